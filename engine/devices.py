@@ -1,0 +1,93 @@
+"""Point devices: transmitters and receivers share one description (physics.md section 2).
+
+A device is a point `position` with unit `normal` and an angular response
+`response(cos)` [per sr]: for a transmitter the radiant intensity per watt,
+R(phi) = (m+1)/(2 pi) cos^m(phi); for a receiver the collecting area per unit
+radiance, A cos(psi) T_s g rect(psi <= FOV). The channel gain of a path
+src -> x1 ... xk -> dst is then symmetric in the two devices, which is what lets
+one kernel trace from either side: rays leave a device with a pdf proportional to
+its response, carrying the weight `total_response` = integral of the response over
+the sphere (1 for a transmitter per watt; A T_s g pi sin^2(FOV) for a receiver).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from schemas import ReceiverSpec, TransmitterSpec
+
+from .sampling import sample_cosine_cone, sample_generalized_lambertian, to_world
+
+
+@dataclass
+class Devices:
+    """A set of point devices of one kind; arrays have a leading device axis.
+
+    `kind` is "transmitter" (response (m+1)/(2 pi) cos^m) or "receiver"
+    (response gain * cos for cos >= cos_fov, with gain = A T_s g).
+    """
+
+    kind: str
+    ids: list[str]
+    positions: np.ndarray  # (n, 3) [m]
+    normals: np.ndarray  # (n, 3)
+    order: np.ndarray  # (n,) Lambertian order m (transmitters)
+    cos_fov: np.ndarray  # (n,) cos(FOV) (receivers; 0 for transmitters)
+    gain: np.ndarray  # (n,) A T_s g [m^2] (receivers; 1 for transmitters)
+    power: np.ndarray  # (n,) P_t [W] (transmitters; 1 for receivers)
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def response(self, idx: np.ndarray, cos: np.ndarray) -> np.ndarray:
+        """Angular response of devices `idx` at cosine `cos` to their normal [1/sr or m^2]."""
+        cos = np.asarray(cos, float)
+        if self.kind == "transmitter":
+            m = self.order[idx]
+            safe = np.where(cos > 0, cos, 1.0)
+            return np.where(cos > 0, (m + 1) / (2 * np.pi) * np.exp(m * np.log(safe)), 0.0)
+        return np.where((cos > 0) & (cos >= self.cos_fov[idx]), self.gain[idx] * cos, 0.0)
+
+    def total_response(self, i: int) -> float:
+        """Integral of device i's response over the sphere (the weight of a sampled ray)."""
+        if self.kind == "transmitter":
+            return 1.0
+        return float(self.gain[i] * np.pi * (1.0 - self.cos_fov[i] ** 2))
+
+    def sample_directions(self, i: int, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
+        """Directions leaving device i with pdf response / total_response (exact inversion)."""
+        if self.kind == "transmitter":
+            local = sample_generalized_lambertian(self.order[i], u1, u2)
+        else:
+            local = sample_cosine_cone(self.cos_fov[i], u1, u2)
+        return to_world(local, self.normals[i])
+
+
+def transmitters_from_specs(specs: list[TransmitterSpec], ids: list[str]) -> Devices:
+    n = len(specs)
+    return Devices(
+        kind="transmitter", ids=ids,
+        positions=np.array([s.position for s in specs], float).reshape(n, 3),
+        normals=np.array([s.normal for s in specs], float).reshape(n, 3),
+        order=np.array([s.m for s in specs], float), cos_fov=np.zeros(n), gain=np.ones(n),
+        power=np.array([s.power for s in specs], float))
+
+
+def concentrator_gain(fov: float, index: float | None) -> float:
+    """Ideal non-imaging concentrator g = n_c^2 / sin^2(FOV); 1 without one."""
+    return 1.0 if index is None else index**2 / np.sin(fov) ** 2
+
+
+def receivers_from_specs(specs: list[ReceiverSpec], ids: list[str]) -> Devices:
+    n = len(specs)
+    fov = np.radians([s.fov_deg for s in specs]).reshape(n)
+    gain = np.array([s.area * s.filter_gain * concentrator_gain(f, s.concentrator_index)
+                     for s, f in zip(specs, fov)], float).reshape(n)
+    # cos(90 deg) is 6e-17 in floating point, not 0: clamp so FOV = 90 deg is the full hemisphere.
+    cos_fov = np.where(np.isclose(fov, np.pi / 2, rtol=0, atol=1e-12), 0.0, np.cos(fov))
+    return Devices(
+        kind="receiver", ids=ids,
+        positions=np.array([s.position for s in specs], float).reshape(n, 3),
+        normals=np.array([s.normal for s in specs], float).reshape(n, 3),
+        order=np.zeros(n), cos_fov=cos_fov, gain=gain, power=np.ones(n))

@@ -1,0 +1,193 @@
+"""Scene geometry: triangles with per-face reflectance, and batched ray queries on Embree.
+
+All surfaces are Lambertian (BRDF rho/pi). Vertices are re-centred on the scene's
+bounding-box centre before the float32 Embree build, so a room 5 km from the origin
+keeps millimetre precision; ray origins are re-centred the same way.
+Note: embreex's `EmbreeScene.run` overwrites the `dists` array it is given, so
+every call passes a fresh array.
+"""
+from __future__ import annotations
+
+import base64
+import io
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from embreex import rtcore_scene
+
+from schemas import ROOM_FACES, SceneSpec
+from schemas.geometry import BoxSpec, MeshSpec, RoomSpec
+
+from .constants import DEGENERATE_AREA_FACTOR, RAY_OFFSET_FACTOR
+from .errors import SceneError
+
+# Unit-cube corners and the two triangles of each face, wound so normals point outward.
+_CUBE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
+_CUBE_FACES = {  # name -> two triangles, outward normal for a solid box
+    "floor": [(0, 2, 1), (0, 3, 2)], "ceiling": [(4, 5, 6), (4, 6, 7)],
+    "wall_x_min": [(0, 4, 7), (0, 7, 3)], "wall_x_max": [(1, 2, 6), (1, 6, 5)],
+    "wall_y_min": [(0, 1, 5), (0, 5, 4)], "wall_y_max": [(3, 7, 6), (3, 6, 2)],
+}
+
+
+@dataclass
+class Geometry:
+    """Triangle soup: `vertices` (V,3) [m], `faces` (F,3), per-face `reflectance` and `group` name index."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    reflectance: np.ndarray
+    group: np.ndarray
+    group_names: list[str]
+
+    @property
+    def normals(self) -> np.ndarray:
+        v = self.vertices[self.faces]
+        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _box_triangles(lo, hi, inward: bool) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    verts = np.asarray(lo) + _CUBE * (np.asarray(hi) - np.asarray(lo))
+    faces, names = [], []
+    for name in ROOM_FACES:
+        for tri in _CUBE_FACES[name]:
+            faces.append(tri[::-1] if inward else tri)
+            names.append(name)
+    return verts, np.asarray(faces), names
+
+
+def _room(room: RoomSpec):
+    verts, faces, names = _box_triangles(room.lo, room.hi, inward=True)
+    rho = room.reflectance.by_face()
+    return verts, faces, np.array([rho[n] for n in names]), [f"room.{n}" for n in names]
+
+
+def _furniture(i: int, box: BoxSpec):
+    verts, faces, names = _box_triangles(box.min, box.max, inward=False)
+    label = box.name or f"furniture[{i}]"
+    return verts, faces, np.full(len(faces), box.reflectance), [label] * len(faces)
+
+
+def _load_mesh(i: int, spec: MeshSpec, base_dir: Path | None):
+    label = spec.name or f"meshes[{i}]"
+    if spec.vertices is not None:
+        verts = np.asarray(spec.vertices, float)
+        faces = np.asarray(spec.faces, np.int64)
+        return verts, faces, np.full(len(faces), spec.reflectance), [label] * len(faces)
+    fmt = spec.format
+    try:
+        if spec.file is not None:
+            path = Path(spec.file)
+            if not path.is_absolute() and base_dir is not None:
+                path = base_dir / path
+            if not path.is_file():
+                raise SceneError(f"{label}: mesh file {str(path)!r} not found")
+            fmt = fmt or path.suffix[1:].lower()
+            data = path.read_bytes()
+        else:
+            data = base64.b64decode(spec.data_base64, validate=True)
+        # OBJ objects and groups become separate geometries (trimesh merges them otherwise).
+        kw = {"split_objects": True, "split_groups": True} if fmt == "obj" else {}
+        loaded = trimesh.load_scene(io.BytesIO(data), file_type=fmt, process=False, **kw)
+    except SceneError:
+        raise
+    except Exception as exc:  # trimesh raises many kinds; the user needs the file and the reason
+        raise SceneError(f"{label}: cannot read mesh ({type(exc).__name__}: {exc})") from None
+    unknown = set(spec.group_reflectance)
+    vs, fs, rhos, names, offset = [], [], [], [], 0
+    for node in loaded.graph.nodes_geometry:
+        transform, geom_name = loaded.graph[node]
+        part = loaded.geometry[geom_name]
+        if not hasattr(part, "faces") or len(part.faces) == 0:
+            continue
+        key = next((k for k in (node, geom_name) if k in spec.group_reflectance), None)
+        unknown.discard(key)
+        vs.append(trimesh.transform_points(np.asarray(part.vertices, float), transform))
+        fs.append(np.asarray(part.faces, np.int64) + offset)
+        offset += len(part.vertices)
+        rhos.append(np.full(len(part.faces), spec.group_reflectance.get(key, spec.reflectance)))
+        names += [f"{label}.{key or geom_name}"] * len(part.faces)
+    if unknown:
+        raise SceneError(f"{label}: group_reflectance names groups the file does not have: {sorted(unknown)}")
+    if not fs:
+        raise SceneError(f"{label}: the mesh has no faces")
+    return np.concatenate(vs), np.concatenate(fs), np.concatenate(rhos), names
+
+
+def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
+    """All surfaces of the scene as one triangle soup; degenerate triangles dropped with a warning."""
+    pieces = []
+    if spec.room is not None:
+        pieces.append(_room(spec.room))
+    pieces += [_furniture(i, b) for i, b in enumerate(spec.furniture)]
+    pieces += [_load_mesh(i, m, base_dir) for i, m in enumerate(spec.meshes)]
+    if not pieces:
+        return Geometry(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0), np.zeros(0, np.int64), [])
+    verts, faces, rho, labels, offset = [], [], [], [], 0
+    for v, f, r, names in pieces:
+        if not np.all(np.isfinite(v)):
+            raise SceneError(f"{names[0].split('.')[0]}: vertices contain NaN or infinite values")
+        verts.append(v)
+        faces.append(f + offset)
+        offset += len(v)
+        rho.append(r)
+        labels += names
+    vertices, faces, rho = np.concatenate(verts), np.concatenate(faces), np.concatenate(rho)
+    group_names, group = np.unique(np.asarray(labels), return_inverse=True)
+    tri = vertices[faces]
+    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    extent = float(np.ptp(vertices, axis=0).max()) or 1.0
+    ok = area2 > 2 * DEGENERATE_AREA_FACTOR * extent**2
+    if not ok.all():
+        bad = sorted({group_names[g] for g in group[~ok]})
+        warnings.warn(f"dropped {int((~ok).sum())} degenerate (zero-area) triangles from {bad}", stacklevel=2)
+    if not ok.any():
+        raise SceneError("every triangle of the scene is degenerate")
+    return Geometry(vertices, faces[ok], rho[ok], group[ok], list(group_names))
+
+
+class Intersector:
+    """Batched closest-hit and occlusion queries against one Embree scene (float32, re-centred)."""
+
+    def __init__(self, geometry: Geometry):
+        self.geometry = geometry
+        self.empty = len(geometry.faces) == 0
+        v = geometry.vertices
+        self.center = 0.5 * (v.min(axis=0) + v.max(axis=0)) if not self.empty else np.zeros(3)
+        self.extent = float(np.ptp(v, axis=0).max()) if not self.empty else 1.0
+        #: offset of re-spawned ray origins off surfaces [m]
+        self.offset = RAY_OFFSET_FACTOR * max(self.extent, 1e-3)
+        self.normals = geometry.normals if not self.empty else np.zeros((0, 3))
+        self.n_intersect = 0
+        self.n_occluded = 0
+        if not self.empty:
+            self._scene = rtcore_scene.EmbreeScene()
+            from embreex.mesh_construction import TriangleMesh
+            TriangleMesh(self._scene, (v - self.center).astype(np.float32)[geometry.faces])
+
+    def intersect(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray | None = None):
+        """Closest hit along each ray: (face index or -1, distance [m], inf on a miss)."""
+        n = len(origins)
+        self.n_intersect += n
+        if self.empty or n == 0:
+            return np.full(n, -1, np.int64), np.full(n, np.inf)
+        dists = np.full(n, 1e30, np.float32) if t_max is None else np.asarray(t_max, np.float32).copy()
+        out = self._scene.run((origins - self.center).astype(np.float32),
+                              directions.astype(np.float32), dists=dists, output=1)
+        prim = out["primID"].astype(np.int64)
+        t = np.where(prim >= 0, out["tfar"].astype(np.float64), np.inf)
+        return prim, t
+
+    def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:
+        """True where a surface lies on the ray within distance `t_max` [m]."""
+        n = len(origins)
+        self.n_occluded += n
+        if self.empty or n == 0:
+            return np.zeros(n, bool)
+        res = self._scene.run((origins - self.center).astype(np.float32), directions.astype(np.float32),
+                              dists=np.asarray(t_max, np.float32).copy(), query="OCCLUDED")
+        return np.asarray(res) == 0

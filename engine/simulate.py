@@ -1,0 +1,201 @@
+"""Run a job: plan the batches, choose directions, execute, merge, stop on accuracy.
+
+`simulate(spec)` is the engine's entry point. The plan is a function of the scene
+document only (batches, their sizes and their random streams), so the same seed
+gives bit-identical results with any number of workers. In accuracy mode batches
+are issued in rounds (one batch per source) and the run stops after the first
+round at which every link's relative standard error of H0 is at or below the
+target, or when the time budget is spent (the result says which).
+"""
+from __future__ import annotations
+
+import itertools
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from schemas import SceneSpec
+
+from .errors import UnsupportedError
+from .execution import ProcessExecutor, SerialExecutor
+from .kernel import KernelSettings, WorkItem
+from .los import line_of_sight
+from .result import build_result
+from .scene import Scene, build_scene
+from .tally import Accumulator, TimeBins
+
+#: Heuristic of the auto direction: with this many times more receivers than
+#: transmitters (or the reverse), one side amortizes its paths over so many links
+#: that no pilot is run.
+AMORTIZATION_RATIO = 8
+#: Accuracy mode checks the target only once each link has this many paths.
+MIN_PATHS_FOR_STOP = 2048
+
+ProgressFn = Callable[[float, dict], None]
+
+
+@dataclass
+class RunInfo:
+    stop_reason: str = "paths"
+    wall_time_s: float = 0.0
+    workers: int = 1
+    batches: int = 0
+    pilot: dict = field(default_factory=dict)
+
+
+def kernel_settings(spec: SceneSpec) -> KernelSettings:
+    sim = spec.simulation
+    return KernelSettings(
+        max_reflections=sim.max_reflections, russian_roulette=sim.russian_roulette,
+        rr_start_depth=sim.rr_start_depth, bins=TimeBins(sim.t_min_s, sim.time_bin_s, sim.n_bins))
+
+
+def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: int = 1,
+             progress: ProgressFn | None = None, should_stop: Callable[[], bool] | None = None,
+             scene: Scene | None = None) -> dict:
+    """Simulate the scene document; return the result document (see schemas.results)."""
+    t_start = time.perf_counter()
+    sim = spec.simulation
+    if sim.algorithm != 1:
+        raise UnsupportedError(f"algorithm {sim.algorithm} is not available in this version; use algorithm 1")
+    scene = scene if scene is not None else build_scene(spec, base_dir)
+    settings = kernel_settings(spec)
+    los_gain, los_delay = line_of_sight(scene)
+    info = RunInfo(workers=workers)
+    executor = (SerialExecutor(scene) if workers <= 1
+                else ProcessExecutor(spec, str(base_dir) if base_dir is not None else None, workers))
+    try:
+        directions = _choose_directions(scene, spec, settings, executor, los_gain, info)
+        acc = _run(scene, spec, settings, executor, directions, los_gain, info, progress, should_stop, t_start)
+    finally:
+        executor.close()
+    info.wall_time_s = time.perf_counter() - t_start
+    return build_result(spec, scene, acc, settings, los_gain, los_delay, directions, info)
+
+
+def _sources(scene: Scene, directions: np.ndarray) -> list[tuple[str, int, tuple[int, ...]]]:
+    """(direction, source, targets) runs that cover every link in its chosen direction."""
+    n_rx = len(scene.receivers)
+    fwd = directions.reshape(len(scene.transmitters), n_rx) == 0
+    runs = [("forward", i, tuple(np.flatnonzero(fwd[i]).tolist())) for i in range(fwd.shape[0]) if fwd[i].any()]
+    runs += [("backward", j, tuple(np.flatnonzero(~fwd[:, j]).tolist())) for j in range(n_rx) if (~fwd[:, j]).any()]
+    return runs
+
+
+def _items(runs, sim, phase: int, n_paths: int | None):
+    """Batches in rounds (one per run per round); endless when n_paths is None."""
+    bs = sim.batch_size
+    rounds = itertools.count() if n_paths is None else range(-(-n_paths // bs))
+    for b in rounds:
+        size = bs if n_paths is None else min(bs, n_paths - b * bs)
+        for direction, source, targets in runs:
+            yield WorkItem(direction, source, targets, b, size, sim.seed, phase)
+
+
+def _merge(acc: Accumulator, executor, items, settings, on_batch=None) -> None:
+    """Feed items to the executor and merge their tallies in order; `on_batch` may stop the run."""
+    pulled: deque[WorkItem] = deque()
+
+    def recording():
+        for it in items:
+            pulled.append(it)
+            yield it
+
+    results = executor.map(recording(), settings)
+    try:
+        for tally in results:
+            item = pulled.popleft()
+            acc.add(tally, item.batch, item.source if item.direction == "forward" else None)
+            if on_batch is not None and on_batch(item):
+                break
+    finally:
+        results.close()
+
+
+def _choose_directions(scene, spec, settings, executor, los_gain, info) -> np.ndarray:
+    """Per link: 0 = forward (from the transmitter), 1 = backward (from the receiver)."""
+    sim = spec.simulation
+    n_tx, n_rx = len(scene.transmitters), len(scene.receivers)
+    if sim.direction != "auto":
+        info.pilot = {"rule": f"requested: {sim.direction}"}
+        return np.full(scene.n_links, 0 if sim.direction == "forward" else 1)
+    if sim.max_reflections == 0:
+        info.pilot = {"rule": "max_reflections = 0: line of sight only, computed exactly"}
+        return np.zeros(scene.n_links, np.int64)
+    if n_rx >= AMORTIZATION_RATIO * n_tx or n_tx >= AMORTIZATION_RATIO * n_rx:
+        side = 0 if n_rx >= n_tx else 1
+        info.pilot = {"rule": f"{n_tx} transmitters x {n_rx} receivers: the "
+                              f"{'transmitter' if side == 0 else 'receiver'} side amortizes its paths, no pilot"}
+        return np.full(scene.n_links, side)
+    # Pilot: a short run each way; efficiency = 1 / (relative variance per path x rays per path),
+    # rays shared by the links a source serves. Ray counts (not times) keep the choice deterministic.
+    cost_eff = []
+    for code, direction in enumerate(("forward", "backward")):
+        runs = _sources(scene, np.full(scene.n_links, code))
+        acc = Accumulator(scene.n_links, settings.max_reflections + 1, settings.n_scatter_orders, settings.bins)
+        _merge(acc, executor, _items(runs, sim, 1, sim.pilot_paths), settings)
+        n = acc.n_paths.astype(float)
+        mean = acc.s1[:, 0] / n
+        var = np.maximum(acc.s2[:, 0, 0] / n - mean**2, 0.0)
+        h0 = mean + los_gain
+        rays_per_path = (acc.rays_intersect + acc.rays_occluded) / max(n.sum(), 1)
+        links_per_source = n_rx if direction == "forward" else n_tx
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel_var = np.where(h0 > 0, var / h0**2, np.inf)
+            cost_eff.append((rel_var * rays_per_path / links_per_source, np.sqrt(rel_var), rays_per_path))
+    choice = np.where(cost_eff[1][0] < cost_eff[0][0], 1, 0)
+    info.pilot = {
+        "rule": "pilot: lower relative variance x rays per path, per link",
+        "paths_per_direction": sim.pilot_paths,
+        "rel_std_per_path_forward": _finite_list(cost_eff[0][1]),
+        "rel_std_per_path_backward": _finite_list(cost_eff[1][1]),
+        "rays_per_path_forward": float(cost_eff[0][2]), "rays_per_path_backward": float(cost_eff[1][2]),
+    }
+    return choice
+
+
+def _finite_list(x):
+    return [float(v) if np.isfinite(v) else None for v in x]
+
+
+def _run(scene, spec, settings, executor, directions, los_gain, info, progress, should_stop, t_start):
+    sim = spec.simulation
+    runs = _sources(scene, directions)
+    acc = Accumulator(scene.n_links, settings.max_reflections + 1, settings.n_scatter_orders, settings.bins)
+    n_paths = sim.n_paths
+    total_batches = len(runs) * -(-n_paths // sim.batch_size) if n_paths is not None else None
+    state = {"done": 0}
+
+    def on_batch(item: WorkItem) -> bool:
+        state["done"] += 1
+        info.batches = state["done"]
+        end_of_round = state["done"] % len(runs) == 0
+        rel = acc.dc_gain_rel_stderr(los_gain)
+        worst = float(np.max(rel)) if len(rel) else 0.0
+        elapsed = time.perf_counter() - t_start
+        if total_batches is not None:
+            frac = state["done"] / total_batches
+        else:
+            target = sim.target_rel_error
+            frac = min(1.0, max(elapsed / sim.time_budget_s, (target / worst) ** 2 if worst > 0 else 1.0))
+        if progress is not None:
+            progress(frac, {"paths": int(acc.n_paths.max()), "batches": state["done"],
+                            "dc_gain_rel_stderr": worst if np.isfinite(worst) else None, "elapsed_s": elapsed})
+        if should_stop is not None and should_stop():
+            info.stop_reason = "cancelled"
+            return True
+        if total_batches is None and end_of_round:
+            if acc.n_paths.min() >= MIN_PATHS_FOR_STOP and worst <= sim.target_rel_error:
+                info.stop_reason = "target_reached"
+                return True
+            if elapsed >= sim.time_budget_s:
+                info.stop_reason = "time_budget"
+                return True
+        return False
+
+    _merge(acc, executor, _items(runs, sim, 0, n_paths), settings, on_batch)
+    return acc

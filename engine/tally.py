@@ -1,0 +1,143 @@
+"""Tallies: what one batch of paths adds, and the ordered merge of batches.
+
+A batch records every connection (next-event estimate) as a contribution
+(target, reflection order k, scattering order s, delay t [s], power w per watt).
+It reduces them with `np.bincount` on flat indices into:
+- `cir`: power per (link, k, s, time bin) inside the window;
+- `early` / `late`: power arriving before t_min / after t_max, per (link, k, s);
+- `order_sum`, `order_sumsq`: sum of w and w^2 per (link, k, s) — each path makes
+  at most one contribution per (target, k, s), so these are per-path moments;
+- `s1`, `s2`: per-path sums a = sum w, b = sum w t, c = sum w t^2 per link, and
+  the sums of their outer products (for delta-method standard errors of delays).
+Batches are merged in batch order, so results are bit-identical whatever the
+number of workers. Groups (batch index mod N_GROUPS) keep per-bin power for
+batch-spread standard errors and jackknife.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: Number of batch groups kept for per-bin standard errors and the jackknife.
+N_GROUPS = 16
+
+
+@dataclass
+class TimeBins:
+    """Bins of width `dt` [s] from `t_min` [s]; `n` bins."""
+
+    t_min: float
+    dt: float
+    n: int
+
+    @property
+    def edges(self) -> np.ndarray:
+        return self.t_min + self.dt * np.arange(self.n + 1)
+
+
+@dataclass
+class BatchTally:
+    """What one batch adds; arrays over the batch's local links (global ids in `links`)."""
+
+    links: np.ndarray  # (L,)
+    n_paths: int
+    cir: np.ndarray  # (L, K+1, S+1, n_bins)
+    early: np.ndarray  # (L, K+1, S+1)
+    late: np.ndarray  # (L, K+1, S+1)
+    order_sum: np.ndarray  # (L, K+1, S+1)
+    order_sumsq: np.ndarray  # (L, K+1, S+1)
+    s1: np.ndarray  # (L, 3)
+    s2: np.ndarray  # (L, 3, 3)
+    rays_intersect: int = 0
+    rays_occluded: int = 0
+    surface_power: float = 0.0  # incident power on surfaces (forward paths) [W/W]
+    escaped_power: float = 0.0  # power of rays that left the scene [W/W]
+    medium_evaluations: int = 0
+
+
+def reduce_contributions(links, n_paths, bins: TimeBins, n_orders: int, n_scatter: int,
+                         target, order, scatter, delay, power, path) -> BatchTally:
+    """Bin a batch's contributions (1-D arrays of equal length) into a BatchTally."""
+    n_links = len(links)
+    shape_kl = (n_links, n_orders, n_scatter)
+    cell = (target * n_orders + order) * n_scatter + scatter
+    n_cells = n_links * n_orders * n_scatter
+    b = np.floor((delay - bins.t_min) / bins.dt)
+    inside = (b >= 0) & (b < bins.n)
+    b = np.where(inside, b, 0).astype(np.int64)
+    cir = np.bincount(cell[inside] * bins.n + b[inside], power[inside], n_cells * bins.n)
+    early = np.bincount(cell, np.where(delay < bins.t_min, power, 0.0), n_cells)
+    late = np.bincount(cell, np.where(~inside & (delay >= bins.t_min), power, 0.0), n_cells)
+    order_sum = np.bincount(cell, power, n_cells)
+    order_sumsq = np.bincount(cell, power * power, n_cells)
+    # Per-path sums per link, then their first and second moments over paths.
+    key = path * n_links + target
+    abc = np.stack([np.bincount(key, power * delay**p, n_paths * n_links) for p in range(3)], axis=-1)
+    abc = abc.reshape(n_paths, n_links, 3)
+    used = np.flatnonzero(abc[:, :, 0].any(axis=1)) if len(power) else np.zeros(0, np.int64)
+    abc = abc[used]
+    s1 = abc.sum(axis=0)
+    s2 = np.einsum("pli,plj->lij", abc, abc)
+    return BatchTally(
+        links=np.asarray(links), n_paths=n_paths,
+        cir=cir.reshape(*shape_kl, bins.n), early=early.reshape(shape_kl), late=late.reshape(shape_kl),
+        order_sum=order_sum.reshape(shape_kl), order_sumsq=order_sumsq.reshape(shape_kl), s1=s1, s2=s2)
+
+
+@dataclass
+class Accumulator:
+    """Sums of batch tallies over the whole job, per global link."""
+
+    n_links: int
+    n_orders: int
+    n_scatter: int
+    bins: TimeBins
+    n_paths: np.ndarray = field(init=False)
+    cir: np.ndarray = field(init=False)
+    groups: np.ndarray = field(init=False)  # (N_GROUPS, n_links, n_bins), summed over k, s
+    group_paths: np.ndarray = field(init=False)  # (N_GROUPS, n_links)
+    rays_intersect: int = 0
+    rays_occluded: int = 0
+    medium_evaluations: int = 0
+
+    def __post_init__(self):
+        kl = (self.n_links, self.n_orders, self.n_scatter)
+        self.n_paths = np.zeros(self.n_links, np.int64)
+        self.cir = np.zeros((*kl, self.bins.n))
+        self.early = np.zeros(kl)
+        self.late = np.zeros(kl)
+        self.order_sum = np.zeros(kl)
+        self.order_sumsq = np.zeros(kl)
+        self.s1 = np.zeros((self.n_links, 3))
+        self.s2 = np.zeros((self.n_links, 3, 3))
+        self.groups = np.zeros((N_GROUPS, self.n_links, self.bins.n))
+        self.group_paths = np.zeros((N_GROUPS, self.n_links), np.int64)
+        self.surface_power: dict[int, float] = {}
+        self.escaped_power: dict[int, float] = {}
+
+    def add(self, batch: BatchTally, batch_index: int, source: int | None = None) -> None:
+        """Add one batch; call in batch order for bit-identical sums."""
+        ln = batch.links
+        self.n_paths[ln] += batch.n_paths
+        for name in ("cir", "early", "late", "order_sum", "order_sumsq", "s1", "s2"):
+            getattr(self, name)[ln] += getattr(batch, name)
+        g = batch_index % N_GROUPS
+        self.groups[g, ln] += batch.cir.sum(axis=(1, 2))
+        self.group_paths[g, ln] += batch.n_paths
+        self.rays_intersect += batch.rays_intersect
+        self.rays_occluded += batch.rays_occluded
+        self.medium_evaluations += batch.medium_evaluations
+        if source is not None:
+            self.surface_power[source] = self.surface_power.get(source, 0.0) + batch.surface_power
+            self.escaped_power[source] = self.escaped_power.get(source, 0.0) + batch.escaped_power
+
+    def dc_gain_rel_stderr(self, los: np.ndarray) -> np.ndarray:
+        """Relative standard error of H0 per link (inf where nothing is known yet, 0 where H0 = 0 exactly)."""
+        n = np.maximum(self.n_paths, 1).astype(float)
+        mean = self.s1[:, 0] / n
+        var = np.maximum(self.s2[:, 0, 0] / n - mean**2, 0.0) / np.maximum(n - 1, 1)
+        h0 = mean + los
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel = np.where(h0 > 0, np.sqrt(var) / h0, 0.0)
+        return np.where(self.n_paths >= 2, rel, np.inf)

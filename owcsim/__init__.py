@@ -1,0 +1,1 @@
+"""The `owcsim` command line: composes schemas, engine (and later server, clients)."""

@@ -1,0 +1,86 @@
+"""Load a scene document from disk with overrides, and format validation errors for people."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from pydantic import ValidationError
+
+from schemas import SceneSpec
+
+
+class InputError(Exception):
+    """A problem with the user's input, already worded for them."""
+
+
+def set_path(doc: dict, dotted: str, value) -> None:
+    """Set `doc[a][b][0][c] = value` for `dotted` = "a.b.0.c" (list indices as integers)."""
+    keys = dotted.split(".")
+    node = doc
+    for depth, key in enumerate(keys):
+        last = depth == len(keys) - 1
+        if isinstance(node, list):
+            try:
+                idx = int(key)
+                node[idx]
+            except (ValueError, IndexError):
+                raise InputError(f"--set {dotted}: {'.'.join(keys[:depth]) or 'document'} is a list "
+                                 f"of {len(node)}; {key!r} is not an index in it") from None
+            if last:
+                node[idx] = value
+            else:
+                node = node[idx]
+        elif isinstance(node, dict):
+            if last:
+                node[key] = value
+            else:
+                node = node.setdefault(key, {})
+        else:
+            raise InputError(f"--set {dotted}: {'.'.join(keys[:depth])} is a value, not an object or list")
+
+
+def parse_assignment(text: str) -> tuple[str, object]:
+    """PATH=VALUE with VALUE parsed as JSON (a bare word that is not JSON is taken as a string)."""
+    if "=" not in text:
+        raise InputError(f"--set {text!r}: expected PATH=VALUE, e.g. receivers.0.fov_deg=60")
+    path, raw = text.split("=", 1)
+    try:
+        value = json.loads(raw)
+    except json.JSONDecodeError:
+        value = raw
+    return path.strip(), value
+
+
+def format_validation_error(err: ValidationError) -> str:
+    lines = [f"the scene has {err.error_count()} problem{'s' if err.error_count() > 1 else ''}:"]
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"]) or "(document)"
+        msg = e["msg"].removeprefix("Value error, ")
+        lines.append(f"  {loc}: {msg}")
+    return "\n".join(lines)
+
+
+def load_scene(path: str | Path, overrides: list[tuple[str, object]] = (),
+               assignments: list[str] = ()) -> tuple[SceneSpec, dict]:
+    """Read, override and validate a scene document; returns (spec, raw document).
+
+    `overrides` are (dotted path, value) pairs applied first, then the `--set`
+    style `assignments` ("PATH=JSON").
+    """
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+    if not isinstance(doc, dict):
+        raise InputError(f"{path}: a scene document is a JSON object")
+    for dotted, value in overrides:
+        set_path(doc, dotted, value)
+    for a in assignments:
+        set_path(doc, *parse_assignment(a))
+    try:
+        return SceneSpec.model_validate(doc), doc
+    except ValidationError as err:
+        raise InputError(f"{path}: " + format_validation_error(err)) from None

@@ -1,0 +1,37 @@
+"""Shared pieces of the wire models: strict base class and 3-vectors.
+
+Everything is SI (metres, seconds, watts, 1/m); the only unit suffix is `_deg`
+for angles, which JSON users think of in degrees.
+"""
+from __future__ import annotations
+
+import math
+from typing import Annotated
+
+from pydantic import AfterValidator, BaseModel, ConfigDict
+
+
+class SpecModel(BaseModel):
+    """Input model: unknown fields are errors, values are immutable once parsed."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _finite_vec(v: tuple[float, float, float]) -> tuple[float, float, float]:
+    if not all(math.isfinite(c) for c in v):
+        raise ValueError("components must be finite numbers")
+    return v
+
+
+def _unit_vec(v: tuple[float, float, float]) -> tuple[float, float, float]:
+    _finite_vec(v)
+    norm = math.sqrt(sum(c * c for c in v))
+    if norm < 1e-12:
+        raise ValueError("a direction must have a non-zero length")
+    return tuple(c / norm for c in v)  # type: ignore[return-value]
+
+
+#: A point [m], three finite numbers.
+Point = Annotated[tuple[float, float, float], AfterValidator(_finite_vec)]
+#: A direction, normalised on input; a zero-length vector is an error.
+Direction = Annotated[tuple[float, float, float], AfterValidator(_unit_vec)]

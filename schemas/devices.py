@@ -1,0 +1,110 @@
+"""Transmitters and receivers (physics.md section 2)."""
+from __future__ import annotations
+
+import math
+from typing import Annotated
+
+from pydantic import Field, model_validator
+
+from .base import Direction, Point, SpecModel
+
+Fov = Annotated[float, Field(gt=0.0, le=90.0, description="field of view, half-angle [deg], in (0, 90]")]
+
+
+class TransmitterSpec(SpecModel):
+    """Point emitter, generalized Lambertian of order m: R(phi) = (m+1)/(2 pi) cos^m(phi).
+
+    Give exactly one of `lambertian_order` (m >= 0) and `half_power_semi_angle_deg`
+    (then m = -ln 2 / ln cos(Phi_half)).
+    """
+
+    id: str | None = None
+    position: Point
+    normal: Direction
+    power: float = Field(1.0, gt=0.0, description="optical power P_t [W]")
+    lambertian_order: float | None = Field(None, ge=0.0, le=1e4, description="Lambertian order m")
+    half_power_semi_angle_deg: float | None = Field(None, gt=0.0, lt=90.0, description="Phi_1/2 [deg]")
+
+    @model_validator(mode="after")
+    def _one_pattern(self) -> "TransmitterSpec":
+        if (self.lambertian_order is None) == (self.half_power_semi_angle_deg is None):
+            raise ValueError("give exactly one of `lambertian_order` and `half_power_semi_angle_deg`")
+        return self
+
+    @property
+    def m(self) -> float:
+        """Lambertian order, from either input form."""
+        if self.lambertian_order is not None:
+            return self.lambertian_order
+        return -math.log(2.0) / math.log(math.cos(math.radians(self.half_power_semi_angle_deg)))
+
+
+class ReceiverSpec(SpecModel):
+    """Photodiode: area A [m^2], FOV half-angle, optional filter gain and concentrator.
+
+    Collects A cos(psi) T_s g(psi) for psi <= FOV, with g = n_c^2 / sin^2(FOV) when
+    `concentrator_index` n_c is given (ideal non-imaging concentrator), else 1.
+    Treated as a point for visibility and distance (valid while sqrt(A) << distances).
+    """
+
+    id: str | None = None
+    position: Point
+    normal: Direction
+    area: float = Field(gt=0.0, le=1.0, description="detector area A [m^2]")
+    fov_deg: Fov = 90.0
+    filter_gain: float = Field(1.0, gt=0.0, le=1.0, description="optical filter gain T_s")
+    concentrator_index: float | None = Field(None, ge=1.0, le=4.0, description="concentrator refractive index n_c")
+
+
+class ReceiverGridSpec(SpecModel):
+    """Receivers on a rectangle: `origin` + i * spacing * `u` + j * spacing * `v`.
+
+    `u` and `v` are unit directions spanning the plane (orthogonal), `size` the extent
+    along each [m]; points at 0, spacing, ... up to and including `size` (within 1e-9).
+    Every receiver shares `normal`, `area`, `fov_deg`, filter and concentrator.
+    Ids are `{id_prefix}[i,j]`.
+    """
+
+    id_prefix: str = "grid"
+    origin: Point
+    u: Direction = (1.0, 0.0, 0.0)
+    v: Direction = (0.0, 1.0, 0.0)
+    size: tuple[float, float] = Field(description="extent along u and v [m]")
+    spacing: float = Field(gt=0.0, description="grid step [m]")
+    normal: Direction = (0.0, 0.0, 1.0)
+    area: float = Field(gt=0.0, le=1.0)
+    fov_deg: Fov = 90.0
+    filter_gain: float = Field(1.0, gt=0.0, le=1.0)
+    concentrator_index: float | None = Field(None, ge=1.0, le=4.0)
+
+    @model_validator(mode="after")
+    def _sane(self) -> "ReceiverGridSpec":
+        if abs(sum(a * b for a, b in zip(self.u, self.v))) > 1e-6:
+            raise ValueError("grid directions `u` and `v` must be orthogonal")
+        if any(not math.isfinite(s) or s < 0 for s in self.size):
+            raise ValueError("grid size must be two non-negative lengths [m]")
+        if self.count > 100_000:
+            raise ValueError(f"grid has {self.count} receivers, more than the 100000 allowed")
+        return self
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return tuple(int(math.floor(s / self.spacing + 1e-9)) + 1 for s in self.size)  # type: ignore[return-value]
+
+    @property
+    def count(self) -> int:
+        nu, nv = self.shape
+        return nu * nv
+
+    def expand(self) -> list[ReceiverSpec]:
+        """The grid as individual receivers, row-major in (i along u, j along v)."""
+        nu, nv = self.shape
+        out = []
+        for i in range(nu):
+            for j in range(nv):
+                p = tuple(o + self.spacing * (i * a + j * b) for o, a, b in zip(self.origin, self.u, self.v))
+                out.append(ReceiverSpec(
+                    id=f"{self.id_prefix}[{i},{j}]", position=p, normal=self.normal, area=self.area,
+                    fov_deg=self.fov_deg, filter_gain=self.filter_gain,
+                    concentrator_index=self.concentrator_index))
+        return out

@@ -1,0 +1,63 @@
+"""Simulation settings: algorithm, depth, time binning, path budget or target accuracy."""
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from .base import SpecModel
+
+#: Most time bins a job may ask for.
+MAX_BINS = 1_000_000
+#: Paths used when neither `paths` nor `target_rel_error` is given.
+DEFAULT_PATHS = 100_000
+
+
+class SimulationSpec(SpecModel):
+    """How to estimate the channel.
+
+    `algorithm` 1..5 names the report's estimators (physics.md section 4); `direction`
+    chooses the transmitter-side ("forward") or receiver-side ("backward") estimator,
+    or lets a pilot run pick per link ("auto"). Give `paths` (per source device) or
+    `target_rel_error` on H0 (with `time_budget_s`), not both.
+    """
+
+    algorithm: Literal[1, 2, 3, 4, 5] = 1
+    direction: Literal["auto", "forward", "backward"] = "auto"
+    max_reflections: int = Field(3, ge=0, le=1000, description="highest reflection order K")
+    time_bin_s: float = Field(0.25e-9, gt=0.0, description="CIR bin width dt [s]")
+    t_min_s: float = Field(0.0, ge=0.0, description="start of the time window [s]")
+    t_max_s: float = Field(100e-9, gt=0.0, description="end of the time window [s]")
+    paths: int | None = Field(None, ge=1, le=10**12, description="paths per source device")
+    target_rel_error: float | None = Field(None, gt=0.0, lt=1.0,
+                                           description="stop when stderr(H0)/H0 <= this, every link")
+    time_budget_s: float = Field(600.0, gt=0.0, description="wall-time limit of an accuracy run [s]")
+    seed: int = Field(0, ge=0, lt=2**63)
+    batch_size: int = Field(8192, ge=64, le=1_048_576, description="paths per batch (memory bound)")
+    russian_roulette: bool = True
+    rr_start_depth: int = Field(3, ge=1, le=1000, description="first reflection order subject to roulette")
+    pilot_paths: int = Field(4096, ge=256, le=1_000_000, description="paths per direction of the auto pilot")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "SimulationSpec":
+        if self.paths is not None and self.target_rel_error is not None:
+            raise ValueError("give `paths` or `target_rel_error`, not both")
+        if not self.t_max_s > self.t_min_s:
+            raise ValueError("`t_max_s` must exceed `t_min_s`")
+        if self.n_bins > MAX_BINS:
+            raise ValueError(
+                f"time window {self.t_min_s:g}..{self.t_max_s:g} s at {self.time_bin_s:g} s per bin needs "
+                f"{self.n_bins} bins, more than the budget of {MAX_BINS}: widen `time_bin_s`")
+        return self
+
+    @property
+    def n_bins(self) -> int:
+        return max(1, math.ceil((self.t_max_s - self.t_min_s) / self.time_bin_s - 1e-9))
+
+    @property
+    def n_paths(self) -> int | None:
+        """Paths per source device for a fixed-budget run (None in accuracy mode)."""
+        if self.target_rel_error is not None:
+            return None
+        return self.paths if self.paths is not None else DEFAULT_PATHS

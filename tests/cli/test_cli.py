@@ -1,0 +1,74 @@
+"""The command line: outputs, overrides, located errors, exit codes."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from owcsim.cli import main
+from tests.scenes import EXAMPLES
+
+BARRY = str(EXAMPLES / "barry_config_a.json")
+
+
+def test_run_writes_result_csv_png(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["run", BARRY, "--out", str(out), "--paths", "4000", "--seed", "3", "--max-reflections", "2",
+                 "--set", "receivers.0.fov_deg=60", "--set", "simulation.direction=\"forward\""]) == 0
+    res = json.loads((out / "result.json").read_text())
+    link = res["links"][0]
+    for key in ("transmitter", "receiver", "dc_gain", "dc_gain_stderr", "mean_delay_s", "rms_delay_spread_s",
+                "dc_gain_by_reflection_order"):
+        assert key in link
+    assert len(link["dc_gain_by_reflection_order"]) == 3
+    assert res["scene"]["receivers"][0]["fov_deg"] == 60  # the exact inputs are echoed
+    assert res["scene"]["simulation"]["paths"] == 4000 and res["scene"]["simulation"]["seed"] == 3
+    assert link["direction"] == "forward" and link["paths"] == 4000
+    csv = (out / "cir.csv").read_text().splitlines()
+    assert csv[0].startswith("transmitter,receiver,t_start_s,t_end_s,h_per_s")
+    assert len(csv) == 1 + res["time_bins"]["n_bins"]
+    assert (out / "cir.png").read_bytes()[:4] == b"\x89PNG"
+    assert "H0 =" in capsys.readouterr().out
+
+
+def test_target_rel_error_flag_replaces_paths(tmp_path):
+    out = tmp_path / "o"
+    assert main(["run", BARRY, "--out", str(out), "--target-rel-error", "0.02", "--max-reflections", "1"]) == 0
+    res = json.loads((out / "result.json").read_text())
+    assert res["run"]["stop_reason"] == "target_reached"
+    assert res["scene"]["simulation"]["paths"] is None
+
+
+def test_validate_reports_located_errors(tmp_path, capsys):
+    doc = json.loads(Path(BARRY).read_text())
+    doc["receivers"][0]["fov_deg"] = 120
+    doc["room"]["reflectance"]["floor"] = 1.5
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc))
+    assert main(["validate", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "receivers.0.fov_deg" in err and "room.reflectance.floor" in err and "Traceback" not in err
+    assert main(["validate", BARRY]) == 0
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--set", "receivers.5.fov_deg=60"], "not an index"),
+    (["--set", "nonsense"], "PATH=VALUE"),
+    (["--algorithm", "3"], "algorithm 3 is not available"),
+])
+def test_bad_overrides_are_errors(tmp_path, capsys, args, message):
+    assert main(["run", BARRY, "--out", str(tmp_path), "--paths", "100", *args]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_not_json_is_an_error(tmp_path, capsys):
+    p = tmp_path / "x.json"
+    p.write_text("{ nope")
+    assert main(["validate", str(p)]) == 2
+    assert "not valid JSON" in capsys.readouterr().err
+
+
+def test_entry_point_runs_as_module(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "owcsim", "validate", BARRY], capture_output=True, text=True)
+    assert proc.returncode == 0 and "valid" in proc.stdout
