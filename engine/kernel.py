@@ -24,7 +24,7 @@ import numpy as np
 
 from .constants import SPEED_OF_LIGHT
 from .devices import Devices
-from .sampling import sample_cosine_hemisphere, to_world
+from .sampling import sample_cosine_about
 from .scene import Scene
 from .tally import BatchTally, TimeBins, reduce_contributions
 
@@ -119,8 +119,10 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         rho = geo.reflectance[prim]
         surface_power += weights.sum()
 
+        spawn = points + isect.offset * normals  # where rays leave this surface from
+
         # --- next-event estimation to every target -----------------------------------
-        _connect(scene, targets, tgt, t_pos, t_nrm, points, normals, weights * rho / np.pi,
+        _connect(scene, targets, tgt, t_pos, t_nrm, points, spawn, normals, weights * rho / np.pi,
                  lengths, path, depth, out)
         if depth == settings.max_reflections:
             break
@@ -128,8 +130,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         # --- Lambertian reflection, then Russian roulette ----------------------------
         weights = weights * rho
         u = rng.random((len(path), 3))
-        directions = to_world(sample_cosine_hemisphere(u[:, 0], u[:, 1]), normals)
-        origins = points + isect.offset * normals
+        directions = sample_cosine_about(normals, u[:, 0], u[:, 1])
+        origins = spawn
         alive = weights > 0
         if settings.russian_roulette and depth >= settings.rr_start_depth:
             q = np.minimum(1.0, weights / w0)
@@ -155,38 +157,38 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     return tally
 
 
-def _connect(scene, targets, tgt, t_pos, t_nrm, points, normals, radiance_weight, lengths, path, depth, out):
+def _connect(scene, targets, tgt, t_pos, t_nrm, points, spawn, normals, radiance_weight, lengths, path, depth, out):
     """NEE from surface points to each target: visibility, cosines, response, 1/d^2, extinction.
 
-    `radiance_weight` is weight * rho / pi (outgoing radiance per unit incident power).
+    `radiance_weight` is weight * rho / pi (outgoing radiance per unit incident power);
+    `spawn` the points offset off their surface (shadow-ray origins).
     """
     isect, medium = scene.intersector, scene.medium
     n_pts, n_tgt = len(points), len(tgt)
     step = max(1, NEE_CHUNK // max(n_tgt, 1))
     for lo in range(0, n_pts, step):  # chunks bound memory; one chunk for ordinary batches
         sl = slice(lo, lo + step)
-        to = t_pos[None, :, :] - points[sl, None, :]  # (n, T, 3)
+        to = t_pos[None, :, :] - points[sl, None, :]  # (n, T, 3), unnormalized
         d2 = np.einsum("ntk,ntk->nt", to, to)
         d = np.sqrt(d2)
-        wdir = to / d[..., None]
-        cos_s = np.einsum("ntk,nk->nt", wdir, normals[sl])
-        cos_t = -np.einsum("ntk,tk->nt", wdir, t_nrm)
-        f = radiance_weight[sl, None] * np.maximum(cos_s, 0.0) * targets.response(tgt[None, :], cos_t) / d2
-        pi, ti = np.nonzero(f > 0)
-        if len(pi) == 0:
+        cos_s = np.einsum("ntk,nk->nt", to, normals[sl]) / d
+        cos_t = -np.einsum("ntk,tk->nt", to, t_nrm) / d
+        f = (radiance_weight[sl, None] / d2) * np.maximum(cos_s, 0.0) * targets.response(tgt[None, :], cos_t)
+        flat = np.flatnonzero(f > 0)
+        if len(flat) == 0:
             continue
-        f, d, wdir = f[pi, ti], d[pi, ti], wdir[pi, ti]
-        org = points[sl][pi] + isect.offset * normals[sl][pi]
-        # The shadow ray stops short of the device, which may sit on a surface itself.
-        if scene.all_visible:
-            blocked = np.zeros(len(pi), bool)
-        else:
-            blocked = isect.occluded(org, wdir, d - 2.0 * isect.offset)
+        pi, ti = (flat, np.zeros(len(flat), np.int64)) if n_tgt == 1 else np.divmod(flat, n_tgt)
+        f, d = f.ravel()[flat], d.ravel()[flat]
+        wdir = to.reshape(-1, 3)[flat] / d[:, None]
+        gi = pi + lo
+        if not scene.all_visible:
+            # The shadow ray stops short of the device, which may sit on a surface itself.
+            keep = ~isect.occluded(spawn[gi], wdir, d - 2.0 * isect.offset)
+            gi, ti, f, d, wdir = gi[keep], ti[keep], f[keep], d[keep], wdir[keep]
         if medium is not None:
-            f = f * medium.transmittance(points[sl][pi], wdir, d)
-        keep = ~blocked
-        out["target"].append(ti[keep])
-        out["order"].append(np.full(int(keep.sum()), depth))
-        out["delay"].append((lengths[sl][pi][keep] + d[keep]) / SPEED_OF_LIGHT)
-        out["power"].append(f[keep])
-        out["path"].append(path[sl][pi][keep])
+            f = f * medium.transmittance(points[gi], wdir, d)
+        out["target"].append(ti)
+        out["order"].append(np.full(len(gi), depth))
+        out["delay"].append((lengths[gi] + d) / SPEED_OF_LIGHT)
+        out["power"].append(f)
+        out["path"].append(path[gi])

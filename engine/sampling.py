@@ -20,6 +20,7 @@ __all__ = [
     "sample_cosine_cone",
     "cosine_cone_pdf",
     "sample_cosine_hemisphere",
+    "sample_cosine_about",
     "sample_uniform_sphere",
     "uniform_sphere_pdf",
 ]
@@ -65,6 +66,8 @@ def to_world(local, n) -> np.ndarray:
     """
     local, n = _f64(local), _f64(n)
     s, t = orthonormal_basis(n)
+    if n.ndim == 1:  # one frame for every direction: a single matrix product
+        return local @ np.stack((s, t, n))
     return local[..., 0:1] * s + local[..., 1:2] * t + local[..., 2:3] * n
 
 
@@ -122,6 +125,24 @@ def cosine_cone_pdf(cos_max, cos_theta) -> np.ndarray:
 def sample_cosine_hemisphere(u1, u2) -> np.ndarray:
     """Cosine-weighted hemisphere, pdf cos(theta)/pi: sin^2 theta = u1 (Malley)."""
     return sample_cosine_cone(0.0, u1, u2)
+
+
+def sample_cosine_about(n, u1, u2) -> np.ndarray:
+    """World directions with pdf cos(theta)/pi about unit normals n (..., 3), no frame needed.
+
+    d = normalize(n + s), s uniform on the unit sphere: the tip of n + s is uniform on
+    the sphere of radius 1 centred at n, which is tangent to the surface at the origin,
+    and the direction to a uniform point of that sphere is cosine distributed (the
+    sphere projects to the disk uniformly in projected solid angle; Malley's method
+    in 3-D). s = -n has probability zero; it is mapped to n.
+    """
+    d = _f64(n) + sample_uniform_sphere(u1, u2)
+    norm = np.sqrt(np.einsum("...i,...i->...", d, d))
+    bad = norm < 1e-12
+    if np.any(bad):
+        d[bad] = _f64(n)[bad]
+        norm[bad] = 1.0
+    return d / norm[..., None]
 
 
 def sample_uniform_sphere(u1, u2) -> np.ndarray:

@@ -72,13 +72,12 @@ def reduce_contributions(links, n_paths, bins: TimeBins, n_orders: int, n_scatte
     order_sum = np.bincount(cell, power, n_cells)
     order_sumsq = np.bincount(cell, power * power, n_cells)
     # Per-path sums per link, then their first and second moments over paths.
-    key = path * n_links + target
-    abc = np.stack([np.bincount(key, power * delay**p, n_paths * n_links) for p in range(3)], axis=-1)
-    abc = abc.reshape(n_paths, n_links, 3)
-    used = np.flatnonzero(abc[:, :, 0].any(axis=1)) if len(power) else np.zeros(0, np.int64)
-    abc = abc[used]
-    s1 = abc.sum(axis=0)
-    s2 = np.einsum("pli,plj->lij", abc, abc)
+    key = target * n_paths + path
+    wt = power * delay
+    abc = np.stack([np.bincount(key, w, n_paths * n_links) for w in (power, wt, wt * delay)])
+    abc = abc.reshape(3, n_links, n_paths).transpose(1, 0, 2)  # (L, 3, paths)
+    s1 = abc.sum(axis=2)
+    s2 = np.matmul(abc, abc.transpose(0, 2, 1))
     return BatchTally(
         links=np.asarray(links), n_paths=n_paths,
         cir=cir.reshape(*shape_kl, bins.n), early=early.reshape(shape_kl), late=late.reshape(shape_kl),
