@@ -43,11 +43,12 @@ class Devices:
     def response(self, idx: np.ndarray, cos: np.ndarray) -> np.ndarray:
         """Angular response of devices `idx` at cosine `cos` to their normal [1/sr or m^2]."""
         cos = np.asarray(cos, float)
+        idx = np.asarray(idx)
         if self.kind == "transmitter":
-            m = self.order[idx]
+            m = self.order.take(idx)
             safe = np.where(cos > 0, cos, 1.0)
             return np.where(cos > 0, (m + 1) / (2 * np.pi) * np.exp(m * np.log(safe)), 0.0)
-        return np.where((cos > 0) & (cos >= self.cos_fov[idx]), self.gain[idx] * cos, 0.0)
+        return np.where((cos > 0) & (cos >= self.cos_fov.take(idx)), self.gain.take(idx) * cos, 0.0)
 
     def total_response(self, i: int) -> float:
         """Integral of device i's response over the sphere (the weight of a sampled ray)."""

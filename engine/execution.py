@@ -1,17 +1,23 @@
 """Executors: where batches run. Results always come back in submission order.
 
-`SerialExecutor` traces in the calling process; `ProcessExecutor` keeps a pool of
-worker processes, each building the Embree scene once (in its initializer) and then
-tracing the work items it is sent. Items are independent (their random streams are
-fixed by the job), so the merged result does not depend on the executor or the
-number of workers. The interface is `map(items) -> iterator of BatchTally`; items
-may be an endless generator (accuracy mode): only a bounded window is in flight.
+`SerialExecutor` traces in the calling process. `ProcessExecutor` keeps a pool of
+worker processes that outlives jobs: each worker builds a job's Embree scene the
+first time it sees the job (from the scene document written once to a file) and
+caches it, so a warm pool pays no start-up per job. Work items are independent
+(their random streams are fixed by the job), so the merged result does not depend
+on the executor or the number of workers. `map(job, items, settings)` yields batch
+tallies; `items` may be an endless generator (accuracy mode): only a bounded window
+is in flight, and closing the iterator cancels what has not started.
 """
 from __future__ import annotations
 
+import hashlib
 import multiprocessing as mp
-from collections import deque
+import os
+import tempfile
+from collections import OrderedDict, deque
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from typing import Iterable, Iterator, Protocol
 
 from schemas import SceneSpec
@@ -19,55 +25,89 @@ from schemas import SceneSpec
 from .kernel import KernelSettings, WorkItem, trace_batch
 from .scene import Scene, build_scene
 
+#: Scenes a worker keeps built (least recently used are dropped).
+SCENE_CACHE_SIZE = 4
+
+
+@dataclass
+class JobRef:
+    """What executors need to find a job's scene: the built scene (in this process), or its document."""
+
+    scene: Scene
+    key: str
+    spec_path: str
+    base_dir: str | None
+
+
+def job_ref(scene: Scene, base_dir: str | None, folder: str | None = None) -> JobRef:
+    """Write the scene document once (content-addressed) so workers can build it."""
+    text = scene.spec.model_dump_json()
+    key = hashlib.sha256((text + "\0" + str(base_dir)).encode()).hexdigest()[:24]
+    folder = folder or os.path.join(tempfile.gettempdir(), "owcsim-scenes")
+    os.makedirs(folder, exist_ok=True)
+    path = os.path.join(folder, f"{key}.json")
+    if not os.path.exists(path):
+        tmp = f"{path}.{os.getpid()}.tmp"
+        with open(tmp, "w") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    return JobRef(scene, key, path, base_dir)
+
 
 class Executor(Protocol):
-    def map(self, items: Iterable[WorkItem], settings: KernelSettings) -> Iterator: ...
+    workers: int
+
+    def map(self, job: "JobRef", items: Iterable[WorkItem], settings: KernelSettings) -> Iterator: ...
 
     def close(self) -> None: ...
 
 
 class SerialExecutor:
-    """Trace every batch in this process, on `scene`."""
+    """Trace every batch in this process."""
 
-    def __init__(self, scene: Scene):
-        self.scene = scene
+    workers = 1
 
-    def map(self, items, settings):
+    def map(self, job: JobRef, items, settings: KernelSettings):
         for item in items:
-            yield trace_batch(self.scene, item, settings)
+            yield trace_batch(job.scene, item, settings)
 
     def close(self) -> None:
         pass
 
 
-_WORKER_SCENE: Scene | None = None
+_SCENES: OrderedDict[str, Scene] = OrderedDict()
 
 
-def _init_worker(spec_json: str, base_dir: str | None) -> None:
-    global _WORKER_SCENE
-    _WORKER_SCENE = build_scene(SceneSpec.model_validate_json(spec_json), base_dir)
+def _worker_scene(key: str, spec_path: str, base_dir: str | None) -> Scene:
+    scene = _SCENES.get(key)
+    if scene is None:
+        with open(spec_path) as fh:
+            scene = build_scene(SceneSpec.model_validate_json(fh.read()), base_dir)
+        _SCENES[key] = scene
+        while len(_SCENES) > SCENE_CACHE_SIZE:
+            _SCENES.popitem(last=False)
+    _SCENES.move_to_end(key)
+    return scene
 
 
-def _run_item(item: WorkItem, settings: KernelSettings):
-    return trace_batch(_WORKER_SCENE, item, settings)
+def _run_item(key: str, spec_path: str, base_dir: str | None, item: WorkItem, settings: KernelSettings):
+    return trace_batch(_worker_scene(key, spec_path, base_dir), item, settings)
 
 
 class ProcessExecutor:
-    """A pool of `workers` processes (forkserver start: no Embree/TBB state is forked)."""
+    """A pool of `workers` processes (forkserver start: no Embree/TBB state is ever forked)."""
 
-    def __init__(self, spec: SceneSpec, base_dir: str | None, workers: int):
+    def __init__(self, workers: int):
         ctx = mp.get_context("forkserver")
         ctx.set_forkserver_preload(["engine.kernel"])
         self.workers = workers
-        self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
-                                         initargs=(spec.model_dump_json(), base_dir))
+        self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
 
-    def map(self, items, settings):
+    def map(self, job: JobRef, items, settings: KernelSettings):
         window = deque()
-        it = iter(items)
         try:
-            for item in it:
-                window.append(self._pool.submit(_run_item, item, settings))
+            for item in items:
+                window.append(self._pool.submit(_run_item, job.key, job.spec_path, job.base_dir, item, settings))
                 if len(window) >= 2 * self.workers:
                     yield window.popleft().result()
             while window:

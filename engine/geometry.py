@@ -150,6 +150,11 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
     return Geometry(vertices, faces[ok], rho[ok], group[ok], list(group_names))
 
 
+def _f32(a: np.ndarray) -> np.ndarray:
+    """C-contiguous float32 (n, 3), as Embree wants it (from any layout, e.g. a transposed view)."""
+    return np.ascontiguousarray(a, dtype=np.float32)
+
+
 class Intersector:
     """Batched closest-hit and occlusion queries against one Embree scene (float32, re-centred)."""
 
@@ -162,6 +167,8 @@ class Intersector:
         #: offset of re-spawned ray origins off surfaces [m]
         self.offset = RAY_OFFSET_FACTOR * max(self.extent, 1e-3)
         self.normals = geometry.normals if not self.empty else np.zeros((0, 3))
+        #: face normals as (3, F) component rows, for gathers in the kernel
+        self.normals_soa = np.ascontiguousarray(self.normals.T)
         self.n_intersect = 0
         self.n_occluded = 0
         if not self.empty:
@@ -176,8 +183,7 @@ class Intersector:
         if self.empty or n == 0:
             return np.full(n, -1, np.int64), np.full(n, np.inf)
         dists = np.full(n, 1e30, np.float32) if t_max is None else np.asarray(t_max, np.float32).copy()
-        out = self._scene.run((origins - self.center).astype(np.float32),
-                              directions.astype(np.float32), dists=dists, output=1)
+        out = self._scene.run(_f32(origins - self.center), _f32(directions), dists=dists, output=1)
         prim = out["primID"].astype(np.int64)
         t = np.where(prim >= 0, out["tfar"].astype(np.float64), np.inf)
         return prim, t
@@ -188,6 +194,6 @@ class Intersector:
         self.n_occluded += n
         if self.empty or n == 0:
             return np.zeros(n, bool)
-        res = self._scene.run((origins - self.center).astype(np.float32), directions.astype(np.float32),
+        res = self._scene.run(_f32(origins - self.center), _f32(directions),
                               dists=np.asarray(t_max, np.float32).copy(), query="OCCLUDED")
         return np.asarray(res) == 0

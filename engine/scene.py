@@ -20,11 +20,9 @@ class Scene:
     receivers: Devices
     medium: HomogeneousMedium | None
 
-    @property
-    def all_visible(self) -> bool:
-        """True when every pair of points in the scene sees each other: an empty box room
-        (convex, closed), so shadow rays can be skipped."""
-        return self.spec.room is not None and not self.spec.furniture and not self.spec.meshes
+    #: True when every pair of points in the scene sees each other (an empty box room is
+    #: convex), so shadow rays are skipped; benchmarks may turn it off to cast them anyway.
+    all_visible: bool = False
 
     @property
     def n_links(self) -> int:
@@ -48,4 +46,5 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
         transmitters=transmitters_from_specs(spec.transmitters, spec.transmitter_ids()),
         receivers=receivers_from_specs(spec.all_receivers(), spec.receiver_ids()),
         medium=medium_from_spec(spec.medium),
+        all_visible=spec.room is not None and not spec.furniture and not spec.meshes,
     )

@@ -21,7 +21,7 @@ import numpy as np
 from schemas import SceneSpec
 
 from .errors import UnsupportedError
-from .execution import ProcessExecutor, SerialExecutor
+from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
 from .kernel import KernelSettings, WorkItem
 from .los import line_of_sight
 from .result import build_result
@@ -56,8 +56,12 @@ def kernel_settings(spec: SceneSpec) -> KernelSettings:
 
 def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: int = 1,
              progress: ProgressFn | None = None, should_stop: Callable[[], bool] | None = None,
-             scene: Scene | None = None) -> dict:
-    """Simulate the scene document; return the result document (see schemas.results)."""
+             scene: Scene | None = None, executor: Executor | None = None) -> dict:
+    """Simulate the scene document; return the result document (see schemas.results).
+
+    `workers` > 1 starts a process pool for this call; pass a long-lived `executor`
+    instead to reuse warm workers across jobs (it is not closed here).
+    """
     t_start = time.perf_counter()
     sim = spec.simulation
     if sim.algorithm != 1:
@@ -65,14 +69,18 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
     scene = scene if scene is not None else build_scene(spec, base_dir)
     settings = kernel_settings(spec)
     los_gain, los_delay = line_of_sight(scene)
-    info = RunInfo(workers=workers)
-    executor = (SerialExecutor(scene) if workers <= 1
-                else ProcessExecutor(spec, str(base_dir) if base_dir is not None else None, workers))
+    own = executor is None
+    if own:
+        executor = SerialExecutor() if workers <= 1 else ProcessExecutor(workers)
+    info = RunInfo(workers=executor.workers)
+    job = job_ref(scene, str(base_dir) if base_dir is not None else None) if executor.workers > 1 else \
+        JobRef(scene, "", "", None)
     try:
-        directions = _choose_directions(scene, spec, settings, executor, los_gain, info)
-        acc = _run(scene, spec, settings, executor, directions, los_gain, info, progress, should_stop, t_start)
+        directions = _choose_directions(scene, spec, settings, executor, job, los_gain, info)
+        acc = _run(scene, spec, settings, executor, job, directions, los_gain, info, progress, should_stop, t_start)
     finally:
-        executor.close()
+        if own:
+            executor.close()
     info.wall_time_s = time.perf_counter() - t_start
     return build_result(spec, scene, acc, settings, los_gain, los_delay, directions, info)
 
@@ -96,7 +104,7 @@ def _items(runs, sim, phase: int, n_paths: int | None):
             yield WorkItem(direction, source, targets, b, size, sim.seed, phase)
 
 
-def _merge(acc: Accumulator, executor, items, settings, on_batch=None) -> None:
+def _merge(acc: Accumulator, executor, job: JobRef, items, settings, on_batch=None) -> None:
     """Feed items to the executor and merge their tallies in order; `on_batch` may stop the run."""
     pulled: deque[WorkItem] = deque()
 
@@ -105,7 +113,7 @@ def _merge(acc: Accumulator, executor, items, settings, on_batch=None) -> None:
             pulled.append(it)
             yield it
 
-    results = executor.map(recording(), settings)
+    results = executor.map(job, recording(), settings)
     try:
         for tally in results:
             item = pulled.popleft()
@@ -116,7 +124,7 @@ def _merge(acc: Accumulator, executor, items, settings, on_batch=None) -> None:
         results.close()
 
 
-def _choose_directions(scene, spec, settings, executor, los_gain, info) -> np.ndarray:
+def _choose_directions(scene, spec, settings, executor, job, los_gain, info) -> np.ndarray:
     """Per link: 0 = forward (from the transmitter), 1 = backward (from the receiver)."""
     sim = spec.simulation
     n_tx, n_rx = len(scene.transmitters), len(scene.receivers)
@@ -137,7 +145,7 @@ def _choose_directions(scene, spec, settings, executor, los_gain, info) -> np.nd
     for code, direction in enumerate(("forward", "backward")):
         runs = _sources(scene, np.full(scene.n_links, code))
         acc = Accumulator(scene.n_links, settings.max_reflections + 1, settings.n_scatter_orders, settings.bins)
-        _merge(acc, executor, _items(runs, sim, 1, sim.pilot_paths), settings)
+        _merge(acc, executor, job, _items(runs, sim, 1, sim.pilot_paths), settings)
         n = acc.n_paths.astype(float)
         mean = acc.s1[:, 0] / n
         var = np.maximum(acc.s2[:, 0, 0] / n - mean**2, 0.0)
@@ -162,7 +170,7 @@ def _finite_list(x):
     return [float(v) if np.isfinite(v) else None for v in x]
 
 
-def _run(scene, spec, settings, executor, directions, los_gain, info, progress, should_stop, t_start):
+def _run(scene, spec, settings, executor, job, directions, los_gain, info, progress, should_stop, t_start):
     sim = spec.simulation
     runs = _sources(scene, directions)
     acc = Accumulator(scene.n_links, settings.max_reflections + 1, settings.n_scatter_orders, settings.bins)
@@ -197,5 +205,5 @@ def _run(scene, spec, settings, executor, directions, los_gain, info, progress, 
                 return True
         return False
 
-    _merge(acc, executor, _items(runs, sim, 0, n_paths), settings, on_batch)
+    _merge(acc, executor, job, _items(runs, sim, 0, n_paths), settings, on_batch)
     return acc

@@ -1,7 +1,8 @@
 """Tallies: what one batch of paths adds, and the ordered merge of batches.
 
 A batch records every connection (next-event estimate) as a contribution
-(target, reflection order k, scattering order s, delay t [s], power w per watt).
+(target, cell of (target, reflection order k, scattering order s), delay t [s],
+power w per watt, path).
 It reduces them with `np.bincount` on flat indices into:
 - `cir`: power per (link, k, s, time bin) inside the window;
 - `early` / `late`: power arriving before t_min / after t_max, per (link, k, s);
@@ -57,18 +58,26 @@ class BatchTally:
 
 
 def reduce_contributions(links, n_paths, bins: TimeBins, n_orders: int, n_scatter: int,
-                         target, order, scatter, delay, power, path) -> BatchTally:
-    """Bin a batch's contributions (1-D arrays of equal length) into a BatchTally."""
+                         target, cell, delay, power, path) -> BatchTally:
+    """Bin a batch's contributions into a BatchTally.
+
+    1-D arrays of equal length: `target` (local link index), `cell` = (target * n_orders
+    + k) * n_scatter + s, `delay` [s], `power` [W/W], `path` (index in the batch).
+    """
     n_links = len(links)
     shape_kl = (n_links, n_orders, n_scatter)
-    cell = (target * n_orders + order) * n_scatter + scatter
     n_cells = n_links * n_orders * n_scatter
-    b = np.floor((delay - bins.t_min) / bins.dt)
+    b = (delay - bins.t_min) * (1.0 / bins.dt)
     inside = (b >= 0) & (b < bins.n)
-    b = np.where(inside, b, 0).astype(np.int64)
-    cir = np.bincount(cell[inside] * bins.n + b[inside], power[inside], n_cells * bins.n)
-    early = np.bincount(cell, np.where(delay < bins.t_min, power, 0.0), n_cells)
-    late = np.bincount(cell, np.where(~inside & (delay >= bins.t_min), power, 0.0), n_cells)
+    bi = b.astype(np.int64)
+    if inside.all():
+        cir = np.bincount(cell * bins.n + bi, power, n_cells * bins.n)
+        early = late = np.zeros(n_cells)
+    else:
+        sel = np.flatnonzero(inside)
+        cir = np.bincount(cell.take(sel) * bins.n + bi.take(sel), power.take(sel), n_cells * bins.n)
+        early = np.bincount(cell, np.where(b < 0, power, 0.0), n_cells)
+        late = np.bincount(cell, np.where(b >= bins.n, power, 0.0), n_cells)
     order_sum = np.bincount(cell, power, n_cells)
     order_sumsq = np.bincount(cell, power * power, n_cells)
     # Per-path sums per link, then their first and second moments over paths.

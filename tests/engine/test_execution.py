@@ -43,3 +43,20 @@ def test_progress_is_reported_and_cancel_stops():
     full = []
     simulate(spec(doc), progress=lambda f, info: full.append(f))
     assert full[-1] == 1.0 and all(a < b for a, b in zip(full, full[1:]))
+
+
+def test_warm_pool_serves_several_jobs():
+    """One long-lived pool, two different scenes: each equals its serial run (scenes cached per job)."""
+    from engine.execution import ProcessExecutor
+
+    docs = [room_doc(paths=4096, batch_size=1024, direction="forward"),
+            room_doc(rx=(4.0, 1.0, 0.0), paths=4096, batch_size=1024, direction="backward")]
+    pool = ProcessExecutor(2)
+    try:
+        pooled = [simulate(spec(d), executor=pool) for d in docs + docs[:1]]
+    finally:
+        pool.close()
+    serial = [simulate(spec(d)) for d in docs]
+    assert _strip(pooled[0]) == _strip(serial[0]) == _strip(pooled[2])
+    assert _strip(pooled[1]) == _strip(serial[1])
+    assert pooled[0]["links"][0]["dc_gain"] != pooled[1]["links"][0]["dc_gain"]
