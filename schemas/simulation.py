@@ -34,7 +34,7 @@ class SimulationSpec(SpecModel):
                                            description="stop when stderr(H0)/H0 <= this, every link")
     time_budget_s: float = Field(600.0, gt=0.0, description="wall-time limit of an accuracy run [s]")
     seed: int = Field(0, ge=0, lt=2**63)
-    batch_size: int = Field(8192, ge=64, le=1_048_576, description="paths per batch (memory bound)")
+    batch_size: int = Field(16384, ge=64, le=1_048_576, description="paths per batch (memory bound)")
     russian_roulette: bool = True
     rr_start_depth: int = Field(3, ge=1, le=1000, description="first reflection order subject to roulette")
     pilot_paths: int = Field(4096, ge=256, le=1_000_000, description="paths per direction of the auto pilot")
