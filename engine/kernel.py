@@ -1,20 +1,33 @@
 """The shared path-tracing kernel: one batch of paths from one device, NEE to others.
 
-Algorithm 1 (physics.md section 4, report chapter 6) in either direction:
-paths leave the source device with pdf proportional to its angular response
-(weight = its integrated response), bounce on Lambertian surfaces (cosine
-sampling, weight *= rho), and at every surface vertex x_k connect to every target
-device (next-event estimation):
+The five algorithms of physics.md section 4 are configurations of this one loop.
+Paths leave the source device with pdf proportional to its angular response
+(weight = its integrated response). Forward: source = transmitter, targets =
+receivers; backward: source = receiver (rays within its FOV), targets =
+transmitters. The channel gain is symmetric in the two devices, so the same code
+serves both directions. Each step intersects the surfaces, then:
 
-    dH = weight * T(segments) * rho/pi * cos(theta_x) * response_target(cos) / d^2 * V * T(d)
+- surface vertex x (reflection k): next-event estimation (NEE) to every target,
+      dH = w * rho/pi * cos(theta_x) * R_target(cos) / d^2 * V * T(x -> target),
+  tallied at (k, s); then Lambertian reflection (cosine sampling, w *= rho);
+- algorithm 1: every segment multiplies w by its transmittance T (extinction only);
+- algorithms 2-4 (`segment_scatter`): points p on each segment (time strata, see
+  segments.py) connect to the targets with one scattering event,
+      dH = w * T(o -> p) * sigma_s(p) * phase(cos) * R_target / d^2 * V * T(p -> target) * |stratum|,
+  tallied at (k, 1); the path itself stays unscattered (s = 0). Forward this is
+  algorithm 3 (Tx -> k reflections -> p -> Rx), backward algorithm 2
+  (Tx -> p -> k reflections -> Rx); algorithm 4 runs both and weights their shared
+  family (k = 0: Tx -> p -> Rx) by the balance heuristic;
+- algorithm 5 (`free_flight`): the collision distance is sampled (regular tracking
+  of the medium's optical depth); a collision before the surface is a medium vertex:
+  w *= albedo, NEE with the phase function at (k, s + 1), new direction from the
+  phase function. Surface vertices keep w (T / P(no collision) = 1).
+The phase cosine is dot(ray direction, direction to the target) in both directions
+(the phase functions are symmetric). The line-of-sight term (k = s = 0) is exact
+and never sampled (los.py). Russian roulette from `rr_start_depth` (k + s) on, with
+survival probability min(1, w / initial w), keeps every estimator unbiased.
 
-tallied at reflection order k and delay (path length + d) / c. Forward: source =
-transmitter, targets = receivers; backward: source = receiver (rays within its
-FOV), targets = transmitters. The line-of-sight term (k = 0) is computed exactly,
-not sampled (see `los.py`). Russian roulette from `rr_start_depth` on, with
-survival probability min(1, weight / initial weight), keeps the estimator unbiased.
-
-Every loop here is over bounces; all work inside is one array operation per step.
+Every loop here is over steps of the paths; all work inside is array operations.
 """
 from __future__ import annotations
 
@@ -25,6 +38,7 @@ import numpy as np
 from .constants import SPEED_OF_LIGHT
 from .devices import Devices
 from .sampling import cosine_about_soa
+from .segments import equiangular, equiangular_density, time_density, time_strata
 from .scene import Scene
 from .tally import BatchTally, TimeBins, reduce_contributions
 
@@ -34,11 +48,21 @@ NEE_CHUNK = 1 << 20
 
 @dataclass(frozen=True)
 class KernelSettings:
-    max_reflections: int
+    max_reflections: int  # K
     russian_roulette: bool
     rr_start_depth: int
     bins: TimeBins
-    n_scatter_orders: int = 1  # scattering orders tallied (0..S-1); 1 for algorithm 1
+    max_scattering: int = 0  # S: 0 for algorithm 1, 1 for 2-4, S for 5
+    free_flight: bool = False  # algorithm 5
+    segment_scatter: bool = False  # algorithms 2-4
+    strata_length: float = 0.0  # [m] path-length width of the time strata (c dt)
+    max_strata: int = 64
+    equiangular_points: int = 2  # per segment and target, combined with the time strata (balance heuristic)
+    mis: bool = False  # algorithm 4: balance heuristic on the family both directions sample
+
+    @property
+    def n_scatter_orders(self) -> int:
+        return self.max_scattering + 1
 
 
 @dataclass(frozen=True)
@@ -82,12 +106,32 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
+class _Paths:
+    """Path state as (3, n) component arrays and (n,) arrays; `keep(idx)` compacts with `take`."""
+
+    FIELDS = ("origins", "directions", "weights", "lengths", "path", "k", "s")
+
+    def __init__(self, **arrays):
+        for name in self.FIELDS:
+            setattr(self, name, arrays[name])
+
+    def __len__(self) -> int:
+        return len(self.weights)
+
+    def keep(self, idx) -> "_Paths":
+        return _Paths(**{f: getattr(self, f).take(idx, axis=-1) for f in self.FIELDS})
+
+    @staticmethod
+    def concat(parts) -> "_Paths":
+        return _Paths(**{f: np.concatenate([getattr(p, f) for p in parts], axis=-1) for f in _Paths.FIELDS})
+
+
 def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> BatchTally:
     """Trace one batch of paths and return its tally.
 
     Path state is kept as (3, n) component arrays (contiguous rows: the dot products
-    and gathers of the bounce loop run at memory speed); compaction uses index
-    arrays and `take`, which numpy runs several times faster than boolean masks.
+    and gathers run at memory speed); compaction uses index arrays and `take`, which
+    numpy runs several times faster than boolean masks.
     """
     rng = item.rng()
     sources, targets = device_sets(scene, item.direction)
@@ -97,70 +141,93 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     tgt = np.asarray(item.targets, np.int64)
     n, i = item.n_paths, item.source
     forward = item.direction == "forward"
-    face_normals = isect.normals_soa
-    reflectance = geo.reflectance
+    K, S = settings.max_reflections, settings.max_scattering
+    free_flight = settings.free_flight and medium is not None
+    segment_scatter = settings.segment_scatter and medium is not None
+    ctx = _Context(scene, targets, tgt, settings, item, sources.positions[i])
 
     w0 = sources.total_response(i)
     u = rng.random((2, n))
-    directions = np.ascontiguousarray(sources.sample_directions(i, u[0], u[1]).T)
-    origins = np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1)
-    weights = np.full(n, w0)
-    lengths = np.zeros(n)
-    path = np.arange(n)
-    out = {k: [] for k in ("target", "cell", "delay", "power", "path")}
-    n_orders, n_scatter = settings.max_reflections + 1, settings.n_scatter_orders
+    paths = _Paths(
+        directions=np.ascontiguousarray(sources.sample_directions(i, u[0], u[1]).T),
+        origins=np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1),
+        weights=np.full(n, w0), lengths=np.zeros(n), path=np.arange(n),
+        k=np.zeros(n, np.int64), s=np.zeros(n, np.int64))
     surface_power = escaped_power = 0.0
+    # Segments that leave the scene run to where the medium has absorbed everything.
+    far = scene.medium_far_distance
 
-    for depth in range(1, settings.max_reflections + 1):
+    for _step in range(K + S + 2):
         # --- intersect -------------------------------------------------------------
-        prim, t = isect.intersect(origins.T, directions.T)
-        if (prim < 0).any():
-            hit = np.flatnonzero(prim >= 0)
-            escaped_power += weights.sum() - weights.take(hit).sum()
-            prim, t, weights, lengths, path = (a.take(hit) for a in (prim, t, weights, lengths, path))
-            origins, directions = origins.take(hit, axis=1), directions.take(hit, axis=1)
-        if len(path) == 0:
+        prim, t = isect.intersect(paths.origins.T, paths.directions.T)
+        hit = prim >= 0
+        t_seg = np.where(hit, t, far)
+        if segment_scatter:  # algorithms 2-4: single scattering along the segment
+            _segment_scatter(ctx, paths, t_seg, rng, first=_step == 0)
+        collided = np.zeros(len(paths), bool)
+        if free_flight:  # algorithm 5: sample the collision distance
+            t_col, collided = medium.sample_distance(paths.origins.T, paths.directions.T, t_seg, rng.random(len(paths)))
+        elif medium is not None:
+            paths.weights = paths.weights * medium.transmittance(paths.origins.T, paths.directions.T, t_seg)
+        escaped_power += paths.weights[~hit & ~collided].sum()
+        parts = []
+        # --- surface vertices ---------------------------------------------------------
+        si = np.flatnonzero(hit & ~collided & (paths.k < K))
+        sp = paths.keep(si)
+        if len(sp):
+            ts = t.take(si)
+            points = sp.origins + ts * sp.directions
+            sp.lengths = sp.lengths + ts
+            prims = prim.take(si)
+            normals = isect.normals_soa.take(prims, axis=1)
+            normals *= np.where(_dot(normals, sp.directions) > 0, -1.0, 1.0)  # two-sided: face the arriving ray
+            rho = geo.reflectance.take(prims)
+            surface_power += sp.weights.sum()
+            spawn = points + isect.offset * normals
+            sp.k = sp.k + 1
+            # Algorithm 4 estimates the unscattered family from both sides: each counts half.
+            share = 0.5 if settings.mis else 1.0
+            ctx.connect(points, spawn, sp.weights * rho * (share / np.pi), sp, normals=normals)
+            sp.weights = sp.weights * rho
+            u = rng.random((2, len(sp)))
+            sp.directions = cosine_about_soa(normals, u[0], u[1])
+            sp.origins = spawn
+            # after reflection K a path still matters if it can scatter (5) or host segment points (2-4)
+            alive = (sp.k < K) | (free_flight & (sp.s < S)) | (segment_scatter & (sp.k <= K))
+            parts.append(sp.keep(np.flatnonzero(alive & (sp.weights > 0))))
+        # --- medium vertices (algorithm 5) ----------------------------------------------
+        if free_flight:
+            mi = np.flatnonzero(collided & (paths.s < S))
+            mp = paths.keep(mi)
+            if len(mp):
+                tm = t_col.take(mi)
+                points = mp.origins + tm * mp.directions
+                mp.lengths = mp.lengths + tm
+                mp.weights = mp.weights * medium.albedo_at(points.T)
+                mp.s = mp.s + 1
+                ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions)
+                u = rng.random((2, len(mp)))
+                mp.directions = scene.phase.sample(mp.directions, u[0], u[1])
+                mp.origins = points
+                alive = ((mp.k < K) | (mp.s < S)) & (mp.weights > 0)
+                parts.append(mp.keep(np.flatnonzero(alive)))
+        paths = _Paths.concat(parts) if parts else paths.keep(np.zeros(0, np.int64))
+        # --- Russian roulette ------------------------------------------------------------
+        if settings.russian_roulette and len(paths):
+            at = np.flatnonzero(paths.k + paths.s >= settings.rr_start_depth)
+            if len(at):
+                q = np.minimum(1.0, paths.weights.take(at) * (1.0 / w0))
+                survive = rng.random(len(at)) < q
+                paths.weights[at] = paths.weights.take(at) / np.where(survive, q, 1.0)
+                dead = at[~survive]
+                if len(dead):
+                    keep = np.ones(len(paths), bool)
+                    keep[dead] = False
+                    paths = paths.keep(np.flatnonzero(keep))
+        if len(paths) == 0:
             break
-        points = origins + t * directions
-        if medium is not None:
-            weights = weights * medium.transmittance(origins.T, directions.T, t)
-        lengths = lengths + t
-        normals = face_normals.take(prim, axis=1)
-        normals *= np.where(_dot(normals, directions) > 0, -1.0, 1.0)  # two-sided: face the arriving ray
-        rho = reflectance.take(prim)
-        surface_power += weights.sum()
-        spawn = points + isect.offset * normals  # where rays leave this surface from
 
-        # --- next-event estimation to every target -----------------------------------
-        _connect(scene, targets, tgt, points, spawn, normals, weights * rho * (1.0 / np.pi), lengths, path,
-                 depth * n_scatter, n_orders * n_scatter, out)
-        if depth == settings.max_reflections:
-            break
-
-        # --- Lambertian reflection, then Russian roulette ----------------------------
-        weights = weights * rho
-        u = rng.random((3, len(path)))
-        directions = cosine_about_soa(normals, u[0], u[1])
-        origins = spawn
-        keep = None
-        if settings.russian_roulette and depth >= settings.rr_start_depth:
-            q = np.minimum(1.0, weights * (1.0 / w0))
-            survive = u[2] < q
-            weights = weights / np.where(survive, q, 1.0)
-            keep = survive & (weights > 0)
-        elif (weights == 0).any():
-            keep = weights > 0
-        if keep is not None:
-            idx = np.flatnonzero(keep)
-            weights, lengths, path = (a.take(idx) for a in (weights, lengths, path))
-            origins, directions = origins.take(idx, axis=1), directions.take(idx, axis=1)
-        if len(path) == 0:
-            break
-
-    cat = {k: (np.concatenate(v) if v else np.zeros(0, np.int64 if k in ("target", "cell", "path") else float))
-           for k, v in out.items()}
-    tally = reduce_contributions(item_links(scene, item), n, settings.bins, n_orders, n_scatter,
-                                 cat["target"], cat["cell"], cat["delay"], cat["power"], cat["path"])
+    tally = ctx.reduce(n)
     tally.rays_intersect = isect.n_intersect - rays0[0]
     tally.rays_occluded = isect.n_occluded - rays0[1]
     tally.surface_power = surface_power if forward else 0.0
@@ -169,54 +236,175 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     return tally
 
 
-def _connect(scene, targets, tgt, points, spawn, normals, radiance_weight, lengths, path, cell_offset, cell_stride,
-             out):
-    """NEE from surface points (3, n) to each target: cosines, response, 1/d^2, visibility, extinction.
+class _Context:
+    """Per-batch connection machinery and contribution lists (tallied by `reduce`)."""
 
-    `radiance_weight` is weight * rho / pi (outgoing radiance per unit incident power);
-    `spawn` the points offset off their surface (shadow-ray origins). A contribution to
-    target j lands in tally cell j * cell_stride + cell_offset. Pairs (point, target)
-    are flattened so that any number of targets is one array operation.
+    def __init__(self, scene, targets, tgt, settings, item, source_position):
+        self.scene, self.targets, self.tgt, self.settings, self.item = scene, targets, tgt, settings, item
+        self.t_pos = np.ascontiguousarray(targets.positions[tgt].T)  # (3, T)
+        self.t_nrm = np.ascontiguousarray(targets.normals[tgt].T)
+        self.n_scatter = settings.n_scatter_orders
+        self.cell_stride = (settings.max_reflections + 1) * self.n_scatter
+        self.source_position = source_position
+        self.out = {k: [] for k in ("target", "cell", "delay", "power", "path")}
+
+    def connect(self, points, shadow_origins, weights, paths, normals=None, in_dirs=None,
+                scatter_order=None, extra_length=None):
+        """NEE from vertices (3, n) to every target; weights carry everything but the connection.
+
+        Surface vertices give `normals` (factor max(cos, 0)); medium vertices give the
+        arriving directions `in_dirs` (factor phase(cos)). Cells use paths.k and
+        paths.s (or `scatter_order`); delays use paths.lengths (+ `extra_length`).
+        """
+        scene, targets, tgt = self.scene, self.targets, self.tgt
+        isect, medium = scene.intersector, scene.medium
+        n_pts, n_tgt = points.shape[1], len(tgt)
+        step = max(1, NEE_CHUNK // max(n_tgt, 1))
+        for lo in range(0, n_pts, step):  # chunks bound memory; one chunk for ordinary batches
+            hi = min(lo + step, n_pts)
+            if n_tgt == 1:
+                pi, ti = np.arange(lo, hi), np.zeros(hi - lo, np.int64)
+                to = self.t_pos - points[:, lo:hi]
+                t_nrm = self.t_nrm
+            else:
+                pi = np.repeat(np.arange(lo, hi), n_tgt)
+                ti = np.tile(np.arange(n_tgt), hi - lo)
+                to = self.t_pos.take(ti, axis=1) - points.take(pi, axis=1)
+                t_nrm = self.t_nrm.take(ti, axis=1)
+            ct = -_dot(to, t_nrm)  # cos at the target, times d
+            if normals is not None:
+                cs = _dot(to, normals[:, lo:hi] if n_tgt == 1 else normals.take(pi, axis=1))
+                sel = np.flatnonzero((cs > 0) & (ct > 0))
+            else:
+                sel = np.flatnonzero(ct > 0)
+            if len(sel) == 0:
+                continue
+            pi, ti, ct = pi.take(sel), ti.take(sel), ct.take(sel)
+            to = to.take(sel, axis=1)
+            d2 = _dot(to, to)
+            d = np.sqrt(d2)
+            wdir = to / d
+            if normals is not None:
+                lobe = cs.take(sel) / d
+            else:
+                lobe = scene.phase.eval(_dot(in_dirs.take(pi, axis=1), wdir))
+            f = weights.take(pi) * lobe * targets.response(tgt.take(ti), ct / d) / d2
+            sel = np.flatnonzero(f > 0)
+            if len(sel) == 0:
+                continue
+            pi, ti, f, d, wdir = pi.take(sel), ti.take(sel), f.take(sel), d.take(sel), wdir.take(sel, axis=1)
+            if not scene.all_visible:
+                # The shadow ray stops short of the device, which may sit on a surface itself.
+                keep = np.flatnonzero(~isect.occluded(shadow_origins.take(pi, axis=1).T, wdir.T,
+                                                      d - 2.0 * isect.offset))
+                pi, ti, f, d, wdir = pi.take(keep), ti.take(keep), f.take(keep), d.take(keep), wdir.take(keep, axis=1)
+            if medium is not None:
+                f = f * medium.transmittance(points.take(pi, axis=1).T, wdir.T, d)
+            s_ord = (paths.s if scatter_order is None else scatter_order).take(pi)
+            length = paths.lengths.take(pi) + d + (0.0 if extra_length is None else extra_length.take(pi))
+            self.out["target"].append(ti)
+            self.out["cell"].append(ti * self.cell_stride + paths.k.take(pi) * self.n_scatter + s_ord)
+            self.out["delay"].append(length * (1.0 / SPEED_OF_LIGHT))
+            self.out["power"].append(f)
+            self.out["path"].append(paths.path.take(pi))
+
+    def reduce(self, n_paths: int) -> BatchTally:
+        ints = ("target", "cell", "path")
+        cat = {k: (np.concatenate(v) if v else np.zeros(0, np.int64 if k in ints else float))
+               for k, v in self.out.items()}
+        return reduce_contributions(item_links(self.scene, self.item), n_paths, self.settings.bins,
+                                    self.settings.max_reflections + 1, self.n_scatter, cat["target"], cat["cell"],
+                                    cat["delay"], cat["power"], cat["path"],
+                                    several_per_cell=self.settings.segment_scatter)
+
+
+def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool) -> None:
+    """Single scattering at points of each segment, connected to the targets (algorithms 2-4).
+
+    Per target (the strata are ellipsoids with the target as a focus): one point per
+    time stratum plus `equiangular_points` equiangular points (segments.py), combined
+    by the balance heuristic: a point at s has weight
+        w * T(o -> p) * sigma_s(p) / (n_T(s) + n_E(s)),
+    and the connection adds phase, response, 1/d^2, visibility and T(p -> target).
+    Algorithm 4 multiplies the family both directions sample (the first segment,
+    k = 0) by the direction balance-heuristic weight (`_direction_mis`).
     """
-    isect, medium = scene.intersector, scene.medium
-    n_pts, n_tgt = points.shape[1], len(tgt)
-    t_pos = np.ascontiguousarray(targets.positions[tgt].T)  # (3, T)
-    t_nrm = np.ascontiguousarray(targets.normals[tgt].T)
-    step = max(1, NEE_CHUNK // max(n_tgt, 1))
-    for lo in range(0, n_pts, step):  # chunks bound memory; one chunk for ordinary batches
-        hi = min(lo + step, n_pts)
-        if n_tgt == 1:
-            pi, ti = np.arange(lo, hi), np.zeros(hi - lo, np.int64)
-            to = t_pos - points[:, lo:hi]
-            nrm = normals[:, lo:hi]
-        else:
-            pi = np.repeat(np.arange(lo, hi), n_tgt)
-            ti = np.tile(np.arange(n_tgt), hi - lo)
-            to = t_pos.take(ti, axis=1) - points.take(pi, axis=1)
-            nrm = normals.take(pi, axis=1)
-        cs = _dot(to, nrm)  # cos at the surface, times d
-        ct = -_dot(to, t_nrm if n_tgt == 1 else t_nrm.take(ti, axis=1))  # cos at the target, times d
-        sel = np.flatnonzero((cs > 0) & (ct > 0))
-        if len(sel) == 0:
+    scene, settings = ctx.scene, ctx.settings
+    medium = scene.medium
+    alive = np.flatnonzero((paths.s == 0) & (paths.k <= settings.max_reflections) & np.isfinite(t_seg))
+    if len(alive) == 0:
+        return
+    seg_paths = paths.keep(alive)
+    t_seg = t_seg.take(alive)
+    zeros = np.zeros(len(seg_paths))
+    h, n_eq = settings.strata_length, settings.equiangular_points
+    for j in range(len(ctx.tgt)):  # strata depend on the target: a loop over devices, not rays
+        y = np.repeat(ctx.t_pos[:, j:j + 1], len(seg_paths), axis=1)
+        o, d, l0 = seg_paths.origins, seg_paths.directions, seg_paths.lengths
+        seg_t, s_t, _ = time_strata(l0, o, d, y, zeros, t_seg, h, lambda m: rng.random(m), settings.max_strata)
+        seg_e, s_e = equiangular(o, d, y, zeros, t_seg, n_eq, lambda m: rng.random(m))
+        seg, s = np.concatenate([seg_t, seg_e]), np.concatenate([s_t, s_e])
+        if len(seg) == 0:
             continue
-        pi, ti, cs, ct = pi.take(sel), ti.take(sel), cs.take(sel), ct.take(sel)
-        to = to.take(sel, axis=1)
-        d2 = _dot(to, to)
-        d = np.sqrt(d2)
-        f = radiance_weight.take(pi) * (cs / d) * targets.response(tgt.take(ti), ct / d) / d2
-        sel = np.flatnonzero(f > 0)
-        if len(sel) == 0:
+        pp = seg_paths.keep(seg)
+        points = pp.origins + s * pp.directions
+        sigma_s = medium.sigma_s_at(points.T)
+        inside = np.flatnonzero(sigma_s > 0)
+        if len(inside) == 0:
             continue
-        pi, ti, f, d = pi.take(sel), ti.take(sel), f.take(sel), d.take(sel)
-        wdir = to.take(sel, axis=1) / d
-        if not scene.all_visible:
-            # The shadow ray stops short of the device, which may sit on a surface itself.
-            keep = np.flatnonzero(~isect.occluded(spawn.take(pi, axis=1).T, wdir.T, d - 2.0 * isect.offset))
-            pi, ti, f, d, wdir = pi.take(keep), ti.take(keep), f.take(keep), d.take(keep), wdir.take(keep, axis=1)
-        if medium is not None:
-            f = f * medium.transmittance(points.take(pi, axis=1).T, wdir.T, d)
-        out["target"].append(ti)
-        out["cell"].append(ti * cell_stride + cell_offset)
-        out["delay"].append((lengths.take(pi) + d) * (1.0 / SPEED_OF_LIGHT))
-        out["power"].append(f)
-        out["path"].append(path.take(pi))
+        seg, pp, points, s, sigma_s = (seg.take(inside), pp.keep(inside), points.take(inside, axis=1),
+                                       s.take(inside), sigma_s.take(inside))
+        y_p, end = y.take(seg, axis=1), t_seg.take(seg)
+        density = (time_density(pp.lengths, pp.origins, pp.directions, y_p, np.zeros(len(s)), end, s, h,
+                                settings.max_strata)
+                   + equiangular_density(pp.origins, pp.directions, y_p, np.zeros(len(s)), end, s, n_eq))
+        w = pp.weights * medium.transmittance(pp.origins.T, pp.directions.T, s) * sigma_s / density
+        if settings.mis and first:
+            w = w * _direction_mis(ctx, int(ctx.tgt[j]), pp, points, s, density)
+        sub = _Context(scene, ctx.targets, ctx.tgt[j:j + 1], settings, ctx.item, ctx.source_position)
+        sub.connect(points, points, w, pp, in_dirs=pp.directions, scatter_order=np.ones(len(pp), np.int64),
+                    extra_length=s)
+        for key in ctx.out:
+            if key == "target":
+                ctx.out[key] += [np.full(len(a), j, np.int64) for a in sub.out[key]]
+            elif key == "cell":
+                ctx.out[key] += [a + j * ctx.cell_stride for a in sub.out[key]]
+            else:
+                ctx.out[key] += sub.out[key]
+
+
+def _direction_mis(ctx: _Context, j: int, pp: _Paths, points, s, density):
+    """Balance heuristic for Tx -> p -> Rx, sampled from both devices (algorithm 4).
+
+    Per-path density of p in volume measure for the side that starts at device X:
+        q_X(p) = R_X(cos_X) / W_X / r_X^2 * (n_T + n_E)_X(p),
+    direction pdf times the point density along X's first segment. This run is one
+    side (its density is given); the other side's first segment is cast from the
+    other device through p. Both sides run the same number of paths (the plan
+    guarantees it), so the weight is q_self / (q_self + q_other).
+    """
+    scene, settings = ctx.scene, ctx.settings
+    src_set, dst_set = device_sets(scene, ctx.item.direction)
+    i, n = ctx.item.source, len(s)
+    cos_src = _dot(pp.directions, src_set.normals[i][:, None])
+    q_self = src_set.response(np.full(n, i), cos_src) / src_set.total_response(i) / (s * s) * density
+    isect = scene.intersector
+    o = dst_set.positions[j] + isect.offset * dst_set.normals[j]
+    to_p = points - o[:, None]
+    r = np.sqrt(_dot(to_p, to_p))
+    w_dir = to_p / r
+    q_other = dst_set.response(np.full(n, j), _dot(w_dir, dst_set.normals[j][:, None])) / dst_set.total_response(j)
+    live = np.flatnonzero(q_other > 0)
+    if len(live):
+        origins = np.repeat(o[:, None], len(live), axis=1)
+        dirs = w_dir.take(live, axis=1)
+        _, t_hit = isect.intersect(origins.T, dirs.T)
+        t_hit = np.where(np.isfinite(t_hit), t_hit, scene.medium_far_distance)
+        src = np.repeat(src_set.positions[i][:, None], len(live), axis=1)
+        zeros, rl = np.zeros(len(live)), r.take(live)
+        other = (time_density(zeros, origins, dirs, src, zeros, t_hit, rl, settings.strata_length,
+                              settings.max_strata)
+                 + equiangular_density(origins, dirs, src, zeros, t_hit, rl, settings.equiangular_points))
+        q_other[live] = q_other.take(live) / (rl * rl) * other
+    total = q_self + q_other
+    return np.where(total > 0, q_self / np.where(total > 0, total, 1.0), 1.0)

@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["delay_metrics", "path_loss_db", "rms_delay_spread_h2",
+__all__ = ["delay_metrics", "delay_metrics_from_moments", "path_loss_db", "rms_delay_spread_h2",
            "bandwidth_3db", "jackknife", "bin_stderr"]
 
 
@@ -52,7 +52,20 @@ def delay_metrics(n_paths, s1, s2, deterministic=None) -> dict:
         cov = (s2 - nn[..., None] * mu[..., :, None] * mu[..., None, :])
         cov = cov / (_safe(n, n_ok) - 1)[..., None, None] / nn[..., None]
         cov = np.where(n_ok[..., None, None], cov, np.nan)
-        m = mu if deterministic is None else mu + np.asarray(deterministic, float)
+    m = mu if deterministic is None else mu + np.asarray(deterministic, float)
+    return delay_metrics_from_moments(m, cov)
+
+
+def delay_metrics_from_moments(m, cov) -> dict:
+    """As `delay_metrics`, from the mean m = (a, b, c) (..., 3) and its covariance (..., 3, 3).
+
+    Independent estimators of the same link (e.g. forward and backward runs of
+    algorithm 4) combine by adding their means and their covariances first.
+    """
+    m = np.asarray(m, float)
+    cov = np.asarray(cov, float)
+    n_ok = np.all(np.isfinite(cov), axis=(-1, -2))
+    with np.errstate(all="ignore"):
         a, b, c = m[..., 0], m[..., 1], m[..., 2]
         reach = a > 0
         sa = _safe(a, reach)

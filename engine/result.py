@@ -1,4 +1,8 @@
-"""Turn merged tallies into the result document (schemas.results.SimulationResultPublic)."""
+"""Turn merged tallies into the result document (schemas.results.SimulationResultPublic).
+
+A link is estimated by one direction's paths, or by both (algorithm 4): independent
+estimators of the same quantity, so means and variances add.
+"""
 from __future__ import annotations
 
 import math
@@ -9,9 +13,19 @@ import numpy as np
 from schemas.results import SimulationResultPublic
 
 from . import metrics
-from .tally import Accumulator
+from .tally import combined_rel_stderr
 
-FAMILIES = {1: "paths without scattering (s = 0), reflection orders 0..K; extinction on every segment"}
+FAMILIES = {
+    1: "paths without scattering (s = 0), reflection orders 0..K; extinction on every segment",
+    2: "s = 0 paths up to K reflections, plus single scattering lit directly by the transmitter: "
+       "Tx -> p -> (k <= K reflections) -> Rx",
+    3: "s = 0 paths up to K reflections, plus single scattering seen directly by the receiver: "
+       "Tx -> (k <= K reflections) -> p -> Rx",
+    4: "s = 0 paths up to K reflections, plus Tx -> p -> (k <= K) -> Rx and Tx -> (k <= K) -> p -> Rx, "
+       "the shared family Tx -> p -> Rx counted once (balance heuristic)",
+    5: "all paths with at most K reflections and S scattering events, in any order",
+}
+DIRECTION_NAMES = {0: "forward", 1: "backward", 2: "both"}
 
 
 def _num(x) -> float | None:
@@ -26,56 +40,87 @@ def _owcsim_version() -> str:
         return "0+unknown"
 
 
-def build_result(spec, scene, acc: Accumulator, settings, los_gain, los_delay, directions, info) -> dict:
+def _combined(accs):
+    """Per-link sums over directions: mean (a, b, c), its covariance, CIR, early/late, order moments."""
+    accs = [a for a in accs if a.n_paths.any()]
+    first = accs[0] if accs else None
+    mean = sum(a.moments()[0] for a in accs)
+    cov = sum(a.moments()[1] for a in accs)
+    cir = sum(a.per_path(a.cir) for a in accs)
+    early = sum(a.per_path(a.early) for a in accs)
+    late = sum(a.per_path(a.late) for a in accs)
+    order_mean = sum(a.order_moments()[0] for a in accs)
+    order_var = sum(a.order_moments()[1] for a in accs)
+    return first, accs, mean, cov, cir, early, late, order_mean, order_var
+
+
+def _group_estimates(accs, link):
+    """Per batch group: that group's own estimate of the per-path CIR, summed over directions.
+
+    Returned as (group sums, group weights) for metrics.jackknife / bin_stderr: sum = estimate x weight.
+    """
+    used = np.all([a.group_paths[:, link] > 0 for a in accs], axis=0)
+    est = sum(a.groups[used, link] / a.group_paths[used, link][:, None] for a in accs)
+    weight = sum(a.group_paths[used, link] for a in accs) / len(accs)
+    return est * weight[:, None], weight
+
+
+def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info) -> dict:
     bins = settings.bins
     edges = bins.edges
-    n = acc.n_paths.astype(float)
-    nn = np.maximum(n, 1.0)
+    first, used_accs, mean, cov, cir, early_all, late_all, order_mean, order_var = _combined(accs.values())
     los_abc = np.stack([los_gain, los_gain * los_delay, los_gain * los_delay**2], axis=-1)
-    delay = metrics.delay_metrics(acc.n_paths, acc.s1, acc.s2, deterministic=los_abc)
-    # Line of sight into the tallies (deterministic: no variance).
+    delay = metrics.delay_metrics_from_moments(mean + los_abc, cov)
+    n_paths = sum(a.n_paths for a in accs.values())
     los_bin = np.floor((los_delay - bins.t_min) / bins.dt).astype(np.int64)
     tx_ids, rx_ids = scene.transmitters.ids, scene.receivers.ids
     n_rx = len(rx_ids)
     links = []
     for link in range(scene.n_links):  # loop over links to assemble the document, not over paths
         ti, ri = divmod(link, n_rx)
-        cir_k = acc.cir[link].sum(axis=1) / nn[link]  # (K+1, bins), summed over s
-        early = acc.early[link].sum() / nn[link]
-        late = acc.late[link].sum() / nn[link]
-        los_in = 0 <= los_bin[link] < bins.n
+        cir_ks = cir[link].copy()  # (K+1, S+1, bins)
+        early, late = float(early_all[link].sum()), float(late_all[link].sum())
+        los_vec = np.zeros(bins.n)
         if los_gain[link] > 0:
-            if los_in:
-                cir_k[0, los_bin[link]] += los_gain[link]
+            if 0 <= los_bin[link] < bins.n:
+                cir_ks[0, 0, los_bin[link]] += los_gain[link]
+                los_vec[los_bin[link]] = los_gain[link]
             elif los_delay[link] < bins.t_min:
                 early += los_gain[link]
             else:
                 late += los_gain[link]
+        cir_k = cir_ks.sum(axis=1)
         total = cir_k.sum(axis=0)
-        used = acc.group_paths[:, link] > 0
-        groups, gp = acc.groups[used, link], acc.group_paths[used, link]
-        los_vec = np.zeros(bins.n)
-        if los_gain[link] > 0 and los_in:
-            los_vec[los_bin[link]] = los_gain[link]
-        bin_se = metrics.bin_stderr(groups, gp) if used.sum() >= 2 else np.full(bins.n, np.nan)
+        serving = [a for a in used_accs if a.n_paths[link] > 0]
+        if serving:
+            groups, weight = _group_estimates(serving, link)
+        else:
+            groups, weight = np.zeros((0, bins.n)), np.zeros(0)
+        enough = len(weight) >= 2
+        bin_se = metrics.bin_stderr(groups, weight) if enough else np.full(bins.n, np.nan)
 
-        def per_path(x, _n=float(gp.sum()) if used.any() else 1.0, _los=los_vec):
-            return x / _n + _los
+        def per_path(x, _w=float(weight.sum()) if len(weight) else 1.0, _los=los_vec):
+            return x / _w + _los
 
         t0_h2, rms_h2 = metrics.rms_delay_spread_h2(edges, total)
-        _, rms_h2_se = metrics.jackknife(lambda x: metrics.rms_delay_spread_h2(edges, per_path(x))[1], groups, gp)
+        rms_h2_se = np.nan
+        if enough:
+            _, rms_h2_se = metrics.jackknife(lambda x: metrics.rms_delay_spread_h2(edges, per_path(x))[1],
+                                             groups, weight)
         bw = metrics.bandwidth_3db(edges, total)
         bw_se = None
-        if bw is not None:
-            _, bw_se = metrics.jackknife(lambda x: metrics.bandwidth_3db(edges, per_path(x)), groups, gp)
-        order_mean = acc.order_sum[link].sum(axis=1) / nn[link]
-        order_var = np.maximum(acc.order_sumsq[link].sum(axis=1) / nn[link] - order_mean**2, 0) / max(n[link] - 1, 1)
-        order_mean[0] += los_gain[link]
-        order_se = np.sqrt(order_var) if n[link] >= 2 else np.full_like(order_var, np.nan)
+        if bw is not None and enough:
+            _, bw_se = metrics.jackknife(lambda x: metrics.bandwidth_3db(edges, per_path(x)), groups, weight)
+        by_k = order_mean[link].sum(axis=1)
+        by_k[0] += los_gain[link]
+        by_k_se = np.sqrt(order_var[link].sum(axis=1))
+        by_s = order_mean[link].sum(axis=0)
+        by_s[0] += los_gain[link]
+        by_s_se = np.sqrt(order_var[link].sum(axis=0))
         h0 = float(delay["dc_gain"][link])
         links.append({
             "transmitter": tx_ids[ti], "receiver": rx_ids[ri], "transmitter_index": ti, "receiver_index": ri,
-            "direction": "forward" if directions[link] == 0 else "backward", "paths": int(n[link]),
+            "direction": DIRECTION_NAMES[int(directions[link])], "paths": int(n_paths[link]),
             "dc_gain": h0, "dc_gain_stderr": _num(delay["dc_gain_stderr"][link]),
             "path_loss_db": _num(metrics.path_loss_db(h0)),
             "received_power_w": h0 * float(scene.transmitters.power[ti]),
@@ -88,27 +133,34 @@ def build_result(spec, scene, acc: Accumulator, settings, los_gain, los_delay, d
             "bandwidth_3db_hz": None if bw is None else _num(bw),
             "bandwidth_3db_hz_stderr": None if bw_se is None else _num(bw_se),
             "los_gain": float(los_gain[link]), "los_delay_s": float(los_delay[link]),
-            "dc_gain_by_reflection_order": [float(v) for v in order_mean],
-            "dc_gain_by_reflection_order_stderr": [_num(v) for v in order_se],
-            "dc_gain_by_scattering_order": [h0],
-            "early_gain": float(early), "late_gain": float(late),
+            "dc_gain_by_reflection_order": [float(v) for v in by_k],
+            "dc_gain_by_reflection_order_stderr": [_num(v) for v in by_k_se],
+            "dc_gain_by_scattering_order": [float(v) for v in by_s],
+            "dc_gain_by_scattering_order_stderr": [_num(v) for v in by_s_se],
+            "early_gain": early, "late_gain": late,
             "cir": {"total": total.tolist(), "total_stderr": [_num(v) for v in bin_se],
-                    "by_reflection_order": cir_k.tolist()},
+                    "by_reflection_order": cir_k.tolist(),
+                    "by_scattering_order": cir_ks.sum(axis=0).tolist()},
         })
-    rel = acc.dc_gain_rel_stderr(los_gain)
+    rel = combined_rel_stderr(accs.values(), los_gain)
+    fwd = accs["forward"]
+    all_accs = list(accs.values())
     run = {
         "stop_reason": info.stop_reason, "target_rel_error": spec.simulation.target_rel_error,
         "max_dc_gain_rel_stderr": _num(rel.max()) if len(rel) else None,
         "wall_time_s": info.wall_time_s, "workers": info.workers, "batches": info.batches,
-        "paths_total": int(acc.n_paths.sum()), "rays_intersect": acc.rays_intersect,
-        "rays_occluded": acc.rays_occluded, "direction_choice": info.pilot,
+        "paths_total": int(sum(a.n_paths.sum() for a in all_accs)),
+        "rays_intersect": sum(a.rays_intersect for a in all_accs),
+        "rays_occluded": sum(a.rays_occluded for a in all_accs), "direction_choice": info.pilot,
     }
+
+    def per_tx(values):
+        return {tx_ids[i]: float(p) / max(fwd.n_paths[scene.link(i, 0):scene.link(i + 1, 0)].max(), 1)
+                for i, p in values.items()}
+
     diagnostics = {
-        "power_on_surfaces": {tx_ids[i]: float(p) / max(acc.n_paths[scene.link(i, 0):scene.link(i + 1, 0)].max(), 1)
-                              for i, p in acc.surface_power.items()},
-        "escaped_power": {tx_ids[i]: float(p) / max(acc.n_paths[scene.link(i, 0):scene.link(i + 1, 0)].max(), 1)
-                          for i, p in acc.escaped_power.items()},
-        "medium_evaluations": acc.medium_evaluations,
+        "power_on_surfaces": per_tx(fwd.surface_power), "escaped_power": per_tx(fwd.escaped_power),
+        "medium_evaluations": sum(a.medium_evaluations for a in all_accs),
     }
     doc = {
         "owcsim_version": _owcsim_version(), "algorithm": spec.simulation.algorithm,

@@ -4,11 +4,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from schemas import SceneSpec
 
 from .devices import Devices, receivers_from_specs, transmitters_from_specs
 from .geometry import Geometry, Intersector, build_geometry
 from .media import HomogeneousMedium, medium_from_spec
+from .phase import phase_from_spec
 
 
 @dataclass
@@ -23,6 +26,10 @@ class Scene:
     #: True when every pair of points in the scene sees each other (an empty box room is
     #: convex), so shadow rays are skipped; benchmarks may turn it off to cast them anyway.
     all_visible: bool = False
+    #: phase function of the medium (None without a medium)
+    phase: object = None
+    #: length given to segments that leave the scene: the medium beyond it absorbs everything [m]
+    medium_far_distance: float = float("inf")
 
     @property
     def n_links(self) -> int:
@@ -39,12 +46,35 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
     `base_dir` resolves relative mesh file paths (the scene file's folder).
     """
     geometry = build_geometry(spec, Path(base_dir) if base_dir is not None else None)
+    medium = medium_from_spec(spec.medium)
     return Scene(
         spec=spec,
         geometry=geometry,
         intersector=Intersector(geometry),
         transmitters=transmitters_from_specs(spec.transmitters, spec.transmitter_ids()),
         receivers=receivers_from_specs(spec.all_receivers(), spec.receiver_ids()),
-        medium=medium_from_spec(spec.medium),
+        medium=medium,
         all_visible=spec.room is not None and not spec.furniture and not spec.meshes,
+        phase=phase_from_spec(spec.medium.phase) if medium is not None else None,
+        medium_far_distance=_far_distance(spec, geometry, medium),
     )
+
+
+def _far_distance(spec: SceneSpec, geometry: Geometry, medium) -> float:
+    """A segment length past which a ray that left the scene meets no more medium [m].
+
+    Bounded region: the diagonal of the box holding surfaces, devices and region.
+    Whole-scene medium: where its optical depth reaches 50 (transmittance 2e-22).
+    """
+    if medium is None:
+        return float("inf")
+    pts = [geometry.vertices] if len(geometry.vertices) else []
+    pts += [np.array([d.position for d in spec.transmitters]), np.array([r.position for r in spec.all_receivers()])]
+    bounds = getattr(medium, "bounds", None)
+    if bounds is not None:
+        pts.append(np.asarray(bounds, float).reshape(-1, 3))
+    allp = np.concatenate(pts)
+    diag = float(np.linalg.norm(allp.max(axis=0) - allp.min(axis=0))) + 1.0
+    if bounds is not None:
+        return diag
+    return diag + 50.0 / max(getattr(medium, "sigma_t_min", medium.sigma_t), 1e-12)

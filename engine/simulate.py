@@ -20,13 +20,13 @@ import numpy as np
 
 from schemas import SceneSpec
 
-from .errors import UnsupportedError
 from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
+from .constants import SPEED_OF_LIGHT
 from .kernel import KernelSettings, WorkItem
 from .los import line_of_sight
 from .result import build_result
 from .scene import Scene, build_scene
-from .tally import Accumulator, TimeBins
+from .tally import Accumulator, TimeBins, combined_rel_stderr
 
 #: Heuristic of the auto direction: with this many times more receivers than
 #: transmitters (or the reverse), one side amortizes its paths over so many links
@@ -34,6 +34,8 @@ from .tally import Accumulator, TimeBins
 AMORTIZATION_RATIO = 8
 #: Accuracy mode checks the target only once each link has this many paths.
 MIN_PATHS_FOR_STOP = 2048
+#: Per-link direction codes: paths from the transmitter, from the receiver, or both (algorithm 4).
+FORWARD, BACKWARD, BOTH = 0, 1, 2
 
 ProgressFn = Callable[[float, dict], None]
 
@@ -48,10 +50,16 @@ class RunInfo:
 
 
 def kernel_settings(spec: SceneSpec) -> KernelSettings:
+    """The kernel configuration of the job's algorithm (physics.md section 4)."""
     sim = spec.simulation
+    a = sim.algorithm
+    step = sim.segment_time_step_s if sim.segment_time_step_s is not None else sim.time_bin_s
     return KernelSettings(
         max_reflections=sim.max_reflections, russian_roulette=sim.russian_roulette,
-        rr_start_depth=sim.rr_start_depth, bins=TimeBins(sim.t_min_s, sim.time_bin_s, sim.n_bins))
+        rr_start_depth=sim.rr_start_depth, bins=TimeBins(sim.t_min_s, sim.time_bin_s, sim.n_bins),
+        max_scattering=sim.scattering_orders, free_flight=a == 5, segment_scatter=a in (2, 3, 4),
+        strata_length=step * SPEED_OF_LIGHT, max_strata=sim.max_strata,
+        equiangular_points=sim.equiangular_points, mis=a == 4)
 
 
 def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: int = 1,
@@ -63,9 +71,6 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
     instead to reuse warm workers across jobs (it is not closed here).
     """
     t_start = time.perf_counter()
-    sim = spec.simulation
-    if sim.algorithm != 1:
-        raise UnsupportedError(f"algorithm {sim.algorithm} is not available in this version; use algorithm 1")
     scene = scene if scene is not None else build_scene(spec, base_dir)
     settings = kernel_settings(spec)
     los_gain, los_delay = line_of_sight(scene)
@@ -77,20 +82,21 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
         JobRef(scene, "", "", None)
     try:
         directions = _choose_directions(scene, spec, settings, executor, job, los_gain, info)
-        acc = _run(scene, spec, settings, executor, job, directions, los_gain, info, progress, should_stop, t_start)
+        accs = _run(scene, spec, settings, executor, job, directions, los_gain, info, progress, should_stop, t_start)
     finally:
         if own:
             executor.close()
     info.wall_time_s = time.perf_counter() - t_start
-    return build_result(spec, scene, acc, settings, los_gain, los_delay, directions, info)
+    return build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info)
 
 
 def _sources(scene: Scene, directions: np.ndarray) -> list[tuple[str, int, tuple[int, ...]]]:
-    """(direction, source, targets) runs that cover every link in its chosen direction."""
+    """(direction, source, targets) runs that cover every link in its chosen direction(s)."""
     n_rx = len(scene.receivers)
-    fwd = directions.reshape(len(scene.transmitters), n_rx) == 0
+    codes = directions.reshape(len(scene.transmitters), n_rx)
+    fwd, bwd = codes != BACKWARD, codes != FORWARD
     runs = [("forward", i, tuple(np.flatnonzero(fwd[i]).tolist())) for i in range(fwd.shape[0]) if fwd[i].any()]
-    runs += [("backward", j, tuple(np.flatnonzero(~fwd[:, j]).tolist())) for j in range(n_rx) if (~fwd[:, j]).any()]
+    runs += [("backward", j, tuple(np.flatnonzero(bwd[:, j]).tolist())) for j in range(n_rx) if bwd[:, j].any()]
     return runs
 
 
@@ -104,7 +110,12 @@ def _items(runs, sim, phase: int, n_paths: int | None):
             yield WorkItem(direction, source, targets, b, size, sim.seed, phase)
 
 
-def _merge(acc: Accumulator, executor, job: JobRef, items, settings, on_batch=None) -> None:
+def _new_accumulators(scene, settings) -> dict[str, Accumulator]:
+    return {d: Accumulator(scene.n_links, settings.max_reflections + 1, settings.n_scatter_orders, settings.bins)
+            for d in ("forward", "backward")}
+
+
+def _merge(accs: dict[str, Accumulator], executor, job: JobRef, items, settings, on_batch=None) -> None:
     """Feed items to the executor and merge their tallies in order; `on_batch` may stop the run."""
     pulled: deque[WorkItem] = deque()
 
@@ -117,7 +128,7 @@ def _merge(acc: Accumulator, executor, job: JobRef, items, settings, on_batch=No
     try:
         for tally in results:
             item = pulled.popleft()
-            acc.add(tally, item.batch, item.source if item.direction == "forward" else None)
+            accs[item.direction].add(tally, item.batch, item.source if item.direction == "forward" else None)
             if on_batch is not None and on_batch(item):
                 break
     finally:
@@ -128,6 +139,13 @@ def _choose_directions(scene, spec, settings, executor, job, los_gain, info) -> 
     """Per link: 0 = forward (from the transmitter), 1 = backward (from the receiver)."""
     sim = spec.simulation
     n_tx, n_rx = len(scene.transmitters), len(scene.receivers)
+    fixed = {2: ("backward", "algorithm 2 samples in-scattering from the receiver side"),
+             3: ("forward", "algorithm 3 samples out-scattering from the transmitter side"),
+             4: ("both", "algorithm 4 runs both sides and weights their shared family by MIS")}
+    if sim.algorithm in fixed:
+        side, why = fixed[sim.algorithm]
+        info.pilot = {"rule": why}
+        return np.full(scene.n_links, {"forward": FORWARD, "backward": BACKWARD, "both": BOTH}[side])
     if sim.direction != "auto":
         info.pilot = {"rule": f"requested: {sim.direction}"}
         return np.full(scene.n_links, 0 if sim.direction == "forward" else 1)
@@ -144,8 +162,9 @@ def _choose_directions(scene, spec, settings, executor, job, los_gain, info) -> 
     cost_eff = []
     for code, direction in enumerate(("forward", "backward")):
         runs = _sources(scene, np.full(scene.n_links, code))
-        acc = Accumulator(scene.n_links, settings.max_reflections + 1, settings.n_scatter_orders, settings.bins)
-        _merge(acc, executor, job, _items(runs, sim, 1, sim.pilot_paths), settings)
+        accs = _new_accumulators(scene, settings)
+        _merge(accs, executor, job, _items(runs, sim, 1, sim.pilot_paths), settings)
+        acc = accs[direction]
         n = acc.n_paths.astype(float)
         mean = acc.s1[:, 0] / n
         var = np.maximum(acc.s2[:, 0, 0] / n - mean**2, 0.0)
@@ -173,7 +192,7 @@ def _finite_list(x):
 def _run(scene, spec, settings, executor, job, directions, los_gain, info, progress, should_stop, t_start):
     sim = spec.simulation
     runs = _sources(scene, directions)
-    acc = Accumulator(scene.n_links, settings.max_reflections + 1, settings.n_scatter_orders, settings.bins)
+    accs = _new_accumulators(scene, settings)
     n_paths = sim.n_paths
     total_batches = len(runs) * -(-n_paths // sim.batch_size) if n_paths is not None else None
     state = {"done": 0}
@@ -182,7 +201,7 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
         state["done"] += 1
         info.batches = state["done"]
         end_of_round = state["done"] % len(runs) == 0
-        rel = acc.dc_gain_rel_stderr(los_gain)
+        rel = combined_rel_stderr(accs.values(), los_gain)
         worst = float(np.max(rel)) if len(rel) else 0.0
         elapsed = time.perf_counter() - t_start
         if total_batches is not None:
@@ -191,13 +210,14 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
             target = sim.target_rel_error
             frac = min(1.0, max(elapsed / sim.time_budget_s, (target / worst) ** 2 if worst > 0 else 1.0))
         if progress is not None:
-            progress(frac, {"paths": int(acc.n_paths.max()), "batches": state["done"],
+            progress(frac, {"paths": int(max(a.n_paths.max() for a in accs.values())), "batches": state["done"],
                             "dc_gain_rel_stderr": worst if np.isfinite(worst) else None, "elapsed_s": elapsed})
         if should_stop is not None and should_stop():
             info.stop_reason = "cancelled"
             return True
         if total_batches is None and end_of_round:
-            if acc.n_paths.min() >= MIN_PATHS_FOR_STOP and worst <= sim.target_rel_error:
+            served = sum(a.n_paths for a in accs.values())
+            if served.min() >= MIN_PATHS_FOR_STOP and worst <= sim.target_rel_error:
                 info.stop_reason = "target_reached"
                 return True
             if elapsed >= sim.time_budget_s:
@@ -205,5 +225,5 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
                 return True
         return False
 
-    _merge(acc, executor, job, _items(runs, sim, 0, n_paths), settings, on_batch)
-    return acc
+    _merge(accs, executor, job, _items(runs, sim, 0, n_paths), settings, on_batch)
+    return accs

@@ -58,11 +58,13 @@ class BatchTally:
 
 
 def reduce_contributions(links, n_paths, bins: TimeBins, n_orders: int, n_scatter: int,
-                         target, cell, delay, power, path) -> BatchTally:
+                         target, cell, delay, power, path, several_per_cell: bool = False) -> BatchTally:
     """Bin a batch's contributions into a BatchTally.
 
     1-D arrays of equal length: `target` (local link index), `cell` = (target * n_orders
     + k) * n_scatter + s, `delay` [s], `power` [W/W], `path` (index in the batch).
+    `several_per_cell`: a path may add several contributions to one cell (points
+    along segments); they are summed per (path, cell) before squaring.
     """
     n_links = len(links)
     shape_kl = (n_links, n_orders, n_scatter)
@@ -79,7 +81,12 @@ def reduce_contributions(links, n_paths, bins: TimeBins, n_orders: int, n_scatte
         early = np.bincount(cell, np.where(b < 0, power, 0.0), n_cells)
         late = np.bincount(cell, np.where(b >= bins.n, power, 0.0), n_cells)
     order_sum = np.bincount(cell, power, n_cells)
-    order_sumsq = np.bincount(cell, power * power, n_cells)
+    if several_per_cell and len(cell):
+        keys, inverse = np.unique(path * n_cells + cell, return_inverse=True)
+        per_path_cell = np.bincount(inverse, power, len(keys))
+        order_sumsq = np.bincount(keys % n_cells, per_path_cell * per_path_cell, n_cells)
+    else:
+        order_sumsq = np.bincount(cell, power * power, n_cells)
     # Per-path sums per link, then their first and second moments over paths.
     key = target * n_paths + path
     wt = power * delay
@@ -140,12 +147,43 @@ class Accumulator:
             self.surface_power[source] = self.surface_power.get(source, 0.0) + batch.surface_power
             self.escaped_power[source] = self.escaped_power.get(source, 0.0) + batch.escaped_power
 
-    def dc_gain_rel_stderr(self, los: np.ndarray) -> np.ndarray:
-        """Relative standard error of H0 per link (inf where nothing is known yet, 0 where H0 = 0 exactly)."""
-        n = np.maximum(self.n_paths, 1).astype(float)
-        mean = self.s1[:, 0] / n
-        var = np.maximum(self.s2[:, 0, 0] / n - mean**2, 0.0) / np.maximum(n - 1, 1)
-        h0 = mean + los
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rel = np.where(h0 > 0, np.sqrt(var) / h0, 0.0)
-        return np.where(self.n_paths >= 2, rel, np.inf)
+    def per_path(self, x: np.ndarray) -> np.ndarray:
+        """A per-link sum divided by the link's path count (0 for links this accumulator does not serve)."""
+        n = self.n_paths.astype(float).reshape((-1,) + (1,) * (x.ndim - 1))
+        return np.where(n > 0, x / np.maximum(n, 1.0), 0.0)
+
+    def moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per link: mean of the per-path (a, b, c) (L, 3) and the covariance of that mean (L, 3, 3).
+
+        Links with no path here get zeros (they add nothing when accumulators combine);
+        links with one path get NaN covariance (no error estimate).
+        """
+        n = self.n_paths.astype(float)[:, None, None]
+        mu = self.per_path(self.s1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cov = (self.s2 - n * mu[:, :, None] * mu[:, None, :]) / np.maximum(n - 1, 1) / np.maximum(n, 1)
+        cov = np.where(n >= 2, cov, np.where(n > 0, np.nan, 0.0))
+        return mu, cov
+
+    def order_moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per (link, k, s): mean gain per path and the variance of that mean."""
+        n = self.n_paths.astype(float)[:, None, None]
+        mean = self.per_path(self.order_sum)
+        var = np.maximum(self.per_path(self.order_sumsq) - mean**2, 0.0) / np.maximum(n - 1, 1)
+        return mean, np.where(n >= 2, var, np.where(n > 0, np.nan, 0.0))
+
+
+def combined_rel_stderr(accs, los: np.ndarray) -> np.ndarray:
+    """Relative standard error of H0 per link over independent accumulators.
+
+    inf where a serving accumulator has fewer than 2 paths; 0 where H0 = 0 exactly.
+    """
+    mean = los.astype(float).copy()
+    var = np.zeros_like(mean)
+    for acc in accs:
+        mu, cov = acc.moments()
+        mean += mu[:, 0]
+        var += cov[:, 0, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.where(mean > 0, np.sqrt(np.maximum(var, 0.0)) / mean, 0.0)
+    return np.where(np.isnan(var), np.inf, rel)

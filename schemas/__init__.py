@@ -4,15 +4,22 @@ Depends on nothing else in owcsim; `engine`, `server` and `clients` import it.
 """
 from .devices import ReceiverGridSpec, ReceiverSpec, TransmitterSpec
 from .geometry import ROOM_FACES, BoxSpec, MeshSpec, RoomReflectance, RoomSpec
-from .medium import (BoxRegionSpec, HenyeyGreensteinPhaseSpec, HomogeneousMediumSpec, IsotropicPhaseSpec,
-                     MediumSpec, MixturePhaseSpec, PhaseSpec, RayleighPhaseSpec, SceneRegionSpec,
-                     SchlickPhaseSpec)
+from .medium import (BoxRegionSpec, GridMediumSpec, HenyeyGreensteinPhaseSpec, HomogeneousMediumSpec,
+                     IsotropicPhaseSpec, MediumSpec, MeshRegionSpec, MixturePhaseSpec, PhaseSpec, RayleighPhaseSpec,
+                     SceneRegionSpec, SchlickPhaseSpec)
 from .scene import SceneSpec
 from .simulation import SimulationSpec
 
 __all__ = [
-    "BoxRegionSpec", "BoxSpec", "HenyeyGreensteinPhaseSpec", "HomogeneousMediumSpec", "IsotropicPhaseSpec",
+    "BoxRegionSpec", "BoxSpec", "GridMediumSpec", "MeshRegionSpec", "HenyeyGreensteinPhaseSpec", "HomogeneousMediumSpec", "IsotropicPhaseSpec",
     "MediumSpec", "MeshSpec", "MixturePhaseSpec", "PhaseSpec", "RayleighPhaseSpec", "ReceiverGridSpec",
     "ReceiverSpec", "ROOM_FACES", "RoomReflectance", "RoomSpec", "SceneRegionSpec", "SceneSpec",
     "SchlickPhaseSpec", "SimulationSpec", "TransmitterSpec",
 ]
+
+# The HTTP service: jobs and problem details.
+from .errors import Problem, ProblemField  # noqa: E402
+from .jobs import HealthPublic, JobListPublic, JobProgress, JobPublic, JobStatus, JobUrls, VersionPublic  # noqa: E402
+
+__all__ += ["HealthPublic", "JobListPublic", "JobProgress", "JobPublic", "JobStatus", "JobUrls", "Problem",
+            "ProblemField", "VersionPublic"]

@@ -1,11 +1,18 @@
 """Participating medium (smoke): coefficients, phase function, region (physics.md section 3)."""
 from __future__ import annotations
 
+import math
+from collections import Counter
 from typing import Annotated, Literal, Union
 
-from pydantic import Field, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from .base import Point, SpecModel
+
+#: Largest coefficient a medium may have [1/m] (optical depth 1e4 per metre: opaque).
+MAX_COEFFICIENT = 1e4
+#: Most cells a grid medium may have (two float64 arrays of this size are ~320 MB).
+MAX_GRID_CELLS = 20_000_000
 
 #: Koschmieder's relation: sigma_t = KOSCHMIEDER / visibility [1/m] (2 % contrast threshold).
 KOSCHMIEDER = 3.912
@@ -84,7 +91,39 @@ class BoxRegionSpec(SpecModel):
         return self
 
 
-RegionSpec = Annotated[Union[SceneRegionSpec, BoxRegionSpec], Field(discriminator="type")]
+class MeshRegionSpec(SpecModel):
+    """The medium fills the inside of a closed triangle mesh (inline `vertices` [m], `faces`).
+
+    Inside is where a ray from the point crosses the boundary an odd number of times
+    (nested closed shells make hollows). The mesh must be closed: every edge (vertices
+    identified by their coordinates) is shared by exactly two triangles. Winding order
+    does not matter: the engine orients each shell itself.
+    """
+
+    type: Literal["mesh"] = "mesh"
+    vertices: list[Point] = Field(min_length=4)
+    faces: list[tuple[int, int, int]] = Field(min_length=4)
+
+    @model_validator(mode="after")
+    def _closed(self) -> "MeshRegionSpec":
+        n = len(self.vertices)
+        bad = [i for i, f in enumerate(self.faces) if min(f) < 0 or max(f) >= n]
+        if bad:
+            raise ValueError(f"faces {bad[:5]} index vertices outside 0..{n - 1}")
+        key = [tuple(v) for v in self.vertices]  # identify duplicated vertices by position
+        faces = [tuple(key[i] for i in f) for f in self.faces]
+        bad = [i for i, f in enumerate(faces) if len(set(f)) < 3]
+        if bad:
+            raise ValueError(f"faces {bad[:5]} repeat a vertex (degenerate triangles)")
+        edges = Counter(frozenset(e) for a, b, c in faces for e in ((a, b), (b, c), (c, a)))
+        open_edges = [tuple(e) for e, k in edges.items() if k != 2]
+        if open_edges:
+            raise ValueError(f"the mesh region is not closed: {len(open_edges)} edges are not shared by exactly "
+                             f"two triangles, e.g. between {list(open_edges[0])}")
+        return self
+
+
+RegionSpec = Annotated[Union[SceneRegionSpec, BoxRegionSpec, MeshRegionSpec], Field(discriminator="type")]
 
 
 class HomogeneousMediumSpec(SpecModel):
@@ -95,8 +134,8 @@ class HomogeneousMediumSpec(SpecModel):
     """
 
     type: Literal["homogeneous"] = "homogeneous"
-    sigma_a: float | None = Field(None, ge=0.0, le=1e4, description="absorption coefficient [1/m]")
-    sigma_s: float | None = Field(None, ge=0.0, le=1e4, description="scattering coefficient [1/m]")
+    sigma_a: float | None = Field(None, ge=0.0, le=MAX_COEFFICIENT, description="absorption coefficient [1/m]")
+    sigma_s: float | None = Field(None, ge=0.0, le=MAX_COEFFICIENT, description="scattering coefficient [1/m]")
     visibility_m: float | None = Field(None, gt=0.0, description="visibility [m]")
     albedo: float | None = Field(None, ge=0.0, le=1.0, description="sigma_s / sigma_t, with visibility_m")
     phase: PhaseSpec = Field(default_factory=IsotropicPhaseSpec)
@@ -131,4 +170,54 @@ class HomogeneousMediumSpec(SpecModel):
         return self.sigma_a, self.sigma_s
 
 
-MediumSpec = Annotated[Union[HomogeneousMediumSpec], Field(discriminator="type")]
+class GridMediumSpec(SpecModel):
+    """Heterogeneous smoke: a 3-D grid of homogeneous cells filling the box `min`..`max` [m].
+
+    `shape` = [nx, ny, nz] cells of equal size. `sigma_a`, `sigma_s` [1/m] are each one
+    number (every cell) or a flat list of nx*ny*nz values in C order, x slowest, z fastest:
+    cell (i, j, k) is entry (i * ny + j) * nz + k (numpy `reshape(nx, ny, nz)`).
+    Outside the grid box there is no medium. One phase function for every cell.
+    """
+
+    type: Literal["grid"] = "grid"
+    min: Point
+    max: Point
+    shape: tuple[int, int, int]
+    sigma_a: float | list[float] = Field(description="absorption coefficient [1/m], one or nx*ny*nz values")
+    sigma_s: float | list[float] = Field(description="scattering coefficient [1/m], one or nx*ny*nz values")
+    phase: PhaseSpec = Field(default_factory=IsotropicPhaseSpec)
+    emission: float = Field(0.0, ge=0.0, le=0.0, description="volume emission L_ve (reserved, 0)")
+
+    @field_validator("shape")
+    @classmethod
+    def _shape(cls, v: tuple[int, int, int]) -> tuple[int, int, int]:
+        if min(v) < 1:
+            raise ValueError("every entry of `shape` must be >= 1")
+        if math.prod(v) > MAX_GRID_CELLS:
+            raise ValueError(f"{math.prod(v)} cells exceed the limit of {MAX_GRID_CELLS}")
+        return v
+
+    @field_validator("sigma_a", "sigma_s")
+    @classmethod
+    def _coefficients(cls, v: float | list[float], info: ValidationInfo) -> float | list[float]:
+        values = [v] if isinstance(v, (int, float)) else v
+        shape = info.data.get("shape")
+        if not isinstance(v, (int, float)) and shape is not None and len(v) != math.prod(shape):
+            raise ValueError(f"expected 1 or nx*ny*nz = {math.prod(shape)} values (C order, x slowest), "
+                             f"got {len(v)}")
+        bad = next((i for i, x in enumerate(values) if not (0.0 <= x <= MAX_COEFFICIENT)), None)
+        if bad is not None:
+            where = "" if isinstance(v, (int, float)) else f" at flat index {bad}"
+            if shape is not None and where:
+                where += f" (cell {bad // (shape[1] * shape[2])}, {bad // shape[2] % shape[1]}, {bad % shape[2]})"
+            raise ValueError(f"value {values[bad]}{where} must be finite, >= 0 and <= {MAX_COEFFICIENT} [1/m]")
+        return v
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "GridMediumSpec":
+        if not all(b > a for a, b in zip(self.min, self.max)):
+            raise ValueError("grid `max` must exceed `min` on every axis")
+        return self
+
+
+MediumSpec = Annotated[Union[HomogeneousMediumSpec, GridMediumSpec], Field(discriminator="type")]

@@ -27,6 +27,7 @@ class CirPublic(PublicModel):
     total: list[float]
     total_stderr: list[float | None]
     by_reflection_order: list[list[float]] = Field(description="[k][bin], k = 0..max_reflections")
+    by_scattering_order: list[list[float]] = Field(description="[s][bin], s = 0..S of the algorithm")
 
 
 class LinkPublic(PublicModel):
@@ -34,7 +35,7 @@ class LinkPublic(PublicModel):
     receiver: str
     transmitter_index: int
     receiver_index: int
-    direction: Literal["forward", "backward"]
+    direction: Literal["forward", "backward", "both"]
     paths: int
     dc_gain: float
     dc_gain_stderr: float | None
@@ -54,6 +55,7 @@ class LinkPublic(PublicModel):
     dc_gain_by_reflection_order: list[float]
     dc_gain_by_reflection_order_stderr: list[float | None]
     dc_gain_by_scattering_order: list[float]
+    dc_gain_by_scattering_order_stderr: list[float | None]
     early_gain: float = Field(description="power per watt arriving before t_min_s (not in the CIR)")
     late_gain: float = Field(description="power per watt arriving after t_max_s (not in the CIR)")
     cir: CirPublic

@@ -41,12 +41,13 @@ class SceneSpec(SpecModel):
             for i, d in enumerate(devs):
                 _check_device_placement(self, f"{kind}[{i}]" + (f" ({d.id})" if d.id else ""), d)
         sim = self.simulation
-        cells = len(self.transmitters) * len(rx) * (sim.max_reflections + 1) * sim.n_bins
+        orders = (sim.max_reflections + 1) * (sim.scattering_orders + 1)
+        cells = len(self.transmitters) * len(rx) * orders * sim.n_bins
         if cells > MAX_TALLY_CELLS:
             raise ValueError(
-                f"{len(self.transmitters)} x {len(rx)} links x {sim.max_reflections + 1} orders x "
+                f"{len(self.transmitters)} x {len(rx)} links x {orders} (reflection, scattering) orders x "
                 f"{sim.n_bins} bins = {cells} tally cells, more than the budget of {MAX_TALLY_CELLS}: "
-                "widen `time_bin_s`, shorten the window or lower `max_reflections`")
+                "widen `time_bin_s`, shorten the window or lower `max_reflections` / `max_scattering`")
         return self
 
     def all_receivers(self) -> list[ReceiverSpec]:

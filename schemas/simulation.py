@@ -19,13 +19,21 @@ class SimulationSpec(SpecModel):
 
     `algorithm` 1..5 names the report's estimators (physics.md section 4); `direction`
     chooses the transmitter-side ("forward") or receiver-side ("backward") estimator,
-    or lets a pilot run pick per link ("auto"). Give `paths` (per source device) or
-    `target_rel_error` on H0 (with `time_budget_s`), not both.
+    or lets a pilot run pick per link ("auto"); algorithms 2 and 3 have their own
+    direction (backward and forward) and 4 runs both. Give `paths` (per source
+    device and direction) or `target_rel_error` on H0 (with `time_budget_s`), not both.
     """
 
     algorithm: Literal[1, 2, 3, 4, 5] = 1
     direction: Literal["auto", "forward", "backward"] = "auto"
     max_reflections: int = Field(3, ge=0, le=1000, description="highest reflection order K")
+    max_scattering: int = Field(3, ge=1, le=1000,
+                                description="highest scattering order S of algorithm 5 (algorithms 2-4: 1, 1: 0)")
+    segment_time_step_s: float | None = Field(
+        None, gt=0.0, description="time strata of the points along segments, algorithms 2-4 [s] (default: time_bin_s)")
+    max_strata: int = Field(64, ge=1, le=4096, description="most time strata per segment and target, algorithms 2-4")
+    equiangular_points: int = Field(2, ge=0, le=256,
+                                    description="equiangular points per segment and target, algorithms 2-4")
     time_bin_s: float = Field(0.25e-9, gt=0.0, description="CIR bin width dt [s]")
     t_min_s: float = Field(0.0, ge=0.0, description="start of the time window [s]")
     t_max_s: float = Field(100e-9, gt=0.0, description="end of the time window [s]")
@@ -50,6 +58,11 @@ class SimulationSpec(SpecModel):
                 f"time window {self.t_min_s:g}..{self.t_max_s:g} s at {self.time_bin_s:g} s per bin needs "
                 f"{self.n_bins} bins, more than the budget of {MAX_BINS}: widen `time_bin_s`")
         return self
+
+    @property
+    def scattering_orders(self) -> int:
+        """Highest scattering order S the algorithm tallies."""
+        return {1: 0, 2: 1, 3: 1, 4: 1}.get(self.algorithm, self.max_scattering)
 
     @property
     def n_bins(self) -> int:

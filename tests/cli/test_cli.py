@@ -55,7 +55,7 @@ def test_validate_reports_located_errors(tmp_path, capsys):
 @pytest.mark.parametrize("args,message", [
     (["--set", "receivers.5.fov_deg=60"], "not an index"),
     (["--set", "nonsense"], "PATH=VALUE"),
-    (["--algorithm", "3"], "algorithm 3 is not available"),
+    (["--algorithm", "7"], "simulation.algorithm"),
 ])
 def test_bad_overrides_are_errors(tmp_path, capsys, args, message):
     assert main(["run", BARRY, "--out", str(tmp_path), "--paths", "100", *args]) == 2

@@ -1,0 +1,287 @@
+"""Phase functions of the smoke medium (physics.md section 3; report section 3, eq. 3.3).
+
+Sign convention (the only place it is defined): ``cos_theta`` is the cosine between the
+propagation direction BEFORE a scattering event and the propagation direction AFTER it;
+g > 0 (or Schlick k > 0) is forward scattering (cos_theta near +1 most likely).
+Every phase function is a pdf on the sphere: integral of p d(omega) = 1, p in 1/sr, so
+the cos_theta density is 2 pi p(cos_theta).  Every ``sample_cos`` is the exact inverse of
+the cos_theta CDF F(c) = 2 pi int_{-1}^{c} p, hence the pdf of ``sample`` equals ``eval``.
+Directions are component arrays of shape (3, n) (rows x, y, z); all float64, vectorized.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+from pydantic import TypeAdapter
+
+from schemas.medium import PhaseSpec
+
+from .sampling import orthonormal_basis
+
+__all__ = ["PhaseFunction", "Isotropic", "HenyeyGreenstein", "Schlick", "Rayleigh", "Mixture",
+           "schlick_mean_cosine", "SCHLICK_BLASI_G_MAX", "phase_functions", "phase_from_spec"]
+
+_INV_4PI = 1.0 / (4.0 * np.pi)
+_BELOW_ONE = np.nextafter(1.0, 0.0)
+#: |g| above which Blasi's k = 1.55 g - 0.55 g^3 reaches |k| = 1: root of 0.55 g^2 + 0.55 g - 1.
+SCHLICK_BLASI_G_MAX = (-0.55 + np.sqrt(0.55 ** 2 + 4 * 0.55)) / 1.1  # 0.938121...
+
+
+def _f64(x) -> np.ndarray:
+    return np.asarray(x, dtype=np.float64)
+
+
+def _open_unit(name: str, x) -> float:
+    x = float(x)
+    if not -1.0 < x < 1.0:  # also rejects NaN
+        raise ValueError(f"{name} must lie in the open interval (-1, 1), got {x!r}")
+    return x
+
+
+def _from_sides(a, b):
+    """cos from a = 1 - cos and b = 1 + cos, using the smaller (cancellation-free) one."""
+    return np.clip(np.where(a <= b, 1.0 - a, b - 1.0), -1.0, 1.0)
+
+
+class PhaseFunction:
+    """Base class: ``eval``, ``sample_cos``, ``sample`` (shared) and ``mean_cosine``."""
+
+    eval: Callable[[np.ndarray], np.ndarray]  #: p(cos_theta) [1/sr]
+    sample_cos: Callable[[np.ndarray], np.ndarray]  #: cos_theta = F^{-1}(u), u uniform in [0, 1)
+    mean_cosine: float  #: g = <cos_theta> = 2 pi int c p(c) dc (a property in every subclass)
+
+    def pdf(self, cos_theta) -> np.ndarray:
+        """Solid-angle pdf of :meth:`sample` [1/sr]; equals :meth:`eval` (exact sampling)."""
+        return self.eval(cos_theta)
+
+    def sample(self, directions, u1, u2) -> np.ndarray:
+        """New unit directions (3, n) around ``directions`` (3, n): cos = sample_cos(u1), phi = 2 pi u2.
+
+        d' = sin(t) cos(phi) s + sin(t) sin(phi) t + cos(t) d, with (s, t, d) the frame of
+        :func:`engine.sampling.orthonormal_basis` (stable for d = (0, 0, +-1)).
+        """
+        d = _f64(directions)
+        if d.ndim != 2 or d.shape[0] != 3:
+            raise ValueError(f"directions must have shape (3, n), got {d.shape}")
+        c = np.broadcast_to(self.sample_cos(u1), d.shape[1:])
+        sin_t = np.sqrt(np.maximum(0.0, (1.0 - c) * (1.0 + c)))
+        phi = 2.0 * np.pi * _f64(u2)
+        s, t = orthonormal_basis(d.T)
+        out = s.T * (sin_t * np.cos(phi)) + t.T * (sin_t * np.sin(phi)) + d * c
+        return out / np.sqrt(np.einsum("ij,ij->j", out, out))
+
+    @classmethod
+    def from_spec(cls, spec) -> "PhaseFunction":
+        return cls()
+
+    def __repr__(self):
+        args = ", ".join(f"{k}={v!r}" for k, v in vars(self).items() if not k.startswith("_"))
+        return f"{type(self).__name__}({args})"
+
+
+class Isotropic(PhaseFunction):
+    """p = 1 / (4 pi); cos = 2u - 1; g = 0."""
+
+    def eval(self, cos_theta):
+        return np.full(np.shape(cos_theta), _INV_4PI)
+
+    def sample_cos(self, u):
+        return 2.0 * _f64(u) - 1.0
+
+    mean_cosine = property(lambda self: 0.0)
+
+
+class HenyeyGreenstein(PhaseFunction):
+    """p = (1 - g^2) / (4 pi (1 + g^2 - 2 g cos)^(3/2)), -1 < g < 1, mean cosine g.
+
+    Henyey & Greenstein, Astrophys. J. 93, 70 (1941); inversion: PBRT 4th ed. sec. 11.3.1.
+    """
+
+    def __init__(self, g: float):
+        self.g = _open_unit("Henyey-Greenstein g", g)
+
+    def eval(self, cos_theta):
+        g, c = self.g, np.clip(_f64(cos_theta), -1.0, 1.0)
+        # 1 + g^2 - 2 g c as a sum of non-negative terms (exact for |g| -> 1 near the peak)
+        q = (1 - g) ** 2 + 2 * g * (1 - c) if g >= 0 else (1 + g) ** 2 - 2 * g * (1 + c)
+        return (1 - g) * (1 + g) * _INV_4PI / (q * np.sqrt(q))
+
+    def sample_cos(self, u):
+        """Closed-form inversion cos = (1 + g^2 - ((1 - g^2)/(1 - g + 2 g u))^2) / (2 g), rewritten:
+
+        with w = 1 - g + 2 g u,
+            1 - cos = 2 (1 - g)^2 (1 - u) (1 + g u) / w^2,
+            1 + cos = 2 (1 + g)^2 u (1 - g (1 - u)) / w^2.
+        No division by g (g = 0 gives cos = 2u - 1 exactly, so no isotropic branch is
+        needed for tiny |g|) and no cancellation, also for |g| -> 1.
+        """
+        g, u = self.g, _f64(u)
+        v = 1.0 - u  # exact for u >= 1/2
+        if g >= 0:
+            w, gu, gv = (1 - g) + 2 * g * u, 1 + g * u, (1 - g) + g * u
+        else:
+            w, gu, gv = (1 + g) - 2 * g * v, (1 + g) - g * v, 1 - g * v
+        a = 2 * (1 - g) ** 2 * v * gu / (w * w)
+        b = 2 * (1 + g) ** 2 * u * gv / (w * w)
+        return _from_sides(a, b)
+
+    mean_cosine = property(lambda self: self.g)
+
+    @classmethod
+    def from_spec(cls, spec):
+        return cls(spec.g)
+
+
+def schlick_mean_cosine(k) -> np.ndarray:
+    """Exact mean cosine of Schlick(k): <cos> = 1/k - (1 - k^2) artanh(k) / k^2.
+
+    For |k| < 1e-2 the series sum_{n>=1} 2 k^(2n-1) / (4 n^2 - 1) = 2k/3 + 2k^3/15 + ...
+    avoids the cancellation.  Note <cos> != k (and != g of the HG it approximates).
+    """
+    k = _f64(k)
+    ks = np.where(np.abs(k) < 1e-2, 0.5, k)  # keep the closed form finite on masked entries
+    closed = 1.0 / ks - (1.0 - ks * ks) * np.arctanh(ks) / (ks * ks)
+    k2 = k * k
+    series = k * (2 / 3 + k2 * (2 / 15 + k2 * (2 / 35 + k2 * 2 / 63)))
+    return np.where(np.abs(k) < 1e-2, series, closed)
+
+
+class Schlick(PhaseFunction):
+    """p = (1 - k^2) / (4 pi (1 - k cos)^2), -1 < k < 1; k > 0 forward.
+
+    Blasi, Le Saec & Schlick, Computer Graphics Forum 12(3) (Eurographics '93), 201-212.
+    CDF F(c) = (1 - k)(1 + c) / (2 (1 - k c)); inversion cos = (2u + k - 1) / (2 k u - k + 1).
+    """
+
+    def __init__(self, k: float):
+        self.k = _open_unit("Schlick k", k)
+
+    @classmethod
+    def from_g(cls, g: float, method: str = "blasi") -> "Schlick":
+        """Schlick approximating HG(g).
+
+        ``"blasi"``: k = 1.55 g - 0.55 g^3 (Blasi et al. 1993; odd in g, so the report's
+        "g^2" is a typo).  It is a fit, not a moment match: the mean cosine is off by up
+        to 0.075 (at |g| = 0.85), and it gives |k| >= 1 for |g| >= SCHLICK_BLASI_G_MAX
+        = 0.9381, which is rejected.  ``"exact"``: k such that the mean cosine is exactly g (bisection
+        on :func:`schlick_mean_cosine`, monotone in k), valid on all of (-1, 1).
+        """
+        g = _open_unit("Schlick g", g)
+        if method == "blasi":
+            if abs(g) >= SCHLICK_BLASI_G_MAX:
+                raise ValueError(f"Blasi's k = 1.55 g - 0.55 g^3 gives |k| >= 1 for |g| >= "
+                                 f"{SCHLICK_BLASI_G_MAX:.4f} (got g = {g}); give k, or method='exact'")
+            return cls(1.55 * g - 0.55 * g ** 3)
+        if method != "exact":
+            raise ValueError(f"unknown Schlick mapping {method!r} (use 'blasi' or 'exact')")
+        lo, hi = -1.0, 1.0
+        for _ in range(64):  # interval 2^-63: below the spacing of doubles near +-1
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if schlick_mean_cosine(mid) < g else (lo, mid)
+        return cls(min(max(0.5 * (lo + hi), -_BELOW_ONE), _BELOW_ONE))
+
+    def eval(self, cos_theta):
+        k, c = self.k, np.clip(_f64(cos_theta), -1.0, 1.0)
+        q = (1 - k) + k * (1 - c) if k >= 0 else (1 + k) - k * (1 + c)  # 1 - k c, no cancellation
+        return (1 - k) * (1 + k) * _INV_4PI / (q * q)
+
+    def sample_cos(self, u):
+        """With D = 2 k u - k + 1:  1 - cos = 2 (1 - k)(1 - u) / D,  1 + cos = 2 (1 + k) u / D."""
+        k, u = self.k, _f64(u)
+        d = (1 - k) + 2 * k * u if k >= 0 else (1 + k) - 2 * k * (1.0 - u)
+        return _from_sides(2 * (1 - k) * (1.0 - u) / d, 2 * (1 + k) * u / d)
+
+    mean_cosine = property(lambda self: float(schlick_mean_cosine(self.k)))
+
+    @classmethod
+    def from_spec(cls, spec):
+        """A spec's `g` maps to the k whose mean cosine is exactly g: the user asked for an
+        asymmetry g, and Blasi's polynomial misses it by up to 0.075 (at |g| = 0.85) and
+        has no valid k above |g| = 0.938."""
+        return cls(spec.k) if spec.k is not None else cls.from_g(spec.g, method="exact")
+
+
+class Rayleigh(PhaseFunction):
+    """p = 3 (1 + cos^2) / (16 pi); g = 0.  Rayleigh, Phil. Mag. 41 (1871); Chandrasekhar 1950.
+
+    CDF F(c) = (c^3 + 3c + 4) / 8.  F(c) = u is the depressed cubic c^3 + 3c + (4 - 8u) = 0
+    (one real root); Cardano gives c = A - 1/A with A = cbrt(z + sqrt(z^2 + 1)), z = 4u - 2,
+    and since z + sqrt(z^2 + 1) = exp(asinh z):  cos = 2 sinh(asinh(4u - 2) / 3)  (exact, stable).
+    """
+
+    def eval(self, cos_theta):
+        c = np.clip(_f64(cos_theta), -1.0, 1.0)
+        return 3.0 / (16.0 * np.pi) * (1.0 + c * c)
+
+    def sample_cos(self, u):
+        return np.clip(2.0 * np.sinh(np.arcsinh(4.0 * _f64(u) - 2.0) / 3.0), -1.0, 1.0)
+
+    mean_cosine = property(lambda self: 0.0)
+
+
+class Mixture(PhaseFunction):
+    """p = sum_i w_i p_i with sum_i w_i = 1 (report eq. 3.3), e.g. two-term HG; g = sum w_i g_i.
+
+    Sampling uses one uniform: u in [W_{i-1}, W_i) (W the cumulative weights) selects
+    component i, and (u - W_{i-1}) / w_i is passed to its sample_cos.
+    """
+
+    def __init__(self, components):
+        if not (comps := list(components)):
+            raise ValueError("a mixture needs at least one (weight, phase) component")
+        for w, p in comps:
+            if not isinstance(p, PhaseFunction):
+                raise TypeError(f"mixture component {p!r} is not a PhaseFunction")
+            if not (np.isfinite(w) and w >= 0):
+                raise ValueError(f"mixture weights must be finite and >= 0, got {w!r}")
+        if (total := float(sum(w for w, _ in comps))) <= 0:
+            raise ValueError("mixture weights are all zero")
+        comps = [(float(w) / total, p) for w, p in comps if w > 0]
+        self.weights = np.array([w for w, _ in comps])
+        self.components = tuple(p for _, p in comps)
+        self._edges = np.concatenate(([0.0], np.cumsum(self.weights)))
+
+    def eval(self, cos_theta):
+        return sum(w * p.eval(cos_theta) for w, p in self._pairs())
+
+    def sample_cos(self, u):
+        u = _f64(u)
+        flat = u.reshape(-1)  # u in [W_{i-1}, W_i) -> component i, rescaled to [0, 1)
+        idx = np.clip(np.searchsorted(self._edges, flat, side="right") - 1, 0, len(self.weights) - 1)
+        v = np.clip((flat - self._edges[idx]) / self.weights[idx], 0.0, _BELOW_ONE)
+        out = np.empty_like(flat)
+        for i, p in enumerate(self.components):  # loop over components, not samples
+            m = idx == i
+            out[m] = p.sample_cos(v[m])
+        return out.reshape(u.shape)
+
+    mean_cosine = property(lambda self: float(sum(w * p.mean_cosine for w, p in self._pairs())))
+
+    def _pairs(self):
+        return zip(self.weights, self.components)
+
+    @classmethod
+    def from_spec(cls, spec):
+        return cls([(c.weight, phase_from_spec(c.phase)) for c in spec.components])
+
+    def __repr__(self):
+        return f"Mixture({[(float(w), p) for w, p in self._pairs()]!r})"
+
+
+#: Phase-function classes keyed by the ``type`` literal of schemas.medium's phase specs.
+phase_functions: dict[str, type[PhaseFunction]] = {
+    "isotropic": Isotropic, "hg": HenyeyGreenstein, "schlick": Schlick,
+    "rayleigh": Rayleigh, "mixture": Mixture,
+}
+
+
+def phase_from_spec(spec) -> PhaseFunction:
+    """Build a phase function from a schemas.medium phase spec (or its dict form)."""
+    if isinstance(spec, dict):
+        spec = TypeAdapter(PhaseSpec).validate_python(spec)
+    kind = getattr(spec, "type", None)
+    if kind not in phase_functions:
+        raise ValueError(f"unknown phase function type {kind!r}; known: {sorted(phase_functions)}")
+    return phase_functions[kind].from_spec(spec)

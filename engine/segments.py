@@ -1,0 +1,138 @@
+"""Points along ray segments for the single-scattering estimators (algorithms 2-4).
+
+A segment o + s w, a <= s <= b, is connected to a target y through points p(s).
+The estimate of the integral  I = int_a^b g(s) ds  must be unbiased, so every
+placement below is a partition of [a, b] into strata with one uniformly jittered
+point per stratum, each point weighted by its stratum's length (stratified
+sampling: E[sum_j g(s_j) |stratum_j|] = I exactly).
+
+Time strata (the report's ellipse construction, section 7.3, made unbiased): the
+total path length l(s) = l0 + s + |y - p(s)| grows monotonically with s, and its
+level sets are ellipsoids with foci o and y. Cutting [a, b] where l(s) crosses a
+multiple of h = c dt puts every point in its own time bin of width dt. The cut for
+a path length L solves s + |v - s w| = D, D = L - l0, v = y - o:
+
+    s = (D^2 - |v|^2) / (2 (D - v.w)).
+
+Segments crossing more than `max_strata` bins get wider strata (still a partition).
+
+Equiangular points (Kulla & Fajardo 2012) are drawn with pdf proportional to
+1 / |y - p(s)|^2 along the segment, which cancels the 1/d^2 of the connection
+near the device: s = D + h tan(theta_a + u (theta_b - theta_a)), D = (y - o).w,
+h = |y - o - D w|, theta = atan((s - D) / h). The two placements are combined by
+the balance heuristic on sample densities: a point from either set is weighted by
+1 / (n_T(s) + n_E(s)), with n_T = 1 / |time stratum containing s| and
+n_E = N_E pdf_E(s); the sum over both sets is an unbiased estimate of the integral.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def _cut(D, vv, vw):
+    """s where s + |v - s w| = D (see module docstring); D - v.w > 0 for cuts inside a segment."""
+    den = 2.0 * (D - vw)
+    return (D * D - vv) / np.where(den > 0, den, 1.0)
+
+
+def path_length(l0, origins, directions, targets, s):
+    """l(s) = l0 + s + |target - (origin + s direction)| for (3, n) arrays [m]."""
+    r = targets - (origins + s * directions)
+    return l0 + s + np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+
+
+def _strata_plan(la, lb, h, max_strata):
+    """Per segment: (first cut index, cut spacing, cut origin, number of cuts) in path length."""
+    first = np.floor(la / h) + 1.0
+    n_cuts = np.maximum(np.ceil(lb / h) - first, 0.0)
+    coarse = n_cuts > max_strata - 1
+    step = np.where(coarse, (lb - la) / max_strata, h)
+    first = np.where(coarse, 1.0, first)
+    origin_l = np.where(coarse, la, 0.0)
+    n_cuts = np.where(coarse, max_strata - 1, n_cuts)
+    return first, step, origin_l, n_cuts
+
+
+def time_density(l0, origins, directions, targets, a, b, s, h, max_strata: int = 64):
+    """n_T(s) = 1 / length of the time stratum of `time_strata` containing s (one point per segment)."""
+    la = path_length(l0, origins, directions, targets, a)
+    lb = path_length(l0, origins, directions, targets, b)
+    first, step, origin_l, n_cuts = _strata_plan(la, lb, h, max_strata)
+    l = path_length(l0, origins, directions, targets, s)
+    j = np.clip(np.floor((l - origin_l) / step) - first + 1, 0, n_cuts)  # stratum index 0..n_cuts
+    v = targets - origins
+    vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+    vw = v[0] * directions[0] + v[1] * directions[1] + v[2] * directions[2]
+    lo = np.where(j == 0, a, _cut(origin_l + (first + j - 1) * step - l0, vv, vw))
+    hi = np.where(j == n_cuts, b, _cut(origin_l + (first + j) * step - l0, vv, vw))
+    length = np.clip(hi, a, b) - np.clip(lo, a, b)
+    return np.where(length > 0, 1.0 / np.where(length > 0, length, 1.0), 0.0)
+
+
+def _equiangular_frame(origins, directions, targets, a, b):
+    v = targets - origins
+    D = v[0] * directions[0] + v[1] * directions[1] + v[2] * directions[2]
+    r = v - D * directions
+    h = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    h = np.maximum(h, 1e-9 * (1.0 + np.abs(D)))  # a target on the ray's line: keep the pdf finite
+    return D, h, np.arctan2(a - D, h), np.arctan2(b - D, h)
+
+
+def equiangular(origins, directions, targets, a, b, n_per: int, u):
+    """`n_per` stratified equiangular points per segment [a, b] with respect to its target.
+
+    Returns (segment index (m,), s (m,)); `u(m)` gives the uniforms.
+    """
+    n = len(a)
+    ok = np.flatnonzero(b > a)
+    seg = np.repeat(ok, n_per)
+    if len(seg) == 0:
+        return seg, np.zeros(0)
+    D, h, ta, tb = _equiangular_frame(origins.take(seg, axis=1), directions.take(seg, axis=1),
+                                      targets.take(seg, axis=1), a.take(seg), b.take(seg))
+    xi = (np.tile(np.arange(n_per), len(ok)) + u(len(seg))) / n_per
+    s = D + h * np.tan(ta + xi * (tb - ta))
+    return seg, np.clip(s, a.take(seg), b.take(seg))
+
+
+def equiangular_density(origins, directions, targets, a, b, s, n_per: int):
+    """n_E(s) = n_per * pdf_E(s) (one point per segment, arrays as `equiangular`)."""
+    if n_per == 0:
+        return np.zeros(len(s))
+    D, h, ta, tb = _equiangular_frame(origins, directions, targets, a, b)
+    span = tb - ta
+    pdf = h / (np.where(span > 0, span, 1.0) * (h * h + (s - D) ** 2))
+    return np.where(span > 0, n_per * pdf, 0.0)
+
+
+def time_strata(l0, origins, directions, targets, a, b, h, u, max_strata: int = 64):
+    """Stratify segments [a, b] in total path length (time bins of length h = c dt [m]).
+
+    Arrays: l0, a, b (n,) [m]; origins, directions, targets (3, n). `u` is a
+    callable u(m) -> m uniforms (the jitter). Returns (segment index (m,), s (m,),
+    stratum length (m,)) for every point, segments with b <= a giving none.
+    """
+    n = len(a)
+    la = path_length(l0, origins, directions, targets, a)
+    lb = path_length(l0, origins, directions, targets, b)
+    ok = b > a
+    # Cuts at multiples of h strictly inside (la, lb); a segment crossing more than
+    # max_strata bins is cut evenly in path length instead (a coarser partition).
+    first, step, origin_l, n_cuts = _strata_plan(la, lb, h, max_strata)
+    counts = np.where(ok, n_cuts.astype(np.int64) + 1, 0)
+    m = int(counts.sum())
+    seg = np.repeat(np.arange(n), counts)
+    start = np.cumsum(counts) - counts
+    j = np.arange(m) - start.take(seg)  # stratum index within its segment
+    cnt = counts.take(seg)
+    v = targets.take(seg, axis=1) - origins.take(seg, axis=1)
+    w = directions.take(seg, axis=1)
+    vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+    vw = v[0] * w[0] + v[1] * w[1] + v[2] * w[2]
+    l0s, st, f, ol = l0.take(seg), step.take(seg), first.take(seg), origin_l.take(seg)
+    s_lo = np.where(j == 0, a.take(seg), _cut(ol + (f + j - 1) * st - l0s, vv, vw))
+    s_hi = np.where(j == cnt - 1, b.take(seg), _cut(ol + (f + j) * st - l0s, vv, vw))
+    s_lo = np.clip(s_lo, a.take(seg), b.take(seg))
+    s_hi = np.clip(s_hi, s_lo, b.take(seg))
+    length = s_hi - s_lo
+    return seg, s_lo + u(m) * length, length
