@@ -40,6 +40,32 @@ def _owcsim_version() -> str:
         return "0+unknown"
 
 
+#: Mean cosine above which a phase function is flagged as too peaked for next-event estimation.
+PEAKED_PHASE_G = 0.95
+
+
+def _warnings(spec, scene) -> list[str]:
+    out = []
+    sim = spec.simulation
+    if scene.phase is not None and sim.algorithm > 1 and abs(scene.phase.mean_cosine) > PEAKED_PHASE_G:
+        out.append(f"phase function mean cosine {scene.phase.mean_cosine:.4g}: connections from scattering "
+                   "points to point-like devices are heavy-tailed, so the scattered part converges slowly and its "
+                   "error bars may be too small; compare runs with different seeds")
+    if sim.algorithm == 1 and _scatters(spec.medium):
+        out.append("algorithm 1 counts only unscattered light: with sigma_s > 0 it underestimates "
+                   "(use algorithm 4 or 5 for scattered light)")
+    return out
+
+
+def _scatters(medium) -> bool:
+    """True when the medium document has any scattering (sigma_s > 0 somewhere)."""
+    if medium is None:
+        return False
+    if medium.type == "homogeneous":
+        return medium.coefficients[1] > 0
+    return bool(np.max(np.atleast_1d(medium.sigma_s)) > 0)
+
+
 def _combined(accs):
     """Per-link sums over directions: mean (a, b, c), its covariance, CIR, early/late, order moments."""
     accs = [a for a in accs if a.n_paths.any()]
@@ -164,6 +190,7 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
     }
     doc = {
         "owcsim_version": _owcsim_version(), "algorithm": spec.simulation.algorithm,
+        "warnings": _warnings(spec, scene),
         "families": FAMILIES[spec.simulation.algorithm],
         "time_bins": {"t_min_s": bins.t_min, "time_bin_s": bins.dt, "n_bins": bins.n},
         "links": links, "run": run, "diagnostics": diagnostics, "scene": spec.model_dump(mode="json"),

@@ -96,4 +96,5 @@ class SimulationResultPublic(PublicModel):
     links: list[LinkPublic]
     run: RunPublic
     diagnostics: DiagnosticsPublic
+    warnings: list[str] = Field(default_factory=list, description="what a careful reader of these numbers should know")
     scene: SceneSpec
