@@ -167,6 +167,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         collided = np.zeros(len(paths), bool)
         if free_flight:  # algorithm 5: sample the collision distance
             t_col, collided = medium.sample_distance(paths.origins.T, paths.directions.T, t_seg, rng.random(len(paths)))
+            if settings.equiangular_points:
+                _equiangular_in_scatter(ctx, paths, t_seg, rng)
         elif medium is not None:
             paths.weights = paths.weights * medium.transmittance(paths.origins.T, paths.directions.T, t_seg)
         escaped_power += paths.weights[~hit & ~collided].sum()
@@ -205,7 +207,17 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
                 mp.lengths = mp.lengths + tm
                 mp.weights = mp.weights * medium.albedo_at(points.T)
                 mp.s = mp.s + 1
-                ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions)
+                if settings.equiangular_points:  # balance heuristic with the equiangular points
+                    origins = mp.origins
+                    p_ff = medium.sigma_t_at(points.T) * medium.transmittance(origins.T, mp.directions.T, tm)
+                    end = t_seg.take(mi)
+                    for j in range(len(ctx.tgt)):
+                        y = np.repeat(ctx.t_pos[:, j:j + 1], len(mp), axis=1)
+                        n_e = equiangular_density(origins, mp.directions, y, np.zeros(len(mp)), end, tm,
+                                                  settings.equiangular_points)
+                        ctx.connect_one(j, points, mp.weights * p_ff / (p_ff + n_e), mp, in_dirs=mp.directions)
+                else:
+                    ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions)
                 u = rng.random((2, len(mp)))
                 mp.directions = scene.phase.sample(mp.directions, u[0], u[1])
                 mp.origins = points
@@ -308,6 +320,18 @@ class _Context:
             self.out["power"].append(f)
             self.out["path"].append(paths.path.take(pi))
 
+    def connect_one(self, j: int, points, weights, paths, **kw) -> None:
+        """`connect` to the item's j-th target only (weights that depend on the target)."""
+        sub = _Context(self.scene, self.targets, self.tgt[j:j + 1], self.settings, self.item, self.source_position)
+        sub.connect(points, points, weights, paths, **kw)
+        for key in self.out:
+            if key == "target":
+                self.out[key] += [np.full(len(a), j, np.int64) for a in sub.out[key]]
+            elif key == "cell":
+                self.out[key] += [a + j * self.cell_stride for a in sub.out[key]]
+            else:
+                self.out[key] += sub.out[key]
+
     def reduce(self, n_paths: int) -> BatchTally:
         ints = ("target", "cell", "path")
         cat = {k: (np.concatenate(v) if v else np.zeros(0, np.int64 if k in ints else float))
@@ -315,7 +339,8 @@ class _Context:
         return reduce_contributions(item_links(self.scene, self.item), n_paths, self.settings.bins,
                                     self.settings.max_reflections + 1, self.n_scatter, cat["target"], cat["cell"],
                                     cat["delay"], cat["power"], cat["path"],
-                                    several_per_cell=self.settings.segment_scatter)
+                                    several_per_cell=self.settings.segment_scatter or (
+                                        self.settings.free_flight and self.settings.equiangular_points > 0))
 
 
 def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool) -> None:
@@ -361,16 +386,47 @@ def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool) -> N
         w = pp.weights * medium.transmittance(pp.origins.T, pp.directions.T, s) * sigma_s / density
         if settings.mis and first:
             w = w * _direction_mis(ctx, int(ctx.tgt[j]), pp, points, s, density)
-        sub = _Context(scene, ctx.targets, ctx.tgt[j:j + 1], settings, ctx.item, ctx.source_position)
-        sub.connect(points, points, w, pp, in_dirs=pp.directions, scatter_order=np.ones(len(pp), np.int64),
-                    extra_length=s)
-        for key in ctx.out:
-            if key == "target":
-                ctx.out[key] += [np.full(len(a), j, np.int64) for a in sub.out[key]]
-            elif key == "cell":
-                ctx.out[key] += [a + j * ctx.cell_stride for a in sub.out[key]]
-            else:
-                ctx.out[key] += sub.out[key]
+        ctx.connect_one(j, points, w, pp, in_dirs=pp.directions, scatter_order=np.ones(len(pp), np.int64),
+                        extra_length=s)
+
+
+def _equiangular_in_scatter(ctx: _Context, paths: _Paths, t_seg, rng) -> None:
+    """Algorithm 5: extra next-event estimates of in-scattering at equiangular points of each segment.
+
+    With free-flight collisions at density p_ff(s) = sigma_t(s) T(o -> s) and
+    `equiangular_points` points at density n_E(s) per target, both estimate the
+    light scattered once more on this segment toward the target; the balance
+    heuristic weights a collision's estimate by p_ff / (p_ff + n_E) and an
+    equiangular point's by n_E / (p_ff + n_E), i.e. its weight is
+    w T(o -> s) sigma_s(s) / (p_ff + n_E). The path continues from the collision only.
+    """
+    scene, settings, medium = ctx.scene, ctx.settings, ctx.scene.medium
+    alive = np.flatnonzero((paths.s < settings.max_scattering) & np.isfinite(t_seg))
+    if len(alive) == 0:
+        return
+    base = paths.keep(alive)
+    end = t_seg.take(alive)
+    n_eq = settings.equiangular_points
+    for j in range(len(ctx.tgt)):
+        y = np.repeat(ctx.t_pos[:, j:j + 1], len(base), axis=1)
+        seg, s = equiangular(base.origins, base.directions, y, np.zeros(len(base)), end, n_eq, lambda m: rng.random(m))
+        if len(seg) == 0:
+            continue
+        pp = base.keep(seg)
+        points = pp.origins + s * pp.directions
+        sigma_s = medium.sigma_s_at(points.T)
+        inside = np.flatnonzero(sigma_s > 0)
+        if len(inside) == 0:
+            continue
+        seg, pp, points, s, sigma_s = (seg.take(inside), pp.keep(inside), points.take(inside, axis=1),
+                                       s.take(inside), sigma_s.take(inside))
+        transmittance = medium.transmittance(pp.origins.T, pp.directions.T, s)
+        p_ff = medium.sigma_t_at(points.T) * transmittance
+        n_e = equiangular_density(pp.origins, pp.directions, y.take(seg, axis=1), np.zeros(len(s)), end.take(seg), s,
+                                  n_eq)
+        pp.s = pp.s + 1
+        ctx.connect_one(j, points, pp.weights * transmittance * sigma_s / (p_ff + n_e), pp, in_dirs=pp.directions,
+                        extra_length=s)
 
 
 def _direction_mis(ctx: _Context, j: int, pp: _Paths, points, s, density):

@@ -32,8 +32,9 @@ class SimulationSpec(SpecModel):
     segment_time_step_s: float | None = Field(
         None, gt=0.0, description="time strata of the points along segments, algorithms 2-4 [s] (default: time_bin_s)")
     max_strata: int = Field(64, ge=1, le=4096, description="most time strata per segment and target, algorithms 2-4")
-    equiangular_points: int = Field(2, ge=0, le=256,
-                                    description="equiangular points per segment and target, algorithms 2-4")
+    equiangular_points: int = Field(
+        2, ge=0, le=256, description="equiangular points per segment and target (algorithms 2-5), combined with "
+                                     "the time strata (2-4) or the free-flight collisions (5) by the balance heuristic")
     time_bin_s: float = Field(0.25e-9, gt=0.0, description="CIR bin width dt [s]")
     t_min_s: float = Field(0.0, ge=0.0, description="start of the time window [s]")
     t_max_s: float = Field(100e-9, gt=0.0, description="end of the time window [s]")
