@@ -35,13 +35,18 @@ _CUBE_FACES = {  # name -> two triangles, outward normal for a solid box
 
 @dataclass
 class Geometry:
-    """Triangle soup: `vertices` (V,3) [m], `faces` (F,3), per-face `reflectance` and `group` name index."""
+    """Triangle soup: `vertices` (V,3) [m], `faces` (F,3), per-face `reflectance` and `group` name index.
+
+    `oriented` marks faces whose winding is known to point into free space (the room's
+    inward faces, furniture's outward faces); user meshes are two-sided, orientation unknown.
+    """
 
     vertices: np.ndarray
     faces: np.ndarray
     reflectance: np.ndarray
     group: np.ndarray
     group_names: list[str]
+    oriented: np.ndarray | None = None
 
     @property
     def normals(self) -> np.ndarray:
@@ -127,6 +132,8 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
     pieces += [_load_mesh(i, m, base_dir) for i, m in enumerate(spec.meshes)]
     if not pieces:
         return Geometry(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0), np.zeros(0, np.int64), [])
+    n_oriented = sum(len(p[1]) for p in pieces[:1 + len(spec.furniture)]) if spec.room is not None else \
+        sum(len(p[1]) for p in pieces[:len(spec.furniture)])
     verts, faces, rho, labels, offset = [], [], [], [], 0
     for v, f, r, names in pieces:
         if not np.all(np.isfinite(v)):
@@ -147,7 +154,8 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
         warnings.warn(f"dropped {int((~ok).sum())} degenerate (zero-area) triangles from {bad}", stacklevel=2)
     if not ok.any():
         raise SceneError("every triangle of the scene is degenerate")
-    return Geometry(vertices, faces[ok], rho[ok], group[ok], list(group_names))
+    oriented = np.arange(len(faces)) < n_oriented
+    return Geometry(vertices, faces[ok], rho[ok], group[ok], list(group_names), oriented[ok])
 
 
 def _f32(a: np.ndarray) -> np.ndarray:

@@ -13,6 +13,7 @@ import numpy as np
 from schemas.results import SimulationResultPublic
 
 from . import metrics
+from .auto import _max_albedo, _scatters
 from .tally import combined_rel_stderr
 
 FAMILIES = {
@@ -25,7 +26,15 @@ FAMILIES = {
        "the shared family Tx -> p -> Rx counted once (balance heuristic)",
     5: "all paths with at most K reflections and S scattering events, in any order",
 }
-DIRECTION_NAMES = {0: "forward", 1: "backward", 2: "both"}
+DIRECTION_NAMES = {0: "forward", 1: "backward", 2: "both", 3: "none"}
+LEFT_OUT = {
+    1: ["scattered light (s >= 1)"],
+    2: ["single scattering reached after reflections from the transmitter (Tx -> k >= 1 -> p -> Rx)",
+        "scattering orders s >= 2"],
+    3: ["single scattering lit after reflections (Tx -> p -> k >= 1 -> Rx)", "scattering orders s >= 2"],
+    4: ["single scattering with reflections on both sides of p", "scattering orders s >= 2"],
+    5: [],
+}
 
 
 def _num(x) -> float | None:
@@ -57,13 +66,9 @@ def _warnings(spec, scene) -> list[str]:
     return out
 
 
-def _scatters(medium) -> bool:
-    """True when the medium document has any scattering (sigma_s > 0 somewhere)."""
-    if medium is None:
-        return False
-    if medium.type == "homogeneous":
-        return medium.coefficients[1] > 0
-    return bool(np.max(np.atleast_1d(medium.sigma_s)) > 0)
+def _albedo_max(scene) -> float:
+    return _max_albedo(scene.spec)
+
 
 
 def _combined(accs):
@@ -91,7 +96,33 @@ def _group_estimates(accs, link):
     return est * weight[:, None], weight
 
 
-def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info) -> dict:
+def _geometric_tail(gain: float, ratio: float) -> float:
+    return gain * ratio / (1.0 - ratio) if ratio < 1.0 else math.inf
+
+
+def _modeled(spec, scene, modeled, unreachable, settings) -> dict:
+    sim = spec.simulation
+    out = dict(modeled or {"algorithm_reason": f"algorithm {sim.algorithm} requested", "pilot": None})
+    left = list(LEFT_OUT[sim.algorithm]) if spec.medium is not None and _scatters(spec.medium) else []
+    left.append(f"reflection orders above K = {sim.max_reflections}")
+    if sim.algorithm == 5 and scene.medium is not None:
+        left.append(f"scattering orders above S = {sim.max_scattering}")
+    left.append(f"arrivals after t_max_s = {settings.bins.edges[-1]:.4g} s in the binned CIR (counted in late_gain)")
+    out["algorithm"] = sim.algorithm
+    out["families"] = FAMILIES[sim.algorithm] if scene.medium is not None else "vacuum paths, reflection orders 0..K"
+    out["left_out"] = left
+    out["max_reflections"] = sim.max_reflections
+    out["max_scattering"] = sim.scattering_orders if scene.medium is not None else 0
+    out["time_window_s"] = [settings.bins.t_min, float(settings.bins.edges[-1])]
+    out["unreachable_receivers"] = [
+        {"receiver": scene.receivers.ids[j], "reason": "its whole field of view is blocked at its position "
+                                                       "(flush against a surface): not simulated"}
+        for j in unreachable]
+    return out
+
+
+def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info, original=None, modeled=None,
+                 unreachable=()) -> dict:
     bins = settings.bins
     edges = bins.edges
     first, used_accs, mean, cov, cir, early_all, late_all, order_mean, order_var = _combined(accs.values())
@@ -144,6 +175,10 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
         by_s[0] += los_gain[link]
         by_s_se = np.sqrt(order_var[link].sum(axis=0))
         h0 = float(delay["dc_gain"][link])
+        rho_max = float(scene.geometry.reflectance.max()) if len(scene.geometry.reflectance) else 0.0
+        tail = _geometric_tail(float(by_k[-1]) if len(by_k) > 1 else 0.0, rho_max) if len(by_k) > 1 else 0.0
+        if settings.max_scattering > 1 and scene.medium is not None:
+            tail += _geometric_tail(float(by_s[-1]), _albedo_max(scene))
         links.append({
             "transmitter": tx_ids[ti], "receiver": rx_ids[ri], "transmitter_index": ti, "receiver_index": ri,
             "direction": DIRECTION_NAMES[int(directions[link])], "paths": int(n_paths[link]),
@@ -158,6 +193,7 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
             "rms_delay_spread_h2_s_stderr": _num(rms_h2_se),
             "bandwidth_3db_hz": None if bw is None else _num(bw),
             "bandwidth_3db_hz_stderr": None if bw_se is None else _num(bw_se),
+            "truncated_gain_estimate": _num(tail),
             "los_gain": float(los_gain[link]), "los_delay_s": float(los_delay[link]),
             "dc_gain_by_reflection_order": [float(v) for v in by_k],
             "dc_gain_by_reflection_order_stderr": [_num(v) for v in by_k_se],
@@ -191,9 +227,10 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
     doc = {
         "owcsim_version": _owcsim_version(), "algorithm": spec.simulation.algorithm,
         "warnings": _warnings(spec, scene),
+        "modeled": _modeled(spec, scene, modeled, unreachable, settings),
         "families": FAMILIES[spec.simulation.algorithm],
         "time_bins": {"t_min_s": bins.t_min, "time_bin_s": bins.dt, "n_bins": bins.n},
-        "links": links, "run": run, "diagnostics": diagnostics, "scene": spec.model_dump(mode="json"),
+        "links": links, "run": run, "diagnostics": diagnostics, "scene": (original or spec).model_dump(mode="json"),
     }
     SimulationResultPublic.model_validate(doc)  # the document matches its published schema
     return doc

@@ -23,6 +23,7 @@ from schemas import SceneSpec
 from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
 from .constants import SPEED_OF_LIGHT
 from .kernel import KernelSettings, WorkItem
+from .auto import resolve, unreachable_receivers
 from .los import line_of_sight
 from .result import build_result
 from .scene import Scene, build_scene
@@ -35,7 +36,7 @@ AMORTIZATION_RATIO = 8
 #: Accuracy mode checks the target only once each link has this many paths.
 MIN_PATHS_FOR_STOP = 2048
 #: Per-link direction codes: paths from the transmitter, from the receiver, or both (algorithm 4).
-FORWARD, BACKWARD, BOTH = 0, 1, 2
+FORWARD, BACKWARD, BOTH, SKIP = 0, 1, 2, 3
 
 ProgressFn = Callable[[float, dict], None]
 
@@ -71,8 +72,16 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
     instead to reuse warm workers across jobs (it is not closed here).
     """
     t_start = time.perf_counter()
+    original = spec
+    modeled = None
+    if not spec.simulation.is_resolved:
+        spec, modeled = resolve(spec, lambda s: build_scene(s, base_dir),
+                                lambda s: simulate(s, base_dir=base_dir, executor=executor, workers=workers))
+        spec = SceneSpec.model_validate(spec.model_dump(mode="python"))  # budgets checked on the resolved settings
+        scene = None
     scene = scene if scene is not None else build_scene(spec, base_dir)
     settings = kernel_settings(spec)
+    blocked = unreachable_receivers(scene)
     los_gain, los_delay = line_of_sight(scene)
     own = executor is None
     if own:
@@ -82,19 +91,21 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
         JobRef(scene, "", "", None)
     try:
         directions = _choose_directions(scene, spec, settings, executor, job, los_gain, info)
+        directions[np.isin(np.arange(scene.n_links) % len(scene.receivers), blocked)] = SKIP
         accs = _run(scene, spec, settings, executor, job, directions, los_gain, info, progress, should_stop, t_start)
     finally:
         if own:
             executor.close()
     info.wall_time_s = time.perf_counter() - t_start
-    return build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info)
+    return build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info,
+                        original=original, modeled=modeled, unreachable=blocked)
 
 
 def _sources(scene: Scene, directions: np.ndarray) -> list[tuple[str, int, tuple[int, ...]]]:
     """(direction, source, targets) runs that cover every link in its chosen direction(s)."""
     n_rx = len(scene.receivers)
     codes = directions.reshape(len(scene.transmitters), n_rx)
-    fwd, bwd = codes != BACKWARD, codes != FORWARD
+    fwd, bwd = (codes == FORWARD) | (codes == BOTH), (codes == BACKWARD) | (codes == BOTH)
     runs = [("forward", i, tuple(np.flatnonzero(fwd[i]).tolist())) for i in range(fwd.shape[0]) if fwd[i].any()]
     runs += [("backward", j, tuple(np.flatnonzero(bwd[:, j]).tolist())) for j in range(n_rx) if bwd[:, j].any()]
     return runs
@@ -200,7 +211,7 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
     def on_batch(item: WorkItem) -> bool:
         state["done"] += 1
         info.batches = state["done"]
-        end_of_round = state["done"] % len(runs) == 0
+        end_of_round = state["done"] % max(len(runs), 1) == 0
         rel = combined_rel_stderr(accs.values(), los_gain)
         worst = float(np.max(rel)) if len(rel) else 0.0
         elapsed = time.perf_counter() - t_start
@@ -216,8 +227,8 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
             info.stop_reason = "cancelled"
             return True
         if total_batches is None and end_of_round:
-            served = sum(a.n_paths for a in accs.values())
-            if served.min() >= MIN_PATHS_FOR_STOP and worst <= sim.target_rel_error:
+            served = sum(a.n_paths for a in accs.values())[directions != SKIP]
+            if (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP and worst <= sim.target_rel_error:
                 info.stop_reason = "target_reached"
                 return True
             if elapsed >= sim.time_budget_s:

@@ -35,7 +35,7 @@ class LinkPublic(PublicModel):
     receiver: str
     transmitter_index: int
     receiver_index: int
-    direction: Literal["forward", "backward", "both"]
+    direction: Literal["forward", "backward", "both", "none"]
     paths: int
     dc_gain: float
     dc_gain_stderr: float | None
@@ -50,6 +50,9 @@ class LinkPublic(PublicModel):
     rms_delay_spread_h2_s_stderr: float | None
     bandwidth_3db_hz: float | None
     bandwidth_3db_hz_stderr: float | None
+    truncated_gain_estimate: float | None = Field(
+        None, description="estimated power per watt of the reflection (and scattering) orders beyond K (and S), "
+                          "not in dc_gain: the last order's gain times rho_max / (1 - rho_max) (albedo for S)")
     los_gain: float
     los_delay_s: float
     dc_gain_by_reflection_order: list[float]
@@ -97,4 +100,5 @@ class SimulationResultPublic(PublicModel):
     run: RunPublic
     diagnostics: DiagnosticsPublic
     warnings: list[str] = Field(default_factory=list, description="what a careful reader of these numbers should know")
+    modeled: dict = Field(default_factory=dict, description="what was simulated, what was left out, and why")
     scene: SceneSpec

@@ -41,6 +41,8 @@ class SceneSpec(SpecModel):
             for i, d in enumerate(devs):
                 _check_device_placement(self, f"{kind}[{i}]" + (f" ({d.id})" if d.id else ""), d)
         sim = self.simulation
+        if not sim.is_resolved:  # the engine checks the budget once it has chosen K, S and the window
+            return self
         orders = (sim.max_reflections + 1) * (sim.scattering_orders + 1)
         cells = len(self.transmitters) * len(rx) * orders * sim.n_bins
         if cells > MAX_TALLY_CELLS:

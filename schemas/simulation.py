@@ -24,11 +24,12 @@ class SimulationSpec(SpecModel):
     device and direction) or `target_rel_error` on H0 (with `time_budget_s`), not both.
     """
 
-    algorithm: Literal[1, 2, 3, 4, 5] = 1
+    algorithm: Literal[1, 2, 3, 4, 5, "auto"] = "auto"
     direction: Literal["auto", "forward", "backward"] = "auto"
-    max_reflections: int = Field(3, ge=0, le=1000, description="highest reflection order K")
-    max_scattering: int = Field(3, ge=1, le=1000,
-                                description="highest scattering order S of algorithm 5 (algorithms 2-4: 1, 1: 0)")
+    max_reflections: int | None = Field(None, ge=0, le=1000,
+                                        description="highest reflection order K (default: from the accuracy asked)")
+    max_scattering: int | None = Field(None, ge=1, le=1000, description="highest scattering order S of algorithm 5 "
+                                       "(algorithms 2-4: 1, 1: 0; default: from the accuracy asked)")
     segment_time_step_s: float | None = Field(
         None, gt=0.0, description="time strata of the points along segments, algorithms 2-4 [s] (default: time_bin_s)")
     max_strata: int = Field(64, ge=1, le=4096, description="most time strata per segment and target, algorithms 2-4")
@@ -37,7 +38,11 @@ class SimulationSpec(SpecModel):
                                      "the time strata (2-4) or the free-flight collisions (5) by the balance heuristic")
     time_bin_s: float = Field(0.25e-9, gt=0.0, description="CIR bin width dt [s]")
     t_min_s: float = Field(0.0, ge=0.0, description="start of the time window [s]")
-    t_max_s: float = Field(100e-9, gt=0.0, description="end of the time window [s]")
+    t_max_s: float | None = Field(None, gt=0.0, description="end of the time window [s] (default: from the accuracy)")
+    truncation_tolerance: float | None = Field(
+        None, gt=0.0, lt=1.0, description="largest truncated power (reflection and scattering orders beyond K and S, "
+        "arrivals after t_max_s) relative to H0 when K, S or t_max_s are chosen automatically (default: 0.1 x "
+        "target_rel_error in an accuracy run, 1e-4 otherwise)")
     paths: int | None = Field(None, ge=1, le=10**12, description="paths per source device")
     target_rel_error: float | None = Field(None, gt=0.0, lt=1.0,
                                            description="stop when stderr(H0)/H0 <= this, every link")
@@ -52,18 +57,31 @@ class SimulationSpec(SpecModel):
     def _consistent(self) -> "SimulationSpec":
         if self.paths is not None and self.target_rel_error is not None:
             raise ValueError("give `paths` or `target_rel_error`, not both")
-        if not self.t_max_s > self.t_min_s:
+        if self.t_max_s is not None and not self.t_max_s > self.t_min_s:
             raise ValueError("`t_max_s` must exceed `t_min_s`")
-        if self.n_bins > MAX_BINS:
+        if self.t_max_s is not None and self.n_bins > MAX_BINS:
             raise ValueError(
                 f"time window {self.t_min_s:g}..{self.t_max_s:g} s at {self.time_bin_s:g} s per bin needs "
                 f"{self.n_bins} bins, more than the budget of {MAX_BINS}: widen `time_bin_s`")
         return self
 
     @property
+    def is_resolved(self) -> bool:
+        """True when the algorithm, K, S (algorithm 5) and the window are all explicit."""
+        return (self.algorithm != "auto" and self.max_reflections is not None and self.t_max_s is not None
+                and (self.algorithm != 5 or self.max_scattering is not None))
+
+    @property
     def scattering_orders(self) -> int:
-        """Highest scattering order S the algorithm tallies."""
+        """Highest scattering order S the algorithm tallies (resolved settings only)."""
         return {1: 0, 2: 1, 3: 1, 4: 1}.get(self.algorithm, self.max_scattering)
+
+    @property
+    def tolerance(self) -> float:
+        """Truncated power allowed, relative to H0 (see `truncation_tolerance`)."""
+        if self.truncation_tolerance is not None:
+            return self.truncation_tolerance
+        return 0.1 * self.target_rel_error if self.target_rel_error is not None else 1e-4
 
     @property
     def n_bins(self) -> int:

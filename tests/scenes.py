@@ -21,7 +21,7 @@ def room_doc(rho_walls=0.8, rho_floor=0.3, rho_ceiling=0.8, *, tx=(2.5, 2.5, 3.0
              rx=(1.0, 1.0, 0.0), rx_normal=(0, 0, 1), area=1e-4, fov_deg=90.0, size=(5.0, 5.0, 3.0),
              origin=(0.0, 0.0, 0.0), medium=None, **simulation) -> dict:
     """A 5 x 5 x 3 m room with one transmitter and one receiver."""
-    sim = {"max_reflections": 3, "time_bin_s": 1e-9, "t_max_s": 2e-7, "paths": 20_000, "seed": 7}
+    sim = {"algorithm": 1, "max_reflections": 3, "time_bin_s": 1e-9, "t_max_s": 2e-7, "paths": 20_000, "seed": 7}
     sim.update(simulation)
     doc = {
         "room": {"size": list(size), "origin": list(origin),

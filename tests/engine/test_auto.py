@@ -1,0 +1,89 @@
+"""Model only what the scene requires: automatic algorithm, orders and window, and the modeled report."""
+import copy
+
+import pytest
+
+from engine.simulate import simulate
+from tests.scenes import barry_doc, room_doc, spec
+
+SMOKE = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2, "phase": {"type": "hg", "g": 0.7}}
+
+
+def _auto_doc(medium=None, **simulation):
+    doc = barry_doc()
+    doc["simulation"] = {"paths": 20_000, "seed": 3, **simulation}
+    if medium is not None:
+        doc["medium"] = medium
+    return doc
+
+
+@pytest.mark.parametrize("medium,algorithm,reason,keeps_medium", [
+    (None, 1, "no medium", False),
+    ({"type": "homogeneous", "sigma_a": 0.0, "sigma_s": 0.0}, 1, "sigma_t = 0", False),
+    ({"type": "homogeneous", "sigma_a": 0.2, "sigma_s": 0.0}, 1, "sigma_s = 0", True),
+    (SMOKE, 5, "scattering medium", True),
+])
+def test_auto_algorithm_per_scene_type(medium, algorithm, reason, keeps_medium):
+    res = simulate(spec(_auto_doc(medium, max_reflections=3, t_max_s=2e-7)))
+    assert res["algorithm"] == algorithm
+    assert reason in res["modeled"]["algorithm_reason"]
+    assert (res["diagnostics"]["medium_evaluations"] > 0) == keeps_medium
+    assert res["scene"]["simulation"]["algorithm"] == "auto"  # the input is echoed as given
+
+
+def test_explicit_settings_win():
+    res = simulate(spec(_auto_doc(SMOKE, algorithm=3, max_reflections=2, t_max_s=1e-7, paths=2048)))
+    assert res["algorithm"] == 3 and res["modeled"]["max_reflections"] == 2
+    assert res["modeled"]["pilot"] is None and res["time_bins"]["n_bins"] == 400
+    assert "algorithm 3 requested" in res["modeled"]["algorithm_reason"]
+
+
+def test_auto_truncation_within_its_bound_of_a_long_run():
+    """Same seed, same paths: the long run differs from the auto one by exactly the truncated orders."""
+    auto = simulate(spec(_auto_doc(paths=40_000, truncation_tolerance=3e-3)))
+    K = auto["modeled"]["max_reflections"]
+    allowed = auto["modeled"]["pilot"]["allowed_truncation_per_watt"]
+    assert 3 < K < 60 and f"capped at {K}" in auto["modeled"]["max_reflections_reason"]
+    long = simulate(spec(_auto_doc(paths=40_000, max_reflections=100, t_max_s=auto["modeled"]["time_window_s"][1])))
+    missing = long["links"][0]["dc_gain"] - auto["links"][0]["dc_gain"]
+    assert 0 <= missing <= allowed
+    assert missing > 0  # the long run does carry orders above K: the check has something to check
+    assert auto["links"][0]["truncated_gain_estimate"] <= allowed
+    assert f"reflection orders above K = {K}" in auto["modeled"]["left_out"]
+
+
+@pytest.mark.parametrize("medium", [None, SMOKE])
+def test_auto_window_keeps_late_power_under_its_bound(medium):
+    res = simulate(spec(_auto_doc(medium, paths=20_000)))
+    allowed = res["modeled"]["pilot"]["allowed_truncation_per_watt"]
+    link = res["links"][0]
+    assert link["late_gain"] <= allowed / 2
+    assert res["time_bins"]["n_bins"] * res["time_bins"]["time_bin_s"] == pytest.approx(
+        res["modeled"]["time_window_s"][1])
+    assert "window ends at" in res["modeled"]["time_window_reason"]
+
+
+def test_accuracy_target_sets_the_tolerance():
+    res = simulate(spec(_auto_doc(target_rel_error=0.01, paths=None)))
+    assert res["run"]["stop_reason"] == "target_reached"
+    allowed = res["modeled"]["pilot"]["allowed_truncation_per_watt"]
+    h0 = res["links"][0]["dc_gain"]
+    assert allowed == pytest.approx(0.1 * 0.01 * h0, rel=0.1)  # a tenth of the target standard error
+
+
+def test_unreachable_receiver_is_reported_not_simulated():
+    doc = room_doc(paths=4096)
+    doc["furniture"] = [{"name": "cabinet", "min": [3.0, 1.0, 0.0], "max": [4.0, 2.0, 1.5], "reflectance": 0.5}]
+    doc["receivers"].append({"id": "stuck", "position": [3.0, 1.5, 0.7], "normal": [1, 0, 0], "area": 1e-4})
+    res = simulate(spec(doc))
+    stuck = res["links"][1]
+    assert stuck["receiver"] == "stuck" and stuck["paths"] == 0 and stuck["dc_gain"] == 0.0
+    assert stuck["direction"] == "none"
+    assert res["modeled"]["unreachable_receivers"][0]["receiver"] == "stuck"
+    assert res["links"][0]["paths"] == 4096 and res["links"][0]["dc_gain"] > 0
+
+
+def test_clear_scene_pays_nothing_for_smoke_support():
+    res = simulate(spec(_auto_doc(max_reflections=3, t_max_s=2e-7)))
+    assert res["diagnostics"]["medium_evaluations"] == 0 and res["algorithm"] == 1
+    assert res["modeled"]["families"].startswith("vacuum")
