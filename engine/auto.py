@@ -38,13 +38,19 @@ PILOT_RECEIVERS = 8
 PILOT_BINS = 400
 
 
-def choose_algorithm(spec: SceneSpec) -> tuple[int, str, bool]:
+def choose_algorithm(spec: SceneSpec, scene_bounds=None) -> tuple[int, str, bool]:
     """(algorithm, reason, drop_medium) for spec.simulation.algorithm = "auto"."""
     med = spec.medium
     if med is None:
         return 1, "no medium: vacuum paths only (algorithm 1)", True
-    if medium_from_spec(med) is None:
+    engine_medium = medium_from_spec(med)
+    if engine_medium is None:
         return 1, "sigma_t = 0: vacuum paths only (algorithm 1)", True
+    bounds = getattr(engine_medium, "bounds", None)
+    if bounds is not None and scene_bounds is not None and spec.room is not None:
+        lo, hi = (np.asarray(b, float) for b in bounds)
+        if np.any(hi <= scene_bounds[0]) or np.any(lo >= scene_bounds[1]):
+            return 1, "the medium's region lies outside the room: no path can enter it; vacuum paths only", True
     if not _scatters(med):
         return 1, "sigma_s = 0: no scattering; algorithm 1 (extinction only) is exact", False
     return 5, ("scattering medium: algorithm 5 covers every family and was measured faster per accuracy than "
@@ -106,7 +112,8 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
     update: dict = {}
     doc_update: dict = {}
     if sim.algorithm == "auto":
-        algorithm, why, drop_medium = choose_algorithm(spec)
+        room_bounds = (np.asarray(spec.room.lo), np.asarray(spec.room.hi)) if spec.room is not None else None
+        algorithm, why, drop_medium = choose_algorithm(spec, room_bounds)
         update["algorithm"] = algorithm
         modeled["algorithm_reason"] = why
         if drop_medium and spec.medium is not None:
