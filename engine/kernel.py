@@ -368,17 +368,10 @@ def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool) -> N
         o, d, l0 = seg_paths.origins, seg_paths.directions, seg_paths.lengths
         seg_t, s_t, _ = time_strata(l0, o, d, y, zeros, t_seg, h, lambda m: rng.random(m), settings.max_strata)
         seg_e, s_e = equiangular(o, d, y, zeros, t_seg, n_eq, lambda m: rng.random(m))
-        seg, s = np.concatenate([seg_t, seg_e]), np.concatenate([s_t, s_e])
-        if len(seg) == 0:
+        found = _scattering_points(seg_paths, np.concatenate([seg_t, seg_e]), np.concatenate([s_t, s_e]), medium)
+        if found is None:
             continue
-        pp = seg_paths.keep(seg)
-        points = pp.origins + s * pp.directions
-        sigma_s = medium.sigma_s_at(points.T)
-        inside = np.flatnonzero(sigma_s > 0)
-        if len(inside) == 0:
-            continue
-        seg, pp, points, s, sigma_s = (seg.take(inside), pp.keep(inside), points.take(inside, axis=1),
-                                       s.take(inside), sigma_s.take(inside))
+        seg, pp, points, s, sigma_s = found
         y_p, end = y.take(seg, axis=1), t_seg.take(seg)
         density = (time_density(pp.lengths, pp.origins, pp.directions, y_p, np.zeros(len(s)), end, s, h,
                                 settings.max_strata)
@@ -388,6 +381,22 @@ def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool) -> N
             w = w * _direction_mis(ctx, int(ctx.tgt[j]), pp, points, s, density)
         ctx.connect_one(j, points, w, pp, in_dirs=pp.directions, scatter_order=np.ones(len(pp), np.int64),
                         extra_length=s)
+
+
+def _scattering_points(paths: _Paths, seg, s, medium):
+    """Points at distance s along the segments `seg` of `paths`, keeping those where sigma_s > 0.
+
+    Returns (seg, their paths, points (3, m), s, sigma_s), or None when no point scatters.
+    """
+    if len(seg) == 0:
+        return None
+    pp = paths.keep(seg)
+    points = pp.origins + s * pp.directions
+    sigma_s = medium.sigma_s_at(points.T)
+    inside = np.flatnonzero(sigma_s > 0)
+    if len(inside) == 0:
+        return None
+    return (seg.take(inside), pp.keep(inside), points.take(inside, axis=1), s.take(inside), sigma_s.take(inside))
 
 
 def _equiangular_in_scatter(ctx: _Context, paths: _Paths, t_seg, rng) -> None:
@@ -410,16 +419,10 @@ def _equiangular_in_scatter(ctx: _Context, paths: _Paths, t_seg, rng) -> None:
     for j in range(len(ctx.tgt)):
         y = np.repeat(ctx.t_pos[:, j:j + 1], len(base), axis=1)
         seg, s = equiangular(base.origins, base.directions, y, np.zeros(len(base)), end, n_eq, lambda m: rng.random(m))
-        if len(seg) == 0:
+        found = _scattering_points(base, seg, s, medium)
+        if found is None:
             continue
-        pp = base.keep(seg)
-        points = pp.origins + s * pp.directions
-        sigma_s = medium.sigma_s_at(points.T)
-        inside = np.flatnonzero(sigma_s > 0)
-        if len(inside) == 0:
-            continue
-        seg, pp, points, s, sigma_s = (seg.take(inside), pp.keep(inside), points.take(inside, axis=1),
-                                       s.take(inside), sigma_s.take(inside))
+        seg, pp, points, s, sigma_s = found
         transmittance = medium.transmittance(pp.origins.T, pp.directions.T, s)
         p_ff = medium.sigma_t_at(points.T) * transmittance
         n_e = equiangular_density(pp.origins, pp.directions, y.take(seg, axis=1), np.zeros(len(s)), end.take(seg), s,
