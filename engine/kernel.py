@@ -121,8 +121,16 @@ class _Paths:
     def keep(self, idx) -> "_Paths":
         return _Paths(**{f: getattr(self, f).take(idx, axis=-1) for f in self.FIELDS})
 
+    def keep_where(self, mask) -> "_Paths":
+        """The paths where `mask` holds; free when it holds everywhere."""
+        if mask.all():
+            return _Paths(**{f: getattr(self, f) for f in self.FIELDS})
+        return self.keep(np.flatnonzero(mask))
+
     @staticmethod
     def concat(parts) -> "_Paths":
+        if len(parts) == 1:
+            return parts[0]
         return _Paths(**{f: np.concatenate([getattr(p, f) for p in parts], axis=-1) for f in _Paths.FIELDS})
 
 
@@ -174,9 +182,10 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         escaped_power += paths.weights[~hit & ~collided].sum()
         parts = []
         # --- surface vertices ---------------------------------------------------------
-        si = np.flatnonzero(hit & ~collided & (paths.k < K))
-        sp = paths.keep(si)
+        at_surface = hit & ~collided & (paths.k < K)
+        sp = paths.keep_where(at_surface)
         if len(sp):
+            si = np.flatnonzero(at_surface)
             ts = t.take(si)
             points = sp.origins + ts * sp.directions
             sp.lengths = sp.lengths + ts
@@ -196,7 +205,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
             sp.origins = spawn
             # after reflection K a path still matters if it can scatter (5) or host segment points (2-4)
             alive = (sp.k < K) | (free_flight & (sp.s < S)) | (segment_scatter & (sp.k <= K))
-            parts.append(sp.keep(np.flatnonzero(alive & (sp.weights > 0))))
+            parts.append(sp.keep_where(alive & (sp.weights > 0)))
         # --- medium vertices (algorithm 5) ----------------------------------------------
         if free_flight:
             mi = np.flatnonzero(collided & (paths.s < S))
@@ -222,7 +231,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
                 mp.directions = scene.phase.sample(mp.directions, u[0], u[1])
                 mp.origins = points
                 alive = ((mp.k < K) | (mp.s < S)) & (mp.weights > 0)
-                parts.append(mp.keep(np.flatnonzero(alive)))
+                parts.append(mp.keep_where(alive))
         paths = _Paths.concat(parts) if parts else paths.keep(np.zeros(0, np.int64))
         # --- Russian roulette ------------------------------------------------------------
         if settings.russian_roulette and len(paths):
