@@ -1,0 +1,24 @@
+"""Clients of owcsim: the Python client of the HTTP service, result files and plots.
+
+`Client`, `AsyncClient` and their exceptions need httpx (`pip install owcsim[client]`);
+they are imported on first use, so `clients.output` and `clients.plot` work without it.
+Depends on schemas only, never on engine or server.
+"""
+from __future__ import annotations
+
+_LAZY = {
+    "Client": "client", "Job": "client", "AsyncClient": "aio", "AsyncJob": "aio", "RetryPolicy": "http",
+    "Result": "result", "OwcsimError": "errors", "ApiError": "errors", "ConnectionFailed": "errors",
+    "InvalidRequest": "errors", "Unauthorized": "errors", "NotFound": "errors", "Conflict": "errors",
+    "QueueFull": "errors", "ServerError": "errors", "JobFailed": "errors",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module 'clients' has no attribute {name!r}")

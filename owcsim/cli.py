@@ -1,8 +1,10 @@
-"""owcsim command line: `owcsim run SCENE --out DIR`, `owcsim validate SCENE`."""
+"""owcsim command line: `owcsim run SCENE --out DIR`, `owcsim validate SCENE`, and the HTTP service:
+`owcsim serve` (run the server) and `owcsim submit SCENE --server URL` (run a scene on one)."""
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 import warnings
@@ -47,7 +49,18 @@ def _cmd_validate(args) -> int:
     return 0
 
 
-def _cmd_run(args) -> int:
+def _print_links(result: dict) -> None:
+    for link in result["links"]:
+        err = link["dc_gain_stderr"]
+        rms = link["rms_delay_spread_s"]
+        print(f"{link['transmitter']} -> {link['receiver']} ({link['direction']}): "
+              f"H0 = {link['dc_gain']:.6e} ± {err if err is not None else float('nan'):.1e}, "
+              f"path loss {link['path_loss_db'] or float('nan'):.2f} dB, "
+              f"tau_rms = {(rms or float('nan')) * 1e9:.3f} ns")
+
+
+def _scene_overrides(args) -> list[tuple[str, object]]:
+    """The simulation flags of `run` and `submit` as (dotted path, value) overrides."""
     flags = {"paths": args.paths, "seed": args.seed, "max_reflections": args.max_reflections,
              "algorithm": args.algorithm, "target_rel_error": args.target_rel_error, "direction": args.direction}
     overrides = [(f"simulation.{k}", v) for k, v in flags.items() if v is not None]
@@ -55,8 +68,12 @@ def _cmd_run(args) -> int:
         overrides.append(("simulation.target_rel_error", None))
     if args.target_rel_error is not None:
         overrides.append(("simulation.paths", None))
+    return overrides
+
+
+def _cmd_run(args) -> int:
     assignments = args.set or []
-    spec, _ = load_scene(args.scene, overrides, assignments)
+    spec, _ = load_scene(args.scene, _scene_overrides(args), assignments)
     from engine.simulate import simulate
     from clients.output import write_outputs
 
@@ -68,17 +85,82 @@ def _cmd_run(args) -> int:
     finally:
         close()
     paths = write_outputs(result, out)
-    for link in result["links"]:
-        err = link["dc_gain_stderr"]
-        rms = link["rms_delay_spread_s"]
-        print(f"{link['transmitter']} -> {link['receiver']} ({link['direction']}): "
-              f"H0 = {link['dc_gain']:.6e} ± {err if err is not None else float('nan'):.1e}, "
-              f"path loss {link['path_loss_db'] or float('nan'):.2f} dB, "
-              f"tau_rms = {(rms or float('nan')) * 1e9:.3f} ns")
+    _print_links(result)
     run = result["run"]
     print(f"{run['paths_total']:,d} paths in {run['wall_time_s']:.2f} s ({run['stop_reason']}); "
           f"wrote {', '.join(str(p) for p in paths)}")
     return 0
+
+
+def _cmd_serve(args) -> int:
+    try:
+        from server.serve import serve
+        from server.settings import Settings
+    except ImportError as exc:
+        raise InputError(f"`owcsim serve` needs the server extra ({exc.name} is missing): "
+                         "pip install 'owcsim[server]'") from None
+    from pydantic import ValidationError
+
+    given = {"db": args.db, "max_concurrent_jobs": args.max_concurrent_jobs, "workers_per_job": args.workers_per_job,
+             "api_keys_file": args.api_keys_file}
+    try:
+        settings = Settings(**{k: v for k, v in given.items() if v is not None})
+        settings.key_owners()  # an unreadable key file is an error now, not at the first request
+    except ValidationError as err:
+        raise InputError("invalid setting: " + "; ".join(
+            f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in err.errors())) from None
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    serve(settings, host=args.host, port=args.port)
+    return 0
+
+
+def _cmd_submit(args) -> int:
+    try:
+        from clients.client import Client
+        from clients.errors import ApiError, ConnectionFailed, InvalidRequest, JobFailed
+    except ImportError as exc:
+        raise InputError(f"`owcsim submit` needs the client extra ({exc.name} is missing): "
+                         "pip install 'owcsim[client]'") from None
+    _, doc = load_scene(args.scene, _scene_overrides(args), args.set or [])
+    api_key = args.api_key or os.environ.get("OWCSIM_API_KEY")
+    try:
+        with Client(args.server, api_key) as owc:
+            job = owc.submit(doc, base_dir=Path(args.scene).resolve().parent)
+            print(f"submitted job {job.id} to {args.server.rstrip('/')}{job.url}", file=sys.stderr)
+            if args.no_wait:
+                print(job.id)
+                return 0
+            try:
+                job.wait(progress=sys.stderr.isatty())
+            except KeyboardInterrupt:
+                job.cancel()
+                print(f"owcsim: interrupted; job {job.id} cancelled", file=sys.stderr)
+                return 130
+            result = job.result(wait=False)
+    except FileNotFoundError as exc:
+        raise InputError(str(exc)) from None
+    except InvalidRequest as exc:
+        raise InputError(f"the server refused the scene: {exc}") from None
+    except (ApiError, ConnectionFailed, JobFailed) as exc:
+        print(f"owcsim: error: {exc}", file=sys.stderr)
+        return 1
+    _print_links(result.raw)
+    run = result.run
+    wrote = f"; wrote {', '.join(str(p) for p in result.save(args.out))}" if args.out else ""
+    print(f"{run.paths_total:,d} paths in {run.wall_time_s:.2f} s ({run.stop_reason}); job {job.id}{wrote}")
+    return 0
+
+
+def _add_simulation_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--paths", type=int, help="paths per source device (replaces target_rel_error)")
+    p.add_argument("--seed", type=int)
+    p.add_argument("--max-reflections", type=int)
+    p.add_argument("--algorithm", type=int)
+    p.add_argument("--direction", choices=("auto", "forward", "backward"))
+    p.add_argument("--target-rel-error", type=float, help="stop when stderr(H0)/H0 reaches this, every link")
+    p.add_argument("--set", action="append", metavar="PATH=VALUE",
+                   help="override any field, e.g. --set receivers.0.fov_deg=60 (VALUE is JSON)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -87,20 +169,30 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="simulate a scene; write result.json, cir.csv and cir.png")
     run.add_argument("scene", help="scene document (JSON)")
     run.add_argument("--out", required=True, help="output folder (created if needed)")
-    run.add_argument("--paths", type=int, help="paths per source device (replaces target_rel_error)")
-    run.add_argument("--seed", type=int)
-    run.add_argument("--max-reflections", type=int)
-    run.add_argument("--algorithm", type=int)
-    run.add_argument("--direction", choices=("auto", "forward", "backward"))
+    _add_simulation_options(run)
     run.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
-    run.add_argument("--target-rel-error", type=float, help="stop when stderr(H0)/H0 reaches this, every link")
-    run.add_argument("--set", action="append", metavar="PATH=VALUE",
-                     help="override any field, e.g. --set receivers.0.fov_deg=60 (VALUE is JSON)")
     run.set_defaults(func=_cmd_run)
     val = sub.add_parser("validate", help="check a scene without running it")
     val.add_argument("scene")
     val.add_argument("--set", action="append", metavar="PATH=VALUE")
     val.set_defaults(func=_cmd_validate)
+    srv = sub.add_parser("serve", help="run the HTTP service (settings: OWCSIM_* environment variables)")
+    srv.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    srv.add_argument("--port", type=int, default=8000, help="port (default 8000)")
+    srv.add_argument("--db", help="job store file (default $OWCSIM_DB or ./owcsim-jobs.sqlite)")
+    srv.add_argument("--max-concurrent-jobs", type=int, help="jobs running at once (default 2)")
+    srv.add_argument("--workers-per-job", type=int, help="engine worker processes per job (default 1)")
+    srv.add_argument("--api-keys-file", help="file of bearer tokens, one per line: turns API keys on")
+    srv.set_defaults(func=_cmd_serve)
+    sbm = sub.add_parser("submit", help="run a scene on an owcsim server; write its results like `run`")
+    sbm.add_argument("scene", help="scene document (JSON); mesh files are sent inline")
+    sbm.add_argument("--server", default=os.environ.get("OWCSIM_SERVER", "http://127.0.0.1:8000"),
+                     help="server URL (default $OWCSIM_SERVER or http://127.0.0.1:8000)")
+    sbm.add_argument("--api-key", help="bearer token (default $OWCSIM_API_KEY)")
+    sbm.add_argument("--out", help="output folder for result.json, cir.csv, cir.png (optional)")
+    sbm.add_argument("--no-wait", action="store_true", help="print the job id and return at once")
+    _add_simulation_options(sbm)
+    sbm.set_defaults(func=_cmd_submit)
     return p
 
 

@@ -1,0 +1,73 @@
+"""The result of a job: the typed result document, with numpy arrays, plots and files at hand."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from pydantic import PrivateAttr
+
+from schemas.results import LinkPublic, SimulationResultPublic
+
+
+class Result(SimulationResultPublic):
+    """schemas.results.SimulationResultPublic plus helpers. `raw` is the document exactly as served
+    (fields a newer server adds are kept there, and in the files `save` writes)."""
+
+    _raw: dict = PrivateAttr(default_factory=dict)
+
+    @classmethod
+    def from_document(cls, doc: dict) -> "Result":
+        out = cls.model_validate(doc)
+        out._raw = doc
+        return out
+
+    @property
+    def raw(self) -> dict:
+        return self._raw or self.model_dump(mode="json")
+
+    def link(self, transmitter: str, receiver: str) -> LinkPublic:
+        """The link between two devices, by id."""
+        for lk in self.links:
+            if lk.transmitter == transmitter and lk.receiver == receiver:
+                return lk
+        raise KeyError(f"no link {transmitter} -> {receiver}")
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The arrays of the server's result.npz: t_edges_s (n_bins + 1) [s]; per link (axis 0, in `links`
+        order) cir and cir_stderr (n_links, n_bins) [power per bin per watt; NaN = no error bar],
+        by_reflection_order (n_links, K + 1, n_bins), dc_gain, dc_gain_stderr, transmitter, receiver."""
+        tb, links = self.time_bins, self.links
+        n = tb.n_bins
+        orders = max((len(lk.cir.by_reflection_order) for lk in links), default=1)
+        by_k = np.zeros((len(links), orders, n))
+        for i, lk in enumerate(links):
+            by_k[i, :len(lk.cir.by_reflection_order)] = lk.cir.by_reflection_order
+        nan = lambda xs: np.array([np.nan if x is None else x for x in xs], float)  # noqa: E731
+        return {
+            "t_edges_s": tb.t_min_s + tb.time_bin_s * np.arange(n + 1),
+            "cir": np.array([lk.cir.total for lk in links], float).reshape(len(links), n),
+            "cir_stderr": np.array([nan(lk.cir.total_stderr) for lk in links]).reshape(len(links), n),
+            "by_reflection_order": by_k,
+            "dc_gain": np.array([lk.dc_gain for lk in links], float),
+            "dc_gain_stderr": nan([lk.dc_gain_stderr for lk in links]),
+            "transmitter": np.array([lk.transmitter for lk in links], str),
+            "receiver": np.array([lk.receiver for lk in links], str),
+        }
+
+    def plot(self, path: str | Path | None = None, link: int | None = None):
+        """h(t) per reflection order and total (clients.plot.plot_cir); saved to `path` if given."""
+        from .plot import plot_cir
+
+        return plot_cir(self.raw, path, link)
+
+    def save(self, folder: str | Path) -> list[Path]:
+        """Write result.json, cir.csv and cir.png, as `owcsim run` does."""
+        from .output import write_outputs
+
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        return write_outputs(self.raw, folder)
+
+    def to_json(self) -> str:
+        return json.dumps(self.raw)

@@ -1,0 +1,44 @@
+"""The scene document a client sends: from a SceneSpec, a dict or a JSON file, meshes made self-contained.
+
+The server takes no file paths: a mesh given as `file` is read here (relative to the
+scene file's folder, or `base_dir`) and sent as `data_base64` + `format`.
+"""
+from __future__ import annotations
+
+import base64
+import copy
+import json
+from pathlib import Path
+
+from schemas import SceneSpec
+
+
+def scene_document(scene: SceneSpec | dict | str | Path, base_dir: str | Path | None = None) -> dict:
+    """The JSON document to submit. A str or Path is a scene file; its folder resolves mesh files."""
+    if isinstance(scene, (str, Path)):
+        path = Path(scene)
+        doc = json.loads(path.read_text())
+        base_dir = path.resolve().parent if base_dir is None else base_dir
+    elif isinstance(scene, SceneSpec):
+        doc = scene.model_dump(mode="json", exclude_unset=True)
+    elif isinstance(scene, dict):
+        doc = copy.deepcopy(scene)
+    else:
+        raise TypeError(f"a scene is a SceneSpec, a dict or a path to a JSON file, not {type(scene).__name__}")
+    return inline_mesh_files(doc, Path(base_dir) if base_dir is not None else Path.cwd())
+
+
+def inline_mesh_files(doc: dict, base_dir: Path) -> dict:
+    """Replace each mesh's `file` by its content (`data_base64`) and `format` (from the suffix if not given)."""
+    for mesh in doc.get("meshes") or []:
+        if isinstance(mesh, dict) and isinstance(mesh.get("file"), str):
+            path = Path(mesh.pop("file"))
+            path = path if path.is_absolute() else base_dir / path
+            try:
+                data = path.read_bytes()
+            except OSError as exc:
+                raise FileNotFoundError(f"mesh file {str(path)!r}: {exc.strerror}") from None
+            if not mesh.get("format"):
+                mesh["format"] = path.suffix[1:].lower() or None
+            mesh["data_base64"] = base64.b64encode(data).decode("ascii")
+    return doc

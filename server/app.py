@@ -1,0 +1,92 @@
+"""The FastAPI application: routes under /v1, problem answers, the job store and the dispatcher.
+
+`create_app(settings)` builds it; the dispatcher thread runs between the app's startup
+and shutdown (uvicorn's lifespan). The OpenAPI document is generated from schemas/.
+"""
+from __future__ import annotations
+
+import importlib
+import logging
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+from fastapi.openapi.utils import get_openapi
+from starlette.concurrency import run_in_threadpool
+
+from schemas import SceneSpec
+from schemas.errors import PROBLEM_MEDIA_TYPE
+
+from . import problems
+from .dispatcher import Dispatcher
+from .routes import jobs, results, service
+from .routes.service import owcsim_version
+from .settings import Settings
+from .store import JobStore
+from .views import API_PREFIX
+
+log = logging.getLogger("owcsim.server")
+
+DESCRIPTION = """Monte Carlo simulation of indoor optical wireless channels, as jobs.
+
+POST a scene document (the JSON `owcsim run` takes) to `/v1/jobs`, follow the job at the URL
+in `Location` until its status is `succeeded`, then GET its `result` (JSON), `result.csv`,
+`result.npz` or `plot.png`. Errors are `application/problem+json` documents naming the wrong
+field. With API keys on, send `Authorization: Bearer <key>`; a key sees only its own jobs."""
+
+
+def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> FastAPI:
+    """The service. `run_jobs=False` keeps the dispatcher off (jobs stay queued): for API tests."""
+    settings = settings or Settings()
+    owners = settings.key_owners()
+    store = JobStore(settings.db)
+    dispatcher = Dispatcher(store, settings)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        await run_in_threadpool(importlib.import_module, "engine.simulate")  # the pre-flight's imports
+        if run_jobs:
+            await run_in_threadpool(dispatcher.start)
+        log.info("owcsim service: job store %s, %d job(s) at once, API keys %s", settings.db,
+                 settings.max_concurrent_jobs, "on" if owners else "off")
+        try:
+            yield
+        finally:
+            if run_jobs:
+                await run_in_threadpool(dispatcher.stop)
+
+    app = FastAPI(title="owcsim", version=owcsim_version(), description=DESCRIPTION, lifespan=lifespan,
+                  docs_url=f"{API_PREFIX}/docs", redoc_url=None, openapi_url=f"{API_PREFIX}/openapi.json")
+    app.state.settings, app.state.store, app.state.dispatcher, app.state.owners = settings, store, dispatcher, owners
+    problems.install(app)
+    for module in (jobs, results, service):
+        app.include_router(module.router, prefix=API_PREFIX)
+    app.openapi = lambda: _openapi(app)
+    return app
+
+
+def _openapi(app: FastAPI) -> dict:
+    """FastAPI's document, plus the scene body schema; every 422 and error answer is a problem document."""
+    if app.openapi_schema:
+        return app.openapi_schema
+    doc = get_openapi(title=app.title, version=app.version, description=app.description, routes=app.routes)
+    comps = doc.setdefault("components", {}).setdefault("schemas", {})
+    scene = SceneSpec.model_json_schema(ref_template="#/components/schemas/{model}", mode="validation")
+    for name, schema in scene.pop("$defs", {}).items():
+        comps.setdefault(name, schema)
+    comps["SceneSpec"] = scene
+    for path in doc["paths"].values():
+        for op in path.values():
+            for code, resp in op.get("responses", {}).items():
+                content = resp.get("content", {})
+                if code == "422" or PROBLEM_MEDIA_TYPE in content:
+                    resp["content"] = {PROBLEM_MEDIA_TYPE: {"schema": {"$ref": "#/components/schemas/Problem"}}}
+                    resp["description"] = resp.get("description") or "problem"
+    for name in ("HTTPValidationError", "ValidationError"):
+        comps.pop(name, None)
+    if not app.state.owners:  # no API keys: no operation asks for one
+        doc["components"].pop("securitySchemes", None)
+        for path in doc["paths"].values():
+            for op in path.values():
+                op.pop("security", None)
+    app.openapi_schema = doc
+    return doc

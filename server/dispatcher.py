@@ -1,0 +1,187 @@
+"""The dispatcher: one thread that starts queued jobs in order, each in its own worker process.
+
+At most `max_concurrent_jobs` workers run at once. Worker processes come from a
+forkserver whose state is clean (it never builds an Embree scene), so nothing with
+threads is ever forked. The dispatcher also watches its workers:
+
+- a worker that exits without recording an outcome (killed, crashed) is requeued once
+  (`crash_retries`) and then fails the job with the exit code or signal as the reason;
+- a worker asked to stop (cancel) that is still alive `cancel_grace_s` later is killed,
+  and so is one past the wall-time limit plus that grace;
+- on start, jobs left running by a previous server process are requeued; on stop,
+  running jobs are requeued and their workers stopped (they start afresh next time:
+  the same seed gives the same result).
+"""
+from __future__ import annotations
+
+import logging
+import multiprocessing as mp
+import os
+import signal
+import threading
+import time
+from dataclasses import dataclass
+from multiprocessing.connection import wait
+
+from .settings import Settings
+from .store import JobStore
+from .worker import WorkerLimits, run_job
+
+log = logging.getLogger("owcsim.server")
+
+TICK_S = 0.2
+
+
+@dataclass
+class _Run:
+    process: mp.process.BaseProcess
+    token: int
+    started: float
+    lifeline: object  # write end of a pipe the worker watches: closed (or the server gone) = stop
+    stop_seen: float | None = None  # when the dispatcher first saw that this run should end
+    kill_reason: str | None = None
+
+    def end(self) -> None:
+        self.lifeline.close()
+        self.process.close()
+
+
+def describe_exit(code: int | None) -> str:
+    if code is not None and code < 0:
+        try:
+            name = signal.Signals(-code).name
+        except ValueError:
+            name = f"signal {-code}"
+        hint = " (e.g. out of memory)" if -code == signal.SIGKILL else ""
+        return f"the worker process was killed by {name}{hint}"
+    if code == 0:
+        return "the worker process ended without recording a result"
+    return f"the worker process exited with status {code} (the server log has the details)"
+
+
+class Dispatcher:
+    def __init__(self, store: JobStore, settings: Settings):
+        self.store, self.settings = store, settings
+        self.limits = WorkerLimits(workers=settings.workers_per_job, max_wall_time_s=settings.max_wall_time_s,
+                                   progress_interval_s=settings.progress_interval_s)
+        self._ctx = mp.get_context("forkserver")
+        self._runs: dict[str, _Run] = {}
+        self._wake_r, self._wake_w = os.pipe()  # wake() writes a byte: the loop looks again at once
+        os.set_blocking(self._wake_w, False)
+        self._wake_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def alive(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def running(self) -> dict[str, int]:
+        """{job id: worker pid} of the workers this dispatcher runs now."""
+        return {job_id: run.process.pid for job_id, run in list(self._runs.items())}
+
+    def start(self) -> None:
+        taken = self.store.take_back_running("requeued: the server restarted while the job was running")
+        if taken:
+            log.warning("requeued %d job(s) left running by the previous server process", len(taken))
+        self._ctx.set_forkserver_preload(["server.worker", "engine.simulate"])
+        from multiprocessing import forkserver
+
+        forkserver.ensure_running()  # pay the engine's imports now, not with the first job
+        self._thread = threading.Thread(target=self._loop, name="owcsim-dispatcher", daemon=True)
+        self._thread.start()
+
+    def wake(self) -> None:
+        with self._wake_lock:
+            if self._wake_w is None:  # stopped
+                return
+            try:
+                os.write(self._wake_w, b"!")
+            except BlockingIOError:  # full of wake-ups already
+                pass
+
+    def stop(self) -> None:
+        """Stop starting jobs; requeue the running ones and end their workers."""
+        self._stop.set()
+        self.wake()
+        if self._thread is not None:
+            self._thread.join()
+        with self._wake_lock:
+            if self._wake_w is not None:
+                os.close(self._wake_r)
+                os.close(self._wake_w)
+                self._wake_r = self._wake_w = None
+        if not self._runs:
+            return
+        self.store.take_back_running("requeued: the server stopped while the job was running")
+        for run in self._runs.values():
+            run.lifeline.close()
+        deadline = time.monotonic() + self.settings.cancel_grace_s
+        for run in self._runs.values():
+            run.process.join(max(0.0, deadline - time.monotonic()))
+            if run.process.is_alive():
+                run.process.kill()
+                run.process.join()
+            run.end()
+        log.info("stopped %d running job(s); they are queued again", len(self._runs))
+        self._runs.clear()
+
+    def _loop(self) -> None:
+        """Look after the workers and the queue on every wake-up, worker exit, or tick."""
+        while not self._stop.is_set():
+            try:
+                self._reap()
+                self._fill()
+            except Exception:  # e.g. the store busy for too long: log, keep going
+                log.exception("dispatcher: error")
+            ready = wait([run.process.sentinel for run in self._runs.values()] + [self._wake_r], TICK_S)
+            if self._wake_r in ready:
+                os.read(self._wake_r, 4096)
+
+    def _fill(self) -> None:
+        while len(self._runs) < self.settings.max_concurrent_jobs and not self._stop.is_set():
+            claimed = self.store.claim_next()
+            if claimed is None:
+                return
+            job_id, token = claimed
+            lifeline_r, lifeline_w = self._ctx.Pipe(duplex=False)
+            process = self._ctx.Process(target=run_job, name=f"owcsim-job-{job_id[:8]}",
+                                        args=(str(self.store.path), job_id, token, self.limits, lifeline_r))
+            try:
+                process.start()
+            except Exception as exc:
+                log.exception("could not start a worker for job %s", job_id)
+                lifeline_w.close()
+                self.store.settle(job_id, token, f"could not start a worker process ({exc})", retries=0)
+                continue
+            finally:
+                lifeline_r.close()
+            self.store.set_worker_pid(job_id, token, process.pid)
+            self._runs[job_id] = _Run(process, token, time.monotonic(), lifeline_w)
+
+    def _reap(self) -> None:
+        if not self._runs:
+            return
+        flags = self.store.running_flags()
+        now, grace = time.monotonic(), self.settings.cancel_grace_s
+        for job_id, run in list(self._runs.items()):
+            if not run.process.is_alive():
+                run.process.join()
+                reason = run.kill_reason or describe_exit(run.process.exitcode)
+                status = self.store.settle(job_id, run.token, reason, retries=self.settings.crash_retries,
+                                           retry=run.kill_reason is None)
+                if status is not None:
+                    log.warning("job %s: %s; the job is now %s", job_id, reason, status)
+                run.end()
+                del self._runs[job_id]
+                continue
+            token, cancel = flags.get(job_id, (None, False))
+            if run.stop_seen is None and (token != run.token or cancel):
+                run.stop_seen = now  # cancelled, or finished and still exiting
+            if run.stop_seen is not None and now - run.stop_seen > grace:
+                run.kill_reason = run.kill_reason or "the worker did not stop in time and was killed"
+                run.process.kill()
+            elif now - run.started > self.settings.max_wall_time_s + grace:
+                run.kill_reason = (f"killed at the server's wall-time limit of {self.settings.max_wall_time_s:g} s "
+                                   "(the worker did not stop by itself)")
+                run.process.kill()

@@ -1,0 +1,104 @@
+"""Jobs: submit (POST /v1/jobs), list, get one, cancel."""
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, Header, Query, Request, Response
+from starlette.concurrency import run_in_threadpool
+
+from schemas.jobs import JobListPublic, JobPublic, JobStatus
+
+from ..auth import NO_AUTH_OWNER, current_owner
+from ..deps import get_dispatcher, get_settings, get_store, owned_job
+from ..dispatcher import Dispatcher
+from ..problems import ProblemError
+from ..settings import Settings
+from ..store import IdempotencyConflict, JobRow, JobStore, QueueFull
+from ..submission import accept, read_body, request_hash
+from ..views import API_PREFIX, job_public, job_url
+from .docs import JOB_LINKS, SCENE_BODY, problems
+
+router = APIRouter(prefix="/jobs", tags=["jobs"])
+
+IdempotencyKey = Annotated[str | None, Header(
+    alias="Idempotency-Key", min_length=1, max_length=255, pattern=r"^[\x21-\x7e]+$",
+    description="any unique string (e.g. a UUID): a retried submission with the same key (and the same "
+                "document) returns the first job instead of queueing a duplicate")]
+
+
+@router.post("", status_code=202, operation_id="submit_job", response_model=JobPublic, summary="Submit a scene document as a job",
+             responses={**problems(400, 401, 413, 415, 422, 429),
+                        202: {"description": "queued (or, with a known Idempotency-Key, the first job)",
+                              "headers": {"Location": {"description": "the job's URL",
+                                                       "schema": {"type": "string"}}}, "links": JOB_LINKS}},
+             openapi_extra={"requestBody": SCENE_BODY})
+async def submit_job(request: Request, response: Response, idempotency_key: IdempotencyKey = None,
+                     owner: str | None = Depends(current_owner), store: JobStore = Depends(get_store),
+                     settings: Settings = Depends(get_settings),
+                     dispatcher: Dispatcher = Depends(get_dispatcher)) -> JobPublic:
+    """Validate the scene (the document `owcsim run` takes), check the server's limits, pre-flight it in
+    the engine, and queue it. Answers 202 with the job and its URL in `Location`."""
+    body = await read_body(request, settings.max_body_bytes)
+    job, created = await run_in_threadpool(_submit, body, owner, idempotency_key, store, settings)
+    if created:
+        dispatcher.wake()
+    else:
+        response.headers["Idempotent-Replayed"] = "true"
+    response.headers["Location"] = job_url(job.id)
+    return job_public(job)
+
+
+def _submit(body: bytes, owner, key, store: JobStore, settings: Settings) -> tuple[JobRow, bool]:
+    spec, canonical = accept(body, settings)
+    try:
+        return store.submit(owner=owner if owner is not None else NO_AUTH_OWNER, scene_json=canonical,
+                            name=spec.name, request_hash=request_hash(canonical), idempotency_key=key,
+                            max_queued=settings.max_queued_jobs)
+    except QueueFull:
+        raise ProblemError(429, "queue-full", f"the queue is full ({settings.max_queued_jobs} jobs): try again later",
+                           headers={"Retry-After": str(settings.retry_after_s)}) from None
+    except IdempotencyConflict as exc:
+        raise ProblemError(422, "idempotency-key-reused",
+                           f"this Idempotency-Key was used for job {exc.job_id} with a different document",
+                           job_id=exc.job_id) from None
+
+
+@router.get("", operation_id="list_jobs", response_model=JobListPublic, summary="List jobs, newest first", responses=problems(401, 422))
+def list_jobs(status: Annotated[list[JobStatus] | None, Query(description="only jobs in these states")] = None,
+              limit: Annotated[int, Query(ge=1, le=500, description="jobs per page")] = 50,
+              cursor: Annotated[str | None, Query(pattern=r"^[0-9]{1,18}$",
+                                                  description="`next_cursor` of the previous page")] = None,
+              owner: str | None = Depends(current_owner), store: JobStore = Depends(get_store)) -> JobListPublic:
+    """Jobs of the caller (of every caller when the server has no API keys)."""
+    rows, next_seq = store.list(owner, status, limit, int(cursor) if cursor else None)
+    nxt = None
+    if next_seq is not None:
+        query = "".join(f"&status={s}" for s in status or ())
+        nxt = f"{API_PREFIX}/jobs?limit={limit}&cursor={next_seq}{query}"
+    return JobListPublic(items=[job_public(r) for r in rows], next_cursor=str(next_seq) if next_seq else None,
+                         next=nxt)
+
+
+@router.get("/{job_id}", operation_id="get_job", response_model=JobPublic, summary="Get a job: state, progress, timestamps",
+            responses=problems(401, 404))
+def get_job(job: JobRow = Depends(owned_job)) -> JobPublic:
+    return job_public(job)
+
+
+@router.post("/{job_id}/cancel", operation_id="cancel_job", response_model=JobPublic, summary="Cancel a job",
+             responses={**problems(401, 404, 409),
+                        202: {"description": "running: asked to stop (its status becomes `cancelled` within "
+                                             "seconds)", "model": JobPublic}})
+def cancel_job(response: Response, job: JobRow = Depends(owned_job), owner: str | None = Depends(current_owner),
+               store: JobStore = Depends(get_store), dispatcher: Dispatcher = Depends(get_dispatcher)) -> JobPublic:
+    """A queued job is cancelled at once (200). A running one is asked to stop (202): it stops within
+    seconds and keeps its partial result. Cancelling a cancelled job is a no-op; a finished one is 409."""
+    if job.status in ("succeeded", "failed"):
+        raise ProblemError(409, "job-finished", f"job {job.id} has already {job.status}", job_status=job.status)
+    row = store.request_cancel(job.id, owner)
+    dispatcher.wake()
+    if row.status == "running":
+        response.status_code = 202
+    elif row.status != "cancelled":  # it finished meanwhile
+        raise ProblemError(409, "job-finished", f"job {job.id} has already {row.status}", job_status=row.status)
+    return job_public(row)

@@ -1,0 +1,52 @@
+"""Settings of the HTTP service, read from `OWCSIM_*` environment variables (or given in code).
+
+Every limit has a default that suits one machine; the README lists them all.
+"""
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+from pydantic import Field, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    model_config = SettingsConfigDict(env_prefix="OWCSIM_", extra="ignore", frozen=True)
+
+    db: Path = Field(Path("owcsim-jobs.sqlite"), description="the SQLite job store (one file, created if missing)")
+    max_concurrent_jobs: int = Field(2, ge=1, le=256, description="jobs running at once (one process each)")
+    workers_per_job: int = Field(1, ge=1, le=256, description="engine worker processes per job")
+    max_queued_jobs: int = Field(1000, ge=1, description="queued jobs; a submission beyond this gets 429")
+    retry_after_s: int = Field(5, ge=1, description="Retry-After [s] sent with 429 when the queue is full")
+    max_body_bytes: int = Field(32 * 2**20, ge=1024, description="largest request body [bytes]")
+    max_triangles: int = Field(1_000_000, ge=12, description="most triangles in a scene")
+    max_receivers: int = Field(100_000, ge=1, description="most receivers in a scene, grids included")
+    max_paths_per_job: int = Field(10**9, ge=1, description="most paths of a fixed-budget job, all sources")
+    max_wall_time_s: float = Field(3600.0, gt=0, description="longest run of one job [s]")
+    api_keys: str = Field("", description="comma-separated bearer tokens; empty (and no file) = no auth")
+    api_keys_file: Path | None = Field(None, description="file with one bearer token per line (# comments)")
+    crash_retries: int = Field(1, ge=0, le=10, description="times a job whose worker process died is requeued")
+    cancel_grace_s: float = Field(5.0, gt=0, description="a stopped job's worker still alive after this is killed")
+    progress_interval_s: float = Field(0.5, gt=0, description="least time between progress writes of a job [s]")
+
+    @field_validator("db", mode="after")
+    @classmethod
+    def _absolute(cls, v: Path) -> Path:
+        return v.expanduser().resolve()
+
+    def key_owners(self) -> dict[str, str]:
+        """{sha256 of a token: owner id}. Empty when auth is off. Tokens themselves are not kept."""
+        tokens = [t.strip() for t in self.api_keys.split(",")]
+        if self.api_keys_file is not None:
+            try:
+                lines = self.api_keys_file.read_text().splitlines()
+            except OSError as exc:
+                raise ValueError(f"api_keys_file {str(self.api_keys_file)!r}: {exc.strerror}") from None
+            tokens += [ln.strip() for ln in lines if not ln.strip().startswith("#")]
+        out = {}
+        for t in tokens:
+            if t:
+                digest = hashlib.sha256(t.encode()).hexdigest()
+                out[digest] = digest[:16]
+        return out

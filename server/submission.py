@@ -1,0 +1,141 @@
+"""From a request body to an accepted scene document: size, JSON, schema, server limits, engine pre-flight.
+
+Every refusal is a ProblemError that names the wrong field. Runs in a worker thread
+(validation and the pre-flight can take a moment for large meshes).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+
+from fastapi import Request
+from pydantic import ValidationError
+
+from schemas import ReceiverGridSpec, SceneSpec
+from schemas.errors import ProblemField
+
+from .preflight import preflight
+from .problems import ProblemError, field_errors
+from .settings import Settings
+
+JSON_TYPES = ("application/json",)
+
+
+async def read_body(request: Request, max_bytes: int) -> bytes:
+    """The request body, refused with 413 past `max_bytes` (declared or streamed) and 415 if not JSON."""
+    ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if ctype and ctype not in JSON_TYPES and not ctype.endswith("+json"):
+        raise ProblemError(415, "unsupported-media-type",
+                           f"the scene document must be sent as application/json, not {ctype}")
+    too_big = ProblemError(413, "body-too-large", f"the request body is larger than this server's limit of "
+                           f"{max_bytes:,d} bytes (setting max_body_bytes)", max_body_bytes=max_bytes)
+    declared = request.headers.get("content-length")
+    if declared is not None and declared.isdigit() and int(declared) > max_bytes:
+        raise too_big
+    chunks, size = [], 0
+    async for chunk in request.stream():
+        size += len(chunk)
+        if size > max_bytes:
+            raise too_big
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def _invalid(errors: list[ProblemField], kind: str = "invalid-scene", status: int = 422) -> ProblemError:
+    detail = "; ".join(f"{e.loc}: {e.msg}" for e in errors[:5])
+    if len(errors) > 5:
+        detail += f"; and {len(errors) - 5} more"
+    return ProblemError(status, kind, detail, errors=errors)
+
+
+def parse_scene(body: bytes, settings: Settings) -> SceneSpec:
+    """JSON -> SceneSpec, after the cheap size checks that keep validation itself bounded."""
+    try:
+        doc = json.loads(body)
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        where = f" (line {exc.lineno}, column {exc.colno})" if isinstance(exc, json.JSONDecodeError) else ""
+        msg = exc.msg if isinstance(exc, json.JSONDecodeError) else "not UTF-8 text"
+        raise _invalid([ProblemField(loc="body", msg=f"not valid JSON{where}: {msg}", type="json_invalid")],
+                       "malformed-json", 400) from None
+    except RecursionError:
+        raise _invalid([ProblemField(loc="body", msg="JSON nested too deeply", type="json_invalid")],
+                       "malformed-json", 400) from None
+    if not isinstance(doc, dict):
+        raise _invalid([ProblemField(loc="body", msg="a scene document is a JSON object", type="dict_type")])
+    _check_receiver_count(doc, settings)
+    try:
+        return SceneSpec.model_validate(doc)
+    except ValidationError as err:
+        raise _invalid(field_errors(err.errors(include_url=False), ("body",))) from None
+    except RecursionError:
+        raise _invalid([ProblemField(loc="body", msg="document nested too deeply", type="value_error")]) from None
+    except ArithmeticError as exc:  # a rule of the schema met a number it cannot compute with
+        raise _invalid([_out_of_range("body", exc)]) from None
+
+
+def _out_of_range(loc: str, exc: ArithmeticError) -> ProblemField:
+    return ProblemField(loc=loc, type="value_error",
+                        msg=f"a number is out of the range the simulator can compute with ({exc})")
+
+
+def _check_receiver_count(doc: dict, settings: Settings) -> None:
+    """Grids expand into receivers during validation: bound their number first."""
+    grids = doc.get("receiver_grids")
+    receivers = doc.get("receivers")
+    count = len(receivers) if isinstance(receivers, list) else 0
+    for i, g in enumerate(grids if isinstance(grids, list) else []):
+        try:
+            count += ReceiverGridSpec.model_validate(g).count
+        except ArithmeticError as exc:  # e.g. size / spacing overflows
+            raise _invalid([_out_of_range(f"body.receiver_grids.{i}", exc)]) from None
+        except (ValidationError, ValueError, TypeError):
+            pass  # reported by the full validation
+    if count > settings.max_receivers:
+        raise _limit("body.receiver_grids", f"the scene has {count:,d} receivers; this server accepts at most "
+                     f"{settings.max_receivers:,d} (setting max_receivers)")
+
+
+def _limit(loc: str, msg: str) -> ProblemError:
+    return _invalid([ProblemField(loc=loc, msg=msg, type="limit_exceeded")], "limit-exceeded")
+
+
+def check_limits(spec: SceneSpec, settings: Settings) -> None:
+    """Server rules on a valid document: no mesh paths, triangles, paths, wall time."""
+    errors = [ProblemField(loc=f"body.meshes.{i}.file", type="path_not_allowed",
+                           msg="a mesh cannot be a path on the server: send it inline (`vertices` + `faces`) "
+                               "or as `data_base64` + `format` (`owcsim submit` does this for you)")
+              for i, m in enumerate(spec.meshes) if m.file is not None]
+    if errors:
+        raise _invalid(errors)
+    triangles = (12 if spec.room else 0) + 12 * len(spec.furniture) + sum(len(m.faces or ()) for m in spec.meshes)
+    if triangles > settings.max_triangles:
+        raise _limit("body.meshes", f"the scene has {triangles:,d} triangles; this server accepts at most "
+                     f"{settings.max_triangles:,d} (setting max_triangles)")
+    sim = spec.simulation
+    if sim.n_paths is not None:
+        n_tx, n_rx = len(spec.transmitters), len(spec.all_receivers())
+        # source devices: exact for a fixed direction; for auto the fewest the engine can use
+        sources = {"forward": n_tx, "backward": n_rx}.get(sim.direction, min(n_tx, n_rx))
+        if sim.n_paths * sources > settings.max_paths_per_job:
+            raise _limit("body.simulation.paths",
+                         f"{sim.n_paths:,d} paths x {sources} source devices is more than this server's limit of "
+                         f"{settings.max_paths_per_job:,d} paths per job (setting max_paths_per_job)")
+    elif sim.time_budget_s > settings.max_wall_time_s:
+        raise _limit("body.simulation.time_budget_s",
+                     f"{sim.time_budget_s:g} s is longer than this server's limit of {settings.max_wall_time_s:g} s "
+                     "per job (setting max_wall_time_s)")
+
+
+def accept(body: bytes, settings: Settings) -> tuple[SceneSpec, str]:
+    """Parse, validate, check limits and pre-flight; returns (spec, canonical JSON) or raises ProblemError."""
+    spec = parse_scene(body, settings)
+    check_limits(spec, settings)
+    triangles = preflight(spec)
+    if triangles > settings.max_triangles:
+        raise _limit("body.meshes", f"the scene has {triangles:,d} triangles; this server accepts at most "
+                     f"{settings.max_triangles:,d} (setting max_triangles)")
+    return spec, spec.model_dump_json()
+
+
+def request_hash(canonical: str) -> str:
+    return hashlib.sha256(canonical.encode()).hexdigest()

@@ -1,0 +1,120 @@
+"""One job's run, in its own worker process: load the scene, simulate, write progress and outcome.
+
+The worker talks to the job store with its own connection. After every batch it
+writes progress (at most every `progress_interval_s`) and learns whether to stop:
+the job was cancelled, its run was taken back (server restart), the server process
+is gone (its end of the worker's lifeline pipe closed), or the wall-time limit is reached. A cancelled run stores its partial
+result. An engine error fails the job with the engine's message.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+import signal
+import sys
+import time
+import warnings
+from dataclasses import dataclass
+
+log = logging.getLogger("owcsim.server.worker")
+
+
+@dataclass(frozen=True)
+class WorkerLimits:
+    workers: int
+    max_wall_time_s: float
+    progress_interval_s: float
+
+
+class _Watch:
+    """Progress writer and stop rule of one run (called by the engine after each batch)."""
+
+    def __init__(self, store, job_id: str, token: int, limits: WorkerLimits, lifeline):
+        self.store, self.job_id, self.token, self.limits = store, job_id, token, limits
+        self.lifeline = lifeline
+        self.t0 = time.monotonic()
+        self.last_write = 0.0
+        self.last_check = 0.0
+        self.pending: tuple | None = None
+        self.reason: str | None = None  # why the run stops early: cancelled, abandoned, time limit
+
+    def progress(self, fraction: float, info: dict) -> None:
+        self.pending = (fraction, info["paths"], info["batches"], info.get("dc_gain_rel_stderr"), info["elapsed_s"])
+        now = time.monotonic()
+        if now - self.last_write >= self.limits.progress_interval_s:
+            self.flush()
+
+    def flush(self) -> None:
+        self.last_write = time.monotonic()
+        if self.pending is not None and not self.store.progress(self.job_id, self.token, *self.pending):
+            self.reason = self.reason or "abandoned"
+
+    def should_stop(self) -> bool:
+        now = time.monotonic()
+        if self.reason is None and self.lifeline.poll():
+            self.reason = "abandoned"  # the server closed the pipe: it stopped, or it is gone
+        if self.reason is None and now - self.last_check >= 0.2:
+            self.last_check = now
+            mine, cancel = self.store.run_state(self.job_id, self.token)
+            self.reason = "abandoned" if not mine else "cancelled" if cancel else None
+            if self.reason is None and now - self.t0 > self.limits.max_wall_time_s:
+                self.reason = "time_limit"
+        return self.reason is not None
+
+
+def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifeline) -> None:
+    """Entry point of the worker process. `lifeline`: read end of a pipe only the server writes to."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the server decides
+    from engine.errors import EngineError
+    from engine.simulate import simulate
+    from schemas import SceneSpec
+
+    from .store import JobStore
+
+    store = JobStore(db_path)
+    watch = _Watch(store, job_id, token, limits, lifeline)
+    try:
+        spec = SceneSpec.model_validate_json(store.scene_json(job_id))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            result = simulate(spec, base_dir=None, workers=limits.workers, progress=watch.progress,
+                              should_stop=watch.should_stop)
+        notes = list(dict.fromkeys(str(w.message) for w in caught))
+    except EngineError as exc:
+        store.finish(job_id, token, "failed", error=str(exc))
+        return
+    except Exception as exc:  # a bug, not the user's input: keep the trace in the server log
+        log.exception("job %s: the engine failed", job_id)
+        store.finish(job_id, token, "failed", error=f"internal error in the engine ({type(exc).__name__}: {exc})")
+        return
+    finally:
+        sys.stderr.flush()
+    if watch.reason == "abandoned":
+        return
+    if watch.reason == "time_limit":
+        store.finish(job_id, token, "failed", warnings=notes,
+                     error=f"stopped at the server's wall-time limit of {limits.max_wall_time_s:g} s after "
+                           f"{result['run']['paths_total']:,d} paths: ask for fewer paths or a larger "
+                           "target_rel_error")
+        return
+    watch.flush()
+    store.finish(job_id, token, "cancelled" if watch.reason == "cancelled" else "succeeded",
+                 result_json=_to_json(result), warnings=notes)
+
+
+def _to_json(result: dict) -> str:
+    try:
+        return json.dumps(result, allow_nan=False)
+    except ValueError:  # JSON has no NaN/inf: null them (the engine already does; this guards the store)
+        return json.dumps(_clean(result))
+
+
+def _clean(x):
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_clean(v) for v in x]
+    return x

@@ -1,0 +1,101 @@
+"""Load: 200 submissions from 20 concurrent clients against a real server on 127.0.0.1.
+
+The queue is kept short (50) so that clients meet 429 + Retry-After and must retry.
+Every job must be accounted for (200 distinct ids, all succeeded, all listed), and the
+server must stay responsive: a monitor polls /v1/health throughout. Bounded: 200 jobs,
+at most LOAD_TIMEOUT_S. The figures are printed (run with -s to see them).
+"""
+import statistics
+import threading
+import time
+
+import httpx
+
+from clients import Client, RetryPolicy
+
+from .helpers import ServerProcess, quick_doc
+
+CLIENTS, PER_CLIENT = 20, 10
+LOAD_TIMEOUT_S = 150.0
+
+
+def _pct(values, q):
+    values = sorted(values)
+    return values[min(len(values) - 1, int(round(q / 100 * (len(values) - 1))))]
+
+
+def test_200_submissions_from_20_clients(tmp_path):
+    statuses: dict[int, int] = {}
+    lock = threading.Lock()
+
+    def count(response):
+        with lock:
+            statuses[response.status_code] = statuses.get(response.status_code, 0) + 1
+
+    with ServerProcess(tmp_path / "jobs.sqlite", max_concurrent_jobs=2, max_queued_jobs=50,
+                       retry_after_s=1) as srv:
+        submitted: list[tuple[str, float]] = []
+        errors: list[BaseException] = []
+        health: list[float] = []
+        stop = threading.Event()
+        t_end = time.monotonic() + LOAD_TIMEOUT_S
+
+        def monitor():
+            with httpx.Client(base_url=srv.url, timeout=10) as h:
+                while not stop.is_set() and time.monotonic() < t_end:
+                    t0 = time.perf_counter()
+                    r = h.get("/v1/health")
+                    health.append(time.perf_counter() - t0)
+                    assert r.status_code == 200
+                    time.sleep(0.1)
+
+        def client(i: int):
+            try:
+                http = httpx.Client(base_url=srv.url, timeout=30, event_hooks={"response": [count]})
+                with Client(srv.url, retry=RetryPolicy(retries=100, backoff_s=0.2, max_backoff_s=2.0),
+                            http=http) as owc:
+                    for k in range(PER_CLIENT):
+                        t0 = time.perf_counter()
+                        job = owc.submit(quick_doc(seed=i * PER_CLIENT + k))
+                        with lock:
+                            submitted.append((job.id, time.perf_counter() - t0))
+                http.close()
+            except BaseException as exc:  # reported below
+                errors.append(exc)
+
+        mon = threading.Thread(target=monitor, daemon=True)
+        mon.start()
+        t0 = time.perf_counter()
+        threads = [threading.Thread(target=client, args=(i,)) for i in range(CLIENTS)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(max(0.0, t_end - time.monotonic()))
+        t_submitted = time.perf_counter() - t0
+        assert not errors, errors[:3]
+        assert not any(t.is_alive() for t in threads), "submissions did not finish in time"
+
+        with Client(srv.url) as owc:
+            while True:
+                done = {j.id: j.status for j in owc.jobs(status=["succeeded", "failed", "cancelled"])}
+                if len(done) >= CLIENTS * PER_CLIENT or time.monotonic() > t_end:
+                    break
+                time.sleep(0.25)
+            t_all = time.perf_counter() - t0
+            stop.set()
+            mon.join()
+            listed = {j.id: j.status for j in owc.jobs()}
+
+    ids = [i for i, _ in submitted]
+    latency = [s for _, s in submitted]
+    assert len(ids) == len(set(ids)) == CLIENTS * PER_CLIENT  # no duplicate, none lost
+    assert set(listed) == set(ids) and set(listed.values()) == {"succeeded"}
+    assert statuses.get(500, 0) == 0
+    assert len(health) >= 10 and max(health) < 2.0, f"health check took up to {max(health):.2f} s"
+    print(f"\nload: {len(ids)} jobs from {CLIENTS} clients; submitted in {t_submitted:.1f} s "
+          f"({len(ids) / t_submitted:.1f} submissions/s), all {len(listed)} succeeded after {t_all:.1f} s "
+          f"({len(ids) / t_all:.1f} jobs/s)")
+    print(f"load: submit latency incl. retries p50 {_pct(latency, 50):.3f} s, p95 {_pct(latency, 95):.3f} s, "
+          f"p99 {_pct(latency, 99):.3f} s, max {max(latency):.3f} s; answers {dict(sorted(statuses.items()))}")
+    print(f"load: /v1/health during the run ({len(health)} probes): p50 {1e3 * statistics.median(health):.1f} ms, "
+          f"p99 {1e3 * _pct(health, 99):.1f} ms, max {1e3 * max(health):.1f} ms")
