@@ -150,7 +150,7 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
     extent = float(np.ptp(vertices, axis=0).max()) or 1.0
     ok = area2 > 2 * DEGENERATE_AREA_FACTOR * extent**2
     if not ok.all():
-        bad = sorted({group_names[g] for g in group[~ok]})
+        bad = sorted({str(group_names[g]) for g in group[~ok]})
         warnings.warn(f"dropped {int((~ok).sum())} degenerate (zero-area) triangles from {bad}", stacklevel=2)
     if not ok.any():
         raise SceneError("every triangle of the scene is degenerate")

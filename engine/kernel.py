@@ -418,7 +418,7 @@ def _equiangular_in_scatter(ctx: _Context, paths: _Paths, t_seg, rng) -> None:
     equiangular point's by n_E / (p_ff + n_E), i.e. its weight is
     w T(o -> s) sigma_s(s) / (p_ff + n_E). The path continues from the collision only.
     """
-    scene, settings, medium = ctx.scene, ctx.settings, ctx.scene.medium
+    settings, medium = ctx.settings, ctx.scene.medium
     alive = np.flatnonzero((paths.s < settings.max_scattering) & np.isfinite(t_seg))
     if len(alive) == 0:
         return

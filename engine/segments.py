@@ -83,7 +83,6 @@ def equiangular(origins, directions, targets, a, b, n_per: int, u):
 
     Returns (segment index (m,), s (m,)); `u(m)` gives the uniforms.
     """
-    n = len(a)
     ok = np.flatnonzero(b > a)
     seg = np.repeat(ok, n_per)
     if len(seg) == 0:

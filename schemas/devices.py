@@ -8,7 +8,8 @@ from pydantic import Field, model_validator
 
 from .base import Direction, Point, SpecModel
 
-Fov = Annotated[float, Field(gt=0.0, le=90.0, description="field of view, half-angle [deg], in (0, 90]")]
+Fov = Annotated[float, Field(ge=1e-6, le=90.0, description="field of view, half-angle [deg], in (0, 90] "
+                                                          "(at least 1e-6 deg: below it a concentrator's gain overflows)")]
 
 
 class TransmitterSpec(SpecModel):
@@ -29,6 +30,11 @@ class TransmitterSpec(SpecModel):
     def _one_pattern(self) -> "TransmitterSpec":
         if (self.lambertian_order is None) == (self.half_power_semi_angle_deg is None):
             raise ValueError("give exactly one of `lambertian_order` and `half_power_semi_angle_deg`")
+        if self.half_power_semi_angle_deg is not None:
+            log_cos = math.log(math.cos(math.radians(self.half_power_semi_angle_deg)))
+            if log_cos == 0.0 or -math.log(2.0) / log_cos > 1e4:
+                raise ValueError(f"half_power_semi_angle_deg = {self.half_power_semi_angle_deg:g} means a Lambertian "
+                                 "order above 10000: give at least 0.68 deg")
         return self
 
     @property
@@ -83,6 +89,10 @@ class ReceiverGridSpec(SpecModel):
             raise ValueError("grid directions `u` and `v` must be orthogonal")
         if any(not math.isfinite(s) or s < 0 for s in self.size):
             raise ValueError("grid size must be two non-negative lengths [m]")
+        steps = [s / self.spacing for s in self.size]
+        if any(not math.isfinite(x) or x > 1e6 for x in steps) or (steps[0] + 1) * (steps[1] + 1) > 200_000:
+            raise ValueError(f"a spacing of {self.spacing:g} m over {self.size} m gives more than the 100000 "
+                             "receivers allowed")
         if self.count > 100_000:
             raise ValueError(f"grid has {self.count} receivers, more than the 100000 allowed")
         return self

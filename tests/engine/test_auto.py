@@ -1,5 +1,4 @@
 """Model only what the scene requires: automatic algorithm, orders and window, and the modeled report."""
-import copy
 
 import pytest
 

@@ -166,3 +166,26 @@ def test_receiver_grid_expands():
     rx = spec.all_receivers()
     assert len(rx) == 1 + 25
     assert spec.receiver_ids()[1] == "grid[0,0]" and rx[-1].position == (4.5, 4.5, 0.85)
+
+
+@pytest.mark.parametrize("field,value,message", [
+    ("half_power_semi_angle_deg", 1e-300, "above 10000"),
+    ("half_power_semi_angle_deg", 0.5, "above 10000"),
+])
+def test_extreme_half_power_angle_is_an_error_not_a_crash(field, value, message):
+    doc = barry_doc()
+    del doc["transmitters"][0]["lambertian_order"]
+    doc["transmitters"][0][field] = value
+    assert message in _errors(doc)
+
+
+def test_tiny_grid_spacing_is_an_error_not_a_crash():
+    doc = room_doc()
+    doc["receiver_grids"] = [{"origin": [0.5, 0.5, 0.85], "size": [4.0, 4.0], "spacing": 5e-324, "area": 1e-4}]
+    assert "100000 receivers" in _errors(doc)
+
+
+def test_tiny_fov_is_bounded():
+    doc = barry_doc()
+    doc["receivers"][0].update(fov_deg=1e-300, concentrator_index=1.5)
+    assert "receivers.0.fov_deg" in _errors(doc)
