@@ -3,7 +3,9 @@
 `SerialExecutor` traces in the calling process. `ProcessExecutor` keeps a pool of
 worker processes that outlives jobs: each worker builds a job's Embree scene the
 first time it sees the job (from the scene document written once to a file) and
-caches it, so a warm pool pays no start-up per job. Work items are independent
+caches it, so a warm pool pays no start-up per job. The document travels pickled, not as
+JSON: validating JSON again would re-normalise direction vectors and could change their
+last bit, and with it the result. Work items are independent
 (their random streams are fixed by the job), so the merged result does not depend
 on the executor or the number of workers. `map(job, items, settings)` yields batch
 tallies; `items` may be an endless generator (accuracy mode): only a bounded window
@@ -14,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import multiprocessing as mp
 import os
+import pickle
 import tempfile
 from collections import OrderedDict, deque
 from concurrent.futures import ProcessPoolExecutor
@@ -40,18 +43,28 @@ class JobRef:
 
 
 def job_ref(scene: Scene, base_dir: str | None, folder: str | None = None) -> JobRef:
-    """Write the scene document once (content-addressed) so workers can build it."""
-    text = scene.spec.model_dump_json()
-    key = hashlib.sha256((text + "\0" + str(base_dir)).encode()).hexdigest()[:24]
-    folder = folder or os.path.join(tempfile.gettempdir(), "owcsim-scenes")
-    os.makedirs(folder, exist_ok=True)
-    path = os.path.join(folder, f"{key}.json")
+    """Write the validated scene document once (pickled, content-addressed) so workers can build it."""
+    data = pickle.dumps(scene.spec, protocol=pickle.HIGHEST_PROTOCOL)
+    key = hashlib.sha256(scene.spec.model_dump_json().encode() + b"\0" + data + str(base_dir).encode()).hexdigest()[:24]
+    folder = folder or _private_folder()
+    path = os.path.join(folder, f"{key}.pickle")
     if not os.path.exists(path):
         tmp = f"{path}.{os.getpid()}.tmp"
-        with open(tmp, "w") as fh:
-            fh.write(text)
+        with open(tmp, "wb") as fh:
+            fh.write(data)
         os.replace(tmp, path)
     return JobRef(scene, key, path, base_dir)
+
+
+def _private_folder() -> str:
+    """This user's scene folder under the temporary directory, readable by nobody else (it holds pickles)."""
+    uid = os.getuid() if hasattr(os, "getuid") else 0
+    folder = os.path.join(tempfile.gettempdir(), f"owcsim-scenes-{uid}")
+    os.makedirs(folder, mode=0o700, exist_ok=True)
+    st = os.stat(folder)
+    if hasattr(os, "getuid") and (st.st_uid != uid or st.st_mode & 0o077):
+        raise PermissionError(f"{folder} must belong to this user and be private (mode 700); remove it")
+    return folder
 
 
 class Executor(Protocol):
@@ -81,8 +94,10 @@ _SCENES: OrderedDict[str, Scene] = OrderedDict()
 def _worker_scene(key: str, spec_path: str, base_dir: str | None) -> Scene:
     scene = _SCENES.get(key)
     if scene is None:
-        with open(spec_path) as fh:
-            scene = build_scene(SceneSpec.model_validate_json(fh.read()), base_dir)
+        with open(spec_path, "rb") as fh:
+            spec = pickle.load(fh)
+        assert isinstance(spec, SceneSpec), spec_path
+        scene = build_scene(spec, base_dir)
         _SCENES[key] = scene
         while len(_SCENES) > SCENE_CACHE_SIZE:
             _SCENES.popitem(last=False)

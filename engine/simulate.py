@@ -87,8 +87,8 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
     if own:
         executor = SerialExecutor() if workers <= 1 else ProcessExecutor(workers)
     info = RunInfo(workers=executor.workers)
-    job = job_ref(scene, str(base_dir) if base_dir is not None else None) if executor.workers > 1 else \
-        JobRef(scene, "", "", None)
+    job = JobRef(scene, "", "", None) if isinstance(executor, SerialExecutor) else \
+        job_ref(scene, str(base_dir) if base_dir is not None else None)
     try:
         directions = _choose_directions(scene, spec, settings, executor, job, los_gain, info)
         directions[np.isin(np.arange(scene.n_links) % len(scene.receivers), blocked)] = SKIP

@@ -78,11 +78,19 @@ def _cmd_run(args) -> int:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    executor = None
+    if args.scheduler:
+        from engine.execution_dask import executor_from_scheduler
+
+        executor = executor_from_scheduler(args.scheduler)
     update, close = _progress_bar()
     try:
-        result = simulate(spec, base_dir=Path(args.scene).resolve().parent, workers=args.workers, progress=update)
+        result = simulate(spec, base_dir=Path(args.scene).resolve().parent, workers=args.workers, progress=update,
+                          executor=executor)
     finally:
         close()
+        if executor is not None:
+            executor.close()
     paths = write_outputs(result, out)
     _print_links(result)
     run = result["run"]
@@ -101,7 +109,7 @@ def _cmd_serve(args) -> int:
     from pydantic import ValidationError
 
     given = {"db": args.db, "max_concurrent_jobs": args.max_concurrent_jobs, "workers_per_job": args.workers_per_job,
-             "api_keys_file": args.api_keys_file}
+             "api_keys_file": args.api_keys_file, "scheduler": args.scheduler}
     try:
         settings = Settings(**{k: v for k, v in given.items() if v is not None})
         settings.key_owners()  # an unreadable key file is an error now, not at the first request
@@ -169,7 +177,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("scene", help="scene document (JSON)")
     run.add_argument("--out", required=True, help="output folder (created if needed)")
     _add_simulation_options(run)
-    run.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    where = run.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=1, help="worker processes on this machine (default 1)")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run the batches on the Dask cluster of this scheduler, e.g. tcp://host:8786 "
+                            "(needs owcsim[cluster])")
     run.set_defaults(func=_cmd_run)
     val = sub.add_parser("validate", help="check a scene without running it")
     val.add_argument("scene")
@@ -182,6 +194,8 @@ def build_parser() -> argparse.ArgumentParser:
     srv.add_argument("--max-concurrent-jobs", type=int, help="jobs running at once (default 2)")
     srv.add_argument("--workers-per-job", type=int, help="engine worker processes per job (default 1)")
     srv.add_argument("--api-keys-file", help="file of bearer tokens, one per line: turns API keys on")
+    srv.add_argument("--scheduler", metavar="ADDRESS",
+                     help="run every job's batches on this Dask scheduler's cluster (default $OWCSIM_SCHEDULER)")
     srv.set_defaults(func=_cmd_serve)
     sbm = sub.add_parser("submit", help="run a scene on an owcsim server; write its results like `run`")
     sbm.add_argument("scene", help="scene document (JSON); mesh files are sent inline")

@@ -63,7 +63,7 @@ class Dispatcher:
     def __init__(self, store: JobStore, settings: Settings):
         self.store, self.settings = store, settings
         self.limits = WorkerLimits(workers=settings.workers_per_job, max_wall_time_s=settings.max_wall_time_s,
-                                   progress_interval_s=settings.progress_interval_s)
+                                   progress_interval_s=settings.progress_interval_s, scheduler=settings.scheduler)
         self._ctx = mp.get_context("forkserver")
         self._runs: dict[str, _Run] = {}
         self._wake_r, self._wake_w = os.pipe()  # wake() writes a byte: the loop looks again at once

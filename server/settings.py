@@ -29,6 +29,22 @@ class Settings(BaseSettings):
     crash_retries: int = Field(1, ge=0, le=10, description="times a job whose worker process died is requeued")
     cancel_grace_s: float = Field(5.0, gt=0, description="a stopped job's worker still alive after this is killed")
     progress_interval_s: float = Field(0.5, gt=0, description="least time between progress writes of a job [s]")
+    scheduler: str | None = Field(None, description="Dask scheduler address (tcp://host:8786): jobs run their "
+                                  "batches on its cluster instead of workers_per_job local processes")
+
+    @field_validator("scheduler", mode="after")
+    @classmethod
+    def _scheduler(cls, v: str | None) -> str | None:
+        if v is None or not v.strip():
+            return None
+        v = v.strip()
+        if "://" not in v:
+            raise ValueError(f"a Dask scheduler address looks like tcp://host:8786, not {v!r}")
+        try:
+            import distributed  # noqa: F401
+        except ImportError:
+            raise ValueError("a Dask scheduler needs the cluster extra: pip install 'owcsim[cluster]'") from None
+        return v
 
     @field_validator("db", mode="after")
     @classmethod

@@ -25,6 +25,7 @@ class WorkerLimits:
     workers: int
     max_wall_time_s: float
     progress_interval_s: float
+    scheduler: str | None = None  # Dask scheduler address: batches run on its cluster
 
 
 class _Watch:
@@ -74,12 +75,17 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
 
     store = JobStore(db_path)
     watch = _Watch(store, job_id, token, limits, lifeline)
+    executor = None
     try:
         spec = SceneSpec.model_validate_json(store.scene_json(job_id))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
+            if limits.scheduler:
+                from engine.execution_dask import executor_from_scheduler
+
+                executor = executor_from_scheduler(limits.scheduler)
             result = simulate(spec, base_dir=None, workers=limits.workers, progress=watch.progress,
-                              should_stop=watch.should_stop)
+                              should_stop=watch.should_stop, executor=executor)
         notes = list(dict.fromkeys(str(w.message) for w in caught))
     except EngineError as exc:
         store.finish(job_id, token, "failed", error=str(exc))
@@ -89,6 +95,11 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
         store.finish(job_id, token, "failed", error=f"internal error in the engine ({type(exc).__name__}: {exc})")
         return
     finally:
+        if executor is not None:
+            try:
+                executor.close()
+            except Exception:  # the job's outcome is decided; a cluster that went away must not change it
+                log.warning("job %s: closing the Dask client failed", job_id, exc_info=True)
         sys.stderr.flush()
     if watch.reason == "abandoned":
         return

@@ -24,6 +24,17 @@ def test_one_and_two_workers_bit_identical():
     assert one["links"][0]["dc_gain"] > one["links"][0]["los_gain"] > 0
 
 
+def test_tilted_normals_bit_identical_across_workers():
+    """Normals the schema normalises (not unit on input): the workers must see the very same bits."""
+    doc = room_doc(max_reflections=2, paths=6_000, batch_size=1024, direction="forward")
+    doc["transmitters"][0]["normal"] = [0.3, -0.7, -2.9]
+    doc["receivers"][0]["normal"] = [0.11, 0.37, 0.93]
+    one = simulate(spec(doc), workers=1)
+    two = simulate(spec(doc), workers=2)
+    assert one["links"][0]["dc_gain"] > 0
+    assert _strip(one) == _strip(two)
+
+
 def test_accuracy_mode_bit_identical_across_workers():
     doc = room_doc(max_reflections=3, paths=None, target_rel_error=0.02, batch_size=512, direction="backward")
     one = simulate(spec(doc), workers=1)
