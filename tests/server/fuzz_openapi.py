@@ -12,7 +12,10 @@ Not part of the default run (it is slower): `.ci/run` runs it, or
 `scripts/test tests/server/fuzz_openapi.py`. FUZZ_EXAMPLES sets the examples per operation.
 """
 import os
+from collections import Counter
+import sqlite3
 import tempfile
+import time
 import warnings
 from pathlib import Path
 
@@ -25,10 +28,12 @@ from server.settings import Settings
 
 EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "100"))
 KEY = "fuzz-key"
+SCENARIO_JOBS: Counter = Counter()  # final status of the jobs the stateful scenarios submitted
 
+DB = Path(tempfile.mkdtemp(prefix="owcsim-fuzz-")) / "jobs.sqlite"
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
-    app = create_app(Settings(db=Path(tempfile.mkdtemp(prefix="owcsim-fuzz-")) / "jobs.sqlite", api_keys=KEY,
+    app = create_app(Settings(db=DB, api_keys=KEY,
                               max_concurrent_jobs=1, max_queued_jobs=40, max_paths_per_job=200_000,
                               max_wall_time_s=5, max_receivers=2000, max_body_bytes=256 * 1024), run_jobs=False)
 schema = schemathesis.openapi.from_asgi("/v1/openapi.json", app)
@@ -49,7 +54,8 @@ def dispatcher():
     yield
     alive = app.state.dispatcher.alive
     app.state.dispatcher.stop()
-    print(f"\nfuzz: jobs queued by the fuzz, by final status: {app.state.store.counts()}", alive)
+    print(f"\nfuzz: jobs in the store at the end, by status: {app.state.store.counts()}; "
+          f"jobs of the stateful scenarios, by final status: {dict(SCENARIO_JOBS)}; dispatcher alive: {alive}")
 
 
 def checks(case) -> dict:
@@ -69,7 +75,30 @@ def test_api(case):
 
 
 class Workflows(schema.as_state_machine()):
-    """Sequences that follow the OpenAPI links: submit (the documented example), then get, cancel, results."""
+    """Sequences that follow the OpenAPI links: submit (the documented example), then get, cancel, results.
+
+    Hypothesis replays a scenario (to shrink it, or to check a failure) and requires the
+    replay to draw the same choices; which links it can follow depends on the answers
+    (202 or 429, a job queued or finished). So every scenario starts from an empty job
+    store, and a submitted job is waited for until it ends: the answers depend on the
+    requests only, never on timing or on earlier scenarios.
+    """
+
+    def setup(self):
+        with sqlite3.connect(DB, timeout=30) as con:
+            con.execute("DELETE FROM job_documents")
+            con.execute("DELETE FROM jobs")
+        con.close()
+
+    def after_call(self, response, case):
+        super().after_call(response, case)
+        if case.method.upper() == "POST" and case.path == "/v1/jobs" and response.status_code in (200, 202):
+            job_id = response.json()["id"]
+            deadline = time.monotonic() + 60
+            while (job := app.state.store.get(job_id)) is not None and job.status in ("queued", "running"):
+                assert time.monotonic() < deadline, f"fuzz job {job_id} still {job.status} after 60 s"
+                time.sleep(0.02)
+            SCENARIO_JOBS[job.status if job is not None else "gone"] += 1
 
     def validate_response(self, response, case, additional_checks=(), **kwargs):
         case.validate_response(response, **checks(case))
