@@ -22,6 +22,7 @@ import pytest
 import trimesh
 
 distributed = pytest.importorskip("distributed")
+from dask import config as dask_config  # noqa: E402
 
 from engine.errors import EngineError, SceneError  # noqa: E402
 from engine.execution import JobRef  # noqa: E402
@@ -55,8 +56,11 @@ def _doc(**simulation):
 
 @pytest.fixture(scope="module")
 def client():
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                       dashboard_address="127.0.0.1:0", silence_logs=logging.CRITICAL)
+    # The tests read the scheduler's transition log, a deque of 1000 entries by default: keep more,
+    # so that one test's reading never depends on how many transitions earlier tests made.
+    with dask_config.set({"distributed.admin.low-level-log-length": 100_000}):
+        cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                           dashboard_address="127.0.0.1:0", silence_logs=logging.CRITICAL)
     client = distributed.Client(cluster, set_as_default=False)
     try:
         yield client
@@ -297,6 +301,12 @@ def test_command_line_scheduler_flag(client, tmp_path, capsys, monkeypatch):
     assert f"127.0.0.1:{port}" in capsys.readouterr().err
 
 
+def _batch_keys_done(dask_scheduler):
+    """Keys of the batch tasks whose results reached memory, among the scheduler's recent transitions."""
+    return sorted({str(t[0]) for t in list(dask_scheduler.transition_log)
+                   if str(t[0]).startswith(BATCH_PREFIX) and t[2] == "memory"})
+
+
 def test_service_sends_its_jobs_to_the_scheduler(client, tmp_path):
     """OWCSIM_SCHEDULER: a job runs its batches on the cluster and serves the engine's numbers."""
     from pydantic import ValidationError
@@ -306,17 +316,15 @@ def test_service_sends_its_jobs_to_the_scheduler(client, tmp_path):
 
     doc = quick_doc(paths=6000, max_reflections=2)
     with app_client(tmp_path, run_jobs=True, scheduler=client.scheduler.address) as c:
-        before = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.transition_log))
+        # transition_log is a bounded deque (1000 entries): compare the sets of batch keys, not its length
+        before = client.run_on_scheduler(_batch_keys_done)
         job = c.post("/v1/jobs", json=doc).json()
         done = wait_for(c, job["id"], ("succeeded", "failed"), timeout=120)
         assert done["status"] == "succeeded", done
         served = c.get(f"{job['url']}/result").json()
 
-        def batches_seen(dask_scheduler):
-            return sum(1 for t in list(dask_scheduler.transition_log)[before:]
-                       if str(t[0]).startswith(BATCH_PREFIX) and t[2] == "memory")
-
-        assert client.run_on_scheduler(batches_seen) >= 6  # 6 batches of 1024 paths ran on the cluster
+        ran_here = set(client.run_on_scheduler(_batch_keys_done)) - set(before)
+        assert len(ran_here) >= 6, ran_here  # 6 batches of 1024 paths ran on the cluster
     assert served["run"]["workers"] == 2
     assert _strip(served) == _strip(simulate(spec(doc)))
     with pytest.raises(ValidationError, match="tcp://host:8786"):
