@@ -25,9 +25,13 @@ import math
 
 import numpy as np
 
+from pydantic import ValidationError
+
 from schemas import SceneSpec
+from schemas.simulation import check_bin_budget
 
 from .constants import SPEED_OF_LIGHT
+from .errors import SceneError
 from .media import medium_from_spec
 
 #: Highest orders the truncation pilot measures.
@@ -105,6 +109,16 @@ def _tail_order(gains, errors, ratio: float, allowed: float, cap: int):
     return cap, tail
 
 
+def validated(doc: dict, what: str) -> SceneSpec:
+    """The SceneSpec of a document the engine derived (`what` names it); its problems as one SceneError."""
+    try:
+        return SceneSpec.model_validate(doc)
+    except ValidationError as err:
+        problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or '(document)'}: {e['msg'].removeprefix('Value error, ')}"
+                             for e in err.errors())
+        raise SceneError(f"{what}: {problems}") from None
+
+
 def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dict]:
     """Explicit settings for every "auto" one, and the `modeled` section explaining them."""
     sim = spec.simulation
@@ -146,7 +160,7 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
     pilot_doc["simulation"].update(
         max_reflections=cap_k, max_scattering=cap_s, t_max_s=t_long, time_bin_s=(t_long - sim.t_min_s) / PILOT_BINS,
         paths=sim.pilot_paths, target_rel_error=None, seed=sim.seed + 1, batch_size=min(sim.batch_size, 4096))
-    pilot = simulate_fn(SceneSpec.model_validate(pilot_doc))
+    pilot = simulate_fn(validated(pilot_doc, "the pilot run that chooses the automatic settings"))
     links = pilot["links"]
     h0 = max(max(link["dc_gain"] for link in links), 1e-300)
     allowed = sim.tolerance * min(link["dc_gain"] for link in links if link["dc_gain"] > 0) \
@@ -174,7 +188,12 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
         dt = sim.time_bin_s
         edges = pilot["time_bins"]["t_min_s"] + pilot["time_bins"]["time_bin_s"] * np.arange(PILOT_BINS + 1)
         t_end = max(_window_end(edges, lk, allowed / 2) for lk in links)
-        n_bins = max(1, math.ceil((max(t_end, sim.t_min_s + dt) - sim.t_min_s) / dt - 1e-9))
+        t_end = max(t_end, sim.t_min_s + dt)
+        try:
+            check_bin_budget(sim.t_min_s, t_end, dt, automatic=True)
+        except ValueError as exc:
+            raise SceneError(f"simulation: {exc}") from None
+        n_bins = max(1, math.ceil((t_end - sim.t_min_s) / dt - 1e-9))
         update["t_max_s"] = sim.t_min_s + n_bins * dt
         modeled["time_window_reason"] = (
             f"window ends at {update['t_max_s'] * 1e9:.1f} ns: the power arriving later, extrapolated from the "

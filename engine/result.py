@@ -124,12 +124,16 @@ def _modeled(spec, scene, modeled, unreachable, settings) -> dict:
 def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info, original=None, modeled=None,
                  unreachable=()) -> dict:
     bins = settings.bins
-    edges = bins.edges
+    # Binned metrics see times from t_min: spread and bandwidth do not depend on the origin, and edges
+    # t_min + k dt would be uneven in float64 when t_min >> dt.
+    rel_edges = bins.dt * np.arange(bins.n + 1)
     first, used_accs, mean, cov, cir, early_all, late_all, order_mean, order_var = _combined(accs.values())
     los_abc = np.stack([los_gain, los_gain * los_delay, los_gain * los_delay**2], axis=-1)
     delay = metrics.delay_metrics_from_moments(mean + los_abc, cov)
     n_paths = sum(a.n_paths for a in accs.values())
-    los_bin = np.floor((los_delay - bins.t_min) / bins.dt).astype(np.int64)
+    with np.errstate(over="ignore"):  # a delay far outside the window may overflow the bin index: no bin, then
+        los_pos = (los_delay - bins.t_min) / bins.dt
+    los_bin = np.where((los_pos >= 0) & (los_pos < bins.n), np.floor(np.clip(los_pos, 0, bins.n)), -1).astype(np.int64)
     tx_ids, rx_ids = scene.transmitters.ids, scene.receivers.ids
     n_rx = len(rx_ids)
     links = []
@@ -159,15 +163,16 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
         def per_path(x, _w=float(weight.sum()) if len(weight) else 1.0, _los=los_vec):
             return x / _w + _los
 
-        t0_h2, rms_h2 = metrics.rms_delay_spread_h2(edges, total)
+        t0_h2, rms_h2 = metrics.rms_delay_spread_h2(rel_edges, total)
+        t0_h2 = bins.t_min + t0_h2
         rms_h2_se = np.nan
         if enough:
-            _, rms_h2_se = metrics.jackknife(lambda x: metrics.rms_delay_spread_h2(edges, per_path(x))[1],
+            _, rms_h2_se = metrics.jackknife(lambda x: metrics.rms_delay_spread_h2(rel_edges, per_path(x))[1],
                                              groups, weight)
-        bw = metrics.bandwidth_3db(edges, total)
+        bw = metrics.bandwidth_3db(rel_edges, total)
         bw_se = None
         if bw is not None and enough:
-            _, bw_se = metrics.jackknife(lambda x: metrics.bandwidth_3db(edges, per_path(x)), groups, weight)
+            _, bw_se = metrics.jackknife(lambda x: metrics.bandwidth_3db(rel_edges, per_path(x)), groups, weight)
         by_k = order_mean[link].sum(axis=1)
         by_k[0] += los_gain[link]
         by_k_se = np.sqrt(order_var[link].sum(axis=1))

@@ -23,7 +23,7 @@ from schemas import SceneSpec
 from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
 from .constants import SPEED_OF_LIGHT
 from .kernel import KernelSettings, WorkItem
-from .auto import resolve, unreachable_receivers
+from .auto import resolve, unreachable_receivers, validated
 from .los import line_of_sight
 from .result import build_result
 from .scene import Scene, build_scene
@@ -77,7 +77,7 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
     if not spec.simulation.is_resolved:
         spec, modeled = resolve(spec, lambda s: build_scene(s, base_dir),
                                 lambda s: simulate(s, base_dir=base_dir, executor=executor, workers=workers))
-        spec = SceneSpec.model_validate(spec.model_dump(mode="python"))  # budgets checked on the resolved settings
+        spec = validated(spec.model_dump(mode="python"), "the scene with its automatic settings")  # budgets
         scene = None
     scene = scene if scene is not None else build_scene(spec, base_dir)
     settings = kernel_settings(spec)

@@ -71,13 +71,12 @@ def reduce_contributions(links, n_paths, bins: TimeBins, n_orders: int, n_scatte
     n_cells = n_links * n_orders * n_scatter
     b = (delay - bins.t_min) * (1.0 / bins.dt)
     inside = (b >= 0) & (b < bins.n)
-    bi = b.astype(np.int64)
     if inside.all():
-        cir = np.bincount(cell * bins.n + bi, power, n_cells * bins.n)
+        cir = np.bincount(cell * bins.n + b.astype(np.int64), power, n_cells * bins.n)
         early = late = np.zeros(n_cells)
-    else:
+    else:  # only bins inside the window are cast (a far arrival's index may not fit an int64)
         sel = np.flatnonzero(inside)
-        cir = np.bincount(cell.take(sel) * bins.n + bi.take(sel), power.take(sel), n_cells * bins.n)
+        cir = np.bincount(cell.take(sel) * bins.n + b.take(sel).astype(np.int64), power.take(sel), n_cells * bins.n)
         early = np.bincount(cell, np.where(b < 0, power, 0.0), n_cells)
         late = np.bincount(cell, np.where(b >= bins.n, power, 0.0), n_cells)
     order_sum = np.bincount(cell, power, n_cells)

@@ -10,6 +10,18 @@ from .base import SpecModel
 
 #: Most time bins a job may ask for.
 MAX_BINS = 1_000_000
+
+
+def check_bin_budget(t_min_s: float, t_max_s: float, time_bin_s: float, automatic: bool = False) -> None:
+    """ValueError when the window t_min_s..t_max_s [s] needs more than MAX_BINS bins of time_bin_s [s]."""
+    ratio = (t_max_s - t_min_s) / time_bin_s  # may overflow to inf for a denormal bin width: still compared
+    if ratio - 1e-9 > MAX_BINS:
+        where = "the automatic time window" if automatic else "time window"
+        fix = "widen `time_bin_s` or give a shorter `t_max_s`" if automatic else "widen `time_bin_s`"
+        raise ValueError(f"{where} {t_min_s:g}..{t_max_s:g} s at {time_bin_s:g} s per bin needs {ratio:.4g} bins, "
+                         f"more than the budget of {MAX_BINS:,}: {fix}")
+
+
 #: Paths used when neither `paths` nor `target_rel_error` is given.
 DEFAULT_PATHS = 100_000
 
@@ -31,13 +43,15 @@ class SimulationSpec(SpecModel):
     max_scattering: int | None = Field(None, ge=1, le=1000, description="highest scattering order S of algorithm 5 "
                                        "(algorithms 2-4: 1, 1: 0; default: from the accuracy asked)")
     segment_time_step_s: float | None = Field(
-        None, gt=0.0, description="time strata of the points along segments, algorithms 2-4 [s] (default: time_bin_s)")
+        None, ge=1e-15, description="time strata of the points along segments, algorithms 2-4 [s] (default: time_bin_s)")
     max_strata: int = Field(64, ge=1, le=4096, description="most time strata per segment and target, algorithms 2-4")
     equiangular_points: int = Field(
         2, ge=0, le=256, description="equiangular points per segment and target (algorithms 2-5), combined with "
                                      "the time strata (2-4) or the free-flight collisions (5) by the balance heuristic")
-    time_bin_s: float = Field(0.25e-9, gt=0.0, description="CIR bin width dt [s]")
-    t_min_s: float = Field(0.0, ge=0.0, description="start of the time window [s]")
+    time_bin_s: float = Field(0.25e-9, ge=1e-15, description="CIR bin width dt [s] (at least 1 fs: light travels "
+                              "0.3 um in it)")
+    t_min_s: float = Field(0.0, ge=0.0, le=1.0, description="start of the time window [s] (at most 1 s: light "
+                           "travels 300,000 km in it)")
     t_max_s: float | None = Field(None, gt=0.0, description="end of the time window [s] (default: from the accuracy)")
     truncation_tolerance: float | None = Field(
         None, gt=0.0, lt=1.0, description="largest truncated power (reflection and scattering orders beyond K and S, "
@@ -59,10 +73,8 @@ class SimulationSpec(SpecModel):
             raise ValueError("give `paths` or `target_rel_error`, not both")
         if self.t_max_s is not None and not self.t_max_s > self.t_min_s:
             raise ValueError("`t_max_s` must exceed `t_min_s`")
-        if self.t_max_s is not None and self.n_bins > MAX_BINS:
-            raise ValueError(
-                f"time window {self.t_min_s:g}..{self.t_max_s:g} s at {self.time_bin_s:g} s per bin needs "
-                f"{self.n_bins} bins, more than the budget of {MAX_BINS}: widen `time_bin_s`")
+        if self.t_max_s is not None:
+            check_bin_budget(self.t_min_s, self.t_max_s, self.time_bin_s)
         return self
 
     @property

@@ -1,7 +1,10 @@
 """Model only what the scene requires: automatic algorithm, orders and window, and the modeled report."""
 
+import warnings
+
 import pytest
 
+from engine.errors import SceneError
 from engine.simulate import simulate
 from tests.scenes import barry_doc, room_doc, spec
 
@@ -35,6 +38,23 @@ def test_explicit_settings_win():
     assert res["algorithm"] == 3 and res["modeled"]["max_reflections"] == 2
     assert res["modeled"]["pilot"] is None and res["time_bins"]["n_bins"] == 400
     assert "algorithm 3 requested" in res["modeled"]["algorithm_reason"]
+
+
+def test_automatic_window_over_the_bin_budget_is_a_located_error():
+    # The window is chosen by the pilot; a bin width it cannot afford is the user's to fix, said plainly.
+    with pytest.raises(SceneError, match=r"automatic time window 0\.\.[0-9.e-]+ s at 1e-15 s per bin .*`t_max_s`"):
+        simulate(spec(_auto_doc(max_reflections=2, time_bin_s=1e-15, t_max_s=None, paths=256)))
+
+
+def test_window_far_after_every_arrival_counts_them_early_without_warnings():
+    # Every arrival (LOS included) precedes the window: all of it is early power, no bin index overflows.
+    doc = _auto_doc(algorithm=1, max_reflections=1, t_min_s=0.5, t_max_s=0.5 + 1e-10, time_bin_s=1e-15, paths=2048)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = simulate(spec(doc))
+    link = res["links"][0]
+    assert link["dc_gain"] > 0 and sum(link["cir"]["total"]) == 0
+    assert link["early_gain"] == pytest.approx(link["dc_gain"], rel=1e-12)
 
 
 def test_auto_truncation_within_its_bound_of_a_long_run():

@@ -129,6 +129,21 @@ def test_bin_budget():
     assert "simulation" in msg and "bins" in msg and "budget" in msg
 
 
+@pytest.mark.parametrize("field,value,where", [
+    ("time_bin_s", 1e-300, "simulation.time_bin_s"), ("time_bin_s", 5e-324, "simulation.time_bin_s"),
+    ("segment_time_step_s", 1e-300, "simulation.segment_time_step_s"), ("t_min_s", 1e300, "simulation.t_min_s"),
+])
+def test_time_scales_below_a_femtosecond_or_beyond_a_second_are_refused(field, value, where):
+    # Unphysical bin widths and window starts: a located error, not an overflowing bin index.
+    msg = _errors(barry_doc(**{field: value, "t_max_s": None}))
+    assert msg.startswith(where), msg
+
+
+def test_bin_budget_message_stays_short():
+    msg = _errors(barry_doc(time_bin_s=1e-15, t_max_s=1.0))
+    assert "1e+15 bins" in msg and "1,000,000" in msg and len(msg) < 300
+
+
 def test_tally_budget():
     doc = barry_doc(time_bin_s=1e-12, t_max_s=5e-7, max_reflections=200)
     assert "tally cells" in _errors(doc)
