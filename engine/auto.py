@@ -212,11 +212,13 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
 def unreachable_receivers(scene, n_rays: int = 64) -> list[int]:
     """Receivers that no light can reach: their whole field of view is blocked at their position.
 
-    Casts `n_rays` stratified directions over each receiver's FOV cone; if every one hits
-    a surface within 1e-4 of the scene's extent (flush against it) or the back of a room
-    or furniture face (the receiver looks into a solid), the receiver is reported, not
-    simulated. Receivers enclosed by a user mesh are not detected (its orientation is
-    unknown).
+    A receiver whose front (its position plus one ray offset along its normal) lies inside
+    a furniture box or outside the room looks into a solid. Otherwise `n_rays` stratified
+    directions over its FOV cone are cast from just off the receiver along each ray (a
+    surface it sits on is not an obstacle); if every one hits a surface within 10 ray
+    offsets (~1e-5 of the scene's extent), it is flush against that surface. Either way it
+    is reported, not simulated. The caller keeps receivers a transmitter sees directly.
+    Receivers enclosed by a user mesh are not detected (its orientation is unknown).
     """
     from .sampling import sample_cosine_cone, to_world
 
@@ -225,18 +227,21 @@ def unreachable_receivers(scene, n_rays: int = 64) -> list[int]:
         return []
     side = int(math.ceil(math.sqrt(n_rays)))
     u = (np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1).reshape(-1, 2) + 0.5) / side
+    front = rx.positions + isect.offset * rx.normals
+    spec = scene.spec
+    in_solid = np.zeros(len(rx), bool)
+    for box in spec.furniture:  # a loop over boxes, each test vectorized over receivers
+        in_solid |= np.all((front > box.min) & (front < box.max), axis=1)
+    if spec.room is not None:
+        in_solid |= ~np.all((front >= spec.room.lo) & (front <= spec.room.hi), axis=1)
     out = []
     for j in range(len(rx)):  # a loop over devices, each one vectorized call
-        dirs = to_world(sample_cosine_cone(rx.cos_fov[j], u[:, 0], u[:, 1]), rx.normals[j])
-        origins = np.broadcast_to(rx.positions[j] + isect.offset * rx.normals[j], dirs.shape)
-        prim, t = isect.intersect(origins, dirs)
-        if np.any(prim < 0):
+        if in_solid[j]:
+            out.append(j)
             continue
-        oriented = scene.geometry.oriented
-        back = np.einsum("ij,ij->i", dirs, isect.normals[prim]) > 0
-        if oriented is not None:
-            back &= oriented[prim]
-        if np.all((t <= 1e-4 * isect.extent) | back):
+        dirs = to_world(sample_cosine_cone(rx.cos_fov[j], u[:, 0], u[:, 1]), rx.normals[j])
+        prim, t = isect.intersect(front[j] + 2.0 * isect.offset * dirs, dirs)
+        if np.all((prim >= 0) & (t <= 10.0 * isect.offset)):
             out.append(j)
     return out
 

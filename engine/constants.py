@@ -8,6 +8,11 @@ SPEED_OF_LIGHT = 299_792_458.0
 #: float32 rounding of a hit point, and still 200x smaller than 1 mm in a 5 m room.
 RAY_OFFSET_FACTOR = 1e-6
 
+#: Largest extent of a scene (surfaces and devices) [m]. Embree's float32 and the offset above
+#: scale with it: at 2 km the offset is 2 mm and a hit point rounds by ~0.1 mm, the most a
+#: device of a few mm can bear. Larger scenes are refused, not traced imprecisely.
+MAX_SCENE_EXTENT = 2000.0
+
 #: Triangles whose area is below this fraction of extent^2 are dropped as degenerate.
 DEGENERATE_AREA_FACTOR = 1e-14
 

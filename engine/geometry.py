@@ -21,7 +21,7 @@ from embreex import rtcore_scene
 from schemas import ROOM_FACES, SceneSpec
 from schemas.geometry import BoxSpec, MeshSpec, RoomSpec
 
-from .constants import DEGENERATE_AREA_FACTOR, RAY_OFFSET_FACTOR
+from .constants import DEGENERATE_AREA_FACTOR, MAX_SCENE_EXTENT, RAY_OFFSET_FACTOR
 from .errors import SceneError
 
 # Unit-cube corners and the two triangles of each face, wound so normals point outward.
@@ -123,6 +123,17 @@ def _load_mesh(i: int, spec: MeshSpec, base_dir: Path | None):
     return np.concatenate(vs), np.concatenate(fs), np.concatenate(rhos), names
 
 
+def check_extent(points: np.ndarray, what: str) -> float:
+    """Largest side [m] of the box around `points` (n, 3); SceneError above MAX_SCENE_EXTENT."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        extent = float(np.ptp(points, axis=0).max()) if len(points) else 0.0
+    if not extent <= MAX_SCENE_EXTENT:
+        raise SceneError(f"{what} span {extent:.4g} m, more than the {MAX_SCENE_EXTENT:g} m owcsim traces "
+                         "accurately (float32 ray casting around the scene centre); coordinates are in metres "
+                         "(a mesh in millimetres?)")
+    return extent
+
+
 def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
     """All surfaces of the scene as one triangle soup; degenerate triangles dropped with a warning."""
     pieces = []
@@ -145,9 +156,9 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
         labels += names
     vertices, faces, rho = np.concatenate(verts), np.concatenate(faces), np.concatenate(rho)
     group_names, group = np.unique(np.asarray(labels), return_inverse=True)
+    extent = check_extent(vertices, "the surfaces") or 1.0
     tri = vertices[faces]
     area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    extent = float(np.ptp(vertices, axis=0).max()) or 1.0
     ok = area2 > 2 * DEGENERATE_AREA_FACTOR * extent**2
     if not ok.all():
         bad = sorted({str(group_names[g]) for g in group[~ok]})

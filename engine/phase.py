@@ -236,9 +236,11 @@ class Mixture(PhaseFunction):
                 raise TypeError(f"mixture component {p!r} is not a PhaseFunction")
             if not (np.isfinite(w) and w >= 0):
                 raise ValueError(f"mixture weights must be finite and >= 0, got {w!r}")
-        if (total := float(sum(w for w, _ in comps))) <= 0:
+        if (largest := max(float(w) for w, _ in comps)) <= 0:
             raise ValueError("mixture weights are all zero")
-        comps = [(float(w) / total, p) for w, p in comps if w > 0]
+        comps = [(float(w) / largest, p) for w, p in comps if w > 0]  # scaled first: the sum cannot overflow
+        total = sum(w for w, _ in comps)
+        comps = [(w / total, p) for w, p in comps]
         self.weights = np.array([w for w, _ in comps])
         self.components = tuple(p for _, p in comps)
         self._edges = np.concatenate(([0.0], np.cumsum(self.weights)))

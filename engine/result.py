@@ -63,7 +63,26 @@ def _warnings(spec, scene) -> list[str]:
     if sim.algorithm == 1 and _scatters(spec.medium):
         out.append("algorithm 1 counts only unscattered light: with sigma_s > 0 it underestimates "
                    "(use algorithm 4 or 5 for scattered light)")
+    out += _size_warnings(spec, scene)
     return out
+
+
+#: A receiver is a point while its side sqrt(area) is below this fraction of its distance to a transmitter.
+POINT_RECEIVER_RATIO = 0.1
+
+
+def _size_warnings(spec, scene) -> list[str]:
+    """Receivers too large for the point-receiver model (gain ~ A cos / d^2, physics.md §2) next to a transmitter."""
+    areas = np.array([r.area for r in spec.all_receivers()])
+    d = np.linalg.norm(scene.receivers.positions[:, None, :] - scene.transmitters.positions[None, :, :], axis=2)
+    nearest = d.min(axis=1)
+    big = np.flatnonzero(np.sqrt(areas) > POINT_RECEIVER_RATIO * nearest)
+    if not len(big):
+        return []
+    j = big[0]
+    return [f"{len(big)} receiver(s) too large for the point-receiver model, e.g. {scene.receivers.ids[j]}: side "
+            f"sqrt(area) = {math.sqrt(areas[j]):.3g} m against {nearest[j]:.3g} m to the nearest transmitter "
+            f"(the model needs under {POINT_RECEIVER_RATIO:g} of it); their gains are overestimated and may exceed 1"]
 
 
 def _albedo_max(scene) -> float:
@@ -73,16 +92,18 @@ def _albedo_max(scene) -> float:
 
 def _combined(accs):
     """Per-link sums over directions: mean (a, b, c), its covariance, CIR, early/late, order moments."""
-    accs = [a for a in accs if a.n_paths.any()]
-    first = accs[0] if accs else None
-    mean = sum(a.moments()[0] for a in accs)
-    cov = sum(a.moments()[1] for a in accs)
-    cir = sum(a.per_path(a.cir) for a in accs)
-    early = sum(a.per_path(a.early) for a in accs)
-    late = sum(a.per_path(a.late) for a in accs)
-    order_mean = sum(a.order_moments()[0] for a in accs)
-    order_var = sum(a.order_moments()[1] for a in accs)
-    return first, accs, mean, cov, cir, early, late, order_mean, order_var
+    accs = list(accs)
+    served = [a for a in accs if a.n_paths.any()]
+    pool = served or accs[:1]  # nothing ran (every receiver unreachable): zeros of the right shapes
+    first = served[0] if served else None
+    mean = sum(a.moments()[0] for a in pool)
+    cov = sum(a.moments()[1] for a in pool)
+    cir = sum(a.per_path(a.cir) for a in pool)
+    early = sum(a.per_path(a.early) for a in pool)
+    late = sum(a.per_path(a.late) for a in pool)
+    order_mean = sum(a.order_moments()[0] for a in pool)
+    order_var = sum(a.order_moments()[1] for a in pool)
+    return first, served, mean, cov, cir, early, late, order_mean, order_var
 
 
 def _group_estimates(accs, link):
@@ -115,8 +136,8 @@ def _modeled(spec, scene, modeled, unreachable, settings) -> dict:
     out["max_scattering"] = sim.scattering_orders if scene.medium is not None else 0
     out["time_window_s"] = [settings.bins.t_min, float(settings.bins.edges[-1])]
     out["unreachable_receivers"] = [
-        {"receiver": scene.receivers.ids[j], "reason": "its whole field of view is blocked at its position "
-                                                       "(flush against a surface): not simulated"}
+        {"receiver": scene.receivers.ids[j], "reason": "it faces into a solid or lies flush against a surface "
+                                                       "(no transmitter in view): no light reaches it; not simulated"}
         for j in unreachable]
     return out
 

@@ -9,7 +9,7 @@ import numpy as np
 from schemas import SceneSpec
 
 from .devices import Devices, receivers_from_specs, transmitters_from_specs
-from .geometry import Geometry, Intersector, build_geometry
+from .geometry import Geometry, Intersector, build_geometry, check_extent
 from .media import HomogeneousMedium, medium_from_spec
 from .phase import phase_from_spec
 
@@ -46,6 +46,9 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
     `base_dir` resolves relative mesh file paths (the scene file's folder).
     """
     geometry = build_geometry(spec, Path(base_dir) if base_dir is not None else None)
+    if len(geometry.faces):  # rays are cast in float32 around the surfaces' centre: devices count too
+        devices = np.array([d.position for d in (*spec.transmitters, *spec.all_receivers())], float).reshape(-1, 3)
+        check_extent(np.concatenate([geometry.vertices, devices]), "the surfaces and devices")
     medium = medium_from_spec(spec.medium)
     return Scene(
         spec=spec,

@@ -81,8 +81,9 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
         scene = None
     scene = scene if scene is not None else build_scene(spec, base_dir)
     settings = kernel_settings(spec)
-    blocked = unreachable_receivers(scene)
     los_gain, los_delay = line_of_sight(scene)
+    seen = los_gain.reshape(len(scene.transmitters), len(scene.receivers)).any(axis=0)
+    blocked = [j for j in unreachable_receivers(scene) if not seen[j]]  # a direct view proves it reachable
     own = executor is None
     if own:
         executor = SerialExecutor() if workers <= 1 else ProcessExecutor(workers)
@@ -236,5 +237,8 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
                 return True
         return False
 
+    if not runs:  # every link skipped (unreachable receivers): nothing to run, not an endless empty loop
+        info.stop_reason = "nothing_to_simulate"
+        return accs
     _merge(accs, executor, job, _items(runs, sim, 0, n_paths), settings, on_batch)
     return accs

@@ -49,13 +49,15 @@ def _cmd_validate(args) -> int:
 
 
 def _print_links(result: dict) -> None:
+    for note in result.get("warnings", []):
+        print(f"owcsim: warning: {note}", file=sys.stderr)
     for link in result["links"]:
-        err = link["dc_gain_stderr"]
-        rms = link["rms_delay_spread_s"]
+        err, rms, loss = link["dc_gain_stderr"], link["rms_delay_spread_s"], link["path_loss_db"]
+        nan = float("nan")  # a missing figure (None in the JSON), never a 0 taken for missing
         print(f"{link['transmitter']} -> {link['receiver']} ({link['direction']}): "
-              f"H0 = {link['dc_gain']:.6e} ± {err if err is not None else float('nan'):.1e}, "
-              f"path loss {link['path_loss_db'] or float('nan'):.2f} dB, "
-              f"tau_rms = {(rms or float('nan')) * 1e9:.3f} ns")
+              f"H0 = {link['dc_gain']:.6e} ± {nan if err is None else err:.1e}, "
+              f"path loss {nan if loss is None else loss:.2f} dB, "
+              f"tau_rms = {(nan if rms is None else rms) * 1e9:.3f} ns")
 
 
 def _scene_overrides(args) -> list[tuple[str, object]]:
@@ -70,14 +72,23 @@ def _scene_overrides(args) -> list[tuple[str, object]]:
     return overrides
 
 
+def _output_folder(path: str) -> Path:
+    """The --out folder, created if needed; a path that cannot be one is an InputError (before any work)."""
+    out = Path(path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--out {path}: cannot use it as the output folder ({exc.strerror or exc})") from None
+    return out
+
+
 def _cmd_run(args) -> int:
     assignments = args.set or []
     spec, _ = load_scene(args.scene, _scene_overrides(args), assignments)
     from engine.simulate import simulate
     from clients.output import write_outputs
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _output_folder(args.out)
     executor = None
     if args.scheduler:
         from engine.execution_dask import executor_from_scheduler
@@ -130,6 +141,8 @@ def _cmd_submit(args) -> int:
         raise InputError(f"`owcsim submit` needs the client extra ({exc.name} is missing): "
                          "pip install 'owcsim[client]'") from None
     _, doc = load_scene(args.scene, _scene_overrides(args), args.set or [])
+    if args.out:
+        _output_folder(args.out)  # a bad --out is said now, not after the job ran
     api_key = args.api_key or os.environ.get("OWCSIM_API_KEY")
     try:
         with Client(args.server, api_key) as owc:

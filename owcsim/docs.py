@@ -72,6 +72,10 @@ def load_scene(path: str | Path, overrides: list[tuple[str, object]] = (),
         doc = json.loads(path.read_text())
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a UTF-8 text file (a scene is a JSON document)") from None
+    except OSError as exc:  # a folder, a file we may not read, ...
+        raise InputError(f"{path}: cannot read it ({exc.strerror or exc})") from None
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
     if not isinstance(doc, dict):

@@ -71,7 +71,7 @@ class TimeBinsPublic(PublicModel):
 
 
 class RunPublic(PublicModel):
-    stop_reason: Literal["paths", "target_reached", "time_budget", "cancelled"]
+    stop_reason: Literal["paths", "target_reached", "time_budget", "cancelled", "nothing_to_simulate"]
     target_rel_error: float | None
     max_dc_gain_rel_stderr: float | None
     wall_time_s: float

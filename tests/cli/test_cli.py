@@ -72,3 +72,22 @@ def test_not_json_is_an_error(tmp_path, capsys):
 def test_entry_point_runs_as_module(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "owcsim", "validate", BARRY], capture_output=True, text=True)
     assert proc.returncode == 0 and "valid" in proc.stdout
+
+
+def test_unreadable_scene_and_unusable_out_folder_are_errors(tmp_path, capsys):
+    (tmp_path / "folder.json").mkdir()
+    (tmp_path / "binary.json").write_bytes(b"\xff\xfe{}")
+    (tmp_path / "afile").write_text("")
+    cases = [(["validate", str(tmp_path / "folder.json")], "cannot read it"),
+             (["validate", str(tmp_path / "binary.json")], "not a UTF-8 text file"),
+             (["run", BARRY, "--out", str(tmp_path / "afile"), "--paths", "64"], "cannot use it as the output folder"),
+             (["run", BARRY, "--out", str(tmp_path / "afile" / "sub"), "--paths", "64"], "cannot use it as the output")]
+    for argv, message in cases:
+        assert main(argv) == 2, argv
+        assert message in capsys.readouterr().err
+
+
+def test_a_zero_delay_spread_prints_as_zero(tmp_path, capsys):
+    # Line of sight only: tau_rms is exactly 0 (printed as such, not as nan).
+    assert main(["run", BARRY, "--out", str(tmp_path), "--paths", "256", "--set", "room=null"]) == 0
+    assert "tau_rms = 0.000 ns" in capsys.readouterr().out

@@ -102,7 +102,43 @@ def test_unreachable_receiver_is_reported_not_simulated():
     assert res["links"][0]["paths"] == 4096 and res["links"][0]["dc_gain"] > 0
 
 
+@pytest.mark.parametrize("stopping", [{"paths": 4096}, {"paths": None, "target_rel_error": 0.05,
+                                                      "time_budget_s": 5.0}])
+def test_every_receiver_unreachable_ends_at_once_with_zero_gain(stopping):
+    # Used to crash (no tally to combine) with a fixed budget and loop forever in accuracy mode.
+    doc = room_doc(**stopping)
+    doc["furniture"] = [{"name": "cabinet", "min": [3.0, 1.0, 0.0], "max": [4.0, 2.0, 1.5], "reflectance": 0.5}]
+    doc["receivers"] = [{"id": "stuck", "position": [3.0, 1.5, 0.7], "normal": [1, 0, 0], "area": 1e-4}]
+    res = simulate(spec(doc))
+    assert res["run"]["stop_reason"] == "nothing_to_simulate" and res["run"]["paths_total"] == 0
+    link = res["links"][0]
+    assert link["dc_gain"] == 0.0 and link["dc_gain_stderr"] == 0.0 and link["direction"] == "none"
+    assert res["modeled"]["unreachable_receivers"][0]["receiver"] == "stuck"
+
+
+def test_receiver_on_the_floor_with_a_grazing_normal_is_simulated():
+    # Half its field of view looks into the floor, half into the room: the transmitter is in view.
+    doc = barry_doc(paths=8192, max_reflections=1)
+    doc["receivers"][0]["normal"] = [1.0, 0.0, 1e-13]
+    res = simulate(spec(doc))
+    link = res["links"][0]
+    assert res["modeled"]["unreachable_receivers"] == []
+    assert link["los_gain"] > 0 and link["dc_gain"] > link["los_gain"]
+
+
 def test_clear_scene_pays_nothing_for_smoke_support():
     res = simulate(spec(_auto_doc(max_reflections=3, t_max_s=2e-7)))
     assert res["diagnostics"]["medium_evaluations"] == 0 and res["algorithm"] == 1
     assert res["modeled"]["families"].startswith("vacuum")
+
+
+def test_receiver_too_large_for_the_point_model_is_warned():
+    # A 1 cm receiver 0.1 mm from the transmitter: A cos / d^2 exceeds 1; the result says why.
+    doc = barry_doc(paths=1024, max_reflections=1)
+    doc["room"]["size"] = [1e-4, 1e-4, 1e-4]
+    doc["transmitters"][0]["position"] = [5e-5, 5e-5, 1e-4]
+    doc["receivers"][0]["position"] = [2e-5, 2e-5, 0.0]
+    res = simulate(spec(doc))
+    assert res["links"][0]["dc_gain"] > 1
+    assert any("too large for the point-receiver model" in w for w in res["warnings"])
+    assert not any("point-receiver" in w for w in simulate(spec(barry_doc(paths=1024)))["warnings"])

@@ -261,6 +261,16 @@ def test_mixture_weights_and_one_uniform():
     assert m.mean_cosine == pytest.approx(0.125)
 
 
+def test_mixture_weights_near_the_float_limit_normalise_like_small_ones():
+    # 1e308 + 1e308 overflows: the weights are scaled by the largest before summing.
+    big = ph.Mixture([(1e308, ph.Isotropic()), (1e308, ph.HenyeyGreenstein(0.5))])
+    small = ph.Mixture([(1, ph.Isotropic()), (1, ph.HenyeyGreenstein(0.5))])
+    np.testing.assert_array_equal(big.weights, [0.5, 0.5])
+    c = np.linspace(-1, 1, 7)
+    np.testing.assert_array_equal(big.eval(c), small.eval(c))
+    assert big.mean_cosine == small.mean_cosine == pytest.approx(0.25)
+
+
 def _schema_type_literals():
     union, *_ = typing.get_args(sm.PhaseSpec)
     return {typing.get_args(cls.model_fields["type"].annotation)[0] for cls in typing.get_args(union)}

@@ -204,3 +204,28 @@ def test_tiny_fov_is_bounded():
     doc = barry_doc()
     doc["receivers"][0].update(fov_deg=1e-300, concentrator_index=1.5)
     assert "receivers.0.fov_deg" in _errors(doc)
+
+
+@pytest.mark.parametrize("path,where", [
+    (("transmitters", 0, "power"), "transmitters.0.power"),
+    (("simulation", "time_bin_s"), "simulation.time_bin_s"),
+    (("receivers", 0, "area"), "receivers.0.area"),
+])
+def test_infinite_numbers_are_located_errors(path, where):
+    # JSON readers accept `Infinity`; the schema does not (it used to reach the engine, or the store as null).
+    doc = barry_doc()
+    node = doc
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = float("inf")
+    assert where + ": Input should be a finite number" in _errors(doc)
+
+
+def test_infinite_grid_spacing_and_mixture_weight_are_located():
+    doc = barry_doc()
+    doc["receiver_grids"] = [{"origin": [1, 1, 0.5], "size": [1, 1], "spacing": float("inf"), "area": 1e-4}]
+    assert "receiver_grids.0.spacing: Input should be a finite number" in _errors(doc)
+    doc = barry_doc()
+    doc["medium"] = {"type": "homogeneous", "sigma_a": 0.01, "sigma_s": 0.1,
+                     "phase": {"type": "mixture", "components": [{"weight": float("inf"), "phase": {"type": "isotropic"}}]}}
+    assert "components.0.weight: Input should be a finite number" in _errors(doc)
