@@ -13,6 +13,8 @@ from .base import Point, SpecModel
 MAX_COEFFICIENT = 1e4
 #: Most cells a grid medium may have (two float64 arrays of this size are ~320 MB).
 MAX_GRID_CELLS = 20_000_000
+#: Most cells along one axis of a grid: a segment's traversal costs one array step per plane crossed.
+MAX_GRID_CELLS_PER_AXIS = 1000
 
 #: Koschmieder's relation: sigma_t = KOSCHMIEDER / visibility [1/m] (2 % contrast threshold).
 KOSCHMIEDER = 3.912
@@ -195,6 +197,9 @@ class GridMediumSpec(SpecModel):
             raise ValueError("every entry of `shape` must be >= 1")
         if math.prod(v) > MAX_GRID_CELLS:
             raise ValueError(f"{math.prod(v)} cells exceed the limit of {MAX_GRID_CELLS}")
+        if max(v) > MAX_GRID_CELLS_PER_AXIS:
+            raise ValueError(f"{max(v)} cells along one axis exceed the limit of {MAX_GRID_CELLS_PER_AXIS} "
+                             "(the exact traversal costs one step per cell plane a segment crosses)")
         return v
 
     @field_validator("sigma_a", "sigma_s")

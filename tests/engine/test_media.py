@@ -401,6 +401,7 @@ def test_specs_build_the_right_media():
     ({"sigma_a": [0.1, float("nan")] * 3}, "medium.grid.sigma_a", "finite"),
     ({"shape": [2, 0, 1]}, "medium.grid.shape", ">= 1"),
     ({"shape": [1000, 1000, 21], "sigma_a": 0.1}, "medium.grid.shape", "limit"),
+    ({"shape": [1, 1, 1001], "sigma_a": 0.1}, "medium.grid.shape", "1001 cells along one axis"),
     ({"max": [5, 5, 1]}, "medium.grid", "must exceed"),
 ])
 def test_grid_spec_errors_are_located(change, where, what):
@@ -420,3 +421,45 @@ def test_mesh_region_spec_errors_are_located():
     assert "medium.homogeneous.region.mesh.faces" in _errors(dict(base, region=dict(open_region, faces=[])))
     assert "outside 0..7" in _errors(dict(base, region=dict(open_region, faces=[[0, 1, 8]] * 4)))
     assert "medium.homogeneous.sigma_a" in _errors(dict(base, sigma_a=-0.5))
+
+
+def _random_grid_rays(rng, n=300):
+    """A random grid, and rays from inside and outside it, some along axes, some from cell planes."""
+    shape = (7, 3, 11)
+    grid = GridMedium(LO, HI, shape, rng.uniform(0, 2, int(np.prod(shape))), rng.uniform(0, 1, int(np.prod(shape))))
+    o = rng.uniform(LO - 0.5, HI + 0.5, (n, 3))
+    o[:20, 0] = LO[0] + 3 * grid.h[0]  # start on an interior plane
+    d = rng.uniform(LO, HI, (n, 3)) - o  # toward a point of the grid
+    d[20:40, 1:] = 0.0  # along x
+    d[40:60, :2] = 0.0  # along z
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    L = rng.uniform(0.1, 4.0, n)  # many end inside the grid
+    return grid, o, d, L
+
+
+def test_grid_optical_depth_against_fine_quadrature():
+    # Independent of the traversal: midpoint sums of sigma_t(o + t d) with 200 000 points per ray.
+    rng = _rng()
+    grid, o, d, L = _random_grid_rays(rng)
+    tau = grid.optical_depth(o, d, L)
+    m = 200_000
+    for r in range(len(L)):  # a loop over test rays (reference), each vectorized over its points
+        t = (np.arange(m) + 0.5) * (L[r] / m)
+        sigma, _ = grid._coefficients_at(o[r] + t[:, None] * d[r])
+        ref = sigma.sum() * (L[r] / m)
+        # each cell plane crossed puts at most one step of the sum in the wrong cell
+        planes = np.abs(np.diff(grid.cells(o[r] + t[[0, -1]][:, None] * d[r])[0], axis=0)).sum() + 2
+        assert abs(tau[r] - ref) <= (planes + 1) * grid.sigma_t_max * (L[r] / m) + 1e-12, r
+    assert (tau > 0).sum() > 200  # most rays cross the grid
+
+
+def test_grid_collision_depth_is_the_one_asked():
+    rng = _rng()
+    grid, o, d, L = _random_grid_rays(rng)
+    u = rng.random(len(L))
+    t, hit = grid.sample_distance(o, d, L, u)
+    assert 0.2 < hit.mean() < 0.8
+    # the optical depth up to the sampled collision is -ln(1 - u); no collision: the whole depth is below it
+    np.testing.assert_allclose(grid.optical_depth(o[hit], d[hit], t[hit]), -np.log1p(-u[hit]), rtol=1e-9, atol=1e-12)
+    assert np.all(grid.optical_depth(o[~hit], d[~hit], L[~hit]) <= -np.log1p(-u[~hit]))
+    assert np.array_equal(t[~hit], L[~hit])
