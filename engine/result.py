@@ -67,6 +67,22 @@ def _warnings(spec, scene) -> list[str]:
     return out
 
 
+#: Fraction of H0 outside the time window above which the result warns.
+OUTSIDE_WINDOW_WARNING = 0.1
+
+
+def _window_warnings(links) -> list[str]:
+    """Links with much of H0 arriving before t_min_s or after t_max_s (early_gain + late_gain)."""
+    outside = [(lk["early_gain"] + lk["late_gain"]) / lk["dc_gain"] for lk in links if lk["dc_gain"] > 0]
+    worst = max(outside, default=0.0)
+    if worst <= OUTSIDE_WINDOW_WARNING:
+        return []
+    n = sum(f > OUTSIDE_WINDOW_WARNING for f in outside)
+    return [f"{n} link(s) receive more than {OUTSIDE_WINDOW_WARNING:.0%} of H0 outside the time window (up to "
+            f"{worst:.0%}): the binned CIR, the h2-weighted delay figures and the 3 dB bandwidth describe only the "
+            "part inside it (H0, mean delay and tau_rms count every arrival); widen t_min_s..t_max_s"]
+
+
 #: A receiver is a point while its side sqrt(area) is below this fraction of its distance to a transmitter.
 POINT_RECEIVER_RATIO = 0.1
 
@@ -115,6 +131,14 @@ def _group_estimates(accs, link):
     est = sum(a.groups[used, link] / a.group_paths[used, link][:, None] for a in accs)
     weight = sum(a.group_paths[used, link] for a in accs) / len(accs)
     return est * weight[:, None], weight
+
+
+def _paths_traced(accs, n_tx: int, n_rx: int) -> int:
+    """Paths traced, not path-link pairs: a forward path serves every link of its transmitter
+    (the largest count among them), a backward path every link of its receiver."""
+    fwd = accs["forward"].n_paths.reshape(n_tx, n_rx)
+    bwd = accs["backward"].n_paths.reshape(n_tx, n_rx)
+    return int(fwd.max(axis=1).sum() + bwd.max(axis=0).sum())
 
 
 def _geometric_tail(gain: float, ratio: float) -> float:
@@ -237,7 +261,7 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
         "stop_reason": info.stop_reason, "target_rel_error": spec.simulation.target_rel_error,
         "max_dc_gain_rel_stderr": _num(rel.max()) if len(rel) else None,
         "wall_time_s": info.wall_time_s, "workers": info.workers, "batches": info.batches,
-        "paths_total": int(sum(a.n_paths.sum() for a in all_accs)),
+        "paths_total": _paths_traced(accs, len(tx_ids), n_rx),
         "rays_intersect": sum(a.rays_intersect for a in all_accs),
         "rays_occluded": sum(a.rays_occluded for a in all_accs), "direction_choice": info.pilot,
     }
@@ -252,7 +276,7 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
     }
     doc = {
         "owcsim_version": _owcsim_version(), "algorithm": spec.simulation.algorithm,
-        "warnings": _warnings(spec, scene),
+        "warnings": _warnings(spec, scene) + _window_warnings(links),
         "modeled": _modeled(spec, scene, modeled, unreachable, settings),
         "families": FAMILIES[spec.simulation.algorithm],
         "time_bins": {"t_min_s": bins.t_min, "time_bin_s": bins.dt, "n_bins": bins.n},

@@ -142,3 +142,14 @@ def test_receiver_too_large_for_the_point_model_is_warned():
     assert res["links"][0]["dc_gain"] > 1
     assert any("too large for the point-receiver model" in w for w in res["warnings"])
     assert not any("point-receiver" in w for w in simulate(spec(barry_doc(paths=1024)))["warnings"])
+
+
+def test_paths_total_counts_paths_traced_and_a_narrow_window_is_warned():
+    doc = room_doc(paths=2048, direction="forward", t_min_s=1.4e-8, t_max_s=2e-8)
+    doc["transmitters"].append({"id": "tx2", "position": [1.0, 4.0, 3.0], "normal": [0, 0, -1], "lambertian_order": 1})
+    doc["receivers"].append({"id": "rx2", "position": [4.0, 1.0, 0.0], "normal": [0, 0, 1], "area": 1e-4})
+    res = simulate(spec(doc))
+    # two transmitters x 2048 forward paths, each serving both receivers: 4096 paths, not 8192 path-link pairs
+    assert res["run"]["paths_total"] == 4096 and all(lk["paths"] == 2048 for lk in res["links"])
+    assert any("outside the time window" in w for w in res["warnings"])
+    assert not any("outside the time window" in w for w in simulate(spec(room_doc(paths=2048)))["warnings"])
