@@ -21,7 +21,8 @@ from schemas.jobs import TERMINAL_STATUSES, HealthPublic, JobListPublic, JobPubl
 
 from .client import POLL, job_path
 from .errors import ConnectionFailed, JobFailed
-from .http import API, RetryPolicy, check, headers
+from .http import (API, LAST_POLL_S, RetryPolicy, attempt_timeout, check, headers, retry_delay, submission_lost,
+                   unreachable)
 from .progress import ProgressBar
 from .result import Result
 from .scene import scene_document
@@ -45,8 +46,10 @@ class AsyncJob:
     def done(self) -> bool:
         return self.info.status in TERMINAL_STATUSES
 
-    async def refresh(self) -> "AsyncJob":
-        self.info = JobPublic.model_validate((await self.client._request("GET", job_path(self.info.id))).json())
+    async def refresh(self, deadline: float | None = None) -> "AsyncJob":
+        """The job's current state; `deadline` (time.monotonic) bounds the request and its retries."""
+        response = await self.client._request("GET", job_path(self.info.id), deadline=deadline)
+        self.info = JobPublic.model_validate(response.json())
         return self
 
     async def wait(self, progress: bool = False, timeout: float | None = None, stream=None) -> "AsyncJob":
@@ -55,14 +58,15 @@ class AsyncJob:
         interval = POLL[0]
         try:
             while True:
-                await self.refresh()
+                await self.refresh(deadline=None if deadline is None else deadline + LAST_POLL_S)
                 if bar:
                     bar.update(self.info, force=self.done)
                 if self.done:
                     break
-                if deadline is not None and time.monotonic() + interval > deadline:
+                left = None if deadline is None else deadline - time.monotonic()
+                if left is not None and left <= 0:
                     raise TimeoutError(f"job {self.info.id} is still {self.info.status} after {timeout} s")
-                await asyncio.sleep(interval)
+                await asyncio.sleep(interval if left is None else min(interval, left))  # the last poll is at the deadline
                 interval = min(interval * POLL[1], POLL[2])
         finally:
             if bar:
@@ -107,6 +111,7 @@ class AsyncClient:
         self.base_url = base_url.rstrip("/")
         self.retry = retry
         self._own = http is None
+        self._timeout = timeout
         self._http = http if http is not None else httpx.AsyncClient(base_url=self.base_url, timeout=timeout)
         self._headers = headers(api_key)
 
@@ -120,30 +125,39 @@ class AsyncClient:
         if self._own:
             await self._http.aclose()
 
-    async def _request(self, method: str, path: str, *, answers: tuple[int, ...] = (), **kw) -> httpx.Response:
-        """Send with retries; an error answer raises its ApiError, except the statuses in `answers`."""
+    async def _request(self, method: str, path: str, *, answers: tuple[int, ...] = (),
+                 deadline: float | None = None, **kw) -> httpx.Response:
+        """Send with retries; an error answer raises its ApiError, except the statuses in `answers`.
+        With `deadline` (time.monotonic), no try runs past it: TimeoutError instead."""
         extra = kw.pop("headers", {})
         attempt = 0
         while True:
+            timeout = attempt_timeout(self._timeout, deadline)
             try:
-                response = await self._http.request(method, path, headers={**self._headers, **extra}, **kw)
+                response = await self._http.request(method, path, headers={**self._headers, **extra}, timeout=timeout,
+                                                   **kw)
             except httpx.TransportError as exc:
-                if not self.retry.should_retry(attempt, None):
-                    raise ConnectionFailed(f"cannot reach the owcsim server at {self.base_url}: {exc}") from exc
-                await asyncio.sleep(self.retry.delay(attempt))
+                delay = retry_delay(self.retry, attempt, None, deadline)
+                if delay is None:
+                    raise unreachable(self.base_url, exc, self.retry, attempt, deadline) from exc
+                await asyncio.sleep(delay)
             else:
                 if response.status_code in answers:
                     return response
-                if not self.retry.should_retry(attempt, response):
+                delay = retry_delay(self.retry, attempt, response, deadline)
+                if delay is None:
                     return check(response)
-                await asyncio.sleep(self.retry.delay(attempt, response))
+                await asyncio.sleep(delay)
             attempt += 1
 
     async def submit(self, scene: SceneSpec | dict | str | Path, *, base_dir: str | Path | None = None,
                      idempotency_key: str | None = None) -> AsyncJob:
         doc = scene_document(scene, base_dir)
         key = idempotency_key or uuid.uuid4().hex
-        response = await self._request("POST", f"{API}/jobs", json=doc, headers={"Idempotency-Key": key})
+        try:
+            response = await self._request("POST", f"{API}/jobs", json=doc, headers={"Idempotency-Key": key})
+        except ConnectionFailed as exc:
+            raise submission_lost(exc, key) from exc
         return AsyncJob(self, JobPublic.model_validate(response.json()))
 
     async def run(self, scene, *, progress: bool = True, timeout: float | None = None, **kw) -> Result:

@@ -25,7 +25,8 @@ from schemas import SceneSpec
 from schemas.jobs import TERMINAL_STATUSES, HealthPublic, JobListPublic, JobPublic, VersionPublic
 
 from .errors import ConnectionFailed, JobFailed
-from .http import API, RetryPolicy, check, headers
+from .http import (API, LAST_POLL_S, RetryPolicy, attempt_timeout, check, headers, retry_delay, submission_lost,
+                   unreachable)
 from .progress import ProgressBar
 from .result import Result
 from .scene import scene_document
@@ -57,8 +58,10 @@ class Job:
     def done(self) -> bool:
         return self.info.status in TERMINAL_STATUSES
 
-    def refresh(self) -> "Job":
-        self.info = JobPublic.model_validate(self.client._request("GET", job_path(self.info.id)).json())
+    def refresh(self, deadline: float | None = None) -> "Job":
+        """The job's current state; `deadline` (time.monotonic) bounds the request and its retries."""
+        response = self.client._request("GET", job_path(self.info.id), deadline=deadline)
+        self.info = JobPublic.model_validate(response.json())
         return self
 
     def wait(self, progress: bool = False, timeout: float | None = None, stream=None) -> "Job":
@@ -70,14 +73,15 @@ class Job:
         interval = POLL[0]
         try:
             while True:
-                self.refresh()
+                self.refresh(deadline=None if deadline is None else deadline + LAST_POLL_S)
                 if bar:
                     bar.update(self.info, force=self.done)
                 if self.done:
                     break
-                if deadline is not None and time.monotonic() + interval > deadline:
+                left = None if deadline is None else deadline - time.monotonic()
+                if left is not None and left <= 0:
                     raise TimeoutError(f"job {self.info.id} is still {self.info.status} after {timeout} s")
-                time.sleep(interval)
+                time.sleep(interval if left is None else min(interval, left))  # the last poll is at the deadline
                 interval = min(interval * POLL[1], POLL[2])
         finally:
             if bar:
@@ -124,6 +128,7 @@ class Client:
         self.base_url = base_url.rstrip("/")
         self.retry = retry
         self._own = http is None
+        self._timeout = timeout
         self._http = http if http is not None else httpx.Client(base_url=self.base_url, timeout=timeout)
         self._headers = headers(api_key)
 
@@ -137,23 +142,29 @@ class Client:
         if self._own:
             self._http.close()
 
-    def _request(self, method: str, path: str, *, answers: tuple[int, ...] = (), **kw) -> httpx.Response:
-        """Send with retries; an error answer raises its ApiError, except the statuses in `answers`."""
+    def _request(self, method: str, path: str, *, answers: tuple[int, ...] = (),
+                 deadline: float | None = None, **kw) -> httpx.Response:
+        """Send with retries; an error answer raises its ApiError, except the statuses in `answers`.
+        With `deadline` (time.monotonic), no try runs past it: TimeoutError instead."""
         extra = kw.pop("headers", {})
         attempt = 0
         while True:
+            timeout = attempt_timeout(self._timeout, deadline)
             try:
-                response = self._http.request(method, path, headers={**self._headers, **extra}, **kw)
+                response = self._http.request(method, path, headers={**self._headers, **extra}, timeout=timeout,
+                                                   **kw)
             except httpx.TransportError as exc:
-                if not self.retry.should_retry(attempt, None):
-                    raise ConnectionFailed(f"cannot reach the owcsim server at {self.base_url}: {exc}") from exc
-                time.sleep(self.retry.delay(attempt))
+                delay = retry_delay(self.retry, attempt, None, deadline)
+                if delay is None:
+                    raise unreachable(self.base_url, exc, self.retry, attempt, deadline) from exc
+                time.sleep(delay)
             else:
                 if response.status_code in answers:
                     return response
-                if not self.retry.should_retry(attempt, response):
+                delay = retry_delay(self.retry, attempt, response, deadline)
+                if delay is None:
                     return check(response)
-                time.sleep(self.retry.delay(attempt, response))
+                time.sleep(delay)
             attempt += 1
 
     def submit(self, scene: SceneSpec | dict | str | Path, *, base_dir: str | Path | None = None,
@@ -162,7 +173,10 @@ class Client:
         A fresh Idempotency-Key makes the retries of this call safe."""
         doc = scene_document(scene, base_dir)
         key = idempotency_key or uuid.uuid4().hex
-        response = self._request("POST", f"{API}/jobs", json=doc, headers={"Idempotency-Key": key})
+        try:
+            response = self._request("POST", f"{API}/jobs", json=doc, headers={"Idempotency-Key": key})
+        except ConnectionFailed as exc:
+            raise submission_lost(exc, key) from exc
         return Job(self, JobPublic.model_validate(response.json()))
 
     def run(self, scene, *, progress: bool = True, timeout: float | None = None, **kw) -> Result:

@@ -9,7 +9,12 @@ class OwcsimError(Exception):
 
 
 class ConnectionFailed(OwcsimError):
-    """The server could not be reached (after the retries)."""
+    """The server could not be reached (after the retries). For a submission, `idempotency_key`
+    is the key it was sent with: submitting again with it returns the job if the server made one."""
+
+    def __init__(self, message: str, idempotency_key: str | None = None):
+        super().__init__(message)
+        self.idempotency_key = idempotency_key
 
 
 class ApiError(OwcsimError):

@@ -7,6 +7,7 @@ lost answer returns the first job instead of queueing a duplicate.
 from __future__ import annotations
 
 import random
+import time
 from dataclasses import dataclass
 from email.utils import parsedate_to_datetime
 from datetime import datetime, timezone
@@ -15,10 +16,12 @@ import httpx
 
 from schemas.errors import Problem
 
-from .errors import error_for
+from .errors import ConnectionFailed, error_for
 
 RETRY_STATUSES = frozenset({429, 502, 503, 504})
 API = "/v1"
+#: `wait(timeout=T)` may spend up to this long after T on its last status request [s].
+LAST_POLL_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -75,3 +78,35 @@ def check(response: httpx.Response) -> httpx.Response:
     if response.is_success:
         return response
     raise error_for(response.status_code, problem_of(response))
+
+
+def attempt_timeout(timeout: float, deadline: float | None) -> float:
+    """Timeout of one request [s]: the client's, cut to what is left before `deadline` (time.monotonic)."""
+    if deadline is None:
+        return timeout
+    left = deadline - time.monotonic()
+    if left <= 0:
+        raise TimeoutError("the deadline passed before the request was sent")
+    return min(timeout, left)
+
+
+def retry_delay(policy: RetryPolicy, attempt: int, response: httpx.Response | None,
+                deadline: float | None) -> float | None:
+    """Seconds to wait before the next try, or None: no retries left, or the next try would end past `deadline`."""
+    if not policy.should_retry(attempt, response):
+        return None
+    delay = policy.delay(attempt, response)
+    return None if deadline is not None and time.monotonic() + delay >= deadline else delay
+
+
+def unreachable(base_url: str, exc: Exception, policy: RetryPolicy, attempt: int, deadline: float | None) -> Exception:
+    """The error for a request that got no answer: TimeoutError if the deadline stopped the retries."""
+    if deadline is not None and policy.should_retry(attempt, None):
+        return TimeoutError(f"no answer from the owcsim server at {base_url} before the deadline ({exc})")
+    return ConnectionFailed(f"cannot reach the owcsim server at {base_url}: {exc}")
+
+
+def submission_lost(exc: ConnectionFailed, key: str) -> ConnectionFailed:
+    """A submission whose answer never came: the job may exist; its Idempotency-Key finds it."""
+    return ConnectionFailed(f"{exc}. The server may have queued the job anyway: submit again with "
+                            f"idempotency_key={key!r} to get that job instead of a duplicate", idempotency_key=key)

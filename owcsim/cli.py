@@ -206,7 +206,8 @@ def build_parser() -> argparse.ArgumentParser:
     srv.add_argument("--db", help="job store file (default $OWCSIM_DB or ./owcsim-jobs.sqlite)")
     srv.add_argument("--max-concurrent-jobs", type=int, help="jobs running at once (default 2)")
     srv.add_argument("--workers-per-job", type=int, help="engine worker processes per job (default 1)")
-    srv.add_argument("--api-keys-file", help="file of bearer tokens, one per line: turns API keys on")
+    srv.add_argument("--api-keys-file", help="file of bearer tokens, one per line (# comments): turns API keys on; "
+                     "a file with no token is an error")
     srv.add_argument("--scheduler", metavar="ADDRESS",
                      help="run every job's batches on this Dask scheduler's cluster (default $OWCSIM_SCHEDULER)")
     srv.set_defaults(func=_cmd_serve)

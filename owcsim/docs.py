@@ -48,6 +48,8 @@ def parse_assignment(text: str) -> tuple[str, object]:
         value = json.loads(raw)
     except json.JSONDecodeError:
         value = raw
+    except (ValueError, RecursionError) as exc:  # JSON, but not usable: e.g. an integer of 5000 digits
+        raise InputError(f"--set {path.strip()}: the value is not usable JSON ({type(exc).__name__})") from None
     return path.strip(), value
 
 
@@ -78,6 +80,10 @@ def load_scene(path: str | Path, overrides: list[tuple[str, object]] = (),
         raise InputError(f"{path}: cannot read it ({exc.strerror or exc})") from None
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+    except RecursionError:
+        raise InputError(f"{path}: not usable JSON (nested too deeply)") from None
+    except ValueError as exc:  # e.g. an integer of more than 4300 digits
+        raise InputError(f"{path}: not usable JSON ({exc})") from None
     if not isinstance(doc, dict):
         raise InputError(f"{path}: a scene document is a JSON object")
     for dotted, value in overrides:
@@ -88,3 +94,7 @@ def load_scene(path: str | Path, overrides: list[tuple[str, object]] = (),
         return SceneSpec.model_validate(doc), doc
     except ValidationError as err:
         raise InputError(f"{path}: " + format_validation_error(err)) from None
+    except RecursionError:
+        raise InputError(f"{path}: the document is nested too deeply") from None
+    except ArithmeticError as exc:  # a rule of the schema met a number it cannot compute with
+        raise InputError(f"{path}: a number is out of the range owcsim can compute with ({exc})") from None

@@ -1,6 +1,8 @@
 """The scene document: what `owcsim run` reads and `POST /v1/jobs` takes."""
 from __future__ import annotations
 
+from collections import Counter
+
 from pydantic import Field, model_validator
 
 from .base import SpecModel
@@ -34,7 +36,7 @@ class SceneSpec(SpecModel):
             raise ValueError("the scene has no receiver: give `receivers` or `receiver_grids`")
         for kind, devs in (("transmitters", self.transmitters), ("receivers", rx)):
             ids = [d.id for d in devs if d.id is not None]
-            dup = sorted({i for i in ids if ids.count(i) > 1})
+            dup = sorted(i for i, n in Counter(ids).items() if n > 1)  # linear: grids hold 1e5 receivers
             if dup:
                 raise ValueError(f"{kind}: duplicate ids {dup}")
         for kind, devs in (("transmitters", self.transmitters), ("receivers", rx)):

@@ -8,6 +8,7 @@ into a problem document. Field locations are dotted: `body.receivers.0.fov_deg`,
 from __future__ import annotations
 
 import logging
+import re
 import uuid
 from http import HTTPStatus
 
@@ -19,6 +20,7 @@ from starlette.routing import Match
 
 from schemas.errors import PROBLEM_MEDIA_TYPE, Problem, ProblemField
 
+_HTTP_METHODS = {"GET", "PUT", "POST", "DELETE", "OPTIONS", "HEAD", "PATCH", "TRACE"}
 log = logging.getLogger("owcsim.server")
 
 URN = "urn:owcsim:problem:"
@@ -75,6 +77,17 @@ def install(app: FastAPI) -> None:
         detail = "; ".join(f"{e.loc}: {e.msg}" for e in errors[:5])
         return problem_response(request, 422, "invalid-parameter", detail, errors=errors)
 
+    def _documented_methods(request: Request) -> set[str]:
+        """Methods the OpenAPI document gives the request's path (routers included under a prefix
+        do not show their routes in app.routes)."""
+        out: set[str] = set()
+        for template, operations in request.app.openapi().get("paths", {}).items():
+            parts = re.split(r"(\{[^/}]+\})", template)
+            pattern = "".join("[^/]+" if part.startswith("{") else re.escape(part) for part in parts)
+            if re.fullmatch(pattern, request.url.path):
+                out |= {m.upper() for m in operations if m.upper() in _HTTP_METHODS}
+        return out | ({"HEAD"} if "GET" in out else set())
+
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException):
         detail = exc.detail if isinstance(exc.detail, str) else None
@@ -83,7 +96,7 @@ def install(app: FastAPI) -> None:
             detail = f"no such resource: {request.method} {request.url.path}"
         if exc.status_code == 405:  # every method of the path, not only those of the first route matched
             allowed = sorted({m for r in request.app.routes if r.matches(request.scope)[0] != Match.NONE
-                              for m in getattr(r, "methods", None) or ()})
+                              for m in getattr(r, "methods", None) or ()} | _documented_methods(request))
             headers["Allow"] = ", ".join(allowed)
             detail = f"{request.method} is not allowed on {request.url.path}; allowed: {headers['Allow']}"
         return problem_response(request, exc.status_code, _KIND_BY_STATUS.get(exc.status_code, ""), detail,

@@ -59,7 +59,10 @@ class Settings(BaseSettings):
                 lines = self.api_keys_file.read_text().splitlines()
             except OSError as exc:
                 raise ValueError(f"api_keys_file {str(self.api_keys_file)!r}: {exc.strerror}") from None
-            tokens += [ln.strip() for ln in lines if not ln.strip().startswith("#")]
+            from_file = [ln.strip() for ln in lines if ln.strip() and not ln.strip().startswith("#")]
+            if not from_file:  # a key file that turns nothing on would leave the server open, silently
+                raise ValueError(f"api_keys_file {str(self.api_keys_file)!r} holds no key (one token per line)")
+            tokens += from_file
         out = {}
         for t in tokens:
             if t:

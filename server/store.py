@@ -155,13 +155,9 @@ class JobStore:
         packed = _pack(scene_json)
         with self._tx() as con:
             if idempotency_key is not None:
-                row = con.execute(f"SELECT {_COLUMNS} FROM jobs WHERE owner = ? AND idempotency_key = ?",
-                                  (owner, idempotency_key)).fetchone()
-                if row is not None:
-                    job = JobRow.from_db(row)
-                    if job.request_hash != request_hash:
-                        raise IdempotencyConflict(job.id)
-                    return job, False
+                first = self._idempotent(con, owner, idempotency_key, request_hash)
+                if first is not None:
+                    return first, False
             queued = con.execute("SELECT COUNT(*) FROM jobs WHERE status = 'queued'").fetchone()[0]
             if queued >= max_queued:
                 raise QueueFull()
@@ -172,6 +168,22 @@ class JobStore:
             con.execute("INSERT INTO job_documents (job_id, scene) VALUES (?, ?)", (job_id, packed))
             row = con.execute(f"SELECT {_COLUMNS} FROM jobs WHERE id = ?", (job_id,)).fetchone()
         return JobRow.from_db(row), True
+
+    @staticmethod
+    def _idempotent(con, owner: str, key: str, request_hash: str) -> JobRow | None:
+        row = con.execute(f"SELECT {_COLUMNS} FROM jobs WHERE owner = ? AND idempotency_key = ?",
+                          (owner, key)).fetchone()
+        if row is None:
+            return None
+        job = JobRow.from_db(row)
+        if job.request_hash != request_hash:
+            raise IdempotencyConflict(job.id)
+        return job
+
+    def find_idempotent(self, owner: str, key: str, request_hash: str) -> JobRow | None:
+        """The job first submitted with this owner's Idempotency-Key, or None; IdempotencyConflict
+        if it was submitted with another document."""
+        return self._idempotent(self._con(), owner, key, request_hash)
 
     # -- reading ----------------------------------------------------------------------------
 

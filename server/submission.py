@@ -60,6 +60,9 @@ def parse_scene(body: bytes, settings: Settings) -> SceneSpec:
     except RecursionError:
         raise _invalid([ProblemField(loc="body", msg="JSON nested too deeply", type="json_invalid")],
                        "malformed-json", 400) from None
+    except ValueError as exc:  # e.g. an integer of more than 4300 digits
+        raise _invalid([ProblemField(loc="body", msg=f"not valid JSON: {exc}", type="json_invalid")],
+                       "malformed-json", 400) from None
     if not isinstance(doc, dict):
         raise _invalid([ProblemField(loc="body", msg="a scene document is a JSON object", type="dict_type")])
     _check_receiver_count(doc, settings)
@@ -126,15 +129,13 @@ def check_limits(spec: SceneSpec, settings: Settings) -> None:
                      "per job (setting max_wall_time_s)")
 
 
-def accept(body: bytes, settings: Settings) -> tuple[SceneSpec, str]:
-    """Parse, validate, check limits and pre-flight; returns (spec, canonical JSON) or raises ProblemError."""
-    spec = parse_scene(body, settings)
+def check_runnable(spec: SceneSpec, settings: Settings) -> None:
+    """The server's limits and the engine's pre-flight on a validated scene; raises ProblemError."""
     check_limits(spec, settings)
     triangles = preflight(spec)
     if triangles > settings.max_triangles:
         raise _limit("body.meshes", f"the scene has {triangles:,d} triangles; this server accepts at most "
                      f"{settings.max_triangles:,d} (setting max_triangles)")
-    return spec, spec.model_dump_json()
 
 
 def request_hash(canonical: str) -> str:

@@ -14,7 +14,7 @@ from ..dispatcher import Dispatcher
 from ..problems import ProblemError
 from ..settings import Settings
 from ..store import IdempotencyConflict, JobRow, JobStore, QueueFull
-from ..submission import accept, read_body, request_hash
+from ..submission import check_runnable, parse_scene, read_body, request_hash
 from ..views import API_PREFIX, job_public, job_url
 from .docs import JOB_LINKS, SCENE_BODY, problems
 
@@ -49,11 +49,16 @@ async def submit_job(request: Request, response: Response, idempotency_key: Idem
 
 
 def _submit(body: bytes, owner, key, store: JobStore, settings: Settings) -> tuple[JobRow, bool]:
-    spec, canonical = accept(body, settings)
+    owner = owner if owner is not None else NO_AUTH_OWNER
+    spec = parse_scene(body, settings)
+    canonical = spec.model_dump_json()
+    digest = request_hash(canonical)
     try:
-        return store.submit(owner=owner if owner is not None else NO_AUTH_OWNER, scene_json=canonical,
-                            name=spec.name, request_hash=request_hash(canonical), idempotency_key=key,
-                            max_queued=settings.max_queued_jobs)
+        if key is not None and (first := store.find_idempotent(owner, key, digest)) is not None:
+            return first, False  # a retry (e.g. after a client timeout): no second pre-flight
+        check_runnable(spec, settings)
+        return store.submit(owner=owner, scene_json=canonical, name=spec.name, request_hash=digest,
+                            idempotency_key=key, max_queued=settings.max_queued_jobs)
     except QueueFull:
         raise ProblemError(429, "queue-full", f"the queue is full ({settings.max_queued_jobs} jobs): try again later",
                            headers={"Retry-After": str(settings.retry_after_s)}) from None

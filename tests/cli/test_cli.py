@@ -91,3 +91,15 @@ def test_a_zero_delay_spread_prints_as_zero(tmp_path, capsys):
     # Line of sight only: tau_rms is exactly 0 (printed as such, not as nan).
     assert main(["run", BARRY, "--out", str(tmp_path), "--paths", "256", "--set", "room=null"]) == 0
     assert "tau_rms = 0.000 ns" in capsys.readouterr().out
+
+
+def test_json_python_cannot_use_is_an_error_not_a_trace(tmp_path, capsys):
+    big = tmp_path / "big.json"
+    big.write_text('{"simulation": {"seed": ' + "9" * 5000 + "}}")  # past the 4300-digit integer limit
+    deep = tmp_path / "deep.json"
+    deep.write_text("[" * 100_000 + "]" * 100_000)
+    for path, message in ((big, "not usable JSON"), (deep, "nested too deeply")):
+        assert main(["validate", str(path)]) == 2
+        assert message in capsys.readouterr().err
+    assert main(["validate", BARRY, "--set", "simulation.seed=" + "9" * 5000]) == 2
+    assert "--set simulation.seed: the value is not usable JSON" in capsys.readouterr().err

@@ -233,3 +233,73 @@ def test_health_reports_unavailable_without_retrying():
             "max_concurrent_jobs": 2, "max_queued_jobs": 10}
     seen = []
     assert client(httpx.Response(503, json=body), seen=seen).health().status == "unavailable" and len(seen) == 1
+
+
+def _timed_transport(done_at):
+    """A job that reports `running` until time.monotonic() reaches `done_at`, then `succeeded`."""
+    import time
+
+    def handler(request: httpx.Request):
+        return httpx.Response(200, json={**JOB, "status": "succeeded" if time.monotonic() >= done_at else "running"})
+
+    return httpx.MockTransport(handler)
+
+
+def test_wait_polls_at_its_deadline_and_honours_its_timeout():
+    import socket
+    import time
+
+    from clients.client import Job
+    from clients.http import LAST_POLL_S
+
+    # done 0.9 s into a 1 s wait: the last poll lands on the deadline and sees it (it used to give up early)
+    t0 = time.monotonic()
+    http = httpx.Client(base_url="http://owcsim.test", transport=_timed_transport(t0 + 0.9))
+    job = Job(Client("http://owcsim.test", retry=FAST, http=http), JobPublic.model_validate({**JOB, "status": "running"}))
+    assert job.wait(timeout=1.0).info.status == "succeeded"
+    http = httpx.Client(base_url="http://owcsim.test", transport=_timed_transport(t0 + 60))
+    job = Job(Client("http://owcsim.test", retry=FAST, http=http), JobPublic.model_validate({**JOB, "status": "running"}))
+    t = time.monotonic()
+    with pytest.raises(TimeoutError, match="still running after 0.5 s"):
+        job.wait(timeout=0.5)
+    assert 0.45 < time.monotonic() - t < 0.5 + 0.5
+    # a server that accepts the connection and never answers: TimeoutError by the deadline, not after
+    # the client's 30 s request timeout and its retries
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen(8)
+        owc = Client(f"http://127.0.0.1:{silent.getsockname()[1]}", timeout=30.0)
+        job = Job(owc, JobPublic.model_validate({**JOB, "status": "running"}))
+        t = time.monotonic()
+        with pytest.raises(TimeoutError):
+            job.wait(timeout=1.0)
+        assert time.monotonic() - t < 1.0 + LAST_POLL_S + 0.5
+        owc.close()
+
+
+def test_a_submission_without_answer_names_its_idempotency_key():
+    owc = client(httpx.ReadTimeout("no answer"), httpx.ReadTimeout("no answer"), retry=RetryPolicy(retries=1,
+                                                                                                   backoff_s=0.0))
+    with pytest.raises(ConnectionFailed, match="idempotency_key=") as err:
+        owc.submit(room_doc(paths=100), idempotency_key="k-123")
+    assert err.value.idempotency_key == "k-123" and "k-123" in str(err.value)
+
+
+def test_async_wait_polls_at_its_deadline():
+    import time
+
+    from clients.aio import AsyncJob
+
+    async def go():
+        t0 = time.monotonic()
+        http = httpx.AsyncClient(base_url="http://owcsim.test", transport=_timed_transport(t0 + 0.9))
+        owc = AsyncClient("http://owcsim.test", retry=FAST, http=http)
+        job = AsyncJob(owc, JobPublic.model_validate({**JOB, "status": "running"}))
+        assert (await job.wait(timeout=1.0)).info.status == "succeeded"
+        http = httpx.AsyncClient(base_url="http://owcsim.test", transport=_timed_transport(t0 + 60))
+        job = AsyncJob(AsyncClient("http://owcsim.test", retry=FAST, http=http),
+                       JobPublic.model_validate({**JOB, "status": "running"}))
+        with pytest.raises(TimeoutError, match="still running"):
+            await job.wait(timeout=0.3)
+
+    asyncio.run(go())

@@ -174,10 +174,16 @@ def test_full_queue_answers_429_with_retry_after(tmp_path):
         assert c.post("/v1/jobs", json=quick_doc()).status_code == 202
 
 
-def test_idempotency_key_returns_the_first_job(api):
+def test_idempotency_key_returns_the_first_job(api, monkeypatch):
+    import server.routes.jobs as routes
+
+    preflights = []
+    real = routes.check_runnable
+    monkeypatch.setattr(routes, "check_runnable", lambda *a: (preflights.append(1), real(*a)))
     first = api.post("/v1/jobs", json=quick_doc(), headers={"Idempotency-Key": "abc-1"})
     again = api.post("/v1/jobs", json=quick_doc(), headers={"Idempotency-Key": "abc-1"})
     assert first.status_code == again.status_code == 202
+    assert len(preflights) == 1  # a retry (after a client timeout) finds the job before any pre-flight
     assert again.json()["id"] == first.json()["id"] and again.headers["idempotent-replayed"] == "true"
     # the same document in another spelling is the same request
     respaced = json.dumps(quick_doc(), indent=3).encode()
@@ -217,7 +223,19 @@ def test_unknown_job_route_and_method(api):
     problem(api.get("/v1/jobs/nope/result"), 404, "job-not-found")
     problem(api.post("/v1/jobs/nope/cancel"), 404, "job-not-found")
     problem(api.get("/v1/nothing"), 404, "not-found")
-    problem(api.delete("/v1/jobs"), 405, "method-not-allowed")
+    r = api.delete("/v1/jobs")
+    problem(r, 405, "method-not-allowed")
+    assert r.headers["allow"] == "GET, HEAD, POST"  # the methods of the path, from the included router
+    r = api.put("/v1/jobs/abc")
+    problem(r, 405, "method-not-allowed")
+    assert r.headers["allow"] == "GET, HEAD"
+
+
+def test_unusable_json_numbers_are_400(api):
+    body = b'{"simulation": {"seed": ' + b"9" * 5000 + b"}}"  # past Python's 4300-digit integer limit
+    p = problem(api.post("/v1/jobs", content=body, headers={"content-type": "application/json"}), 400,
+                "malformed-json")
+    assert "4300" in p["detail"]
 
 
 @pytest.mark.parametrize("suffix", ["result", "result.csv", "result.npz", "plot.png"])

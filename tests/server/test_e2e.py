@@ -187,3 +187,7 @@ def test_serve_refuses_bad_settings(tmp_path, capsys):
     assert "max_concurrent_jobs" in capsys.readouterr().err
     assert main(["serve", "--db", str(tmp_path / "j.sqlite"), "--api-keys-file", str(tmp_path / "none")]) == 2
     assert "api_keys_file" in capsys.readouterr().err
+    comments = tmp_path / "keys.txt"
+    comments.write_text("# tokens go here\n\n")
+    assert main(["serve", "--db", str(tmp_path / "j.sqlite"), "--api-keys-file", str(comments)]) == 2
+    assert "holds no key" in capsys.readouterr().err
