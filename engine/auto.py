@@ -28,6 +28,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from schemas import SceneSpec
+from schemas.errors import located
 from schemas.simulation import check_bin_budget
 
 from .constants import SPEED_OF_LIGHT
@@ -114,8 +115,7 @@ def validated(doc: dict, what: str) -> SceneSpec:
     try:
         return SceneSpec.model_validate(doc)
     except ValidationError as err:
-        problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or '(document)'}: {e['msg'].removeprefix('Value error, ')}"
-                             for e in err.errors())
+        problems = "; ".join(f"{loc or '(document)'}: {msg}" for loc, msg in located(err.errors()))
         raise SceneError(f"{what}: {problems}") from None
 
 
@@ -209,7 +209,7 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
     return resolved, modeled
 
 
-def unreachable_receivers(scene, n_rays: int = 64) -> list[int]:
+def unreachable_receivers(scene, seen: np.ndarray | None = None, n_rays: int = 64) -> list[int]:
     """Receivers that no light can reach: their whole field of view is blocked at their position.
 
     A receiver whose front (its position plus one ray offset along its normal) lies inside
@@ -217,8 +217,9 @@ def unreachable_receivers(scene, n_rays: int = 64) -> list[int]:
     directions over its FOV cone are cast from just off the receiver along each ray (a
     surface it sits on is not an obstacle); if every one hits a surface within 10 ray
     offsets (~1e-5 of the scene's extent), it is flush against that surface. Either way it
-    is reported, not simulated. The caller keeps receivers a transmitter sees directly.
-    Receivers enclosed by a user mesh are not detected (its orientation is unknown).
+    is reported, not simulated. Receivers in `seen` (a transmitter sees them directly: they
+    are reachable) are not tested. Receivers enclosed by a user mesh are not detected (its
+    orientation is unknown).
     """
     from .sampling import sample_cosine_cone, to_world
 
@@ -236,6 +237,8 @@ def unreachable_receivers(scene, n_rays: int = 64) -> list[int]:
         in_solid |= ~np.all((front >= spec.room.lo) & (front <= spec.room.hi), axis=1)
     out = []
     for j in range(len(rx)):  # a loop over devices, each one vectorized call
+        if seen is not None and seen[j]:
+            continue
         if in_solid[j]:
             out.append(j)
             continue

@@ -36,6 +36,7 @@ class Devices:
     cos_fov: np.ndarray  # (n,) cos(FOV) (receivers; 0 for transmitters)
     gain: np.ndarray  # (n,) A T_s g [m^2] (receivers; 1 for transmitters)
     power: np.ndarray  # (n,) P_t [W] (transmitters; 1 for receivers)
+    area: np.ndarray  # (n,) collecting area A [m^2] (receivers; 0 for transmitters)
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -72,7 +73,7 @@ def transmitters_from_specs(specs: list[TransmitterSpec], ids: list[str]) -> Dev
         positions=np.array([s.position for s in specs], float).reshape(n, 3),
         normals=np.array([s.normal for s in specs], float).reshape(n, 3),
         order=np.array([s.m for s in specs], float), cos_fov=np.zeros(n), gain=np.ones(n),
-        power=np.array([s.power for s in specs], float))
+        power=np.array([s.power for s in specs], float), area=np.zeros(n))
 
 
 def concentrator_gain(fov: float, index: float | None) -> float:
@@ -91,4 +92,5 @@ def receivers_from_specs(specs: list[ReceiverSpec], ids: list[str]) -> Devices:
         kind="receiver", ids=ids,
         positions=np.array([s.position for s in specs], float).reshape(n, 3),
         normals=np.array([s.normal for s in specs], float).reshape(n, 3),
-        order=np.zeros(n), cos_fov=cos_fov, gain=gain, power=np.ones(n))
+        order=np.zeros(n), cos_fov=cos_fov, gain=gain, power=np.ones(n),
+        area=np.array([s.area for s in specs], float).reshape(n))

@@ -63,7 +63,7 @@ def _warnings(spec, scene) -> list[str]:
     if sim.algorithm == 1 and _scatters(spec.medium):
         out.append("algorithm 1 counts only unscattered light: with sigma_s > 0 it underestimates "
                    "(use algorithm 4 or 5 for scattered light)")
-    out += _size_warnings(spec, scene)
+    out += _size_warnings(scene)
     return out
 
 
@@ -87,9 +87,9 @@ def _window_warnings(links) -> list[str]:
 POINT_RECEIVER_RATIO = 0.1
 
 
-def _size_warnings(spec, scene) -> list[str]:
+def _size_warnings(scene) -> list[str]:
     """Receivers too large for the point-receiver model (gain ~ A cos / d^2, physics.md §2) next to a transmitter."""
-    areas = np.array([r.area for r in spec.all_receivers()])
+    areas = scene.receivers.area
     d = np.linalg.norm(scene.receivers.positions[:, None, :] - scene.transmitters.positions[None, :, :], axis=2)
     nearest = d.min(axis=1)
     big = np.flatnonzero(np.sqrt(areas) > POINT_RECEIVER_RATIO * nearest)

@@ -46,16 +46,18 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
     `base_dir` resolves relative mesh file paths (the scene file's folder).
     """
     geometry = build_geometry(spec, Path(base_dir) if base_dir is not None else None)
+    transmitters = transmitters_from_specs(spec.transmitters, spec.transmitter_ids())
+    receivers = receivers_from_specs(spec.all_receivers(), spec.receiver_ids())
     if len(geometry.faces):  # rays are cast in float32 around the surfaces' centre: devices count too
-        devices = np.array([d.position for d in (*spec.transmitters, *spec.all_receivers())], float).reshape(-1, 3)
-        check_extent(np.concatenate([geometry.vertices, devices]), "the surfaces and devices")
+        check_extent(np.concatenate([geometry.vertices, transmitters.positions, receivers.positions]),
+                     "the surfaces and devices")
     medium = medium_from_spec(spec.medium)
     return Scene(
         spec=spec,
         geometry=geometry,
         intersector=Intersector(geometry),
-        transmitters=transmitters_from_specs(spec.transmitters, spec.transmitter_ids()),
-        receivers=receivers_from_specs(spec.all_receivers(), spec.receiver_ids()),
+        transmitters=transmitters,
+        receivers=receivers,
         medium=medium,
         all_visible=spec.room is not None and not spec.furniture and not spec.meshes,
         phase=phase_from_spec(spec.medium.phase) if medium is not None else None,

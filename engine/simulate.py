@@ -83,7 +83,7 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
     settings = kernel_settings(spec)
     los_gain, los_delay = line_of_sight(scene)
     seen = los_gain.reshape(len(scene.transmitters), len(scene.receivers)).any(axis=0)
-    blocked = [j for j in unreachable_receivers(scene) if not seen[j]]  # a direct view proves it reachable
+    blocked = unreachable_receivers(scene, seen)  # a direct view proves a receiver reachable
     own = executor is None
     if own:
         executor = SerialExecutor() if workers <= 1 else ProcessExecutor(workers)

@@ -7,6 +7,7 @@ from pathlib import Path
 from pydantic import ValidationError
 
 from schemas import SceneSpec
+from schemas.errors import located
 
 
 class InputError(Exception):
@@ -55,10 +56,7 @@ def parse_assignment(text: str) -> tuple[str, object]:
 
 def format_validation_error(err: ValidationError) -> str:
     lines = [f"the scene has {err.error_count()} problem{'s' if err.error_count() > 1 else ''}:"]
-    for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"]) or "(document)"
-        msg = e["msg"].removeprefix("Value error, ")
-        lines.append(f"  {loc}: {msg}")
+    lines += [f"  {loc or '(document)'}: {msg}" for loc, msg in located(err.errors())]
     return "\n".join(lines)
 
 

@@ -33,3 +33,9 @@ class Problem(BaseModel):
     detail: str | None = Field(None, description="what went wrong in this case, in words")
     instance: str | None = Field(None, description="the request path")
     errors: list[ProblemField] = Field(default_factory=list, description="each wrong field, located")
+
+
+def located(errors: list[dict], prefix: tuple = ()) -> list[tuple[str, str]]:
+    """pydantic error dicts -> (dotted location, message without pydantic's "Value error, " prefix)."""
+    return [(".".join(str(part) for part in prefix + tuple(e["loc"])),
+             e["msg"].removeprefix("Value error, ").removeprefix("Assertion failed, ")) for e in errors]

@@ -18,7 +18,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
-from schemas.errors import PROBLEM_MEDIA_TYPE, Problem, ProblemField
+from schemas.errors import PROBLEM_MEDIA_TYPE, Problem, ProblemField, located
 
 _HTTP_METHODS = {"GET", "PUT", "POST", "DELETE", "OPTIONS", "HEAD", "PATCH", "TRACE"}
 log = logging.getLogger("owcsim.server")
@@ -36,18 +36,10 @@ class ProblemError(Exception):
         self.errors, self.headers, self.extensions = list(errors), headers or {}, extensions
 
 
-def dotted(loc) -> str:
-    return ".".join(str(p) for p in loc)
-
-
-def clean_message(msg: str) -> str:
-    return msg.removeprefix("Value error, ").removeprefix("Assertion failed, ")
-
-
 def field_errors(errors: list[dict], prefix: tuple = ()) -> list[ProblemField]:
     """pydantic errors -> located fields, e.g. body.receivers.0.fov_deg."""
-    return [ProblemField(loc=dotted(prefix + tuple(e["loc"])) or "body", msg=clean_message(e["msg"]),
-                         type=e.get("type", "value_error")) for e in errors]
+    return [ProblemField(loc=loc or "body", msg=msg, type=e.get("type", "value_error"))
+            for (loc, msg), e in zip(located(errors, prefix), errors)]
 
 
 def problem_response(request: Request, status: int, kind: str, detail: str | None, *,
