@@ -33,9 +33,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks._common import barry_doc  # noqa: E402
-from engine.execution import ProcessExecutor  # noqa: E402
-from engine.simulate import simulate  # noqa: E402
-from schemas import SceneSpec  # noqa: E402
+from owcsim.engine.execution import ProcessExecutor  # noqa: E402
+from owcsim.engine.simulate import simulate  # noqa: E402
+from owcsim.schemas import SceneSpec  # noqa: E402
 
 
 def job(paths: int, batch: int) -> SceneSpec:
@@ -99,7 +99,7 @@ def main() -> None:
     ap.add_argument("--window", type=int, default=None, help="Dask tasks in flight (default: the executor's)")
     ap.add_argument("--glibc-defaults", action="store_true", help="local runs keep glibc's malloc thresholds")
     args = ap.parse_args()
-    from engine.execution_dask import MALLOC_MMAP_THRESHOLD, MALLOC_TRIM_THRESHOLD, DaskExecutor
+    from owcsim.engine.execution_dask import MALLOC_MMAP_THRESHOLD, MALLOC_TRIM_THRESHOLD, DaskExecutor
 
     env = {"MALLOC_MMAP_THRESHOLD_": str(MALLOC_MMAP_THRESHOLD), "MALLOC_TRIM_THRESHOLD_": str(MALLOC_TRIM_THRESHOLD)}
     if not args.glibc_defaults and any(os.environ.get(k) != v for k, v in env.items()):

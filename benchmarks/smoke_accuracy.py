@@ -24,8 +24,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks._common import barry_doc  # noqa: E402
-from engine.simulate import simulate  # noqa: E402
-from schemas import SceneSpec  # noqa: E402
+from owcsim.engine.simulate import simulate  # noqa: E402
+from owcsim.schemas import SceneSpec  # noqa: E402
 
 MEDIUM = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2, "phase": {"type": "hg", "g": 0.7}}
 CASES = [(1, "auto"), (2, "backward"), (3, "forward"), (4, "both"), (5, "forward"), (5, "backward")]

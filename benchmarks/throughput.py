@@ -20,10 +20,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks._common import barry_doc, best_of  # noqa: E402
-from engine.execution import ProcessExecutor  # noqa: E402
-from engine.scene import build_scene  # noqa: E402
-from engine.simulate import simulate  # noqa: E402
-from schemas import SceneSpec  # noqa: E402
+from owcsim.engine.execution import ProcessExecutor  # noqa: E402
+from owcsim.engine.scene import build_scene  # noqa: E402
+from owcsim.engine.simulate import simulate  # noqa: E402
+from owcsim.schemas import SceneSpec  # noqa: E402
 
 
 def raw_embree(scene, n_intersect: int, n_occluded: int, batch: int, rng) -> float:

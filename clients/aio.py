@@ -16,8 +16,8 @@ from typing import AsyncIterator
 
 import httpx
 
-from schemas import SceneSpec
-from schemas.jobs import TERMINAL_STATUSES, HealthPublic, JobListPublic, JobPublic, VersionPublic
+from owcsim.schemas import SceneSpec
+from owcsim.schemas.jobs import TERMINAL_STATUSES, HealthPublic, JobListPublic, JobPublic, VersionPublic
 
 from .client import POLL, job_path
 from .errors import ConnectionFailed, JobFailed

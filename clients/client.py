@@ -1,6 +1,6 @@
 """The Python client of the owcsim service (httpx). `AsyncClient` in clients.aio is its async twin.
 
-    from clients import Client
+    from owcsim.clients import Client
     with Client("http://127.0.0.1:8000", api_key=None) as owc:
         job = owc.submit("examples/barry_config_a.json")
         job.wait(progress=True)
@@ -21,8 +21,8 @@ from typing import Iterator
 
 import httpx
 
-from schemas import SceneSpec
-from schemas.jobs import TERMINAL_STATUSES, HealthPublic, JobListPublic, JobPublic, VersionPublic
+from owcsim.schemas import SceneSpec
+from owcsim.schemas.jobs import TERMINAL_STATUSES, HealthPublic, JobListPublic, JobPublic, VersionPublic
 
 from .errors import ConnectionFailed, JobFailed
 from .http import (API, LAST_POLL_S, RetryPolicy, attempt_timeout, check, headers, retry_delay, submission_lost,

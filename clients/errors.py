@@ -1,7 +1,7 @@
 """Exceptions of the Python client. An answer of the server carries its problem document."""
 from __future__ import annotations
 
-from schemas.errors import Problem, ProblemField
+from owcsim.schemas.errors import Problem, ProblemField
 
 
 class OwcsimError(Exception):

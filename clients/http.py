@@ -14,7 +14,7 @@ from datetime import datetime, timezone
 
 import httpx
 
-from schemas.errors import Problem
+from owcsim.schemas.errors import Problem
 
 from .errors import ConnectionFailed, error_for
 

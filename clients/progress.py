@@ -4,7 +4,7 @@ from __future__ import annotations
 import sys
 import time
 
-from schemas.jobs import JobPublic
+from owcsim.schemas.jobs import JobPublic
 
 
 class ProgressBar:

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import PrivateAttr
 
-from schemas.results import LinkPublic, SimulationResultPublic
+from owcsim.schemas.results import LinkPublic, SimulationResultPublic
 
 
 class Result(SimulationResultPublic):

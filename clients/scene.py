@@ -10,7 +10,7 @@ import copy
 import json
 from pathlib import Path
 
-from schemas import SceneSpec
+from owcsim.schemas import SceneSpec
 
 
 def scene_document(scene: SceneSpec | dict | str | Path, base_dir: str | Path | None = None) -> dict:

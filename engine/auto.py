@@ -27,9 +27,9 @@ import numpy as np
 
 from pydantic import ValidationError
 
-from schemas import SceneSpec
-from schemas.errors import located
-from schemas.simulation import check_bin_budget
+from owcsim.schemas import SceneSpec
+from owcsim.schemas.errors import located
+from owcsim.schemas.simulation import check_bin_budget
 
 from .constants import SPEED_OF_LIGHT
 from .errors import SceneError

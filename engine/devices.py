@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from schemas import ReceiverSpec, TransmitterSpec
+from owcsim.schemas import ReceiverSpec, TransmitterSpec
 
 from .sampling import sample_cosine_cone, sample_generalized_lambertian, to_world
 

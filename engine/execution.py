@@ -23,7 +23,7 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Iterable, Iterator, Protocol
 
-from schemas import SceneSpec
+from owcsim.schemas import SceneSpec
 
 from .kernel import KernelSettings, WorkItem, trace_batch
 from .scene import Scene, build_scene
@@ -114,7 +114,7 @@ class ProcessExecutor:
 
     def __init__(self, workers: int):
         ctx = mp.get_context("forkserver")
-        ctx.set_forkserver_preload(["engine.kernel"])
+        ctx.set_forkserver_preload(["owcsim.engine.kernel"])
         self.workers = workers
         self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
 

@@ -56,7 +56,7 @@ from typing import Iterable, Iterator
 
 import numpy as np
 
-from schemas import SceneSpec
+from owcsim.schemas import SceneSpec
 
 from .errors import EngineError, SceneError
 from .execution import SCENE_CACHE_SIZE, JobRef

@@ -18,8 +18,8 @@ import numpy as np
 import trimesh
 from embreex import rtcore_scene
 
-from schemas import ROOM_FACES, SceneSpec
-from schemas.geometry import BoxSpec, MeshSpec, RoomSpec
+from owcsim.schemas import ROOM_FACES, SceneSpec
+from owcsim.schemas.geometry import BoxSpec, MeshSpec, RoomSpec
 
 from .constants import DEGENERATE_AREA_FACTOR, MAX_SCENE_EXTENT, RAY_OFFSET_FACTOR
 from .errors import SceneError

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from schemas.medium import IsotropicPhaseSpec
+from owcsim.schemas.medium import IsotropicPhaseSpec
 
 from .media import Medium
 from .regions import clip_box

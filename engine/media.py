@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from schemas.medium import GridMediumSpec, HomogeneousMediumSpec, IsotropicPhaseSpec, PhaseSpec
+from owcsim.schemas.medium import GridMediumSpec, HomogeneousMediumSpec, IsotropicPhaseSpec, PhaseSpec
 
 from .regions import BoxRegion, MeshRegion, WholeRegion, as_rows, clip_box
 

@@ -16,7 +16,7 @@ from typing import Callable
 import numpy as np
 from pydantic import TypeAdapter
 
-from schemas.medium import PhaseSpec
+from owcsim.schemas.medium import PhaseSpec
 
 from .sampling import orthonormal_basis
 

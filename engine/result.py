@@ -10,7 +10,7 @@ from importlib.metadata import PackageNotFoundError, version
 
 import numpy as np
 
-from schemas.results import SimulationResultPublic
+from owcsim.schemas.results import SimulationResultPublic
 
 from . import metrics
 from .auto import _max_albedo, _scatters

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from schemas import SceneSpec
+from owcsim.schemas import SceneSpec
 
 from .devices import Devices, receivers_from_specs, transmitters_from_specs
 from .geometry import Geometry, Intersector, build_geometry, check_extent

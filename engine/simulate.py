@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from schemas import SceneSpec
+from owcsim.schemas import SceneSpec
 
 from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
 from .constants import SPEED_OF_LIGHT

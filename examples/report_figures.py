@@ -22,8 +22,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from engine.simulate import simulate  # noqa: E402
-from schemas import SceneSpec  # noqa: E402
+from owcsim.engine.simulate import simulate  # noqa: E402
+from owcsim.schemas import SceneSpec  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 

@@ -39,7 +39,7 @@ def _progress_bar(stream=sys.stderr):
 
 def _cmd_validate(args) -> int:
     spec, _ = load_scene(args.scene, assignments=args.set or [])
-    from engine.scene import build_scene  # builds the geometry: catches unreadable meshes too
+    from owcsim.engine.scene import build_scene  # builds the geometry: catches unreadable meshes too
 
     scene = build_scene(spec, Path(args.scene).resolve().parent)
     print(f"{args.scene}: valid — {len(scene.geometry.faces)} triangles, {len(scene.transmitters)} transmitters, "
@@ -85,13 +85,13 @@ def _output_folder(path: str) -> Path:
 def _cmd_run(args) -> int:
     assignments = args.set or []
     spec, _ = load_scene(args.scene, _scene_overrides(args), assignments)
-    from engine.simulate import simulate
-    from clients.output import write_outputs
+    from owcsim.engine.simulate import simulate
+    from owcsim.clients.output import write_outputs
 
     out = _output_folder(args.out)
     executor = None
     if args.scheduler:
-        from engine.execution_dask import executor_from_scheduler
+        from owcsim.engine.execution_dask import executor_from_scheduler
 
         executor = executor_from_scheduler(args.scheduler)
     update, close = _progress_bar()
@@ -112,8 +112,8 @@ def _cmd_run(args) -> int:
 
 def _cmd_serve(args) -> int:
     try:
-        from server.serve import serve
-        from server.settings import Settings
+        from owcsim.server.serve import serve
+        from owcsim.server.settings import Settings
     except ImportError as exc:
         raise InputError(f"`owcsim serve` needs the server extra ({exc.name} is missing): "
                          "pip install 'owcsim[server]'") from None
@@ -135,8 +135,8 @@ def _cmd_serve(args) -> int:
 
 def _cmd_submit(args) -> int:
     try:
-        from clients.client import Client
-        from clients.errors import ApiError, ConnectionFailed, InvalidRequest, JobFailed
+        from owcsim.clients.client import Client
+        from owcsim.clients.errors import ApiError, ConnectionFailed, InvalidRequest, JobFailed
     except ImportError as exc:
         raise InputError(f"`owcsim submit` needs the client extra ({exc.name} is missing): "
                          "pip install 'owcsim[client]'") from None
@@ -225,7 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from engine.errors import EngineError
+    from owcsim.engine.errors import EngineError
 
     with warnings.catch_warnings():
         warnings.simplefilter("default")

@@ -6,8 +6,8 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from schemas import SceneSpec
-from schemas.errors import located
+from owcsim.schemas import SceneSpec
+from owcsim.schemas.errors import located
 
 
 class InputError(Exception):

@@ -13,8 +13,8 @@ from fastapi import FastAPI
 from fastapi.openapi.utils import get_openapi
 from starlette.concurrency import run_in_threadpool
 
-from schemas import SceneSpec
-from schemas.errors import PROBLEM_MEDIA_TYPE
+from owcsim.schemas import SceneSpec
+from owcsim.schemas.errors import PROBLEM_MEDIA_TYPE
 
 from . import problems
 from .dispatcher import Dispatcher
@@ -43,7 +43,7 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
-        await run_in_threadpool(importlib.import_module, "engine.simulate")  # the pre-flight's imports
+        await run_in_threadpool(importlib.import_module, "owcsim.engine.simulate")  # the pre-flight's imports
         if run_jobs:
             await run_in_threadpool(dispatcher.start)
         log.info("owcsim service: job store %s, %d job(s) at once, API keys %s", settings.db,

@@ -84,7 +84,7 @@ class Dispatcher:
         taken = self.store.take_back_running("requeued: the server restarted while the job was running")
         if taken:
             log.warning("requeued %d job(s) left running by the previous server process", len(taken))
-        self._ctx.set_forkserver_preload(["server.worker", "engine.simulate"])
+        self._ctx.set_forkserver_preload(["owcsim.server.worker", "owcsim.engine.simulate"])
         from multiprocessing import forkserver
 
         forkserver.ensure_running()  # pay the engine's imports now, not with the first job

@@ -8,17 +8,17 @@ with the engine's message, instead of a job that fails after waiting in the queu
 """
 from __future__ import annotations
 
-from schemas import SceneSpec
-from schemas.errors import ProblemField
+from owcsim.schemas import SceneSpec
+from owcsim.schemas.errors import ProblemField
 
 from .problems import ProblemError
 
 
 def preflight(spec: SceneSpec) -> int:
     """Build and dry-run the scene; returns its number of triangles. Raises ProblemError (422)."""
-    from engine.errors import EngineError
-    from engine.scene import build_scene
-    from engine.simulate import simulate
+    from owcsim.engine.errors import EngineError
+    from owcsim.engine.scene import build_scene
+    from owcsim.engine.simulate import simulate
 
     sim = spec.simulation
     tiny = sim.model_copy(update={

@@ -18,7 +18,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
-from schemas.errors import PROBLEM_MEDIA_TYPE, Problem, ProblemField, located
+from owcsim.schemas.errors import PROBLEM_MEDIA_TYPE, Problem, ProblemField, located
 
 _HTTP_METHODS = {"GET", "PUT", "POST", "DELETE", "OPTIONS", "HEAD", "PATCH", "TRACE"}
 log = logging.getLogger("owcsim.server")

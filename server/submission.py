@@ -11,8 +11,8 @@ import json
 from fastapi import Request
 from pydantic import ValidationError
 
-from schemas import ReceiverGridSpec, SceneSpec
-from schemas.errors import ProblemField
+from owcsim.schemas import ReceiverGridSpec, SceneSpec
+from owcsim.schemas.errors import ProblemField
 
 from .preflight import preflight
 from .problems import ProblemError, field_errors

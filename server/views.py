@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from datetime import datetime, timezone
 
-from schemas.jobs import JobProgress, JobPublic, JobUrls
+from owcsim.schemas.jobs import JobProgress, JobPublic, JobUrls
 
 from .store import JobRow
 

@@ -67,9 +67,9 @@ class _Watch:
 def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifeline) -> None:
     """Entry point of the worker process. `lifeline`: read end of a pipe only the server writes to."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the server decides
-    from engine.errors import EngineError
-    from engine.simulate import simulate
-    from schemas import SceneSpec
+    from owcsim.engine.errors import EngineError
+    from owcsim.engine.simulate import simulate
+    from owcsim.schemas import SceneSpec
 
     from .store import JobStore
 
@@ -81,7 +81,7 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             if limits.scheduler:
-                from engine.execution_dask import executor_from_scheduler
+                from owcsim.engine.execution_dask import executor_from_scheduler
 
                 executor = executor_from_scheduler(limits.scheduler)
             result = simulate(spec, base_dir=None, workers=limits.workers, progress=watch.progress,

@@ -5,7 +5,7 @@ import copy
 import json
 from pathlib import Path
 
-from schemas import SceneSpec
+from owcsim.schemas import SceneSpec
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from http import HTTPStatus
 
-from schemas.errors import PROBLEM_MEDIA_TYPE, Problem
+from owcsim.schemas.errors import PROBLEM_MEDIA_TYPE, Problem
 
 #: A small scene: Barry et al. 1993 configuration A at 20 000 paths (the OpenAPI example).
 EXAMPLE_SCENE = {

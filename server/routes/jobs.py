@@ -6,7 +6,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Header, Query, Request, Response
 from starlette.concurrency import run_in_threadpool
 
-from schemas.jobs import JobListPublic, JobPublic, JobStatus
+from owcsim.schemas.jobs import JobListPublic, JobPublic, JobStatus
 
 from ..auth import NO_AUTH_OWNER, current_owner
 from ..deps import get_dispatcher, get_settings, get_store, owned_job

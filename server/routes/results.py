@@ -10,7 +10,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, Query, Response
 
-from schemas.results import SimulationResultPublic
+from owcsim.schemas.results import SimulationResultPublic
 
 from ..deps import get_store, owned_job
 from ..formats import cir_csv, cir_npz, cir_png

@@ -6,7 +6,7 @@ from importlib.metadata import PackageNotFoundError, version
 from fastapi import APIRouter, Depends
 from fastapi.responses import JSONResponse
 
-from schemas.jobs import HealthPublic, VersionPublic
+from owcsim.schemas.jobs import HealthPublic, VersionPublic
 
 from ..deps import get_dispatcher, get_settings, get_store
 from ..dispatcher import Dispatcher

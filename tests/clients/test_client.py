@@ -8,15 +8,15 @@ import httpx
 import numpy as np
 import pytest
 
-from clients import (AsyncClient, Client, Conflict, ConnectionFailed, InvalidRequest, JobFailed, NotFound,
+from owcsim.clients import (AsyncClient, Client, Conflict, ConnectionFailed, InvalidRequest, JobFailed, NotFound,
                      QueueFull, Result, RetryPolicy, ServerError)
-from clients.http import retry_after
-from clients.progress import ProgressBar
-from clients.scene import scene_document
-from engine.simulate import simulate
-from schemas import SceneSpec
-from schemas.jobs import JobPublic
-from schemas.results import SimulationResultPublic
+from owcsim.clients.http import retry_after
+from owcsim.clients.progress import ProgressBar
+from owcsim.clients.scene import scene_document
+from owcsim.engine.simulate import simulate
+from owcsim.schemas import SceneSpec
+from owcsim.schemas.jobs import JobPublic
+from owcsim.schemas.results import SimulationResultPublic
 from tests.scenes import room_doc
 
 FAST = RetryPolicy(retries=3, backoff_s=0.0, max_backoff_s=0.0)
@@ -205,8 +205,8 @@ def test_async_twin(result_doc):
 
 def test_async_client_against_the_app(tmp_path):
     """The async client through httpx's ASGI transport, on the real app (jobs stay queued)."""
-    from server.app import create_app
-    from server.settings import Settings
+    from owcsim.server.app import create_app
+    from owcsim.server.settings import Settings
 
     app = create_app(Settings(db=tmp_path / "j.sqlite"), run_jobs=False)
 
@@ -249,8 +249,8 @@ def test_wait_polls_at_its_deadline_and_honours_its_timeout():
     import socket
     import time
 
-    from clients.client import Job
-    from clients.http import LAST_POLL_S
+    from owcsim.clients.client import Job
+    from owcsim.clients.http import LAST_POLL_S
 
     # done 0.9 s into a 1 s wait: the last poll lands on the deadline and sees it (it used to give up early)
     t0 = time.monotonic()
@@ -288,7 +288,7 @@ def test_a_submission_without_answer_names_its_idempotency_key():
 def test_async_wait_polls_at_its_deadline():
     import time
 
-    from clients.aio import AsyncJob
+    from owcsim.clients.aio import AsyncJob
 
     async def go():
         t0 = time.monotonic()

@@ -24,13 +24,13 @@ import trimesh
 distributed = pytest.importorskip("distributed")
 from dask import config as dask_config  # noqa: E402
 
-from engine.errors import EngineError, SceneError  # noqa: E402
-from engine.execution import JobRef  # noqa: E402
-from engine.execution_dask import (  # noqa: E402
+from owcsim.engine.errors import EngineError, SceneError  # noqa: E402
+from owcsim.engine.execution import JobRef  # noqa: E402
+from owcsim.engine.execution_dask import (  # noqa: E402
     ClusterError, DaskExecutor, DaskUnavailableError, executor_from_scheduler, portable_spec, worker_cache_info)
-from engine.kernel import WorkItem  # noqa: E402
-from engine.scene import build_scene  # noqa: E402
-from engine.simulate import kernel_settings, simulate  # noqa: E402
+from owcsim.engine.kernel import WorkItem  # noqa: E402
+from owcsim.engine.scene import build_scene  # noqa: E402
+from owcsim.engine.simulate import kernel_settings, simulate  # noqa: E402
 from tests.scenes import room_doc, spec  # noqa: E402
 
 BATCH_PREFIX = "owcsim-batch-"
@@ -177,7 +177,7 @@ def test_cancel_reaches_the_cluster(client, dask):
 
 def _fail_first_call():
     """Run on a worker: the next batch this worker traces raises, once."""
-    import engine.execution_dask as ed
+    import owcsim.engine.execution_dask as ed
 
     original = ed.trace_batch
 
@@ -189,8 +189,8 @@ def _fail_first_call():
 
 
 def _restore_and_report():
-    import engine.execution_dask as ed
-    from engine.kernel import trace_batch
+    import owcsim.engine.execution_dask as ed
+    from owcsim.engine.kernel import trace_batch
 
     still_armed = ed.trace_batch is not trace_batch
     ed.trace_batch = trace_batch
@@ -242,7 +242,7 @@ def test_worker_killed_mid_job_still_exact(client, dask):
 def test_errors_without_dask_or_without_a_scheduler(monkeypatch):
     # The engine imports without Dask, and says how to install it.
     code = ("import sys; sys.modules['distributed'] = sys.modules['dask'] = None\n"
-            "import engine.simulate, engine.execution_dask as ed\n"
+            "import owcsim.engine.simulate, owcsim.engine.execution_dask as ed\n"
             "try:\n    ed.executor_from_scheduler('tcp://127.0.0.1:8786')\n"
             "except ed.DaskUnavailableError as e:\n    print(e)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
@@ -293,7 +293,7 @@ def test_command_line_scheduler_flag(client, tmp_path, capsys, monkeypatch):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    from engine import execution_dask
+    from owcsim.engine import execution_dask
 
     quick = functools.partial(execution_dask.executor_from_scheduler, timeout_s=1.0)  # not the default 30 s
     monkeypatch.setattr(execution_dask, "executor_from_scheduler", quick)
@@ -311,7 +311,7 @@ def test_service_sends_its_jobs_to_the_scheduler(client, tmp_path):
     """OWCSIM_SCHEDULER: a job runs its batches on the cluster and serves the engine's numbers."""
     from pydantic import ValidationError
 
-    from server.settings import Settings
+    from owcsim.server.settings import Settings
     from tests.server.helpers import app_client, quick_doc, wait_for
 
     doc = quick_doc(paths=6000, max_reflections=2)

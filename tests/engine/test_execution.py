@@ -1,7 +1,7 @@
 """Determinism: the same seed gives bit-identical results with 1 or 2 worker processes."""
 import json
 
-from engine.simulate import simulate
+from owcsim.engine.simulate import simulate
 from tests.scenes import room_doc, spec
 
 
@@ -58,7 +58,7 @@ def test_progress_is_reported_and_cancel_stops():
 
 def test_warm_pool_serves_several_jobs():
     """One long-lived pool, two different scenes: each equals its serial run (scenes cached per job)."""
-    from engine.execution import ProcessExecutor
+    from owcsim.engine.execution import ProcessExecutor
 
     docs = [room_doc(paths=4096, batch_size=1024, direction="forward"),
             room_doc(rx=(4.0, 1.0, 0.0), paths=4096, batch_size=1024, direction="backward")]

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from engine.errors import SceneError
-from engine.geometry import build_geometry
-from engine.scene import build_scene
-from engine.simulate import simulate
+from owcsim.engine.errors import SceneError
+from owcsim.engine.geometry import build_geometry
+from owcsim.engine.scene import build_scene
+from owcsim.engine.simulate import simulate
 from tests.scenes import room_doc, spec, within
 
 

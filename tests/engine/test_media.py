@@ -13,11 +13,11 @@ import trimesh
 from pydantic import ValidationError
 from scipy import stats
 
-from engine.errors import SceneError
-from engine.grid import GridMedium
-from engine.media import HomogeneousMedium, medium_from_spec
-from engine.regions import MeshRegion
-from schemas import SceneSpec
+from owcsim.engine.errors import SceneError
+from owcsim.engine.grid import GridMedium
+from owcsim.engine.media import HomogeneousMedium, medium_from_spec
+from owcsim.engine.regions import MeshRegion
+from owcsim.schemas import SceneSpec
 from tests.scenes import room_doc
 
 SEED = 12345

@@ -4,7 +4,7 @@ import warnings
 import numpy as np
 import pytest
 
-from engine.metrics import (bandwidth_3db, bin_stderr, delay_metrics, jackknife,
+from owcsim.engine.metrics import (bandwidth_3db, bin_stderr, delay_metrics, jackknife,
                             path_loss_db, rms_delay_spread_h2)
 
 NS = 1e-9

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy import integrate, stats
 
-from engine import phase as ph
-from engine.sampling import orthonormal_basis
-from schemas import medium as sm
+from owcsim.engine import phase as ph
+from owcsim.engine.sampling import orthonormal_basis
+from owcsim.schemas import medium as sm
 
 N_SAMPLES = 100_000
 SEED = 12345

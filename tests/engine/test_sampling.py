@@ -7,7 +7,7 @@ from scipy.stats import chisquare
 import pytest
 from scipy import integrate, stats
 
-from engine import sampling as smp
+from owcsim.engine import sampling as smp
 
 N_SAMPLES = 100_000
 SEED = 12345

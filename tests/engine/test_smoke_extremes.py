@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from engine.simulate import simulate
+from owcsim.engine.simulate import simulate
 from tests.scenes import room_doc, spec, within
 
 

@@ -4,7 +4,7 @@ import copy
 import pytest
 from pydantic import ValidationError
 
-from schemas import SceneSpec
+from owcsim.schemas import SceneSpec
 from tests.scenes import barry_doc, room_doc
 
 

@@ -23,8 +23,8 @@ import pytest
 import schemathesis
 from hypothesis import HealthCheck, settings
 
-from server.app import create_app
-from server.settings import Settings
+from owcsim.server.app import create_app
+from owcsim.server.settings import Settings
 
 EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "100"))
 KEY = "fuzz-key"

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import httpx
 
-from server.app import create_app
-from server.settings import Settings
+from owcsim.server.app import create_app
+from owcsim.server.settings import Settings
 from tests.scenes import room_doc
 
 with warnings.catch_warnings():  # starlette asks for httpx2; the client and the tests use httpx

@@ -116,13 +116,13 @@ def test_inline_and_base64_meshes_are_accepted(api):
 
 
 def test_engine_refusal_is_a_422_with_its_message(api, monkeypatch):
-    import engine.simulate
-    from engine.errors import UnsupportedError
+    import owcsim.engine.simulate
+    from owcsim.engine.errors import UnsupportedError
 
     def refuse(*a, **k):
         raise UnsupportedError("algorithm 4 is not available in this version; use algorithm 1")
 
-    monkeypatch.setattr(engine.simulate, "simulate", refuse)
+    monkeypatch.setattr(owcsim.engine.simulate, "simulate", refuse)
     p = problem(api.post("/v1/jobs", json=quick_doc(algorithm=4)), 422, "scene-not-runnable")
     assert "algorithm 4 is not available" in p["detail"] and locs(p) == {"body"}
     assert api.get("/v1/jobs").json()["items"] == []
@@ -175,7 +175,7 @@ def test_full_queue_answers_429_with_retry_after(tmp_path):
 
 
 def test_idempotency_key_returns_the_first_job(api, monkeypatch):
-    import server.routes.jobs as routes
+    import owcsim.server.routes.jobs as routes
 
     preflights = []
     real = routes.check_runnable
@@ -255,13 +255,13 @@ def test_cancel_a_queued_job(api):
 
 
 def test_unexpected_error_is_a_500_problem_without_trace(api, monkeypatch):
-    import server.routes.jobs
+    import owcsim.server.routes.jobs
 
     def boom(*a, **k):
         raise RuntimeError("secret internals")
 
     api.post("/v1/jobs", json=quick_doc())
-    monkeypatch.setattr(server.routes.jobs, "job_public", boom)
+    monkeypatch.setattr(owcsim.server.routes.jobs, "job_public", boom)
     p = problem(api.get("/v1/jobs"), 500, "internal-error")
     assert "secret" not in json.dumps(p) and p["reference"] in p["detail"]
 

@@ -9,10 +9,10 @@ import httpx
 import numpy as np
 import pytest
 
-from clients import Client, InvalidRequest, NotFound, Unauthorized
-from engine.simulate import simulate
-from schemas import SceneSpec
-from schemas.results import SimulationResultPublic
+from owcsim.clients import Client, InvalidRequest, NotFound, Unauthorized
+from owcsim.engine.simulate import simulate
+from owcsim.schemas import SceneSpec
+from owcsim.schemas.results import SimulationResultPublic
 
 from .helpers import ServerProcess, long_doc, quick_doc
 
@@ -120,7 +120,7 @@ def test_restart_while_a_job_runs_loses_nothing(tmp_path, sig):
             while running.refresh().progress.paths == 0:
                 time.sleep(0.02)
             assert running.status == "running" and running.progress.fraction < 0.9
-        from server.store import JobStore
+        from owcsim.server.store import JobStore
 
         worker = JobStore(srv.db).get(running.id).worker_pid
         srv.stop(sig)  # the server process only: its forkserver and worker must notice by themselves
@@ -147,7 +147,7 @@ def test_restart_while_a_job_runs_loses_nothing(tmp_path, sig):
 
 
 def test_cli_serve_and_submit(server, tmp_path, capsys, monkeypatch):
-    from clients.http import RetryPolicy
+    from owcsim.clients.http import RetryPolicy
     from owcsim.cli import main
     from tests.scenes import EXAMPLES
 

@@ -8,10 +8,10 @@ import time
 import numpy as np
 import pytest
 
-from clients.output import write_cir_csv
-from clients.result import Result
-from engine.simulate import simulate
-from schemas import SceneSpec
+from owcsim.clients.output import write_cir_csv
+from owcsim.clients.result import Result
+from owcsim.engine.simulate import simulate
+from owcsim.schemas import SceneSpec
 
 from .helpers import app_client, long_doc, quick_doc, wait_for
 

@@ -11,7 +11,7 @@ import time
 
 import httpx
 
-from clients import Client, RetryPolicy
+from owcsim.clients import Client, RetryPolicy
 
 from .helpers import ServerProcess, quick_doc
 

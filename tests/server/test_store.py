@@ -3,7 +3,7 @@ import sqlite3
 
 import pytest
 
-from server.store import IdempotencyConflict, JobStore, QueueFull
+from owcsim.server.store import IdempotencyConflict, JobStore, QueueFull
 
 
 def _submit(store, n=1, **kw):
