@@ -152,11 +152,16 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
     cap_k = PILOT_CAP if need_k else resolved.simulation.max_reflections
     cap_s = PILOT_CAP if need_s else resolved.simulation.max_scattering
     t_long = resolved.simulation.t_max_s or (sim.t_min_s + (cap_k + cap_s + 3) * 1.8 * extent / SPEED_OF_LIGHT)
-    receivers = resolved.all_receivers()
-    pick = sorted(set(np.linspace(0, len(receivers) - 1, min(len(receivers), PILOT_RECEIVERS)).round().astype(int)))
+    usable = np.flatnonzero(scene.masked == "")  # grid points in furniture or outside the room are not run
+    if not len(usable):
+        usable = np.arange(len(scene.receivers))
+    pick = sorted(set(usable[np.linspace(0, len(usable) - 1, min(len(usable), PILOT_RECEIVERS)).round().astype(int)]
+                      .tolist()))
     pilot_doc = resolved.model_dump(mode="python")
-    pilot_doc["receivers"] = [receivers[i].model_dump(mode="python") for i in pick]
+    pilot_doc["receivers"] = [resolved.receiver_at(i).model_dump(mode="python") for i in pick]
     pilot_doc["receiver_grids"] = []
+    pilot_doc["transmitter_groups"] = []
+    pilot_doc["outputs"] = {"cir": True, "orders": True}  # the pilot reads the order split and the CIR
     pilot_doc["simulation"].update(
         max_reflections=cap_k, max_scattering=cap_s, t_max_s=t_long, time_bin_s=(t_long - sim.t_min_s) / PILOT_BINS,
         paths=sim.pilot_paths, target_rel_error=None, seed=sim.seed + 1, batch_size=min(sim.batch_size, 4096))
@@ -199,7 +204,7 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
             f"window ends at {update['t_max_s'] * 1e9:.1f} ns: the power arriving later, extrapolated from the "
             f"pilot's exponential decay, is < {allowed / 2:.2e} per watt (late power is counted in late_gain, "
             "not dropped)")
-    modeled["pilot"] = {"paths": sim.pilot_paths, "receivers": [receivers[i].id or f"rx{i}" for i in pick],
+    modeled["pilot"] = {"paths": sim.pilot_paths, "receivers": [scene.receivers.ids[i] for i in pick],
                         "max_reflections": cap_k, "max_scattering": cap_s, "t_max_s": t_long,
                         "allowed_truncation_per_watt": float(allowed), "rho_max": rho_max}
     modeled["truncation_estimate_per_watt"] = float(k_tail + s_tail)

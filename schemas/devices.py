@@ -106,6 +106,18 @@ class ReceiverGridSpec(SpecModel):
         nu, nv = self.shape
         return nu * nv
 
+    def ids(self) -> list[str]:
+        """`{id_prefix}[i,j]` of every point, row-major."""
+        nu, nv = self.shape
+        return [f"{self.id_prefix}[{i},{j}]" for i in range(nu) for j in range(nv)]
+
+    def point(self, i: int, j: int) -> ReceiverSpec:
+        """The receiver at grid index (i, j)."""
+        p = tuple(o + self.spacing * (i * a + j * b) for o, a, b in zip(self.origin, self.u, self.v))
+        return ReceiverSpec(id=f"{self.id_prefix}[{i},{j}]", position=p, normal=self.normal, area=self.area,
+                            fov_deg=self.fov_deg, filter_gain=self.filter_gain,
+                            concentrator_index=self.concentrator_index)
+
     def expand(self) -> list[ReceiverSpec]:
         """The grid as individual receivers, row-major in (i along u, j along v)."""
         nu, nv = self.shape
