@@ -151,7 +151,8 @@ def test_snr_with_isi_and_area_broadcast():
     for k, a in enumerate(area):  # Komine's SNR written out, I_bg = 0
         c = 1.12e-6 * a
         shot = 2 * Q * 0.53 * (p_sig + p_isi) * 1e8
-        th = 8 * math.pi * K * 295 / 10 * c * 0.562 * 1e16 + 16 * math.pi ** 2 * K * 295 * 1.5 / 0.03 * c ** 2 * 0.0868 * 1e24
+        th = (8 * math.pi * K * 295 / 10 * c * 0.562 * 1e16
+              + 16 * math.pi ** 2 * K * 295 * 1.5 / 0.03 * c ** 2 * 0.0868 * 1e24)
         assert got[k] == pytest.approx((0.53 * p_sig) ** 2 / (shot + th + (0.53 * p_isi) ** 2), rel=1e-12)
     # ISI power 1/5 of the signal caps the SNR near 25 (14 dB) however strong the light.
     assert snr(budget, 1e-4, 1.0, 0.2) == pytest.approx(25.0, rel=1e-3)
@@ -275,6 +276,10 @@ def test_demo_script_prints_the_hand_values():
     assert 880 < v["illuminance_max"] < 950                          # between the luminaires' peaks
     assert v["received_power_center"] == pytest.approx(p_centre, rel=1e-5)
     assert v["received_power_center_dbm"] == pytest.approx(-1.961, abs=1e-3)
+    p_corner = 72.0 * sum((M70 + 1) * 1e-4 / (2 * math.pi * (r2 + H ** 2)) * (H / math.sqrt(r2 + H ** 2)) ** (M70 + 1)
+                          for r2 in (3.125, 15.625, 15.625, 28.125))
+    assert v["received_power_corner"] == pytest.approx(p_corner, rel=1e-5)
+    assert v["received_power_corner_dbm"] == pytest.approx(-6.461, abs=1e-3)
     shot = 2 * Q * 0.53 * p_centre * 1e7 + 2 * Q * 5.1e-3 * 0.562 * 1e7
     thermal = 6.4430e-17 + 3.5015e-17
     assert v["shot_noise_center"] == pytest.approx(shot, rel=1e-5)
