@@ -84,6 +84,9 @@ def test_illuminance_equals_sum_over_leds_at_several_points():
             d = math.dist((x, y, 0.0), (lx, ly, H))
             ref += i0 * (H / d) ** m * (H / d) / d ** 2
         assert got[k] == pytest.approx(ref, rel=1e-12)
+    # A grid keeps its shape: (n_tx, 5, 5) in, (5, 5) out.
+    grid = [a.reshape(4, 5, 5) for a in komine_geometry(pts)]
+    np.testing.assert_allclose(illuminance_los(intensities, orders, *grid), got.reshape(5, 5), rtol=1e-15)
 
 
 def test_illuminance_zero_behind_blocked_or_coincident():
