@@ -141,6 +141,14 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
     need_s = algorithm == 5 and sim.max_scattering is None
     need_t = sim.t_max_s is None
     resolved = spec.model_copy(update={**doc_update, "simulation": sim.model_copy(update=update)})
+    if need_t and not need_k and algorithm == 1 and sim.max_reflections == 0:
+        # Line of sight only: every arrival is a direct path, known without a pilot.
+        longest = max(math.dist(t.position, r.position) for t in spec.transmitters for r in _extreme_receivers(spec))
+        n_bins = max(1, math.ceil((longest / SPEED_OF_LIGHT - sim.t_min_s) / sim.time_bin_s + 1e-9) + 1)
+        update["t_max_s"] = sim.t_min_s + n_bins * sim.time_bin_s
+        modeled["time_window_reason"] = "line of sight only: the window ends after the longest direct path"
+        need_t = False
+        resolved = spec.model_copy(update={**doc_update, "simulation": sim.model_copy(update=update)})
     if not (need_k or need_s or need_t):
         modeled["pilot"] = None
         return resolved, modeled
@@ -212,6 +220,16 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
                                   "(scattering) keeps at most rho_max (albedo_max) of the power")
     resolved = spec.model_copy(update={**doc_update, "simulation": sim.model_copy(update=update)})
     return resolved, modeled
+
+
+def _extreme_receivers(spec: SceneSpec):
+    """The explicit receivers and the corners of every grid: the farthest point from any transmitter is one
+    of them (the distance to a point is convex over a grid's rectangle)."""
+    out = list(spec.receivers)
+    for g in spec.receiver_grids:
+        nu, nv = g.shape
+        out += [g.point(i, j) for i in {0, nu - 1} for j in {0, nv - 1}]
+    return out
 
 
 def unreachable_receivers(scene, seen: np.ndarray | None = None, n_rays: int = 64) -> list[int]:

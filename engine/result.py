@@ -15,6 +15,7 @@ from owcsim.schemas.results import SimulationResultPublic
 from . import metrics
 from .auto import _max_albedo, _scatters
 from .estimates import channel_moments, link_moments, los_moments, reported_rel_stderr
+from .lighting import Lighting
 from .result_parts import cir_block, column, document_rows, grid_maps, order_block
 
 FAMILIES = {
@@ -142,7 +143,7 @@ def _paths_traced(accs, n_tx: int, n_rx: int) -> int:
 
 
 def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info, original=None, modeled=None,
-                 unreachable=()) -> dict:
+                 unreachable=(), geometry=None) -> dict:
     """The result document; every per-link figure is computed for all links at once as arrays."""
     plan = settings.tally
     bins = plan.bins
@@ -186,8 +187,11 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
     order_block(accs, plan, order_links, los_gain, cols, rho_max, albedo_max)
     for link in np.flatnonzero(link_masked & (plan.cir_slots(np.arange(scene.n_links)) >= 0)):
         cols["cir"][link] = None
+    lighting = Lighting(spec, scene, geometry) if geometry is not None else None
+    if lighting is not None:
+        lighting.add_link_columns(cols, h0, nan_masked["rms_delay_spread_s"], link_masked)
     links = document_rows(cols, scene.n_links)
-    channels = _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx)
+    channels = _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting)
     rel = reported_rel_stderr(accs, los_gain, scene, plan)
     all_accs = list(accs.values())
     fwd = accs["forward"]
@@ -216,7 +220,7 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
         "families": FAMILIES[spec.simulation.algorithm],
         "time_bins": {"t_min_s": bins.t_min, "time_bin_s": bins.dt, "n_bins": bins.n},
         "links": links, "receivers": receivers, "channels": channels,
-        "maps": grid_maps(spec, scene, links, channels),
+        "maps": grid_maps(spec, scene, links, channels, lighting.map_extra(links, channels) if lighting else None),
         "run": run, "diagnostics": diagnostics, "scene": (original or spec).model_dump(mode="json"),
     }
     return doc
@@ -245,7 +249,7 @@ def _receivers(spec, scene) -> list[dict]:
     return document_rows(cols, len(rx))
 
 
-def _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx) -> list[dict]:
+def _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=None) -> list[dict]:
     """The transmitter groups' channels at every receiver (group-major)."""
     w = plan.group_weights
     if not w.size:
@@ -268,6 +272,8 @@ def _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx) -> list[d
         "rms_delay_spread_s_stderr": column(flat["rms_delay_spread_s_stderr"]),
         "cir": [None] * (n_groups * n_rx),
     }
+    if lighting is not None:
+        lighting.add_channel_columns(cols, w, h0, np.where(nan, np.nan, d["rms_delay_spread_s"]), group_power)
     n_tx = w.shape[1]
     for j in np.flatnonzero(plan.cir_rank >= 0):  # receivers with a CIR: a loop over few explicit receivers
         members = [cir_totals.get(i * n_rx + j) for i in range(n_tx)]

@@ -17,11 +17,12 @@ from .tally import Accumulator, TallyPlan
 def column(x) -> list:
     """A float array as a JSON list, NaN and inf as None."""
     a = np.asarray(x, float)
-    out = a.tolist()
-    bad = np.flatnonzero(~np.isfinite(a))
-    for i in bad.tolist():
-        out[i] = None
-    return out
+    finite = np.isfinite(a)
+    if finite.all():
+        return a.tolist()
+    o = a.astype(object)
+    o[~finite] = None
+    return o.tolist()
 
 
 def document_rows(cols: dict[str, list], n: int) -> list[dict]:
@@ -164,7 +165,7 @@ MAP_QUANTITIES = {
 
 
 def _values(rows: list[dict], key: str) -> np.ndarray:
-    return np.array([np.nan if r[key] is None else r[key] for r in rows], float)
+    return np.array([r[key] for r in rows], dtype=float)  # None becomes NaN
 
 
 def grid_maps(spec, scene, links: list[dict], channels: list[dict], extra: dict | None = None) -> list[dict]:
@@ -196,12 +197,12 @@ def grid_maps(spec, scene, links: list[dict], channels: list[dict], extra: dict 
                         arr = np.where(p > 0, 10.0 * np.log10(np.where(p > 0, p, 1.0) / 1e-3), np.nan)
                 else:
                     arr = _values(part, q)
-                values[q] = [column(row) for row in arr.reshape(nu, nv)]
+                values[q] = column(arr.reshape(nu, nv))
                 units[q] = unit
                 if se_key is not None:
-                    stderr[q] = [column(row) for row in _values(part, se_key).reshape(nu, nv)]
+                    stderr[q] = column(_values(part, se_key).reshape(nu, nv))
             for q, (arr, unit) in (extra or {}).get(name, {}).items():
-                values[q] = [column(row) for row in np.asarray(arr, float)[sl].reshape(nu, nv)]
+                values[q] = column(np.asarray(arr, float)[sl].reshape(nu, nv))
                 units[q] = unit
             out.append({"grid": grid.id_prefix, "channel": name, "shape": (nu, nv), "origin": tuple(grid.origin),
                         "u": tuple(u.tolist()), "v": tuple(v.tolist()), "spacing": grid.spacing, "units": units,

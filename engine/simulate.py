@@ -24,7 +24,7 @@ from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_re
 from .constants import SPEED_OF_LIGHT
 from .kernel import KernelSettings, WorkItem
 from .auto import resolve, unreachable_receivers, validated
-from .los import line_of_sight
+from .los import line_of_sight, los_geometry
 from .result import build_result
 from .scene import Scene, build_scene
 from .estimates import reported_rel_stderr
@@ -111,7 +111,8 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
         scene = None
     scene = scene if scene is not None else build_scene(spec, base_dir)
     settings = kernel_settings(spec, scene)
-    los_gain, los_delay = line_of_sight(scene)
+    geometry = los_geometry(scene)
+    los_gain, los_delay = line_of_sight(scene, geometry)
     seen = los_gain.reshape(len(scene.transmitters), len(scene.receivers)).any(axis=0)
     masked = np.flatnonzero(scene.masked != "")
     blocked = unreachable_receivers(scene, seen | (scene.masked != ""))  # a direct view proves reachability
@@ -135,7 +136,7 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
             executor.close()
     info.wall_time_s = time.perf_counter() - t_start
     return build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info,
-                        original=original, modeled=modeled, unreachable=blocked)
+                        original=original, modeled=modeled, unreachable=blocked, geometry=geometry)
 
 
 def exact_los_only(scene: Scene, settings: KernelSettings) -> bool:

@@ -7,6 +7,7 @@ from typing import Annotated
 from pydantic import Field, model_validator
 
 from .base import Direction, Point, SpecModel
+from .link_budget import PhotometrySpec
 
 Fov = Annotated[float, Field(ge=1e-6, le=90.0, description="field of view, half-angle [deg], in (0, 90] "
                                                           "(at least 1e-6 deg: below it a concentrator's gain overflows)")]
@@ -25,6 +26,9 @@ class TransmitterSpec(SpecModel):
     power: float = Field(1.0, gt=0.0, description="optical power P_t [W]")
     lambertian_order: float | None = Field(None, ge=0.0, le=1e4, description="Lambertian order m")
     half_power_semi_angle_deg: float | None = Field(None, gt=0.0, lt=90.0, description="Phi_1/2 [deg]")
+    luminous_output: PhotometrySpec | None = Field(
+        None, description="luminous flux [lm] or centre luminous intensity [cd] of the source: gives the "
+                          "illuminance on the receivers (the optical power stays `power`)")
 
     @model_validator(mode="after")
     def _one_pattern(self) -> "TransmitterSpec":

@@ -68,6 +68,12 @@ class LinkPublic(PublicModel):
     dc_gain_by_scattering_order_stderr: list[float | None] | None = None
     early_gain: float | None = Field(None, description="power per watt arriving before t_min_s (not in the CIR)")
     late_gain: float | None = Field(None, description="power per watt arriving after t_max_s (not in the CIR)")
+    illuminance_lx: float | None = Field(None, description="direct illuminance on the receiver plane [lx] (when "
+                                         "the transmitters give a luminous output)")
+    snr_db: float | None = Field(None, description="electrical SNR [dB] (with `link_budget`)")
+    ber: float | None = Field(None, description="bit-error rate of OOK-NRZ (with `link_budget`)")
+    max_bit_rate_bps: float | None = Field(None, description="bit rate the delay spread allows, 1/(10 tau_rms) "
+                                           "[bit/s] (with `link_budget`)")
     cir: CirPublic | None = None
 
 
@@ -86,6 +92,12 @@ class ChannelPublic(PublicModel):
     mean_delay_s_stderr: float | None
     rms_delay_spread_s: float | None
     rms_delay_spread_s_stderr: float | None
+    illuminance_lx: float | None = Field(None, description="direct illuminance on the receiver plane [lx] (when "
+                                         "the transmitters give a luminous output)")
+    snr_db: float | None = Field(None, description="electrical SNR [dB] (with `link_budget`)")
+    ber: float | None = Field(None, description="bit-error rate of OOK-NRZ (with `link_budget`)")
+    max_bit_rate_bps: float | None = Field(None, description="bit rate the delay spread allows, 1/(10 tau_rms) "
+                                           "[bit/s] (with `link_budget`)")
     cir: CirPublic | None = None
 
 

@@ -8,6 +8,7 @@ from pydantic import Field, model_validator
 from .base import SpecModel
 from .devices import ReceiverGridSpec, ReceiverSpec, TransmitterSpec
 from .geometry import BoxSpec, MeshSpec, RoomSpec
+from .link_budget import LinkBudgetSpec
 from .medium import MediumSpec
 from .outputs import OutputsSpec
 from .simulation import SimulationSpec
@@ -44,6 +45,9 @@ class SceneSpec(SpecModel):
         default_factory=list, description="transmitters that carry one signal: each group's channel (their "
         "summed response) is reported beside the links, and maps are drawn per group")
     outputs: OutputsSpec = Field(default_factory=OutputsSpec)
+    link_budget: LinkBudgetSpec | None = Field(
+        None, description="photodiode and receiver electronics: adds SNR, BER of OOK and the bit rate the delay "
+                          "spread allows to links, channels and maps (Komine & Nakagawa 2004 noise model)")
     simulation: SimulationSpec = Field(default_factory=SimulationSpec)
 
     @model_validator(mode="after")
