@@ -48,9 +48,18 @@ def _cmd_validate(args) -> int:
     return 0
 
 
+#: Links above which the command line prints a summary per map instead of one line per link.
+MAX_LINES = 20
+
+
 def _print_links(result: dict) -> None:
     for note in result.get("warnings", []):
         print(f"owcsim: warning: {note}", file=sys.stderr)
+    if len(result["links"]) > MAX_LINES:
+        from .summary import format_result_summary
+
+        print(format_result_summary(result))
+        return
     for link in result["links"]:
         err, rms, loss = link["dc_gain_stderr"], link["rms_delay_spread_s"], link["path_loss_db"]
         nan = float("nan")  # a missing figure (None in the JSON), never a 0 taken for missing
