@@ -237,8 +237,6 @@ def _fmt(x: float | None, unit: str) -> str:
         return f"{x:.3e}"
     if unit in _LOG_UNITS:
         return f"{x:.2f}"
-    if unit == "lx":
-        return f"{x:.1f}"
     return f"{x:.4g}"
 
 
@@ -505,7 +503,7 @@ def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | P
     Matplotlib's object API only (Figure + FigureCanvasAgg): safe in server threads.
     """
     import matplotlib
-    from matplotlib import colors
+    from matplotlib import colors, ticker
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.patches import Patch, Polygon
@@ -548,13 +546,15 @@ def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | P
     lim = [lim[0] - pad, lim[1] + pad, lim[2] - pad, lim[3] + pad]
 
     width, height = lim[1] - lim[0], lim[3] - lim[2]
-    fig_h = min(8.0, max(3.2, 5.0 * height / width + 1.6))
-    fig = Figure(figsize=(6.4, fig_h), dpi=dpi, layout="constrained")
+    wide = height < 0.5 * width            # a strip: colour bar below, else beside
+    fig_h = min(8.0, max(2.8, (5.2 if wide else 4.6) * height / width + (2.1 if wide else 1.4)))
+    fig = Figure(figsize=(6.4, fig_h), dpi=dpi, layout="compressed")
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
     cm = matplotlib.colormaps[cmap].with_extremes(bad="white")
     mesh = ax.pcolormesh(xe, ye, shown.T, cmap=cm, norm=norm, shading="flat")
-    bar = fig.colorbar(mesh, ax=ax, shrink=0.9)
+    bar = fig.colorbar(mesh, ax=ax, location="bottom" if wide else "right", shrink=0.8 if wide else 1.0,
+                       aspect=30 if wide else 20)
     bar.set_label(f"{quantity} [{shown_unit}]" + (" (log scale)" if isinstance(norm, colors.LogNorm) else ""))
 
     handles = []
@@ -570,7 +570,9 @@ def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | P
             poly = _hull(_project(m, _box_corners(lo, hi)))
             if len(poly) and _overlaps(poly, grid_box):
                 ax.add_patch(Polygon(poly, closed=len(poly) > 2, fill=False, edgecolor="black", linewidth=1.4))
-                cx, cy = poly.mean(axis=0)
+                # name at the centre of the visible part of the footprint's bounding box
+                cx = (max(poly[:, 0].min(), lim[0]) + min(poly[:, 0].max(), lim[1])) / 2
+                cy = (max(poly[:, 1].min(), lim[2]) + min(poly[:, 1].max(), lim[3])) / 2
                 ax.text(cx, cy, name, ha="center", va="center", fontsize=8, clip_on=True,
                         bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "alpha": 0.7, "linewidth": 0})
         if decor.luminaires:
@@ -587,11 +589,17 @@ def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | P
     ax.set_xlim(lim[0], lim[1])
     ax.set_ylim(lim[2], lim[3])
     ax.set_aspect("equal")
-    ax.set_xlabel(f"along u = {_vec_text(m.u)} from origin [m]")
-    ax.set_ylabel(f"along v = {_vec_text(m.v)} from origin [m]")
+    # Tick counts fixed from the extents: the automatic ones follow the axes' size, which the layout
+    # changes after it has measured the tick labels (and then clips the v label).
+    for axis, extent in ((ax.xaxis, width), (ax.yaxis, height)):
+        bins = max(2, min(7, round(7 * extent / max(width, height))))
+        axis.set_major_locator(ticker.MaxNLocator(nbins=bins, steps=[1, 2, 2.5, 5, 10]))
+    ax.set_xlabel(f"u [m]     (u = {_vec_text(m.u)}, v = {_vec_text(m.v)})")
+    ax.set_ylabel("v [m]")
     stats = "  ".join(f"{k} {_fmt(None if s[k] is None else s[k] * factor, shown_unit)}" for k in ("min", "mean", "max"))
-    u0 = "" if s["uniformity"] is None else f"  U0 = min/mean = {s['uniformity']:.3f}"
-    ax.set_title(f"{m.grid}: {quantity} from {m.channel}\n{stats} {shown_unit}{u0}", fontsize=10)
+    stats += "" if shown_unit == "1" else f" {shown_unit}"
+    u0 = "" if s["uniformity"] is None else f",  U0 = min/mean = {s['uniformity']:.3f}"
+    fig.suptitle(f"{m.grid}: {quantity} from {m.channel}\n{stats}{u0}", fontsize=10)
     path = Path(path)
     fig.savefig(path, dpi=dpi)
     return path

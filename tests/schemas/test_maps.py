@@ -108,7 +108,7 @@ def test_format_summary_scales_units():
     assert " ns " in lines["rms_delay_spread"] and f"{1e-9 / H**2 * 1e9:.4g}" in lines["rms_delay_spread"]
     assert f"{1e-6 / H**2:.3e}" in lines["dc_gain"]
     assert f"{-10 * math.log10(1e-6 / H**2):.2f}" in lines["path_loss_db"] and " dB " in lines["path_loss_db"]
-    assert f"{1000 / H**2:.1f}" in lines["illuminance"]
+    assert f" {1000 / H**2:.4g} " in lines["illuminance"]
 
 
 def test_validation_errors_are_clear():
