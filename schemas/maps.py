@@ -301,8 +301,10 @@ def to_xarray(maps: Sequence[GridMap]) -> xarray.Dataset:
     """The maps of ONE grid (several channels) as a Dataset over (channel, i, j).
 
     Coordinates channel, x(i), y(j) [m] (offsets along u, v) and position_x/y/z(i, j) [m]; a variable
-    per quantity and `<q>_stderr`, each with a `units` attribute; `mask_reason` (channel, i, j) string;
-    attributes grid, origin, u, v, normal.
+    per quantity and `<q>_stderr`, each with a `units` attribute; `mask_reason` string over (i, j) when
+    every channel has the same mask (masks come from the geometry), else over (channel, i, j) (xarray
+    broadcasts either); attributes grid, origin, u, v, normal. netCDF3 does not compress: one string
+    per point and channel would be the largest variable of a big grid.
     """
     import xarray as xr
 
@@ -315,7 +317,9 @@ def to_xarray(maps: Sequence[GridMap]) -> xarray.Dataset:
         data[q] = (dims, a, {"units": units[q]})
         if q in stderr:
             data[f"{q}_stderr"] = (dims, stderr[q], {"units": units[q], "long_name": f"standard error of {q}"})
-    data["mask_reason"] = (dims, np.stack([m.mask_reason for m in maps]).astype(str),
+    reasons = np.stack([m.mask_reason for m in maps]).astype(str)
+    same = bool(np.all(reasons == reasons[:1]))
+    data["mask_reason"] = (dims[1:] if same else dims, reasons[0] if same else reasons,
                            {"long_name": "why the point is masked; empty for a simulated point"})
     coords = {"channel": ("channel", [m.channel for m in maps]),
               "x": ("i", first.x, {"units": "m", "long_name": "offset along u"}),
@@ -331,6 +335,7 @@ def from_xarray(ds: xarray.Dataset) -> list[GridMap]:
     """The maps of a Dataset written by `to_xarray` (a channel that lacked a quantity reads back as NaN)."""
     quantities = [q for q in ds.data_vars if q != "mask_reason" and not str(q).endswith("_stderr")]
     out = []
+    r = ds["mask_reason"].values
     for c in range(ds.sizes["channel"]):
         out.append(GridMap(
             grid=str(ds.attrs["grid"]), channel=str(ds["channel"].values[c]), origin=ds.attrs["origin"],
@@ -338,7 +343,7 @@ def from_xarray(ds: xarray.Dataset) -> list[GridMap]:
             values={str(q): ds[q].values[c] for q in quantities},
             stderr={str(q): ds[f"{q}_stderr"].values[c] for q in quantities if f"{q}_stderr" in ds},
             units={str(q): str(ds[q].attrs.get("units", "")) for q in quantities},
-            mask_reason=ds["mask_reason"].values[c].astype(str)))
+            mask_reason=(r if r.ndim == 2 else r[c]).astype(str)))
     return out
 
 
@@ -378,11 +383,19 @@ def _mat_struct(maps: list[GridMap]) -> dict[str, Any]:
     values, stderr, units = _stacked(maps)
     cell = np.empty(len(maps), dtype=object)
     cell[:] = [m.channel for m in maps]
-    reasons = np.empty((len(maps), *first.shape), dtype=object)
-    reasons[...] = np.stack([m.mask_reason for m in maps])
+    # reasons as codes into a list (1-based, as MATLAB indexes it; 0 = simulated): a cell per point is slow and big
+    names, code = np.unique(np.stack([m.mask_reason for m in maps]), return_inverse=True)
+    code = code.reshape(len(maps), *first.shape)
+    if names[0] == "":
+        names = names[1:]
+    else:
+        code = code + 1
+    reasons = np.empty(len(names), dtype=object)
+    reasons[:] = [str(n) for n in names]
     return {"grid": first.grid, "channels": cell, "origin": first.origin, "u": first.u, "v": first.v,
             "normal": first.normal, "x": first.x, "y": first.y, "position": first.positions,
-            "values": values, "stderr": stderr, "units": units, "mask_reason": reasons}
+            "values": values, "stderr": stderr, "units": units,
+            "mask_code": code.astype(np.int32), "mask_reasons": reasons}
 
 
 def write_map_files(maps: Sequence[GridMap], folder: str | Path, *, decor: MapDecor | None = None,
@@ -390,8 +403,8 @@ def write_map_files(maps: Sequence[GridMap], folder: str | Path, *, decor: MapDe
     """Write `map_<grid>.nc` per grid, one `maps.mat` and the heatmaps `map_<grid>_<channel>_<quantity>.png`.
 
     In maps.mat each grid is a struct `map_<grid>` with grid, channels (cell), origin, u, v, normal,
-    x, y, position (nu, nv, 3), values.<q> and stderr.<q> (channel, nu, nv), units.<q>, mask_reason
-    (cell, channel x nu x nv). `heatmaps`: True for every quantity, False for none, or the quantity
+    x, y, position (nu, nv, 3), values.<q> and stderr.<q> (channel, nu, nv), units.<q>, mask_code
+    (channel, nu, nv): 0 for a simulated point, k for the reason mask_reasons{k} (cell). `heatmaps`: True for every quantity, False for none, or the quantity
     names to draw. Returns the paths written.
     """
     from scipy.io import savemat

@@ -154,12 +154,22 @@ def test_netcdf_round_trip(tmp_path):
     assert ds["illuminance"].attrs["units"] == "lx" and ds["received_power_dbm"].attrs["units"] == "dBm"
     assert ds["x"].attrs["units"] == "m" and ds.attrs["grid"] == "wp"
     np.testing.assert_array_equal(ds.attrs["u"], a.u)
-    assert ds["mask_reason"].values[0, 1, 2] == "inside furniture 'desk'" and ds["mask_reason"].values[0, 0, 0] == ""
+    assert ds["mask_reason"].dims == ("channel", "i", "j")      # the channels' masks differ
+    assert ds["mask_reason"].values[0, 1, 2] == "inside furniture 'desk'" and ds["mask_reason"].values[1, 1, 2] == ""
     back = from_xarray(ds)
-    assert [m.channel for m in back] == ["tx0", "group A"]
+    assert [m.channel for m in back] == ["tx0", "group A"] and not back[1].masked.any()
     np.testing.assert_array_equal(back[0].values["dc_gain"], a.values["dc_gain"])
     np.testing.assert_array_equal(back[0].mask_reason, a.mask_reason.astype(str))
     assert back[0].units == a.units
+
+
+def test_shared_mask_is_stored_once(tmp_path):
+    xr = pytest.importorskip("xarray")
+    a, b = _field(channel="a", mask=[(0, 0), (4, 3)]), _field(channel="b", mask=[(0, 0), (4, 3)])
+    with xr.open_dataset(to_netcdf([a, b], tmp_path / "m.nc"), engine="scipy") as ds:
+        assert ds["mask_reason"].dims == ("i", "j")
+        back = from_xarray(ds.load())
+    assert [int(m.masked.sum()) for m in back] == [2, 2] and back[1].mask_reason[4, 3] == "inside furniture 'desk'"
 
 
 def test_xarray_refuses_mixed_grids_and_units():
@@ -192,7 +202,10 @@ def test_write_map_files_and_mat_round_trip(tmp_path):
     assert wp["units"]["received_power_dbm"] == "dBm"
     np.testing.assert_allclose(wall["position"], tilted.positions)
     np.testing.assert_array_equal(wp["x"], a.x)
-    assert wp["mask_reason"][0, 0, 1] == "inside furniture 'desk'"
+    codes = wp["mask_code"]
+    assert codes.shape == (2, 5, 4) and codes.sum() == 1 and codes[0, 0, 1] == 1
+    assert wp["mask_reasons"] == "inside furniture 'desk'"       # a one-element cell reads back as its string
+    assert np.all(mat["map_wall_north_1"]["mask_code"] == 0)
 
 
 def _decor():
@@ -201,7 +214,7 @@ def _decor():
                     luminaires=[("led0", (1.0, 0.5, 2.85)), ("led1", (3.75, 3.75, 3.0))])
 
 
-@pytest.mark.parametrize("case", ["linear", "log", "decor_masked", "tilted", "one_point", "one_row"])
+@pytest.mark.parametrize("case", ["linear", "log", "decor_masked", "tilted", "one_point", "one_row", "no_data"])
 def test_heatmap_png(tmp_path, case):
     m, decor, log = _field(), None, None
     if case == "log":
@@ -214,10 +227,24 @@ def test_heatmap_png(tmp_path, case):
         m = _field(nu=1, nv=1)
     elif case == "one_row":
         m, decor = _field(nu=7, nv=1), _decor()
+    elif case == "no_data":                 # every point masked: nothing to scale the colours by
+        m, decor, log = _field(nu=3, nv=2, mask=[(i, j) for i in range(3) for j in range(2)]), _decor(), True
     for q in ("illuminance", "dc_gain"):
         p = heatmap_png(m, q, decor, tmp_path / f"{case}_{q}.png", log=log)
         data = p.read_bytes()
         assert data[:8] == PNG and 5_000 < len(data) < 200_000
+
+
+def test_heatmaps_render_the_same_in_threads(tmp_path):
+    """The object API keeps no global state: PNGs drawn in parallel threads equal those drawn one by one."""
+    from concurrent.futures import ThreadPoolExecutor
+    jobs = [(_field(channel=f"c{k}", mask=[(k, 1)], source=(1.0 + k, 1.0, 3.0)), q)
+            for k in range(3) for q in ("illuminance", "dc_gain")]
+    one = [heatmap_png(m, q, _decor(), tmp_path / f"s{k}.png").read_bytes() for k, (m, q) in enumerate(jobs)]
+    with ThreadPoolExecutor(4) as pool:
+        par = list(pool.map(lambda k: heatmap_png(*jobs[k], _decor(), tmp_path / f"p{k}.png").read_bytes(),
+                            range(len(jobs))))
+    assert par == one and len(set(one)) == len(one)
 
 
 def test_log_scale_is_chosen_for_gains_spanning_decades(tmp_path, monkeypatch):
