@@ -37,6 +37,16 @@ _RESERVED = {"channel", "x", "y", "i", "j", "position_x", "position_y", "positio
 _LOG_UNITS = {"dB", "dBm", "dBW", "dBi", "dBc"}
 
 
+def _need(module: str, what: str):
+    """Import an optional dependency, or say which install brings it."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        raise ImportError(f"{what} needs {module.split('.')[0]}: pip install 'owcsim[engine]'") from exc
+
+
 def _vec3(a: Any, what: str) -> np.ndarray:
     out = np.asarray(a, dtype=float).reshape(-1)
     if out.shape != (3,) or not np.all(np.isfinite(out)):
@@ -306,8 +316,7 @@ def to_xarray(maps: Sequence[GridMap]) -> xarray.Dataset:
     broadcasts either); attributes grid, origin, u, v, normal. netCDF3 does not compress: one string
     per point and channel would be the largest variable of a big grid.
     """
-    import xarray as xr
-
+    xr = _need("xarray", "a map Dataset")
     first = _one_grid(maps)
     values, stderr, units = _stacked(maps)
     pos = first.positions
@@ -407,8 +416,7 @@ def write_map_files(maps: Sequence[GridMap], folder: str | Path, *, decor: MapDe
     (channel, nu, nv): 0 for a simulated point, k for the reason mask_reasons{k} (cell). `heatmaps`: True for every quantity, False for none, or the quantity
     names to draw. Returns the paths written.
     """
-    from scipy.io import savemat
-
+    savemat = _need("scipy.io", "the .mat file").savemat
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     groups = _by_grid(maps)
@@ -435,7 +443,7 @@ def write_map_files(maps: Sequence[GridMap], folder: str | Path, *, decor: MapDe
 def to_dataframe(maps: GridMap | Sequence[GridMap]):
     """A long table (pandas): one row per (map, point) with grid, channel, i, j, x, y, position, mask_reason,
     each quantity and its `_stderr`."""
-    import pandas as pd
+    pd = _need("pandas", "a map table")
 
     frames = []
     for m in [maps] if isinstance(maps, GridMap) else maps:
@@ -515,7 +523,7 @@ def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | P
     a log scale for a gain or a power in W whose positive values span more than two decades.
     Matplotlib's object API only (Figure + FigureCanvasAgg): safe in server threads.
     """
-    import matplotlib
+    matplotlib = _need("matplotlib", "a heatmap")
     from matplotlib import colors, ticker
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -566,9 +574,10 @@ def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | P
     ax = fig.add_subplot()
     cm = matplotlib.colormaps[cmap].with_extremes(bad="white")
     mesh = ax.pcolormesh(xe, ye, shown.T, cmap=cm, norm=norm, shading="flat")
-    bar = fig.colorbar(mesh, ax=ax, location="bottom" if wide else "right", shrink=0.8 if wide else 1.0,
-                       aspect=30 if wide else 20)
-    bar.set_label(f"{quantity} [{shown_unit}]" + (" (log scale)" if isinstance(norm, colors.LogNorm) else ""))
+    if s["count"]:                         # no colour bar for a map without a single value
+        bar = fig.colorbar(mesh, ax=ax, location="bottom" if wide else "right", shrink=0.8 if wide else 1.0,
+                           aspect=30 if wide else 20)
+        bar.set_label(f"{quantity} [{shown_unit}]" + (" (log scale)" if isinstance(norm, colors.LogNorm) else ""))
 
     handles = []
     if masked.any():
@@ -609,8 +618,8 @@ def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | P
         axis.set_major_locator(ticker.MaxNLocator(nbins=bins, steps=[1, 2, 2.5, 5, 10]))
     ax.set_xlabel(f"u [m]     (u = {_vec_text(m.u)}, v = {_vec_text(m.v)})")
     ax.set_ylabel("v [m]")
-    stats = "  ".join(f"{k} {_fmt(None if s[k] is None else s[k] * factor, shown_unit)}" for k in ("min", "mean", "max"))
-    stats += "" if shown_unit == "1" else f" {shown_unit}"
+    stats = "no simulated point with a value" if not s["count"] else "  ".join(f"{k} {_fmt(None if s[k] is None else s[k] * factor, shown_unit)}" for k in ("min", "mean", "max"))
+    stats += "" if shown_unit == "1" or not s["count"] else f" {shown_unit}"
     u0 = "" if s["uniformity"] is None else f",  U0 = min/mean = {s['uniformity']:.3f}"
     fig.suptitle(f"{m.grid}: {quantity} from {m.channel}\n{stats}{u0}", fontsize=10)
     path = Path(path)
