@@ -194,9 +194,11 @@ def summary(m: GridMap) -> dict[str, dict]:
     """Per quantity, over the unmasked points with a finite value: count, min, mean, max, uniformity.
 
     uniformity = min / mean, the illuminance uniformity U0 = E_min / E_mean of lighting design
-    (EN 12464-1:2021 sec. 4.4; Komine & Nakagawa 2004 use the same ratio for their maps), the mean
-    being the arithmetic mean over the grid points. None for a quantity on a decibel scale (take the
-    linear one: received power in W, not dBm), for a non-positive mean, and when no point is left.
+    (EN 12464-1:2021 sec. 4.4, ISO 8995-1:2002), the classic VLC case being the work-plane illuminance
+    maps of Komine & Nakagawa 2004; the mean is the arithmetic mean over the grid points (the area
+    average for a regular grid). None for a quantity on a decibel scale (take the linear one: received
+    power in W, not dBm; the mean of a dB quantity is the mean of its dB values), for a non-positive
+    mean or negative minimum, and when no point is left.
     Also: `masked` (points with a mask reason), `missing` (unmasked points without a finite value),
     `min_index` / `max_index` (i, j), and `max_rel_stderr` = max stderr / |value| where a stderr is given.
     """
