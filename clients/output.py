@@ -89,4 +89,4 @@ def write_map_outputs(result: dict, out: Path) -> list[Path]:
     from owcsim.schemas.maps import maps_from_document, write_map_files
 
     maps, decor = maps_from_document(result)
-    return write_map_files(maps, out, decor)
+    return write_map_files(maps, out, decor=decor)

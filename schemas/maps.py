@@ -627,3 +627,34 @@ def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | P
     path = Path(path)
     fig.savefig(path, dpi=dpi)
     return path
+
+
+def maps_from_document(result: dict) -> tuple[list[GridMap], MapDecor | None]:
+    """The maps of a result document (`maps`, `receivers`, `scene`) as GridMaps, with the scene's decor."""
+    from .scene import SceneSpec
+
+    reasons: dict[str, np.ndarray] = {}
+    for m in result.get("maps", []):
+        if m["grid"] not in reasons:
+            mask = np.full(tuple(m["shape"]), "", dtype=object)
+            for r in result.get("receivers", []):
+                if r.get("grid") == m["grid"] and r.get("masked"):
+                    mask[r["i"], r["j"]] = r["masked"]
+            reasons[m["grid"]] = mask.astype(str)
+    maps = []
+    for m in result.get("maps", []):
+        nu, nv = m["shape"]
+        maps.append(GridMap(
+            grid=m["grid"], channel=m["channel"], origin=np.asarray(m["origin"], float),
+            u=np.asarray(m["u"], float), v=np.asarray(m["v"], float),
+            x=m["spacing"] * np.arange(nu), y=m["spacing"] * np.arange(nv),
+            values={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m["values"].items()},
+            stderr={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m.get("stderr", {}).items()},
+            units=dict(m["units"]), mask_reason=reasons[m["grid"]]))
+    decor = None
+    if result.get("scene") is not None:
+        try:
+            decor = MapDecor.from_scene(SceneSpec.model_validate(result["scene"]))
+        except ValueError:  # a document from a newer server: draw the maps without the room
+            decor = None
+    return maps, decor
