@@ -84,9 +84,16 @@ def write_outputs(result: dict, out: Path) -> list[Path]:
     return paths
 
 
+#: Map quantities drawn as heatmaps. The others are the same picture in other units or through a monotone
+#: function (path loss and received power of the gain, BER of the SNR, the delay-limited bit rate of the
+#: RMS delay spread); every quantity is in the netCDF and .mat files.
+HEATMAPS = ("dc_gain", "received_power_dbm", "mean_delay_s", "rms_delay_spread_s", "illuminance_lx", "snr_db")
+
+
 def write_map_outputs(result: dict, out: Path) -> list[Path]:
-    """netCDF (one file per grid), maps.mat and a heatmap PNG per map quantity (owcsim.schemas.maps)."""
+    """netCDF (one file per grid), maps.mat and heatmap PNGs (HEATMAPS) of the maps (owcsim.schemas.maps)."""
     from owcsim.schemas.maps import maps_from_document, write_map_files
 
     maps, decor = maps_from_document(result)
-    return write_map_files(maps, out, decor=decor)
+    drawn = [q for q in HEATMAPS if any(q in m.values for m in maps)]
+    return write_map_files(maps, out, decor=decor, heatmaps=drawn)

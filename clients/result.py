@@ -33,16 +33,45 @@ class Result(SimulationResultPublic):
                 return lk
         raise KeyError(f"no link {transmitter} -> {receiver}")
 
+    def grid_maps(self):
+        """The receiver grids as `owcsim.schemas.maps.GridMap`s (2-D arrays with coordinates, units, masks)."""
+        from owcsim.schemas.maps import maps_from_document
+
+        return maps_from_document(self.raw)[0]
+
+    def to_xarray(self, grid: str | None = None):
+        """One grid's maps (all channels) as an xarray Dataset (dims channel, i, j); the first grid by default."""
+        from owcsim.schemas.maps import to_xarray
+
+        maps = self.grid_maps()
+        if not maps:
+            raise ValueError("this result has no receiver grid")
+        name = grid if grid is not None else maps[0].grid
+        chosen = [m for m in maps if m.grid == name]
+        if not chosen:
+            raise KeyError(f"no grid {name!r}; the grids are {sorted({m.grid for m in maps})}")
+        return to_xarray(chosen)
+
+    def to_dataframe(self):
+        """The links' scalar figures as a pandas DataFrame (one row per link)."""
+        import pandas as pd
+
+        from .output import LINK_COLUMNS
+
+        return pd.DataFrame([{c: lk.get(c) for c in LINK_COLUMNS} for lk in self.raw["links"]])
+
     def arrays(self) -> dict[str, np.ndarray]:
         """The arrays of the server's result.npz: t_edges_s (n_bins + 1) [s]; per link (axis 0, in `links`
         order) cir and cir_stderr (n_links, n_bins) [power per bin per watt; NaN = no error bar],
         by_reflection_order (n_links, K + 1, n_bins), dc_gain, dc_gain_stderr, transmitter, receiver."""
-        tb, links = self.time_bins, self.links
+        tb = self.time_bins
+        links = [lk for lk in self.links if lk.cir is not None]  # the links with a binned CIR
         n = tb.n_bins
-        orders = max((len(lk.cir.by_reflection_order) for lk in links), default=1)
+        orders = max((len(lk.cir.by_reflection_order or [[]]) for lk in links), default=1)
         by_k = np.zeros((len(links), orders, n))
         for i, lk in enumerate(links):
-            by_k[i, :len(lk.cir.by_reflection_order)] = lk.cir.by_reflection_order
+            if lk.cir.by_reflection_order:
+                by_k[i, :len(lk.cir.by_reflection_order)] = lk.cir.by_reflection_order
         nan = lambda xs: np.array([np.nan if x is None else x for x in xs], float)  # noqa: E731
         return {
             "t_edges_s": tb.t_min_s + tb.time_bin_s * np.arange(n + 1),

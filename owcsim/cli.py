@@ -200,7 +200,10 @@ def _add_simulation_options(p: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+
     p = argparse.ArgumentParser(prog="owcsim", description="Optical wireless channel simulator.")
+    p.add_argument("--version", action="version", version=f"owcsim {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="simulate a scene; write result.json, cir.csv and cir.png")
     run.add_argument("scene", help="scene document (JSON)")

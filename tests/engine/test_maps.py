@@ -169,3 +169,33 @@ def test_forward_map_with_a_small_budget_agrees_with_the_default(monkeypatch):
     for a, b in zip(full["channels"], small["channels"]):
         se = math.hypot(a["dc_gain_stderr"], b["dc_gain_stderr"])
         assert within(a["dc_gain"], b["dc_gain"], se)
+
+
+def test_komine_example_script_and_python_api(tmp_path, capsys):
+    """The example runs through `owcsim.simulate` and writes Komine's four maps (line of sight, coarse grid)."""
+    import importlib.util
+
+    path = EXAMPLES / "komine_maps.py"
+    mod = importlib.util.spec_from_file_location("komine_maps", path)
+    module = importlib.util.module_from_spec(mod)
+    mod.loader.exec_module(module)
+    files = module.main(["--out", str(tmp_path), "--los", "--spacing", "0.7"])
+    assert [f.name for f in files] == [f"komine_{q}.png" for q in module.FIGURES]
+    assert all(f.read_bytes()[:4] == b"\x89PNG" for f in files)
+    out = capsys.readouterr().out
+    assert "illuminance_lx" in out and "snr_db" in out
+
+
+def test_command_line_prints_a_map_summary_and_writes_map_files(tmp_path, capsys):
+    from owcsim.cli import main
+
+    scene = tmp_path / "scene.json"
+    doc = komine_doc(spacing=0.7, max_reflections=0)
+    scene.write_text(json.dumps(doc))
+    assert main(["run", str(scene), "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert "plane/ceiling" in out and "illuminance_lx" in out and "links" in out
+    assert out.count("\n") < 30  # a summary, not one line per link
+    names = {p.name for p in (tmp_path / "out").iterdir()}
+    assert {"result.json", "links.csv", "map_plane.nc", "maps.mat", "map_plane_ceiling_illuminance_lx.png"} <= names
+    assert "cir.csv" not in names  # no link asked for a CIR

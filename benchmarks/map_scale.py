@@ -1,0 +1,140 @@
+"""Coverage maps at scale: the Komine-Nakagawa room (4 LED lamps, one signal) on a work-plane grid.
+
+Prints, each case run in its own process (peak memory is that process's maximum RSS):
+ (a) line of sight only on the 50 x 50 grid: in-process time of `simulate` and the time of the whole
+     `owcsim run` command (Python start-up, files written); targets 0.2 s and 5 s;
+ (b) every reflection order (automatic K), until every point's DC gain has a relative standard error
+     of 1 % or less: time, paths, peak memory, size of the output folder; targets 60 s, 2 GB, 50 MB;
+ (c) time and peak memory for 100, 2 500 and 10 000 receivers at a fixed number of paths per
+     receiver (receiver-side paths) and per lamp (transmitter-side paths), and time per receiver
+     relative to the 100-receiver run: cost must grow no faster than linearly with receivers;
+ (d) the two estimator directions on a 10 x 10 grid at fixed paths: time, median and largest relative
+     standard error over the points, and the time each would need for 1 % at the worst point
+     (time x (rel. error / 1 %)^2): what `auto` chooses for maps.
+Run: .venv/bin/python benchmarks/map_scale.py [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+EXAMPLE = ROOT / "examples" / "komine_map.json"
+
+
+def komine(points_per_side: int, **simulation) -> dict:
+    doc = json.loads(EXAMPLE.read_text())
+    g = doc["receiver_grids"][0]
+    g["spacing"] = g["size"][0] / (points_per_side - 1)
+    doc["simulation"] = {"seed": 1, **simulation}
+    return doc
+
+
+def _peak_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def child(case: dict) -> dict:
+    """One measurement in this process (called with --child)."""
+    from owcsim.engine.simulate import simulate
+    from owcsim.schemas import SceneSpec
+
+    spec = SceneSpec.model_validate(case["doc"])
+    if case.get("warm"):
+        simulate(spec)  # imports and first-call costs out of the way
+    t = time.perf_counter()
+    res = simulate(spec)
+    elapsed = time.perf_counter() - t
+    out = {"time_s": elapsed, "peak_mb": _peak_mb(), "paths": res["run"]["paths_total"],
+           "stop": res["run"]["stop_reason"], "rule": res["run"]["direction_choice"].get("rule", ""),
+           "K": res["modeled"].get("max_reflections")}
+    rows = res["channels"] or res["links"]
+    rel = sorted(r["dc_gain_stderr"] / r["dc_gain"] for r in rows if r["dc_gain"] and r["dc_gain_stderr"] is not None)
+    out["rel_median"] = rel[len(rel) // 2] if rel else None
+    out["rel_max"] = rel[-1] if rel else None
+    if case.get("write"):
+        from owcsim.clients.output import write_outputs
+
+        folder = Path(tempfile.mkdtemp(prefix="owcsim-map-"))
+        t = time.perf_counter()
+        files = write_outputs(res, folder)
+        out["write_s"] = time.perf_counter() - t
+        out["output_mb"] = sum(f.stat().st_size for f in files) / 2**20
+        shutil.rmtree(folder)
+    return out
+
+
+def run_child(case: dict) -> dict:
+    proc = subprocess.run([sys.executable, __file__, "--child"], input=json.dumps(case), capture_output=True,
+                          text=True, check=True)
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def whole_command(doc: dict) -> float:
+    with tempfile.TemporaryDirectory() as tmp:
+        scene = Path(tmp) / "scene.json"
+        scene.write_text(json.dumps(doc))
+        owcsim = Path(sys.executable).with_name("owcsim")
+        t = time.perf_counter()
+        subprocess.run([str(owcsim), "run", str(scene), "--out", str(Path(tmp) / "out")], check=True,
+                       capture_output=True)
+        return time.perf_counter() - t
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="smaller runs (a smoke test of the script)")
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child:
+        print(json.dumps(child(json.loads(sys.stdin.read()))))
+        return
+    side = 12 if args.quick else 50
+    print(f"Komine room, 4 lamps in one group, grid at 0.85 m, FOV 85 deg, 1 cm^2; {side} x {side} points")
+
+    # (a) line of sight only
+    los = komine(side, max_reflections=0)
+    a = run_child({"doc": los, "warm": True})
+    cmd = min(whole_command(los) for _ in range(2))
+    print(f"(a) LOS only: in-process {a['time_s']:.3f} s (target 0.2 s); whole `owcsim run` {cmd:.2f} s "
+          f"(target 5 s), including a heatmap per quantity")
+
+    # (b) every order, 1 % on every point
+    target = 0.03 if args.quick else 0.01
+    b = run_child({"doc": komine(side, target_rel_error=target), "write": True})
+    print(f"(b) all orders (K = {b['K']}), {target:.0%} on every point: {b['time_s']:.1f} s (target 60 s), "
+          f"{b['paths']:,d} paths, peak {b['peak_mb']:.0f} MB (target 2048 MB), output {b['output_mb']:.1f} MB "
+          f"(target 50 MB); worst point {b['rel_max']:.4f}, median {b['rel_median']:.4f} ({b['stop']})")
+    print(f"    direction: {b['rule']}")
+
+    # (c) scaling with receivers
+    sides = (5, 10, 20) if args.quick else (10, 50, 100)
+    print("(c) receivers   direction   paths/source   time [s]   peak [MB]   time per receiver vs the first")
+    for direction, paths in (("backward", 200 if args.quick else 1000), ("forward", 500 if args.quick else 2000)):
+        base = None
+        for n in sides:
+            r = run_child({"doc": komine(n, max_reflections=8, t_max_s=1e-7, paths=paths, direction=direction)})
+            per_rx = r["time_s"] / n**2
+            base = base or per_rx
+            print(f"    {n * n:>9,d}   {direction:<9}   {paths:>12,d}   {r['time_s']:>8.2f}   {r['peak_mb']:>9.0f}"
+                  f"   {per_rx / base:>6.2f}")
+
+    # (d) the two directions on the same map
+    print("(d) direction   paths/source   time [s]   median rel.err   worst rel.err   est. time to 1 % at worst")
+    for direction, paths in (("forward", 4000), ("backward", 1000)):
+        r = run_child({"doc": komine(10, max_reflections=8, t_max_s=1e-7, paths=paths, direction=direction)})
+        need = r["time_s"] * (r["rel_max"] / 0.01) ** 2
+        print(f"    {direction:<9}   {paths:>12,d}   {r['time_s']:>8.2f}   {r['rel_median']:>14.4f}   "
+              f"{r['rel_max']:>13.4f}   {need:>10.1f} s")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,47 @@
+"""The in-process Python API: `owcsim.simulate(scene) -> Result`.
+
+`scene` is a scene document as a dict, a path to a JSON file, or a `SceneSpec`; the result is
+the same `Result` type the HTTP client returns (owcsim.clients.result), built from the
+engine's result document.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+from owcsim.clients.result import Result
+from owcsim.schemas import SceneSpec
+
+from .docs import InputError, format_validation_error, load_scene
+
+
+def load(scene: dict | str | Path | SceneSpec) -> tuple[SceneSpec, Path | None]:
+    """(validated scene, folder that relative mesh paths are read from)."""
+    if isinstance(scene, SceneSpec):
+        return scene, None
+    if isinstance(scene, (str, Path)):
+        spec, _ = load_scene(scene)
+        return spec, Path(scene).resolve().parent
+    if isinstance(scene, dict):
+        from pydantic import ValidationError
+
+        try:
+            return SceneSpec.model_validate(scene), None
+        except ValidationError as err:
+            raise InputError(format_validation_error(err)) from None
+    raise TypeError(f"a scene is a dict, a JSON file path or a SceneSpec, not {type(scene).__name__}")
+
+
+def simulate(scene: dict | str | Path | SceneSpec, *, workers: int = 1, base_dir: str | Path | None = None,
+             progress: Callable[[float, dict], None] | None = None) -> Result:
+    """Simulate a scene in this process and return its Result (see the module docstring).
+
+    `workers` > 1 runs batches in that many processes (same result bits); `progress(fraction, info)` is
+    called after every batch; `base_dir` resolves relative mesh paths (default: the scene file's folder).
+    Raises InputError for an invalid scene and owcsim.engine.errors.EngineError for one the engine refuses.
+    """
+    from owcsim.engine.simulate import simulate as run
+
+    spec, folder = load(scene)
+    doc = run(spec, base_dir=base_dir if base_dir is not None else folder, workers=workers, progress=progress)
+    return Result.from_document(doc)
