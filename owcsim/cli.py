@@ -42,9 +42,12 @@ def _cmd_validate(args) -> int:
     from owcsim.engine.scene import build_scene  # builds the geometry: catches unreadable meshes too
 
     scene = build_scene(spec, Path(args.scene).resolve().parent)
+    sim = spec.simulation
+    window = f"{sim.n_bins} time bins" if sim.t_max_s is not None else "time window chosen when it runs"
+    masked = int((scene.masked != "").sum())
     print(f"{args.scene}: valid — {len(scene.geometry.faces)} triangles, {len(scene.transmitters)} transmitters, "
-          f"{len(scene.receivers)} receivers, algorithm {spec.simulation.algorithm}, "
-          f"{spec.simulation.n_bins} time bins")
+          f"{len(scene.receivers)} receivers{f' ({masked} grid points masked)' if masked else ''}, "
+          f"algorithm {sim.algorithm}, {window}")
     return 0
 
 

@@ -103,3 +103,19 @@ def test_json_python_cannot_use_is_an_error_not_a_trace(tmp_path, capsys):
         assert message in capsys.readouterr().err
     assert main(["validate", BARRY, "--set", "simulation.seed=" + "9" * 5000]) == 2
     assert "--set simulation.seed: the value is not usable JSON" in capsys.readouterr().err
+
+
+def test_validate_a_scene_with_an_automatic_window(tmp_path, capsys):
+    """The default scene leaves t_max_s automatic: validate says so instead of failing."""
+    doc = json.loads(Path(BARRY).read_text())
+    doc["simulation"] = {}
+    scene = tmp_path / "auto.json"
+    scene.write_text(json.dumps(doc))
+    assert main(["validate", str(scene)]) == 0
+    assert "chosen when it runs" in capsys.readouterr().out
+
+
+def test_version_flag(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0 and capsys.readouterr().out.startswith("owcsim ")
