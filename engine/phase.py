@@ -305,7 +305,7 @@ class Tabulated(PhaseFunction):
                              f"{c[i]!r}, does not exceed entry {i - 1}, {c[i - 1]!r})")
         if np.any(v < 0):
             i = int(np.argmax(v < 0))
-            raise ValueError(f"tabulated phase function: values must be >= 0 (entry {i} is {v[i]!r})")
+            raise ValueError(f"tabulated phase function: values must be >= 0 (entry {i} is {float(v[i])!r})")
         h = np.diff(c)
         mass = 0.5 * (v[:-1] + v[1:]) * h  # int v dc per segment
         total = float(mass.sum())
