@@ -17,8 +17,8 @@ the sphere is k0^2 C_sca (B&H eq. 4.77/3.22).
 
 Size distribution: number density in y = ln D normal with mean ln D_g and standard
 deviation ln sigma_g. Averages are trapezoid sums over nodes in y (the trapezoid rule is
-spectrally accurate for the Gaussian; the node spacing also resolves the Mie ripple, at
-most 0.5 / x apart), on a window outside which the integrand bounds (Rayleigh-like
+spectrally accurate for the Gaussian; the node spacing also follows the Mie interference
+structure, nodes at most 1 apart in x at the upper end), on a window outside which the integrand bounds (Rayleigh-like
 D^2 min(1, x) and D^2 min(1, x)^4 growth times the Gaussian) hold less than 1e-10:
 
     <C> = int C(D) n(D) dD,   sigma = N <C>,
@@ -139,7 +139,7 @@ def lognormal_nodes(dg: float, sigma_g: float, wavelength: float, medium_index: 
         hi = max(hi, y[min(np.searchsorted(cdf, 1.0 - _TAIL), len(y) - 1)])
     x_hi = np.pi * math.exp(hi) * medium_index / wavelength
     if n_nodes is None:
-        h = min(s / 10.0, 0.5 / max(x_hi, 1e-12))
+        h = min(s / 10.0, 1.0 / max(x_hi, 1e-12))
         n_nodes = int(min(_MAX_NODES, max(33, math.ceil((hi - lo) / h) + 1)))
     yn = np.linspace(lo, hi, n_nodes)
     w = np.full(n_nodes, (hi - lo) / (n_nodes - 1))
