@@ -122,8 +122,11 @@ class ComplexIndexSpec(SpecModel):
     imag: float = Field(0.0, ge=0.0, le=100.0)
 
 
-#: Largest Mie size parameter pi D n_medium / wavelength at the distribution's upper end (3 sigma_g).
-MAX_SIZE_PARAMETER = 2000.0
+#: Largest Mie size parameter pi D n_medium / wavelength the size averaging may reach (its cost grows with it).
+MAX_SIZE_PARAMETER = 500.0
+#: Upper end of the size window the engine integrates over: D_g exp(2 ln^2 sigma_g + 5.7 ln sigma_g)
+#: (the cross-section-weighted distribution, D^2 n(D), has a tail below 1e-8 beyond it).
+SIZE_WINDOW_SIGMAS = 5.7
 
 
 class ParticlesSpec(SpecModel):
@@ -143,10 +146,14 @@ class ParticlesSpec(SpecModel):
 
     @model_validator(mode="after")
     def _size_parameter(self) -> "ParticlesSpec":
-        x = math.pi * self.geometric_mean_diameter * self.geometric_std ** 3 * self.medium_index / self.wavelength
+        s = math.log(self.geometric_std)
+        d_max = self.geometric_mean_diameter * math.exp(2 * s * s + SIZE_WINDOW_SIGMAS * s)
+        x = math.pi * d_max * self.medium_index / self.wavelength
         if x > MAX_SIZE_PARAMETER:
-            raise ValueError(f"size parameter pi D n / wavelength reaches {x:.4g} at D_g sigma_g^3 (limit "
-                             f"{MAX_SIZE_PARAMETER:g}): particles this large are outside the Mie computation's range")
+            raise ValueError(f"the size distribution reaches size parameter pi D n / wavelength = {x:.4g} (at D = "
+                             f"{d_max:.3g} m, where its cross-section-weighted tail ends), above the limit of "
+                             f"{MAX_SIZE_PARAMETER:g}: smaller particles, a narrower distribution or a longer "
+                             "wavelength")
         return self
 
 

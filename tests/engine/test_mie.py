@@ -57,6 +57,10 @@ def test_efficiencies_against_wiscombe_1979(m, x, qext, qsca, gqsc):
     assert e == pytest.approx(qext, rel=2e-6, abs=0)
     assert s == pytest.approx(qsca, rel=2e-6, abs=0)
     assert g * s == pytest.approx(gqsc, rel=2e-6, abs=0)
+    # the sums over the coefficients that the size averaging uses (B&H 4.61, 4.62, 4.74)
+    xs = np.array([x])
+    e2, s2, gs2 = (float(v[0]) for v in mie._efficiencies_ab(*mie._coefficients(m, xs), xs))
+    assert (e2, s2, gs2) == pytest.approx((qext, qsca, gqsc), rel=2e-6, abs=0)
 
 
 def test_efficiencies_against_bohren_huffman_appendix_a():
@@ -223,7 +227,7 @@ def test_number_concentration_and_zero_concentration():
     ({"type": "particles", "particles": SOOT, "mass_concentration": 1e-4}, "needs `particle_density`"),
     ({"type": "particles", "particles": SOOT, "number_concentration": 1e12, "particle_density": 1800},
      "only with `mass_concentration`"),
-    (_medium(particles={**SOOT, "geometric_mean_diameter": 1e-3}), "size parameter"),
+    (_medium(particles={**SOOT, "geometric_mean_diameter": 1e-5}), "reaches size parameter"),
     (_medium(particles={**SOOT, "geometric_std": 0.9}), "greater than or equal to 1"),
     (_medium(particles={**SOOT, "refractive_index": {"real": 1.5, "imag": -0.1}}), "greater than or equal to 0"),
     (_medium(particles={**SOOT, "wavelength": 0}), "greater than 0.00000001"),
@@ -237,3 +241,19 @@ def test_opaque_particle_medium_is_a_located_scene_error():
     med = ParticleMediumSpec.model_validate(_medium(mass_concentration=9.0))
     with pytest.raises(SceneError, match="medium: the particles give sigma_t"):
         medium_from_spec(med)
+
+
+def test_size_limit_is_where_the_engine_window_ends():
+    """The schema's size-parameter limit uses the upper end of the window the engine integrates over."""
+    from owcsim.schemas.medium import MAX_SIZE_PARAMETER, SIZE_WINDOW_SIGMAS
+
+    lam, sg = 8.5e-7, 1.8
+    s = math.log(sg)
+    dg = MAX_SIZE_PARAMETER * lam / math.pi / math.exp(2 * s * s + SIZE_WINDOW_SIGMAS * s)
+    ok = {**SOOT, "geometric_std": sg, "geometric_mean_diameter": 0.99 * dg}
+    ParticlesSpec.model_validate(ok)
+    with pytest.raises(ValidationError, match="reaches size parameter"):
+        ParticlesSpec.model_validate({**ok, "geometric_mean_diameter": 1.01 * dg})
+    # the engine's window (absorbing and Rayleigh-like bounds, tail 1e-8) ends at or below that estimate
+    hi = mie.size_window(0.99 * dg, sg, lam)[1]
+    assert math.pi * math.exp(hi) / lam <= MAX_SIZE_PARAMETER
