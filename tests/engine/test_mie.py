@@ -103,10 +103,10 @@ def test_distribution_in_the_rayleigh_regime_against_lognormal_moments():
     c_sca = 2 * math.pi ** 5 / 3 * abs(K) ** 2 * dg ** 6 * math.exp(18 * s2) / lam ** 4
     c_abs = math.pi ** 2 * K.imag * dg ** 3 * math.exp(4.5 * s2) / lam
     # (cross sections are ~1e-26 m^2: compare ratios, pytest.approx's default abs=1e-12 would pass anything)
-    assert abs(o.c_sca / c_sca - 1) < 2e-3
-    assert abs(o.c_abs / c_abs - 1) < 2e-3
+    assert abs(o.c_sca / c_sca - 1) < 5e-4  # measured: 3e-5 and 8e-5 (x^2 corrections)
+    assert abs(o.c_abs / c_abs - 1) < 5e-4
     assert abs(o.mean_d3 / (dg ** 3 * math.exp(4.5 * s2)) - 1) < 1e-12
-    np.testing.assert_allclose(o.phase, 3 * (1 + o.cos_theta ** 2) / (16 * np.pi), rtol=2e-3)
+    np.testing.assert_allclose(o.phase, 3 * (1 + o.cos_theta ** 2) / (16 * np.pi), rtol=1e-3)
     # power: the monodisperse value (sigma_g ignored) is far off
     assert abs(o.c_sca / (c_sca / math.exp(18 * s2)) - 1) > 1.0
 
@@ -156,9 +156,9 @@ def test_size_averaging_against_direct_quadrature(index, dg, sg):
     g_sca = _direct(p, lambda d: q(d)[3] * q(d)[1] * math.pi * d * d / 4)
     o = mie.particle_optics(p, n_angles=401)
     # (cross sections ~1e-13 m^2: ratios, not pytest.approx with its abs=1e-12)
-    assert abs(o.c_ext / c_ext - 1) < 1e-5
-    assert abs(o.c_sca / c_sca - 1) < 1e-5
-    assert abs(o.g / (g_sca / c_sca) - 1) < 1e-5
+    assert abs(o.c_ext / c_ext - 1) < 1e-6  # measured: 2e-8
+    assert abs(o.c_sca / c_sca - 1) < 1e-6
+    assert abs(o.g / (g_sca / c_sca) - 1) < 1e-6
     # the averaged phase function at a few angles (miepython's own angular sums, per sphere)
     for mu in (-0.9, 0.0, 0.8):
         def weighted(d, mu=mu):
@@ -257,3 +257,17 @@ def test_size_limit_is_where_the_engine_window_ends():
     # the engine's window (absorbing and Rayleigh-like bounds, tail 1e-8) ends at or below that estimate
     hi = mie.size_window(0.99 * dg, sg, lam)[1]
     assert math.pi * math.exp(hi) / lam <= MAX_SIZE_PARAMETER
+
+
+@pytest.mark.parametrize("name", ["light", "dense"])
+def test_soot_examples_build(name):
+    import json
+
+    from tests.scenes import EXAMPLES
+
+    doc = json.loads((EXAMPLES / f"soot_room_{name}.json").read_text())
+    scene = build_scene(spec(doc))
+    info = mie.describe(scene.spec.medium)
+    assert isinstance(scene.phase, MiePhase) and scene.medium.sigma_t == pytest.approx(info["sigma_t"], rel=1e-12)
+    # 50 and 250 mg/m^3 of soot: visibility of tens of metres and of a few metres
+    assert (10 < info["visibility_m"] < 40) if name == "light" else (2 < info["visibility_m"] < 8)
