@@ -45,7 +45,8 @@ from owcsim.schemas.medium import KOSCHMIEDER, MAX_COEFFICIENT, ParticleMediumSp
 from .errors import SceneError
 
 __all__ = ["ParticleOptics", "efficiencies", "intensity", "phase_single", "lognormal_nodes", "particle_optics",
-           "number_concentration", "medium_coefficients", "describe", "DEFAULT_ANGLES"]
+           "number_concentration", "medium_coefficients", "describe", "medium_report", "size_window",
+           "DEFAULT_ANGLES"]
 
 #: Points of the phase table: theta_i = pi (i / (n - 1))^2, dense near the forward peak
 #: (spacing 2 sqrt(pi theta) / n: ~1e-4 rad at theta = 0.01, 0.18 deg at 180 deg).
@@ -314,3 +315,19 @@ def describe(spec: ParticleMediumSpec) -> dict:
         "size_nodes": optics.nodes,
         "phase": table.describe(),
     }
+
+
+def medium_report(medium_spec, phase=None) -> dict | None:
+    """The `modeled["medium"]` entry of a result (for engine/result.py), or None without a medium.
+
+    Particle smoke: `describe(medium_spec)`. Other media: the phase function's type, mean
+    cosine and, for tables, points and normalisation (`phase.describe_phase`), when `phase`
+    (the scene's phase function) is given.
+    """
+    if medium_spec is None:
+        return None
+    if medium_spec.type == "particles":
+        return describe(medium_spec)
+    from .phase import describe_phase
+
+    return {"model": medium_spec.type, "phase": describe_phase(phase) if phase is not None else None}
