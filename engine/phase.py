@@ -18,6 +18,7 @@ from pydantic import TypeAdapter
 
 from owcsim.schemas.medium import PhaseSpec
 
+from .errors import SceneError
 from .sampling import orthonormal_basis
 
 __all__ = ["PhaseFunction", "Isotropic", "HenyeyGreenstein", "Schlick", "Rayleigh", "Mixture", "Tabulated",
@@ -298,11 +299,11 @@ class Tabulated(PhaseFunction):
             raise ValueError("tabulated phase function: cos_theta and values must be finite")
         if c[0] != -1.0 or c[-1] != 1.0:
             raise ValueError(f"tabulated phase function: cos_theta must run from exactly -1 to exactly 1, "
-                             f"got {c[0]!r} .. {c[-1]!r}")
+                             f"got {float(c[0])!r} .. {float(c[-1])!r}")
         if np.any(bad := np.diff(c) <= 0):
             i = int(np.argmax(bad)) + 1
             raise ValueError(f"tabulated phase function: cos_theta must be strictly increasing (entry {i}, "
-                             f"{c[i]!r}, does not exceed entry {i - 1}, {c[i - 1]!r})")
+                             f"{float(c[i])!r}, does not exceed entry {i - 1}, {float(c[i - 1])!r})")
         if np.any(v < 0):
             i = int(np.argmax(v < 0))
             raise ValueError(f"tabulated phase function: values must be >= 0 (entry {i} is {float(v[i])!r})")
@@ -350,7 +351,7 @@ class Tabulated(PhaseFunction):
         c = np.cos(theta)
         c[0], c[-1] = -1.0, 1.0
         if np.any(np.diff(c) <= 0):
-            raise ValueError("tabulated phase function: two angles are too close to give distinct cos(theta)")
+            raise SceneError("medium.phase.angle_deg: two angles are too close to give distinct cos(theta)")
         return cls(c, _f64(spec.values)[::-1])
 
     def describe(self) -> dict:

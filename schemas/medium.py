@@ -107,6 +107,13 @@ class TabulatedPhaseSpec(SpecModel):
         if bad is not None:
             raise ValueError(f"`{name}` must be strictly increasing: entry {bad} ({grid[bad]!r}) does not exceed "
                              f"entry {bad - 1} ({grid[bad - 1]!r})")
+        if self.angle_deg is not None:
+            cos = [math.cos(math.radians(a)) for a in self.angle_deg[1:-1]]
+            cos = [1.0] + cos + [-1.0]
+            bad = next((i for i in range(1, len(cos)) if not cos[i] < cos[i - 1]), None)
+            if bad is not None:
+                raise ValueError(f"`angle_deg` entries {bad - 1} and {bad} ({self.angle_deg[bad - 1]!r}, "
+                                 f"{self.angle_deg[bad]!r}) give the same cos(theta) in double precision")
         bad = _first_bad(self.values, lambda v: v >= 0.0)
         if bad is not None:
             raise ValueError(f"`values` must be >= 0: entry {bad} is {self.values[bad]!r}")

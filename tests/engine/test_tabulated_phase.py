@@ -132,6 +132,7 @@ def test_angle_table_equals_cos_table():
     ({"cos_theta": [-1, 0, 1], "values": [1, 1]}, "3 points but `values` has 2"),
     ({"cos_theta": [-0.9, 1], "values": [1, 1]}, "from exactly -1"),
     ({"angle_deg": [0, 90, 179], "values": [1, 1, 1]}, "from exactly 0 to exactly 180"),
+    ({"angle_deg": [0, 1e-9, 90, 180], "values": [1, 1, 1, 1]}, "entries 0 and 1 .* same cos"),
     ({"cos_theta": [-1, 1], "values": [0, 0]}, "all zero"),
     ({"cos_theta": [-1, 1], "angle_deg": [0, 180], "values": [1, 1]}, "exactly one of"),
     ({"values": [1, 1]}, "exactly one of"),
