@@ -274,6 +274,43 @@ class Mixture(PhaseFunction):
         return f"Mixture({[(float(w), p) for w, p in self._pairs()]!r})"
 
 
+class _Guide:
+    """``searchsorted(edges, keys, "right") - 1`` clipped to the segments, in O(1) per key.
+
+    Guide table (Chen & Asau 1974): keys in [lo, hi] fall in equal buckets; each bucket
+    stores the segment holding its start, and a key moves on by at most ``_GUIDE_STEPS``
+    vectorized steps. Keys in buckets spanning more segments (steep parts of a table), and
+    any key the steps did not settle, take the binary search, so the answer is always exact.
+    """
+
+    def __init__(self, edges: np.ndarray, lo: float, hi: float, per_segment: int = 4):
+        self.edges = edges
+        self.m = len(edges) - 1  # segments
+        self.n = per_segment * self.m  # buckets
+        self.lo, self.scale = lo, self.n / (hi - lo)
+        starts = lo + np.arange(self.n + 1) / self.scale
+        self.start = np.clip(np.searchsorted(edges, starts, side="right") - 1, 0, self.m - 1)
+        self.short = np.diff(self.start) <= _GUIDE_STEPS
+
+    def find(self, keys: np.ndarray) -> np.ndarray:
+        e, m = self.edges, self.m
+        k = np.clip(((keys - self.lo) * self.scale).astype(np.intp), 0, self.n - 1)
+        i = self.start[k]
+        for _ in range(_GUIDE_STEPS):  # loop over steps, vectorized over keys
+            step = (i < m - 1) & (e[np.minimum(i + 1, m)] <= keys)
+            if not step.any():
+                break
+            i = i + step
+        bad = ~self.short[k] | ((i > 0) & (e[i] > keys)) | ((i < m - 1) & (e[np.minimum(i + 1, m)] <= keys))
+        if bad.any():
+            i[bad] = np.clip(np.searchsorted(e, keys[bad], side="right") - 1, 0, m - 1)
+        return i
+
+
+#: Most forward steps of a guide-table lookup before the binary search takes over.
+_GUIDE_STEPS = 3
+
+
 class Tabulated(PhaseFunction):
     """A phase function given at points of cos(theta), linear in cos(theta) between them.
 
@@ -321,18 +358,24 @@ class Tabulated(PhaseFunction):
         cdf[-1] = 1.0
         self._cdf = cdf
         self._mass = np.diff(cdf) / (2.0 * np.pi)  # int p dc per segment
+        self._by_u = _Guide(cdf, 0.0, 1.0)
+        self._by_cos = _Guide(c, -1.0, 1.0)
         a, b = c[:-1], c[1:]
         self._mean = float(2.0 * np.pi * np.sum(h * (self.values[:-1] * (2 * a + b) + self.values[1:] * (a + 2 * b)))
                            / 6.0)
 
     def eval(self, cos_theta):
+        """Linear interpolation (as np.interp), the segment found by a guide table."""
         c = np.clip(_f64(cos_theta), -1.0, 1.0)
-        return np.interp(c, self.cos_theta, self.values)
+        flat = c.reshape(-1)
+        i = self._by_cos.find(flat)
+        out = self.values[i] + self._slope[i] * (flat - self.cos_theta[i])
+        return np.maximum(out, 0.0).reshape(c.shape)
 
     def sample_cos(self, u):
         u = _f64(u)
         flat = u.reshape(-1)
-        i = np.clip(np.searchsorted(self._cdf, flat, side="right") - 1, 0, len(self._h) - 1)
+        i = self._by_u.find(flat)
         r = np.clip((flat - self._cdf[i]) / (2.0 * np.pi), 0.0, self._mass[i])  # int_a^c p dc still to cover
         va, s = self.values[i], self._slope[i]
         den = va + np.sqrt(np.maximum(va * va + 2.0 * s * r, 0.0))

@@ -194,3 +194,18 @@ def test_hg_table_reproduces_hg_through_algorithm_5():
     h_same, _ = _h0(_table_spec(0.6), paths=50_000, seed=3)
     h_ref, _ = _h0(hg, paths=50_000, seed=3)
     assert h_same == pytest.approx(h_ref, rel=1e-5)
+
+
+@pytest.mark.parametrize("c, v", [(ODD_C, ODD_V), _hg_table(0.95, 2001), _hg_table(-0.3, 7)], ids=["odd", "hg", "tiny"])
+def test_guide_table_lookups_equal_binary_search_and_interp(c, v):
+    """eval and sample_cos find segments by guide tables: same answers as np.interp and np.searchsorted."""
+    f = ph.Tabulated(c, v)
+    rng = np.random.default_rng(SEED)
+    keys = np.concatenate([rng.uniform(-1, 1, 200_000), c, np.nextafter(c, 2), np.nextafter(c, -2), [-1.0, 1.0],
+                           1 - rng.random(1000) * 1e-9])
+    keys = np.clip(keys, -1, 1)
+    ref = np.interp(keys, f.cos_theta, f.values)
+    np.testing.assert_allclose(f.eval(keys), ref, rtol=1e-12, atol=1e-300)
+    u = np.concatenate([rng.random(200_000), f._cdf[:-1], np.nextafter(f._cdf[1:-1], 0), [0.0, np.nextafter(1, 0)]])
+    ref_i = np.clip(np.searchsorted(f._cdf, u, side="right") - 1, 0, len(c) - 2)
+    np.testing.assert_array_equal(f._by_u.find(u), ref_i)
