@@ -68,7 +68,15 @@ def _scatters(medium) -> bool:
         return False
     if medium.type == "homogeneous":
         return medium.coefficients[1] > 0
+    if medium.type == "particles":
+        return _particle_coefficients(medium)[1] > 0
     return bool(np.max(np.atleast_1d(medium.sigma_s)) > 0)
+
+
+def _particle_coefficients(medium) -> tuple[float, float]:
+    from .mie import medium_coefficients  # Mie sigma_a, sigma_s of particle smoke (cached)
+
+    return medium_coefficients(medium)
 
 
 def _max_reflectance(spec: SceneSpec, scene) -> float:
@@ -78,8 +86,8 @@ def _max_reflectance(spec: SceneSpec, scene) -> float:
 
 def _max_albedo(spec: SceneSpec) -> float:
     med = spec.medium
-    if med.type == "homogeneous":
-        sa, ss = med.coefficients
+    if med.type in ("homogeneous", "particles"):
+        sa, ss = med.coefficients if med.type == "homogeneous" else _particle_coefficients(med)
         return ss / (sa + ss) if sa + ss > 0 else 0.0
     sa = np.broadcast_to(np.atleast_1d(med.sigma_a), np.atleast_1d(med.sigma_s).shape)
     ss = np.atleast_1d(med.sigma_s)

@@ -29,7 +29,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from owcsim.schemas.medium import GridMediumSpec, HomogeneousMediumSpec, IsotropicPhaseSpec, PhaseSpec
+from owcsim.schemas.medium import (GridMediumSpec, HomogeneousMediumSpec, IsotropicPhaseSpec, ParticleMediumSpec,
+                                  PhaseSpec)
 
 from .regions import BoxRegion, MeshRegion, WholeRegion, as_rows, clip_box
 
@@ -228,8 +229,12 @@ class HomogeneousMedium(Medium):
         return np.where(inside, self.sigma_t, 0.0), np.where(inside, self.sigma_s, 0.0)
 
 
-def medium_from_spec(spec: HomogeneousMediumSpec | GridMediumSpec | None) -> Medium | None:
-    """The engine medium, or None when there is nothing to attenuate (no medium, or sigma_t = 0 everywhere)."""
+def medium_from_spec(spec: HomogeneousMediumSpec | GridMediumSpec | ParticleMediumSpec | None) -> Medium | None:
+    """The engine medium, or None when there is nothing to attenuate (no medium, or sigma_t = 0 everywhere).
+
+    A particle medium becomes a homogeneous one with its Mie sigma_a, sigma_s; its `phase_spec`
+    is the Mie phase spec (built into a table by phase.phase_from_spec).
+    """
     if spec is None:
         return None
     if spec.type == "grid":
@@ -237,7 +242,12 @@ def medium_from_spec(spec: HomogeneousMediumSpec | GridMediumSpec | None) -> Med
 
         medium = GridMedium(spec.min, spec.max, spec.shape, spec.sigma_a, spec.sigma_s, spec.phase)
         return None if medium.sigma_t_max == 0.0 else medium
-    sigma_a, sigma_s = spec.coefficients
+    if spec.type == "particles":  # smoke from its particles: Mie coefficients (engine/mie.py)
+        from .mie import medium_coefficients
+
+        sigma_a, sigma_s = medium_coefficients(spec)
+    else:
+        sigma_a, sigma_s = spec.coefficients
     if sigma_a + sigma_s == 0.0:
         return None
     box = region = None

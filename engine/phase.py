@@ -18,10 +18,12 @@ from pydantic import TypeAdapter
 
 from owcsim.schemas.medium import PhaseSpec
 
+from .errors import SceneError
 from .sampling import orthonormal_basis
 
-__all__ = ["PhaseFunction", "Isotropic", "HenyeyGreenstein", "Schlick", "Rayleigh", "Mixture",
-           "schlick_mean_cosine", "SCHLICK_BLASI_G_MAX", "phase_functions", "phase_from_spec"]
+__all__ = ["PhaseFunction", "Isotropic", "HenyeyGreenstein", "Schlick", "Rayleigh", "Mixture", "Tabulated",
+           "MiePhase", "schlick_mean_cosine", "SCHLICK_BLASI_G_MAX", "phase_functions", "phase_from_spec",
+           "describe_phase"]
 
 _INV_4PI = 1.0 / (4.0 * np.pi)
 _BELOW_ONE = np.nextafter(1.0, 0.0)
@@ -272,11 +274,167 @@ class Mixture(PhaseFunction):
         return f"Mixture({[(float(w), p) for w, p in self._pairs()]!r})"
 
 
+class _Guide:
+    """``searchsorted(edges, keys, "right") - 1`` clipped to the segments, in O(1) per key.
+
+    Guide table (Chen & Asau 1974): keys in [lo, hi] fall in equal buckets; each bucket
+    stores the segment holding its start, and a key moves on by at most ``_GUIDE_STEPS``
+    vectorized steps. Keys in buckets spanning more segments (steep parts of a table), and
+    any key the steps did not settle, take the binary search, so the answer is always exact.
+    """
+
+    def __init__(self, edges: np.ndarray, lo: float, hi: float, per_segment: int = 4):
+        self.edges = edges
+        self.m = len(edges) - 1  # segments
+        self.n = per_segment * self.m  # buckets
+        self.lo, self.scale = lo, self.n / (hi - lo)
+        starts = lo + np.arange(self.n + 1) / self.scale
+        self.start = np.clip(np.searchsorted(edges, starts, side="right") - 1, 0, self.m - 1)
+        self.short = np.diff(self.start) <= _GUIDE_STEPS
+
+    def find(self, keys: np.ndarray) -> np.ndarray:
+        e, m = self.edges, self.m
+        k = np.clip(((keys - self.lo) * self.scale).astype(np.intp), 0, self.n - 1)
+        i = self.start[k]
+        for _ in range(_GUIDE_STEPS):  # loop over steps, vectorized over keys
+            step = (i < m - 1) & (e[np.minimum(i + 1, m)] <= keys)
+            if not step.any():
+                break
+            i = i + step
+        bad = ~self.short[k] | ((i > 0) & (e[i] > keys)) | ((i < m - 1) & (e[np.minimum(i + 1, m)] <= keys))
+        if bad.any():
+            i[bad] = np.clip(np.searchsorted(e, keys[bad], side="right") - 1, 0, m - 1)
+        return i
+
+
+#: Most forward steps of a guide-table lookup before the binary search takes over.
+_GUIDE_STEPS = 3
+
+
+class Tabulated(PhaseFunction):
+    """A phase function given at points of cos(theta), linear in cos(theta) between them.
+
+    ``cos_theta`` (n,) strictly increasing from -1 to 1; ``values`` (n,) >= 0 [1/sr up to a
+    common factor]. The phase function is p(c) = v(c) / normalisation with v the linear
+    interpolant and normalisation = 2 pi int_{-1}^{1} v dc (trapezoid rule, exact for it);
+    ``normalisation`` is reported (1 for a table that was normalised already).
+    Mean cosine, exact for the interpolant: on [a, b] of width h,
+    int c v dc = h (v_a (2a + b) + v_b (a + 2b)) / 6.
+    Sampling inverts the CDF exactly: segment i by its cumulative mass, then within it
+    int_0^x (v_a + s t) dt = r with s = (v_b - v_a)/h gives the root
+    x = 2 r / (v_a + sqrt(v_a^2 + 2 s r)) (no cancellation; v_a^2 + 2 s r >= v_b^2 >= 0).
+    """
+
+    def __init__(self, cos_theta, values):
+        c, v = _f64(cos_theta), _f64(values)
+        if c.ndim != 1 or v.ndim != 1 or len(c) != len(v):
+            raise ValueError(f"a tabulated phase function needs cos_theta and values of one length, got shapes "
+                             f"{c.shape} and {v.shape}")
+        if len(c) < 2:
+            raise ValueError("a tabulated phase function needs at least 2 points")
+        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(v))):
+            raise ValueError("tabulated phase function: cos_theta and values must be finite")
+        if c[0] != -1.0 or c[-1] != 1.0:
+            raise ValueError(f"tabulated phase function: cos_theta must run from exactly -1 to exactly 1, "
+                             f"got {float(c[0])!r} .. {float(c[-1])!r}")
+        if np.any(bad := np.diff(c) <= 0):
+            i = int(np.argmax(bad)) + 1
+            raise ValueError(f"tabulated phase function: cos_theta must be strictly increasing (entry {i}, "
+                             f"{float(c[i])!r}, does not exceed entry {i - 1}, {float(c[i - 1])!r})")
+        if np.any(v < 0):
+            i = int(np.argmax(v < 0))
+            raise ValueError(f"tabulated phase function: values must be >= 0 (entry {i} is {float(v[i])!r})")
+        h = np.diff(c)
+        mass = 0.5 * (v[:-1] + v[1:]) * h  # int v dc per segment
+        total = float(mass.sum())
+        if not total > 0:
+            raise ValueError("tabulated phase function: values are all zero (no positive integral)")
+        self.normalisation = 2.0 * np.pi * total  #: 2 pi int v dc of the values as given [-]
+        self.cos_theta = c
+        self.values = v / self.normalisation  #: p at the points [1/sr], normalised over the sphere
+        self._h = h
+        self._slope = np.diff(self.values) / h
+        cdf = np.concatenate(([0.0], np.cumsum(mass))) / total
+        cdf[-1] = 1.0
+        self._cdf = cdf
+        self._mass = np.diff(cdf) / (2.0 * np.pi)  # int p dc per segment
+        self._by_u = _Guide(cdf, 0.0, 1.0)
+        self._by_cos = _Guide(c, -1.0, 1.0)
+        a, b = c[:-1], c[1:]
+        self._mean = float(2.0 * np.pi * np.sum(h * (self.values[:-1] * (2 * a + b) + self.values[1:] * (a + 2 * b)))
+                           / 6.0)
+
+    def eval(self, cos_theta):
+        """Linear interpolation (as np.interp), the segment found by a guide table."""
+        c = np.clip(_f64(cos_theta), -1.0, 1.0)
+        flat = c.reshape(-1)
+        i = self._by_cos.find(flat)
+        out = self.values[i] + self._slope[i] * (flat - self.cos_theta[i])
+        return np.maximum(out, 0.0).reshape(c.shape)
+
+    def sample_cos(self, u):
+        u = _f64(u)
+        flat = u.reshape(-1)
+        i = self._by_u.find(flat)
+        r = np.clip((flat - self._cdf[i]) / (2.0 * np.pi), 0.0, self._mass[i])  # int_a^c p dc still to cover
+        va, s = self.values[i], self._slope[i]
+        den = va + np.sqrt(np.maximum(va * va + 2.0 * s * r, 0.0))
+        x = np.where(den > 0, 2.0 * r / np.where(den > 0, den, 1.0), 0.0)
+        out = np.minimum(self.cos_theta[i] + np.minimum(x, self._h[i]), self.cos_theta[i + 1])
+        return out.reshape(u.shape)
+
+    mean_cosine = property(lambda self: self._mean)
+
+    @classmethod
+    def from_spec(cls, spec):
+        if spec.cos_theta is not None:
+            return cls(spec.cos_theta, spec.values)
+        # angles increase from 0 to 180 deg: cos decreases from 1 to -1; reversed, with exact end points
+        theta = np.deg2rad(_f64(spec.angle_deg))[::-1]
+        c = np.cos(theta)
+        c[0], c[-1] = -1.0, 1.0
+        if np.any(np.diff(c) <= 0):
+            raise SceneError("medium.phase.angle_deg: two angles are too close to give distinct cos(theta)")
+        return cls(c, _f64(spec.values)[::-1])
+
+    def describe(self) -> dict:
+        return {"type": "tabulated", "points": len(self.cos_theta), "mean_cosine": self.mean_cosine,
+                "normalisation": self.normalisation}
+
+    def __repr__(self):
+        return f"Tabulated(points={len(self.cos_theta)}, mean_cosine={self.mean_cosine:.6g})"
+
+
+class MiePhase(Tabulated):
+    """The size-averaged Mie phase function of a particle spec, as a fine table (engine/mie.py)."""
+
+    @classmethod
+    def from_spec(cls, spec):
+        from .mie import particle_optics  # mie.py builds on this module
+
+        optics = particle_optics(spec.particles)
+        return cls(optics.cos_theta, optics.phase)
+
+    def describe(self) -> dict:
+        return {**super().describe(), "type": "mie"}
+
+    def __repr__(self):
+        return f"MiePhase(points={len(self.cos_theta)}, mean_cosine={self.mean_cosine:.6g})"
+
+
 #: Phase-function classes keyed by the ``type`` literal of schemas.medium's phase specs.
 phase_functions: dict[str, type[PhaseFunction]] = {
     "isotropic": Isotropic, "hg": HenyeyGreenstein, "schlick": Schlick,
-    "rayleigh": Rayleigh, "mixture": Mixture,
+    "rayleigh": Rayleigh, "mixture": Mixture, "tabulated": Tabulated, "mie": MiePhase,
 }
+
+
+def describe_phase(phase: PhaseFunction) -> dict:
+    """What a result reports about a phase function: its type, mean cosine and (tables) normalisation."""
+    if hasattr(phase, "describe"):
+        return phase.describe()
+    kind = next((k for k, v in phase_functions.items() if type(phase) is v), type(phase).__name__)
+    return {"type": kind, "mean_cosine": float(phase.mean_cosine)}
 
 
 def phase_from_spec(spec) -> PhaseFunction:

@@ -66,9 +66,114 @@ class MixturePhaseSpec(SpecModel):
     components: list[MixtureComponent] = Field(min_length=1)
 
 
+#: Most points a tabulated phase function may have.
+MAX_PHASE_TABLE_POINTS = 100_000
+
+
+def _first_bad(values, ok) -> int | None:
+    return next((i for i, v in enumerate(values) if not ok(v)), None)
+
+
+class TabulatedPhaseSpec(SpecModel):
+    """A phase function from a table: `values` of p at the points of `cos_theta` or of `angle_deg`.
+
+    Give `cos_theta` strictly increasing from exactly -1 to exactly 1, or `angle_deg` (the
+    scattering angle theta) strictly increasing from exactly 0 to exactly 180. Between two
+    points p is linear in cos(theta) (also with `angle_deg`). `values` >= 0 [1/sr] may carry
+    any common factor: the engine divides them by their integral 2 pi int p dcos(theta) and
+    reports that normalisation and the mean cosine. Sampling inverts the CDF of this
+    piecewise-linear function exactly.
+    """
+
+    type: Literal["tabulated"] = "tabulated"
+    cos_theta: list[float] | None = Field(None, description="cos(theta), increasing from -1 to 1")
+    angle_deg: list[float] | None = Field(None, description="scattering angle [deg], increasing from 0 to 180")
+    values: list[float] = Field(min_length=2, max_length=MAX_PHASE_TABLE_POINTS,
+                                description="phase function at the points [1/sr, up to a common factor]")
+
+    @model_validator(mode="after")
+    def _table(self) -> "TabulatedPhaseSpec":
+        if (self.cos_theta is None) == (self.angle_deg is None):
+            raise ValueError("give exactly one of `cos_theta` and `angle_deg`")
+        name, grid, ends = (("cos_theta", self.cos_theta, (-1.0, 1.0)) if self.cos_theta is not None
+                            else ("angle_deg", self.angle_deg, (0.0, 180.0)))
+        if len(grid) != len(self.values):
+            raise ValueError(f"`{name}` has {len(grid)} points but `values` has {len(self.values)}: "
+                             "give one value per point")
+        if grid[0] != ends[0] or grid[-1] != ends[1]:
+            raise ValueError(f"`{name}` must run from exactly {ends[0]:g} to exactly {ends[1]:g}, "
+                             f"got {grid[0]!r} .. {grid[-1]!r}")
+        bad = next((i for i in range(1, len(grid)) if not grid[i] > grid[i - 1]), None)
+        if bad is not None:
+            raise ValueError(f"`{name}` must be strictly increasing: entry {bad} ({grid[bad]!r}) does not exceed "
+                             f"entry {bad - 1} ({grid[bad - 1]!r})")
+        if self.angle_deg is not None:
+            cos = [math.cos(math.radians(a)) for a in self.angle_deg[1:-1]]
+            cos = [1.0] + cos + [-1.0]
+            bad = next((i for i in range(1, len(cos)) if not cos[i] < cos[i - 1]), None)
+            if bad is not None:
+                raise ValueError(f"`angle_deg` entries {bad - 1} and {bad} ({self.angle_deg[bad - 1]!r}, "
+                                 f"{self.angle_deg[bad]!r}) give the same cos(theta) in double precision")
+        bad = _first_bad(self.values, lambda v: v >= 0.0)
+        if bad is not None:
+            raise ValueError(f"`values` must be >= 0: entry {bad} is {self.values[bad]!r}")
+        if not any(a > 0 or b > 0 for a, b in zip(self.values[:-1], self.values[1:])):
+            raise ValueError("`values` are all zero: a phase function needs a positive integral")
+        return self
+
+
+class ComplexIndexSpec(SpecModel):
+    """Complex refractive index m = real + i imag; imag >= 0 is absorption (e.g. soot 1.57 + 0.56 i)."""
+
+    real: float = Field(gt=0.0, le=100.0)
+    imag: float = Field(0.0, ge=0.0, le=100.0)
+
+
+#: Largest Mie size parameter pi D n_medium / wavelength the size averaging may reach (its cost grows with it).
+MAX_SIZE_PARAMETER = 500.0
+#: Upper end of the size window the engine integrates over: D_g exp(2 ln^2 sigma_g + 5.7 ln sigma_g)
+#: (the cross-section-weighted distribution, D^2 n(D), has a tail below 1e-8 beyond it).
+SIZE_WINDOW_SIGMAS = 5.7
+
+
+class ParticlesSpec(SpecModel):
+    """Spherical particles with a log-normal number distribution of diameters, seen at one wavelength.
+
+    dN/dlnD = N exp(-(ln D - ln D_g)^2 / (2 ln^2 sigma_g)) / (sqrt(2 pi) ln sigma_g), with D_g the
+    geometric mean (count median) diameter and sigma_g >= 1 the geometric standard deviation
+    (1: all particles of diameter D_g). The engine computes their Mie optics (engine/mie.py).
+    """
+
+    distribution: Literal["lognormal"] = "lognormal"
+    geometric_mean_diameter: float = Field(gt=0.0, le=1e-3, description="count median diameter D_g [m]")
+    geometric_std: float = Field(1.0, ge=1.0, le=4.0, description="geometric standard deviation sigma_g [-]")
+    refractive_index: ComplexIndexSpec = Field(description="of the particle material, m = real + i imag")
+    wavelength: float = Field(gt=1e-8, le=1e-3, description="vacuum wavelength [m]")
+    medium_index: float = Field(1.0, ge=1.0, le=3.0, description="real refractive index of the surrounding gas")
+
+    @model_validator(mode="after")
+    def _size_parameter(self) -> "ParticlesSpec":
+        s = math.log(self.geometric_std)
+        d_max = self.geometric_mean_diameter * math.exp(2 * s * s + SIZE_WINDOW_SIGMAS * s)
+        x = math.pi * d_max * self.medium_index / self.wavelength
+        if x > MAX_SIZE_PARAMETER:
+            raise ValueError(f"the size distribution reaches size parameter pi D n / wavelength = {x:.4g} (at D = "
+                             f"{d_max:.3g} m, where its cross-section-weighted tail ends), above the limit of "
+                             f"{MAX_SIZE_PARAMETER:g}: smaller particles, a narrower distribution or a longer "
+                             "wavelength")
+        return self
+
+
+class MiePhaseSpec(SpecModel):
+    """The Mie phase function of `particles`, averaged over their size distribution (a fine table)."""
+
+    type: Literal["mie"] = "mie"
+    particles: ParticlesSpec
+
+
 PhaseSpec = Annotated[
     Union[IsotropicPhaseSpec, HenyeyGreensteinPhaseSpec, SchlickPhaseSpec, RayleighPhaseSpec,
-          MixturePhaseSpec],
+          MixturePhaseSpec, TabulatedPhaseSpec, MiePhaseSpec],
     Field(discriminator="type"),
 ]
 
@@ -225,4 +330,39 @@ class GridMediumSpec(SpecModel):
         return self
 
 
-MediumSpec = Annotated[Union[HomogeneousMediumSpec, GridMediumSpec], Field(discriminator="type")]
+class ParticleMediumSpec(SpecModel):
+    """Homogeneous smoke given by its particles: concentration, size distribution, refractive index, wavelength.
+
+    Give `mass_concentration` [kg/m^3] with `particle_density` [kg/m^3] (the material density,
+    e.g. about 1800 for soot), or `number_concentration` [1/m^3]. The engine derives
+    sigma_a, sigma_s [1/m] and a tabulated phase function by Mie theory averaged over the
+    size distribution (engine/mie.py) and reports them with albedo, g and the Koschmieder
+    visibility 3.912 / sigma_t.
+    """
+
+    type: Literal["particles"] = "particles"
+    particles: ParticlesSpec
+    mass_concentration: float | None = Field(None, ge=0.0, le=10.0, description="particle mass per volume [kg/m^3]")
+    particle_density: float | None = Field(None, gt=0.0, le=30_000.0, description="material density [kg/m^3]")
+    number_concentration: float | None = Field(None, ge=0.0, le=1e25, description="particles per volume [1/m^3]")
+    region: RegionSpec = Field(default_factory=SceneRegionSpec)
+    emission: float = Field(0.0, ge=0.0, le=0.0, description="volume emission L_ve (reserved, 0)")
+
+    @model_validator(mode="after")
+    def _one_concentration(self) -> "ParticleMediumSpec":
+        if (self.mass_concentration is None) == (self.number_concentration is None):
+            raise ValueError("give exactly one of `mass_concentration` (with `particle_density`) and "
+                             "`number_concentration`")
+        if self.mass_concentration is not None and self.particle_density is None:
+            raise ValueError("`mass_concentration` needs `particle_density` [kg/m^3] (soot: about 1800)")
+        if self.number_concentration is not None and self.particle_density is not None:
+            raise ValueError("`particle_density` is used only with `mass_concentration`")
+        return self
+
+    @property
+    def phase(self) -> MiePhaseSpec:
+        """The phase function the particles imply (Mie, size-averaged)."""
+        return MiePhaseSpec(particles=self.particles)
+
+
+MediumSpec = Annotated[Union[HomogeneousMediumSpec, GridMediumSpec, ParticleMediumSpec], Field(discriminator="type")]
