@@ -12,7 +12,7 @@ import numpy as np
 
 from owcsim.schemas.results import SimulationResultPublic
 
-from . import metrics
+from . import metrics, mie
 from .auto import _max_albedo, _scatters
 from .estimates import channel_moments, link_moments, los_moments, reported_rel_stderr
 from .lighting import Lighting
@@ -124,6 +124,7 @@ def _modeled(spec, scene, modeled, unreachable, settings) -> dict:
     out["algorithm"] = sim.algorithm
     out["families"] = FAMILIES[sim.algorithm] if scene.medium is not None else "vacuum paths, reflection orders 0..K"
     out["left_out"] = left
+    out["medium"] = mie.medium_report(spec.medium, scene.phase)  # derived coefficients, g, visibility
     out["max_reflections"] = sim.max_reflections
     out["max_scattering"] = sim.scattering_orders if scene.medium is not None else 0
     out["time_window_s"] = [settings.bins.t_min, float(settings.bins.edges[-1])]

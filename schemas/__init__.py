@@ -4,7 +4,8 @@ Depends on nothing else in owcsim; `engine`, `server` and `clients` import it.
 """
 from .devices import ReceiverGridSpec, ReceiverSpec, TransmitterSpec
 from .geometry import ROOM_FACES, BoxSpec, MeshSpec, RoomReflectance, RoomSpec
-from .medium import (BoxRegionSpec, GridMediumSpec, HenyeyGreensteinPhaseSpec, HomogeneousMediumSpec,
+from .medium import (ComplexIndexSpec, MiePhaseSpec, ParticleMediumSpec, ParticlesSpec, TabulatedPhaseSpec,
+                     BoxRegionSpec, GridMediumSpec, HenyeyGreensteinPhaseSpec, HomogeneousMediumSpec,
                      IsotropicPhaseSpec, MediumSpec, MeshRegionSpec, MixturePhaseSpec, PhaseSpec, RayleighPhaseSpec,
                      SceneRegionSpec, SchlickPhaseSpec)
 from .link_budget import LinkBudgetSpec, PhotometrySpec
@@ -17,7 +18,8 @@ __all__ = [
     "MediumSpec", "MeshSpec", "MixturePhaseSpec", "PhaseSpec", "RayleighPhaseSpec", "ReceiverGridSpec",
     "ReceiverSpec", "ROOM_FACES", "RoomReflectance", "RoomSpec", "SceneRegionSpec", "SceneSpec",
     "SchlickPhaseSpec", "SimulationSpec", "TransmitterSpec", "LinkBudgetSpec", "PhotometrySpec", "OutputsSpec",
-    "TransmitterGroupSpec",
+    "TransmitterGroupSpec", "ComplexIndexSpec", "MiePhaseSpec", "ParticleMediumSpec", "ParticlesSpec",
+    "TabulatedPhaseSpec",
 ]
 
 # The HTTP service: jobs and problem details.
