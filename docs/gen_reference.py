@@ -9,6 +9,7 @@ not have is an error, so the notes cannot outlive the fields either.
 
 MkDocs runs this through `docs/hooks.py`; `python docs/gen_reference.py OUTDIR` writes the pages to a folder.
 """
+
 from __future__ import annotations
 
 import enum
@@ -79,7 +80,7 @@ NOTES = {
     "LinkPublic.rms_delay_spread_h2_s": "h^2-weighted RMS delay spread from the binned CIR [s]",
     "LinkPublic.rms_delay_spread_h2_s_stderr": "jackknife over 16 batch groups [s]",
     "LinkPublic.bandwidth_3db_hz": "smallest f > 0 with |H(f)|^2 = |H(0)|^2 / 2, from the binned CIR [Hz]; null "
-                                   "when |H| stays above it up to the Nyquist frequency",
+    "when |H| stays above it up to the Nyquist frequency",
     "LinkPublic.bandwidth_3db_hz_stderr": "jackknife over 16 batch groups [Hz]",
     "LinkPublic.los_gain": "exact line-of-sight gain (0 if outside the FOV, behind a device, or blocked)",
     "LinkPublic.los_delay_s": "d / c, the direct path's delay [s]",
@@ -115,11 +116,17 @@ NOTES = {
 }
 
 #: Units read from a field name's suffix when its description has no `[unit]`.
-SUFFIX_UNITS = (("_deg", "deg"), ("_hz", "Hz"), ("_db", "dB"), ("_w", "W"), ("_s", "s"), ("_m", "m"),
-                ("_bytes", "bytes"))
+SUFFIX_UNITS = (
+    ("_deg", "deg"),
+    ("_hz", "Hz"),
+    ("_db", "dB"),
+    ("_w", "W"),
+    ("_s", "s"),
+    ("_m", "m"),
+    ("_bytes", "bytes"),
+)
 #: What the shared validators of schemas/base.py do, by function name.
-VALIDATOR_WORDS = {"_unit_vec": "direction, normalised on input (zero length is an error)",
-                   "_finite_vec": "finite"}
+VALIDATOR_WORDS = {"_unit_vec": "direction, normalised on input (zero length is an error)", "_finite_vec": "finite"}
 
 
 @dataclass
@@ -220,8 +227,15 @@ class _Writer:
             return self.link(tp)
         if inspect.isclass(tp) and issubclass(tp, enum.Enum):
             return " or ".join(f"`{json.dumps(m.value)}`" for m in tp)
-        names = {float: "number", int: "integer", str: "string", bool: "boolean", dict: "object",
-                 type(None): "null", Path: "path"}
+        names = {
+            float: "number",
+            int: "integer",
+            str: "string",
+            bool: "boolean",
+            dict: "object",
+            type(None): "null",
+            Path: "path",
+        }
         return names.get(tp, getattr(tp, "__name__", str(tp)))
 
     def default(self, info: FieldInfo) -> str:
@@ -243,7 +257,9 @@ class _Writer:
 
     def rows(self, model: type[BaseModel], path: str) -> list[str]:
         env = self.page.env_prefix is not None and model is self.page.root
-        head = "| field | " + ("environment variable | " if env else "") + "type | unit | default | bounds | description |"
+        head = (
+            "| field | " + ("environment variable | " if env else "") + "type | unit | default | bounds | description |"
+        )
         out = [head, "|" + "---|" * (head.count("|") - 1)]
         for name, info in model.model_fields.items():
             extra: list[str] = []
@@ -251,8 +267,11 @@ class _Writer:
             tp = self.type_of(info.annotation, sub, extra)
             desc = info.description or NOTES.get(f"{model.__name__}.{name}", "")
             bounds = _bounds(info.metadata) + [e for e in extra if not e.startswith("(")]
-            bounds += [VALIDATOR_WORDS[f.__name__] for m in info.metadata
-                       if (f := getattr(m, "func", None)) is not None and getattr(f, "__name__", "") in VALIDATOR_WORDS]
+            bounds += [
+                VALIDATOR_WORDS[f.__name__]
+                for m in info.metadata
+                if (f := getattr(m, "func", None)) is not None and getattr(f, "__name__", "") in VALIDATOR_WORDS
+            ]
             desc_extra = " ".join(e[1:-1] for e in extra if e.startswith("(") and e[1:-1] != desc)
             desc = "; ".join(d for d in (desc, desc_extra) if d)
             cells = [f"`{name}`"]
@@ -270,8 +289,7 @@ class _Writer:
                 continue
             self.order.append(model)
             body = self.rows(model, path)  # meets nested models: their places are known after this
-            doc = inspect.cleandoc(model.__doc__ or "") if model.__doc__ and model.__doc__ != BaseModel.__doc__ \
-                else ""
+            doc = inspect.cleandoc(model.__doc__ or "") if model.__doc__ and model.__doc__ != BaseModel.__doc__ else ""
             lines += [f"## {model.__name__}", ""]
             if model is not self.page.root:
                 lines += ["At " + ", ".join(f"`{w}`" for w in self.where.get(model, [])) + ".", ""]
@@ -294,24 +312,41 @@ def pages() -> dict[str, str]:
     from owcsim.schemas.results import SimulationResultPublic
     from owcsim.server.settings import Settings
 
-    scene = Page("reference/scene.md", "Scene document reference", """
+    scene = Page(
+        "reference/scene.md",
+        "Scene document reference",
+        """
 The JSON document `owcsim run` reads and `POST /v1/jobs` takes (`owcsim.schemas.SceneSpec`). All units are
 SI (m, s, W, 1/m); angles are in degrees, in the fields ending in `_deg`. Unknown fields are errors, numbers
 must be finite, and every error names its field by its dotted path (e.g. `receivers.0.fov_deg`).
 *This page is generated from the pydantic models (`docs/gen_reference.py`): it is what the code accepts.*
-""", SceneSpec)
-    result = Page("reference/result.md", "Result document reference", """
+""",
+        SceneSpec,
+    )
+    result = Page(
+        "reference/result.md",
+        "Result document reference",
+        """
 What `owcsim run` writes as `result.json`, `GET /v1/jobs/{id}/result` returns and the Python client parses
 (`owcsim.schemas.results.SimulationResultPublic`). Gains are per watt transmitted; delays are absolute
 (from emission). Every Monte Carlo figure has a `_stderr` twin (one standard error); a figure that does
 not exist is null. See [the result document](../results.md) for the sums and how the errors are obtained.
 *Generated from the pydantic models (`docs/gen_reference.py`).*
-""", SimulationResultPublic, elsewhere={SceneSpec: "scene.md"})
-    settings = Page("reference/settings.md", "Service settings reference", """
+""",
+        SimulationResultPublic,
+        elsewhere={SceneSpec: "scene.md"},
+    )
+    settings = Page(
+        "reference/settings.md",
+        "Service settings reference",
+        """
 Settings of `owcsim serve` (`owcsim.server.settings.Settings`), read from `OWCSIM_*` environment variables;
 the flags of `owcsim serve` override the ones they name (`--db`, `--max-concurrent-jobs`, `--workers-per-job`,
 `--api-keys-file`, `--scheduler`). *Generated from the pydantic model (`docs/gen_reference.py`).*
-""", Settings, env_prefix=Settings.model_config.get("env_prefix", ""))
+""",
+        Settings,
+        env_prefix=Settings.model_config.get("env_prefix", ""),
+    )
     out, seen = {}, []
     for page in (scene, result, settings):
         writer = _Writer(page)

@@ -7,6 +7,7 @@
 
 They are never written into docs/, so there is nothing to commit and nothing that can go stale.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -18,7 +19,9 @@ from mkdocs.structure.files import File, Files
 
 
 def _generator():
-    spec = importlib.util.spec_from_file_location("owcsim_docs_gen_reference", Path(__file__).with_name("gen_reference.py"))
+    spec = importlib.util.spec_from_file_location(
+        "owcsim_docs_gen_reference", Path(__file__).with_name("gen_reference.py")
+    )
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # dataclasses look their module up there
     spec.loader.exec_module(module)

@@ -19,12 +19,12 @@ whether the page still shows what the code prints, not luck):
 - a wall time (a number followed by the unit `s`, as in "in 0.17 s") is not compared;
 - any other integer exactly, any other number within 1 % (derived figures: path loss, delay spread).
 """
+
 from __future__ import annotations
 
 import math
 import os
 import re
-import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -33,8 +33,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *sorted((ROOT / "docs" / "tutorials").glob("*.md"))]
-FENCE = re.compile(r"^(?P<indent> *)(?P<fence>```+)(?P<info>[^\n`]*)\n(?P<body>.*?)^(?P=indent)(?P=fence)\s*$",
-                   re.M | re.S)
+FENCE = re.compile(
+    r"^(?P<indent> *)(?P<fence>```+)(?P<info>[^\n`]*)\n(?P<body>.*?)^(?P=indent)(?P=fence)\s*$", re.M | re.S
+)
 NUMBER = r"[-+]?(?:\d{1,3}(?:,\d{3})+|\d+)(?:\.\d+)?(?:[eE][-+]?\d+)?|nan"
 TOKEN = re.compile(rf"(?P<x>{NUMBER})(?:\s*±\s*(?P<e>{NUMBER}))?")
 SERVER_URL = "http://127.0.0.1:8000"
@@ -46,9 +47,15 @@ def blocks(page: Path) -> list[dict]:
     for m in FENCE.finditer(page.read_text()):
         info = m.group("info").strip()
         title = re.search(r'title="([^"]*)"', info)
-        body = "\n".join(line[len(m.group("indent")):] for line in m.group("body").splitlines())
-        out.append({"lang": info.split(" ")[0] if info else "", "title": title.group(1) if title else "",
-                    "body": body, "line": page.read_text()[:m.start()].count("\n") + 1})
+        body = "\n".join(line[len(m.group("indent")) :] for line in m.group("body").splitlines())
+        out.append(
+            {
+                "lang": info.split(" ")[0] if info else "",
+                "title": title.group(1) if title else "",
+                "body": body,
+                "line": page.read_text()[: m.start()].count("\n") + 1,
+            }
+        )
     return out
 
 
@@ -81,7 +88,7 @@ def compare(expected: str, actual: str) -> list[str]:
             continue
         for me, ma in zip(et, at):
             x_e, x_a = _number(me["x"]), _number(ma["x"])
-            after = el[me.end():me.end() + 3]
+            after = el[me.end() : me.end() + 3]
             if math.isnan(x_e) and math.isnan(x_a):
                 continue
             if me["e"] is not None and ma["e"] is not None:
@@ -102,7 +109,7 @@ def _run_example_command() -> str:
     """The command `scripts/run-example` ends with (after installing), with this interpreter's owcsim."""
     last = [ln for ln in (ROOT / "scripts" / "run-example").read_text().splitlines() if ln.startswith("exec ")]
     assert len(last) == 1 and last[0].startswith("exec .venv/bin/owcsim run "), last
-    return last[0][len("exec "):].replace('"$@"', "").strip()
+    return last[0][len("exec ") :].replace('"$@"', "").strip()
 
 
 _OUTPUTS: dict[str, str] = {}  # the same command on two pages (the quick start) runs once per session
@@ -200,11 +207,11 @@ def update(page: Path) -> None:
     for out, prints in reversed(outputs):
         if prints is None:
             continue
-        matches = [m for m in FENCE.finditer(text) if text[:m.start()].count("\n") + 1 == prints["line"]]
+        matches = [m for m in FENCE.finditer(text) if text[: m.start()].count("\n") + 1 == prints["line"]]
         m = matches[0]
         indent = m.group("indent")
         body = "".join(indent + line + "\n" for line in out.rstrip("\n").splitlines())
-        text = text[:m.start("body")] + body + text[m.end("body"):]
+        text = text[: m.start("body")] + body + text[m.end("body") :]
     page.write_text(text)
 
 

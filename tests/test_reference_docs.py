@@ -3,6 +3,7 @@
 The check walks the models' JSON schemas (pydantic's own output, not the generator's walk), so a
 field the generator skipped, a model it never reached, or a page it stopped writing is caught.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -55,9 +56,11 @@ def _models():
     from owcsim.schemas.results import SimulationResultPublic
     from owcsim.server.settings import Settings
 
-    return [("reference/scene.md", SceneSpec.model_json_schema(mode="validation")),
-            ("reference/result.md", SimulationResultPublic.model_json_schema(mode="serialization")),
-            ("reference/settings.md", Settings.model_json_schema())]
+    return [
+        ("reference/scene.md", SceneSpec.model_json_schema(mode="validation")),
+        ("reference/result.md", SimulationResultPublic.model_json_schema(mode="serialization")),
+        ("reference/settings.md", Settings.model_json_schema()),
+    ]
 
 
 @pytest.mark.parametrize("page,schema", _models(), ids=lambda x: x if isinstance(x, str) else "")
@@ -79,8 +82,11 @@ def test_the_result_page_links_the_scene_it_embeds(pages):
 
 def test_rows_carry_type_default_bounds_and_unit(pages):
     """A few rows checked by hand against schemas/ (the point is the columns, not these values)."""
-    rows = {re.match(r"\| `([^`]+)` \|", ln).group(1): ln for ln in pages["reference/scene.md"].splitlines()
-            if ln.startswith("| `")}
+    rows = {
+        re.match(r"\| `([^`]+)` \|", ln).group(1): ln
+        for ln in pages["reference/scene.md"].splitlines()
+        if ln.startswith("| `")
+    }
     assert "| `fov_deg` | number | deg | `90` | >= 1e-06, <= 90 |" in rows["fov_deg"]
     assert "| `time_bin_s` | number | s | `2.5e-10` | >= 1e-15 |" in rows["time_bin_s"]
     assert "**required**" in rows["transmitters"] and "length >= 1" in rows["transmitters"]

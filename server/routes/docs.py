@@ -76,10 +76,13 @@ def _asset_url(request: Request, name: str) -> str:
 def swagger_ui(request: Request) -> HTMLResponse:
     app = request.app
     return get_swagger_ui_html(
-        openapi_url=request.scope.get("root_path", "") + app.openapi_url, title=f"{app.title} - Swagger UI",
-        swagger_js_url=_asset_url(request, "swagger-ui-bundle.js"), swagger_css_url=_asset_url(request, "swagger-ui.css"),
+        openapi_url=request.scope.get("root_path", "") + app.openapi_url,
+        title=f"{app.title} - Swagger UI",
+        swagger_js_url=_asset_url(request, "swagger-ui-bundle.js"),
+        swagger_css_url=_asset_url(request, "swagger-ui.css"),
         swagger_favicon_url=_asset_url(request, "favicon.png"),
-        oauth2_redirect_url=str(request.url_for("docs_oauth2_redirect").path))
+        oauth2_redirect_url=str(request.url_for("docs_oauth2_redirect").path),
+    )
 
 
 @router.get("/docs/oauth2-redirect", response_class=HTMLResponse, name="docs_oauth2_redirect")
@@ -90,9 +93,13 @@ def swagger_ui_redirect() -> HTMLResponse:
 @router.get("/redoc", response_class=HTMLResponse)
 def redoc(request: Request) -> HTMLResponse:
     app = request.app
-    return get_redoc_html(openapi_url=request.scope.get("root_path", "") + app.openapi_url, title=f"{app.title} - ReDoc",
-                          redoc_js_url=_asset_url(request, "redoc.standalone.js"),
-                          redoc_favicon_url=_asset_url(request, "favicon.png"), with_google_fonts=False)
+    return get_redoc_html(
+        openapi_url=request.scope.get("root_path", "") + app.openapi_url,
+        title=f"{app.title} - ReDoc",
+        redoc_js_url=_asset_url(request, "redoc.standalone.js"),
+        redoc_favicon_url=_asset_url(request, "favicon.png"),
+        with_google_fonts=False,
+    )
 
 
 @router.get("/docs/assets/{name}", name="docs_asset")

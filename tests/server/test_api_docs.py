@@ -3,6 +3,7 @@
 Without internet access a page that loads Swagger UI from a CDN is blank: every script, style and
 icon the pages name must be a path of this app, and each must answer with its content.
 """
+
 import re
 
 import pytest
