@@ -23,11 +23,13 @@ def plot_cir(result, path=None, link: int | None = None):
     doc = _as_dict(result)
     tb = doc["time_bins"]
     links = doc["links"] if link is None else [doc["links"][link]]
-    links = links[:6]
+    links = [lk for lk in links if lk.get("cir")][:6]
+    if not links:
+        raise ValueError("no link of this result has a binned CIR (ask for it with outputs.cir = true)")
     t = tb["t_min_s"] + tb["time_bin_s"] * (np.arange(tb["n_bins"]) + 0.5)
     fig, axes = plt.subplots(len(links), 1, figsize=(8, 3.2 * len(links)), squeeze=False)
     for ax, lk in zip(axes[:, 0], links):
-        by_k = np.asarray(lk["cir"]["by_reflection_order"]) / tb["time_bin_s"]
+        by_k = np.asarray(lk["cir"].get("by_reflection_order") or [], float) / tb["time_bin_s"]
         for k, h in enumerate(by_k):
             if h.any() and k <= 8:
                 ax.plot(t * 1e9, h, lw=0.9, label=f"k = {k}")

@@ -141,6 +141,14 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
     need_s = algorithm == 5 and sim.max_scattering is None
     need_t = sim.t_max_s is None
     resolved = spec.model_copy(update={**doc_update, "simulation": sim.model_copy(update=update)})
+    if need_t and not need_k and algorithm == 1 and sim.max_reflections == 0:
+        # Line of sight only: every arrival is a direct path, known without a pilot.
+        longest = max(math.dist(t.position, r.position) for t in spec.transmitters for r in _extreme_receivers(spec))
+        n_bins = max(1, math.ceil((longest / SPEED_OF_LIGHT - sim.t_min_s) / sim.time_bin_s + 1e-9) + 1)
+        update["t_max_s"] = sim.t_min_s + n_bins * sim.time_bin_s
+        modeled["time_window_reason"] = "line of sight only: the window ends after the longest direct path"
+        need_t = False
+        resolved = spec.model_copy(update={**doc_update, "simulation": sim.model_copy(update=update)})
     if not (need_k or need_s or need_t):
         modeled["pilot"] = None
         return resolved, modeled
@@ -152,11 +160,16 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
     cap_k = PILOT_CAP if need_k else resolved.simulation.max_reflections
     cap_s = PILOT_CAP if need_s else resolved.simulation.max_scattering
     t_long = resolved.simulation.t_max_s or (sim.t_min_s + (cap_k + cap_s + 3) * 1.8 * extent / SPEED_OF_LIGHT)
-    receivers = resolved.all_receivers()
-    pick = sorted(set(np.linspace(0, len(receivers) - 1, min(len(receivers), PILOT_RECEIVERS)).round().astype(int)))
+    usable = np.flatnonzero(scene.masked == "")  # grid points in furniture or outside the room are not run
+    if not len(usable):
+        usable = np.arange(len(scene.receivers))
+    pick = sorted(set(usable[np.linspace(0, len(usable) - 1, min(len(usable), PILOT_RECEIVERS)).round().astype(int)]
+                      .tolist()))
     pilot_doc = resolved.model_dump(mode="python")
-    pilot_doc["receivers"] = [receivers[i].model_dump(mode="python") for i in pick]
+    pilot_doc["receivers"] = [resolved.receiver_at(i).model_dump(mode="python") for i in pick]
     pilot_doc["receiver_grids"] = []
+    pilot_doc["transmitter_groups"] = []
+    pilot_doc["outputs"] = {"cir": True, "orders": True}  # the pilot reads the order split and the CIR
     pilot_doc["simulation"].update(
         max_reflections=cap_k, max_scattering=cap_s, t_max_s=t_long, time_bin_s=(t_long - sim.t_min_s) / PILOT_BINS,
         paths=sim.pilot_paths, target_rel_error=None, seed=sim.seed + 1, batch_size=min(sim.batch_size, 4096))
@@ -199,7 +212,7 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
             f"window ends at {update['t_max_s'] * 1e9:.1f} ns: the power arriving later, extrapolated from the "
             f"pilot's exponential decay, is < {allowed / 2:.2e} per watt (late power is counted in late_gain, "
             "not dropped)")
-    modeled["pilot"] = {"paths": sim.pilot_paths, "receivers": [receivers[i].id or f"rx{i}" for i in pick],
+    modeled["pilot"] = {"paths": sim.pilot_paths, "receivers": [scene.receivers.ids[i] for i in pick],
                         "max_reflections": cap_k, "max_scattering": cap_s, "t_max_s": t_long,
                         "allowed_truncation_per_watt": float(allowed), "rho_max": rho_max}
     modeled["truncation_estimate_per_watt"] = float(k_tail + s_tail)
@@ -207,6 +220,16 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
                                   "(scattering) keeps at most rho_max (albedo_max) of the power")
     resolved = spec.model_copy(update={**doc_update, "simulation": sim.model_copy(update=update)})
     return resolved, modeled
+
+
+def _extreme_receivers(spec: SceneSpec):
+    """The explicit receivers and the corners of every grid: the farthest point from any transmitter is one
+    of them (the distance to a point is convex over a grid's rectangle)."""
+    out = list(spec.receivers)
+    for g in spec.receiver_grids:
+        nu, nv = g.shape
+        out += [g.point(i, j) for i in {0, nu - 1} for j in {0, nv - 1}]
+    return out
 
 
 def unreachable_receivers(scene, seen: np.ndarray | None = None, n_rays: int = 64) -> list[int]:

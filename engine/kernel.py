@@ -40,7 +40,7 @@ from .devices import Devices
 from .sampling import cosine_about_soa
 from .segments import equiangular, equiangular_density, time_density, time_strata
 from .scene import Scene
-from .tally import BatchTally, TimeBins, reduce_contributions
+from .tally import BatchBuilder, BatchTally, TallyPlan, TimeBins
 
 #: Upper bound on paths x targets connected in one array operation (memory bound).
 NEE_CHUNK = 1 << 20
@@ -51,7 +51,7 @@ class KernelSettings:
     max_reflections: int  # K
     russian_roulette: bool
     rr_start_depth: int
-    bins: TimeBins
+    tally: TallyPlan
     max_scattering: int = 0  # S: 0 for algorithm 1, 1 for 2-4, S for 5
     free_flight: bool = False  # algorithm 5
     segment_scatter: bool = False  # algorithms 2-4
@@ -63,6 +63,10 @@ class KernelSettings:
     @property
     def n_scatter_orders(self) -> int:
         return self.max_scattering + 1
+
+    @property
+    def bins(self) -> TimeBins:
+        return self.tally.bins
 
 
 @dataclass(frozen=True)
@@ -233,6 +237,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
                 alive = ((mp.k < K) | (mp.s < S)) & (mp.weights > 0)
                 parts.append(mp.keep_where(alive))
         paths = _Paths.concat(parts) if parts else paths.keep(np.zeros(0, np.int64))
+        ctx.flush()  # every estimate of this step went to cells of depth k + s = step + 1
         # --- Russian roulette ------------------------------------------------------------
         if settings.russian_roulette and len(paths):
             at = np.flatnonzero(paths.k + paths.s >= settings.rr_start_depth)
@@ -264,10 +269,13 @@ class _Context:
         self.scene, self.targets, self.tgt, self.settings, self.item = scene, targets, tgt, settings, item
         self.t_pos = np.ascontiguousarray(targets.positions[tgt].T)  # (3, T)
         self.t_nrm = np.ascontiguousarray(targets.normals[tgt].T)
-        self.n_scatter = settings.n_scatter_orders
-        self.cell_stride = (settings.max_reflections + 1) * self.n_scatter
         self.source_position = source_position
-        self.out = {k: [] for k in ("target", "cell", "delay", "power", "path")}
+        self.out = {k: [] for k in self.KEYS}
+        several = settings.segment_scatter or (settings.free_flight and settings.equiangular_points > 0)
+        self.builder = BatchBuilder(settings.tally, item_links(scene, item), item.n_paths, several) \
+            if item is not None else None
+
+    KEYS = ("target", "k", "s", "delay", "power", "path")
 
     def connect(self, points, shadow_origins, weights, paths, normals=None, in_dirs=None,
                 scatter_order=None, extra_length=None):
@@ -324,32 +332,36 @@ class _Context:
             s_ord = (paths.s if scatter_order is None else scatter_order).take(pi)
             length = paths.lengths.take(pi) + d + (0.0 if extra_length is None else extra_length.take(pi))
             self.out["target"].append(ti)
-            self.out["cell"].append(ti * self.cell_stride + paths.k.take(pi) * self.n_scatter + s_ord)
+            self.out["k"].append(paths.k.take(pi))
+            self.out["s"].append(s_ord)
             self.out["delay"].append(length * (1.0 / SPEED_OF_LIGHT))
             self.out["power"].append(f)
             self.out["path"].append(paths.path.take(pi))
 
     def connect_one(self, j: int, points, weights, paths, **kw) -> None:
         """`connect` to the item's j-th target only (weights that depend on the target)."""
-        sub = _Context(self.scene, self.targets, self.tgt[j:j + 1], self.settings, self.item, self.source_position)
+        sub = _Context(self.scene, self.targets, self.tgt[j:j + 1], self.settings, None, self.source_position)
         sub.connect(points, points, weights, paths, **kw)
         for key in self.out:
             if key == "target":
                 self.out[key] += [np.full(len(a), j, np.int64) for a in sub.out[key]]
-            elif key == "cell":
-                self.out[key] += [a + j * self.cell_stride for a in sub.out[key]]
             else:
                 self.out[key] += sub.out[key]
 
+    def flush(self) -> None:
+        """Tally this step's estimates (they all fall in cells of one depth k + s)."""
+        if not self.out["power"]:
+            return
+        cat = {k: np.concatenate(v) for k, v in self.out.items()}
+        self.out = {k: [] for k in self.KEYS}
+        self.builder.add_step(cat["target"], cat["k"], cat["s"], cat["delay"], cat["power"], cat["path"])
+
     def reduce(self, n_paths: int) -> BatchTally:
-        ints = ("target", "cell", "path")
-        cat = {k: (np.concatenate(v) if v else np.zeros(0, np.int64 if k in ints else float))
-               for k, v in self.out.items()}
-        return reduce_contributions(item_links(self.scene, self.item), n_paths, self.settings.bins,
-                                    self.settings.max_reflections + 1, self.n_scatter, cat["target"], cat["cell"],
-                                    cat["delay"], cat["power"], cat["path"],
-                                    several_per_cell=self.settings.segment_scatter or (
-                                        self.settings.free_flight and self.settings.equiangular_points > 0))
+        self.flush()
+        weights = None
+        if self.item.direction == "backward" and self.settings.tally.group_weights.size:
+            weights = self.settings.tally.group_weights[:, self.tgt]  # (G, T): targets are transmitters
+        return self.builder.finish(weights)
 
 
 def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool) -> None:

@@ -3,8 +3,12 @@
 H_los = R(phi) * A cos(psi) T_s g rect(psi <= FOV) / d^2 * exp(-sigma_t d_in) * V,
 R(phi) = (m+1)/(2 pi) cos^m(phi), arriving at t = d / c. It has no variance, so the
 Monte Carlo kernel never samples it; it is added to every estimate as a constant.
+Shadow rays are cast only where the scene has occluders (furniture, meshes) and only for
+pairs that face each other: an empty box room is convex.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -12,26 +16,52 @@ from .constants import SPEED_OF_LIGHT
 from .scene import Scene
 
 
-def line_of_sight(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """(gain per watt, delay [s]) per link, flat in link order (tx * n_rx + rx)."""
+@dataclass(frozen=True)
+class LosGeometry:
+    """Per link (flat, tx * n_rx + rx): cosines at both devices, distance [m], and the clear fraction
+    (0 when blocked, the medium's transmittance exp(-sigma_t d_in) otherwise) of the direct segment."""
+
+    cos_tx: np.ndarray
+    cos_rx: np.ndarray
+    distance: np.ndarray
+    clear: np.ndarray
+
+    @property
+    def delay(self) -> np.ndarray:
+        """Arrival time of the direct light d / c [s]."""
+        return self.distance / SPEED_OF_LIGHT
+
+
+def los_geometry(scene: Scene) -> LosGeometry:
     tx, rx = scene.transmitters, scene.receivers
     ti, ri = np.divmod(np.arange(scene.n_links), len(rx))
     to = rx.positions[ri] - tx.positions[ti]
     d = np.linalg.norm(to, axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         wdir = to / d[:, None]
-    coincident = d == 0
-    wdir[coincident] = 0.0
+    wdir[d == 0] = 0.0
     cos_tx = np.einsum("ij,ij->i", wdir, tx.normals[ti])
     cos_rx = -np.einsum("ij,ij->i", wdir, rx.normals[ri])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        gain = np.where(coincident, 0.0, tx.response(ti, cos_tx) * rx.response(ri, cos_rx) / np.where(coincident, 1.0, d * d))
-    idx = np.flatnonzero(gain > 0)
+    clear = ((cos_tx > 0) & (cos_rx > 0) & (d > 0)).astype(float)
+    idx = np.flatnonzero(clear > 0)
     if len(idx):
         isect = scene.intersector
-        org = tx.positions[ti[idx]] + isect.offset * tx.normals[ti[idx]]
-        blocked = isect.occluded(org, wdir[idx], d[idx] - 2.0 * isect.offset)
-        gain[idx[blocked]] = 0.0
-        if scene.medium is not None:
-            gain[idx] *= scene.medium.transmittance(tx.positions[ti[idx]], wdir[idx], d[idx])
-    return gain, d / SPEED_OF_LIGHT
+        if not scene.all_visible:
+            org = tx.positions[ti[idx]] + isect.offset * tx.normals[ti[idx]]
+            blocked = isect.occluded(org, wdir[idx], d[idx] - 2.0 * isect.offset)
+            clear[idx[blocked]] = 0.0
+            idx = idx[~blocked]
+        if scene.medium is not None and len(idx):
+            clear[idx] = scene.medium.transmittance(tx.positions[ti[idx]], wdir[idx], d[idx])
+    return LosGeometry(cos_tx, cos_rx, d, clear)
+
+
+def line_of_sight(scene: Scene, geometry: LosGeometry | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(gain per watt, delay [s]) per link, flat in link order (tx * n_rx + rx)."""
+    g = geometry if geometry is not None else los_geometry(scene)
+    tx, rx = scene.transmitters, scene.receivers
+    ti, ri = np.divmod(np.arange(scene.n_links), len(rx))
+    ok = g.clear > 0
+    d = np.where(ok, g.distance, 1.0)
+    gain = np.where(ok, tx.response(ti, g.cos_tx) * rx.response(ri, g.cos_rx) / (d * d) * g.clear, 0.0)
+    return gain, g.delay

@@ -14,7 +14,9 @@ from owcsim.schemas.results import SimulationResultPublic
 
 from . import metrics
 from .auto import _max_albedo, _scatters
-from .tally import combined_rel_stderr
+from .estimates import channel_moments, link_moments, los_moments, reported_rel_stderr
+from .lighting import Lighting
+from .result_parts import cir_block, column, document_rows, grid_maps, order_block
 
 FAMILIES = {
     1: "paths without scattering (s = 0), reflection orders 0..K; extinction on every segment",
@@ -73,7 +75,8 @@ OUTSIDE_WINDOW_WARNING = 0.1
 
 def _window_warnings(links) -> list[str]:
     """Links with much of H0 arriving before t_min_s or after t_max_s (early_gain + late_gain)."""
-    outside = [(lk["early_gain"] + lk["late_gain"]) / lk["dc_gain"] for lk in links if lk["dc_gain"] > 0]
+    outside = [(lk["early_gain"] + lk["late_gain"]) / lk["dc_gain"] for lk in links
+               if lk["dc_gain"] and lk["early_gain"] is not None]
     worst = max(outside, default=0.0)
     if worst <= OUTSIDE_WINDOW_WARNING:
         return []
@@ -106,41 +109,6 @@ def _albedo_max(scene) -> float:
 
 
 
-def _combined(accs):
-    """Per-link sums over directions: mean (a, b, c), its covariance, CIR, early/late, order moments."""
-    accs = list(accs)
-    served = [a for a in accs if a.n_paths.any()]
-    pool = served or accs[:1]  # nothing ran (every receiver unreachable): zeros of the right shapes
-    first = served[0] if served else None
-    mean = sum(a.moments()[0] for a in pool)
-    cov = sum(a.moments()[1] for a in pool)
-    cir = sum(a.per_path(a.cir) for a in pool)
-    early = sum(a.per_path(a.early) for a in pool)
-    late = sum(a.per_path(a.late) for a in pool)
-    order_mean = sum(a.order_moments()[0] for a in pool)
-    order_var = sum(a.order_moments()[1] for a in pool)
-    return first, served, mean, cov, cir, early, late, order_mean, order_var
-
-
-def _group_estimates(accs, link):
-    """Per batch group: that group's own estimate of the per-path CIR, summed over directions.
-
-    Returned as (group sums, group weights) for metrics.jackknife / bin_stderr: sum = estimate x weight.
-    """
-    used = np.all([a.group_paths[:, link] > 0 for a in accs], axis=0)
-    est = sum(a.groups[used, link] / a.group_paths[used, link][:, None] for a in accs)
-    weight = sum(a.group_paths[used, link] for a in accs) / len(accs)
-    return est * weight[:, None], weight
-
-
-def _paths_traced(accs, n_tx: int, n_rx: int) -> int:
-    """Paths traced, not path-link pairs: a forward path serves every link of its transmitter
-    (the largest count among them), a backward path every link of its receiver."""
-    fwd = accs["forward"].n_paths.reshape(n_tx, n_rx)
-    bwd = accs["backward"].n_paths.reshape(n_tx, n_rx)
-    return int(fwd.max(axis=1).sum() + bwd.max(axis=0).sum())
-
-
 def _geometric_tail(gain: float, ratio: float) -> float:
     return gain * ratio / (1.0 - ratio) if ratio < 1.0 else math.inf
 
@@ -166,121 +134,157 @@ def _modeled(spec, scene, modeled, unreachable, settings) -> dict:
     return out
 
 
+def _paths_traced(accs, n_tx: int, n_rx: int) -> int:
+    """Paths traced, not path-link pairs: a forward path serves every link of its transmitter
+    (the largest count among them), a backward path every link of its receiver."""
+    fwd = accs["forward"].n_paths.reshape(n_tx, n_rx)
+    bwd = accs["backward"].n_paths.reshape(n_tx, n_rx)
+    return int(fwd.max(axis=1).sum() + bwd.max(axis=0).sum())
+
+
 def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info, original=None, modeled=None,
-                 unreachable=()) -> dict:
-    bins = settings.bins
-    # Binned metrics see times from t_min: spread and bandwidth do not depend on the origin, and edges
-    # t_min + k dt would be uneven in float64 when t_min >> dt.
-    rel_edges = bins.dt * np.arange(bins.n + 1)
-    first, used_accs, mean, cov, cir, early_all, late_all, order_mean, order_var = _combined(accs.values())
-    los_abc = np.stack([los_gain, los_gain * los_delay, los_gain * los_delay**2], axis=-1)
-    delay = metrics.delay_metrics_from_moments(mean + los_abc, cov)
+                 unreachable=(), geometry=None) -> dict:
+    """The result document; every per-link figure is computed for all links at once as arrays."""
+    plan = settings.tally
+    bins = plan.bins
+    tx, rx = scene.transmitters, scene.receivers
+    n_tx, n_rx = len(tx), len(rx)
+    masked_rx = scene.masked != ""
+    link_masked = np.tile(masked_rx, n_tx)
+    los_gain = np.where(link_masked, 0.0, los_gain)
+    los_abc = los_moments(los_gain, los_delay)
+    mean, cov = link_moments(accs, los_abc)
+    delay = metrics.delay_metrics_from_moments(mean, cov)
     n_paths = sum(a.n_paths for a in accs.values())
-    with np.errstate(over="ignore"):  # a delay far outside the window may overflow the bin index: no bin, then
-        los_pos = (los_delay - bins.t_min) / bins.dt
-    los_bin = np.where((los_pos >= 0) & (los_pos < bins.n), np.floor(np.clip(los_pos, 0, bins.n)), -1).astype(np.int64)
-    tx_ids, rx_ids = scene.transmitters.ids, scene.receivers.ids
-    n_rx = len(rx_ids)
-    links = []
-    for link in range(scene.n_links):  # loop over links to assemble the document, not over paths
-        ti, ri = divmod(link, n_rx)
-        cir_ks = cir[link].copy()  # (K+1, S+1, bins)
-        early, late = float(early_all[link].sum()), float(late_all[link].sum())
-        los_vec = np.zeros(bins.n)
-        if los_gain[link] > 0:
-            if 0 <= los_bin[link] < bins.n:
-                cir_ks[0, 0, los_bin[link]] += los_gain[link]
-                los_vec[los_bin[link]] = los_gain[link]
-            elif los_delay[link] < bins.t_min:
-                early += los_gain[link]
-            else:
-                late += los_gain[link]
-        cir_k = cir_ks.sum(axis=1)
-        total = cir_k.sum(axis=0)
-        serving = [a for a in used_accs if a.n_paths[link] > 0]
-        if serving:
-            groups, weight = _group_estimates(serving, link)
-        else:
-            groups, weight = np.zeros((0, bins.n)), np.zeros(0)
-        enough = len(weight) >= 2
-        bin_se = metrics.bin_stderr(groups, weight) if enough else np.full(bins.n, np.nan)
-
-        def per_path(x, _w=float(weight.sum()) if len(weight) else 1.0, _los=los_vec):
-            return x / _w + _los
-
-        t0_h2, rms_h2 = metrics.rms_delay_spread_h2(rel_edges, total)
-        t0_h2 = bins.t_min + t0_h2
-        rms_h2_se = np.nan
-        if enough:
-            _, rms_h2_se = metrics.jackknife(lambda x: metrics.rms_delay_spread_h2(rel_edges, per_path(x))[1],
-                                             groups, weight)
-        bw = metrics.bandwidth_3db(rel_edges, total)
-        bw_se = None
-        if bw is not None and enough:
-            _, bw_se = metrics.jackknife(lambda x: metrics.bandwidth_3db(rel_edges, per_path(x)), groups, weight)
-        by_k = order_mean[link].sum(axis=1)
-        by_k[0] += los_gain[link]
-        by_k_se = np.sqrt(order_var[link].sum(axis=1))
-        by_s = order_mean[link].sum(axis=0)
-        by_s[0] += los_gain[link]
-        by_s_se = np.sqrt(order_var[link].sum(axis=0))
-        h0 = float(delay["dc_gain"][link])
-        rho_max = float(scene.geometry.reflectance.max()) if len(scene.geometry.reflectance) else 0.0
-        tail = _geometric_tail(float(by_k[-1]) if len(by_k) > 1 else 0.0, rho_max) if len(by_k) > 1 else 0.0
-        if settings.max_scattering > 1 and scene.medium is not None:
-            tail += _geometric_tail(float(by_s[-1]), _albedo_max(scene))
-        links.append({
-            "transmitter": tx_ids[ti], "receiver": rx_ids[ri], "transmitter_index": ti, "receiver_index": ri,
-            "direction": DIRECTION_NAMES[int(directions[link])], "paths": int(n_paths[link]),
-            "dc_gain": h0, "dc_gain_stderr": _num(delay["dc_gain_stderr"][link]),
-            "path_loss_db": _num(metrics.path_loss_db(h0)),
-            "received_power_w": h0 * float(scene.transmitters.power[ti]),
-            "mean_delay_s": _num(delay["mean_delay_s"][link]),
-            "mean_delay_s_stderr": _num(delay["mean_delay_s_stderr"][link]),
-            "rms_delay_spread_s": _num(delay["rms_delay_spread_s"][link]),
-            "rms_delay_spread_s_stderr": _num(delay["rms_delay_spread_s_stderr"][link]),
-            "mean_delay_h2_s": _num(t0_h2), "rms_delay_spread_h2_s": _num(rms_h2),
-            "rms_delay_spread_h2_s_stderr": _num(rms_h2_se),
-            "bandwidth_3db_hz": None if bw is None else _num(bw),
-            "bandwidth_3db_hz_stderr": None if bw_se is None else _num(bw_se),
-            "truncated_gain_estimate": _num(tail),
-            "los_gain": float(los_gain[link]), "los_delay_s": float(los_delay[link]),
-            "dc_gain_by_reflection_order": [float(v) for v in by_k],
-            "dc_gain_by_reflection_order_stderr": [_num(v) for v in by_k_se],
-            "dc_gain_by_scattering_order": [float(v) for v in by_s],
-            "dc_gain_by_scattering_order_stderr": [_num(v) for v in by_s_se],
-            "early_gain": early, "late_gain": late,
-            "cir": {"total": total.tolist(), "total_stderr": [_num(v) for v in bin_se],
-                    "by_reflection_order": cir_k.tolist(),
-                    "by_scattering_order": cir_ks.sum(axis=0).tolist()},
-        })
-    rel = combined_rel_stderr(accs.values(), los_gain)
-    fwd = accs["forward"]
+    link_tx, link_rx = np.divmod(np.arange(scene.n_links), n_rx)
+    h0 = np.where(link_masked, np.nan, delay["dc_gain"])
+    nan_masked = {k: np.where(link_masked, np.nan, v) for k, v in delay.items()}
+    cols = {
+        "transmitter": [tx.ids[i] for i in link_tx], "receiver": [rx.ids[j] for j in link_rx],
+        "transmitter_index": link_tx.tolist(), "receiver_index": link_rx.tolist(),
+        "receiver_position": [tuple(p) for p in rx.positions[link_rx].tolist()],
+        "direction": [DIRECTION_NAMES[int(d)] for d in directions], "paths": n_paths.tolist(),
+        "dc_gain": column(h0), "dc_gain_stderr": column(nan_masked["dc_gain_stderr"]),
+        "path_loss_db": column(metrics.path_loss_db(h0)),
+        "received_power_w": column(h0 * tx.power[link_tx]),
+        "mean_delay_s": column(nan_masked["mean_delay_s"]),
+        "mean_delay_s_stderr": column(nan_masked["mean_delay_s_stderr"]),
+        "rms_delay_spread_s": column(nan_masked["rms_delay_spread_s"]),
+        "rms_delay_spread_s_stderr": column(nan_masked["rms_delay_spread_s_stderr"]),
+        "los_gain": column(np.where(link_masked, np.nan, los_gain)), "los_delay_s": los_delay.tolist(),
+    }
+    empty = [None] * scene.n_links
+    for key in ("mean_delay_h2_s", "rms_delay_spread_h2_s", "rms_delay_spread_h2_s_stderr", "bandwidth_3db_hz",
+                "bandwidth_3db_hz_stderr", "truncated_gain_estimate", "dc_gain_by_reflection_order",
+                "dc_gain_by_reflection_order_stderr", "dc_gain_by_scattering_order",
+                "dc_gain_by_scattering_order_stderr", "early_gain", "late_gain", "cir"):
+        cols[key] = list(empty)
+    cir_links = np.flatnonzero(plan.cir_slots(np.arange(scene.n_links)) >= 0)
+    cir_totals = cir_block(accs, plan, cir_links, los_gain, los_delay, cols)
+    order_links = np.flatnonzero(plan.order_slots(np.arange(scene.n_links)) >= 0)
+    rho_max = float(scene.geometry.reflectance.max()) if len(scene.geometry.reflectance) else 0.0
+    albedo_max = _albedo_max(scene) if settings.max_scattering > 1 and scene.medium is not None else None
+    order_block(accs, plan, order_links, los_gain, cols, rho_max, albedo_max)
+    for link in np.flatnonzero(link_masked & (plan.cir_slots(np.arange(scene.n_links)) >= 0)):
+        cols["cir"][link] = None
+    lighting = Lighting(spec, scene, geometry) if geometry is not None else None
+    if lighting is not None:
+        lighting.add_link_columns(cols, h0, nan_masked["rms_delay_spread_s"], link_masked)
+    links = document_rows(cols, scene.n_links)
+    channels = _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting)
+    rel = reported_rel_stderr(accs, los_gain, scene, plan)
     all_accs = list(accs.values())
+    fwd = accs["forward"]
     run = {
         "stop_reason": info.stop_reason, "target_rel_error": spec.simulation.target_rel_error,
         "max_dc_gain_rel_stderr": _num(rel.max()) if len(rel) else None,
         "wall_time_s": info.wall_time_s, "workers": info.workers, "batches": info.batches,
-        "paths_total": _paths_traced(accs, len(tx_ids), n_rx),
+        "paths_total": _paths_traced(accs, n_tx, n_rx),
         "rays_intersect": sum(a.rays_intersect for a in all_accs),
         "rays_occluded": sum(a.rays_occluded for a in all_accs), "direction_choice": info.pilot,
     }
 
     def per_tx(values):
-        return {tx_ids[i]: float(p) / max(fwd.n_paths[scene.link(i, 0):scene.link(i + 1, 0)].max(), 1)
+        return {tx.ids[i]: float(p) / max(fwd.n_paths[scene.link(i, 0):scene.link(i + 1, 0)].max(), 1)
                 for i, p in values.items()}
 
     diagnostics = {
         "power_on_surfaces": per_tx(fwd.surface_power), "escaped_power": per_tx(fwd.escaped_power),
         "medium_evaluations": sum(a.medium_evaluations for a in all_accs),
     }
+    receivers = _receivers(spec, scene)
     doc = {
         "owcsim_version": _owcsim_version(), "algorithm": spec.simulation.algorithm,
-        "warnings": _warnings(spec, scene) + _window_warnings(links),
+        "warnings": _warnings(spec, scene) + _window_warnings(links) + _mask_warnings(scene),
         "modeled": _modeled(spec, scene, modeled, unreachable, settings),
         "families": FAMILIES[spec.simulation.algorithm],
         "time_bins": {"t_min_s": bins.t_min, "time_bin_s": bins.dt, "n_bins": bins.n},
-        "links": links, "run": run, "diagnostics": diagnostics, "scene": (original or spec).model_dump(mode="json"),
+        "links": links, "receivers": receivers, "channels": channels,
+        "maps": grid_maps(spec, scene, links, channels, lighting.map_extra(links, channels) if lighting else None),
+        "run": run, "diagnostics": diagnostics, "scene": (original or spec).model_dump(mode="json"),
     }
-    SimulationResultPublic.model_validate(doc)  # the document matches its published schema
     return doc
+
+
+def _mask_warnings(scene) -> list[str]:
+    masked = np.flatnonzero(scene.masked != "")
+    if not len(masked):
+        return []
+    return [f"{len(masked)} grid point(s) not simulated (values null), e.g. {scene.receivers.ids[masked[0]]}: "
+            f"{scene.masked[masked[0]]}; the receivers list gives every reason"]
+
+
+def _receivers(spec, scene) -> list[dict]:
+    rx = scene.receivers
+    grid = [None] * len(rx)
+    ii, jj = [None] * len(rx), [None] * len(rx)
+    for g, (first, (nu, nv)) in zip(spec.receiver_grids, scene.grid_slices):
+        i, j = np.divmod(np.arange(nu * nv), nv)
+        grid[first:first + nu * nv] = [g.id_prefix] * (nu * nv)
+        ii[first:first + nu * nv] = i.tolist()
+        jj[first:first + nu * nv] = j.tolist()
+    cols = {"id": list(rx.ids), "position": [tuple(p) for p in rx.positions.tolist()],
+            "normal": [tuple(n) for n in rx.normals.tolist()], "grid": grid, "i": ii, "j": jj,
+            "masked": [m or None for m in scene.masked.tolist()]}
+    return document_rows(cols, len(rx))
+
+
+def _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=None) -> list[dict]:
+    """The transmitter groups' channels at every receiver (group-major)."""
+    w = plan.group_weights
+    if not w.size:
+        return []
+    mean, cov = channel_moments(accs, los_abc, plan)
+    d = metrics.delay_metrics_from_moments(mean, cov)
+    n_groups, n_rx = mean.shape[:2]
+    group_power = np.array([scene.transmitters.power[w[g] > 0].sum() for g in range(n_groups)])
+    nan = masked_rx[None, :]
+    h0 = np.where(nan, np.nan, d["dc_gain"])
+    g_idx, r_idx = np.divmod(np.arange(n_groups * n_rx), n_rx)
+    flat = {k: np.where(nan, np.nan, v).ravel() for k, v in d.items()}
+    cols = {
+        "group": [spec.transmitter_groups[g].name for g in g_idx], "receiver": [scene.receivers.ids[j] for j in r_idx],
+        "receiver_index": r_idx.tolist(), "dc_gain": column(h0.ravel()), "dc_gain_stderr": column(flat["dc_gain_stderr"]),
+        "path_loss_db": column(metrics.path_loss_db(h0.ravel())),
+        "received_power_w": column((h0 * group_power[:, None]).ravel()),
+        "mean_delay_s": column(flat["mean_delay_s"]), "mean_delay_s_stderr": column(flat["mean_delay_s_stderr"]),
+        "rms_delay_spread_s": column(flat["rms_delay_spread_s"]),
+        "rms_delay_spread_s_stderr": column(flat["rms_delay_spread_s_stderr"]),
+        "cir": [None] * (n_groups * n_rx),
+    }
+    if lighting is not None:
+        lighting.add_channel_columns(cols, w, h0, np.where(nan, np.nan, d["rms_delay_spread_s"]), group_power)
+    n_tx = w.shape[1]
+    for j in np.flatnonzero(plan.cir_rank >= 0):  # receivers with a CIR: a loop over few explicit receivers
+        members = [cir_totals.get(i * n_rx + j) for i in range(n_tx)]
+        for g in range(n_groups):
+            if masked_rx[j]:
+                continue
+            parts = [(w[g, i], m) for i, m in enumerate(members) if w[g, i] > 0 and m is not None]
+            if not parts:
+                continue
+            total = sum(wi * m[0] for wi, m in parts)
+            groups = sum(wi * m[1] for wi, m in parts)
+            se = metrics.bin_stderr(groups, np.ones(len(groups))) if len(groups) >= 2 else np.full(len(total), np.nan)
+            cols["cir"][g * n_rx + j] = {"total": total.tolist(), "total_stderr": column(se)}
+    return document_rows(cols, n_groups * n_rx)

@@ -24,10 +24,11 @@ from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_re
 from .constants import SPEED_OF_LIGHT
 from .kernel import KernelSettings, WorkItem
 from .auto import resolve, unreachable_receivers, validated
-from .los import line_of_sight
+from .los import line_of_sight, los_geometry
 from .result import build_result
 from .scene import Scene, build_scene
-from .tally import Accumulator, TimeBins, combined_rel_stderr
+from .estimates import reported_rel_stderr
+from .tally import Accumulator, TallyPlan, TimeBins
 
 #: Heuristic of the auto direction: with this many times more receivers than
 #: transmitters (or the reverse), one side amortizes its paths over so many links
@@ -37,6 +38,10 @@ AMORTIZATION_RATIO = 8
 MIN_PATHS_FOR_STOP = 2048
 #: Per-link direction codes: paths from the transmitter, from the receiver, or both (algorithm 4).
 FORWARD, BACKWARD, BOTH, SKIP = 0, 1, 2, 3
+#: Most (path, target) pairs, times the estimates per segment, that one batch holds in its dense per-path
+#: tallies and its step's estimate lists (~150 B each): batches shrink as receivers grow, so a batch of a
+#: 100 000-point map needs about as much memory as one of a single link.
+PATH_TARGET_BUDGET = 1 << 20
 
 ProgressFn = Callable[[float, dict], None]
 
@@ -50,14 +55,39 @@ class RunInfo:
     pilot: dict = field(default_factory=dict)
 
 
-def kernel_settings(spec: SceneSpec) -> KernelSettings:
+def tally_plan(spec: SceneSpec, scene: Scene) -> TallyPlan:
+    """What the job tallies (schemas/outputs.py): CIR and order split per receiver, group weights."""
+    sim = spec.simulation
+    cir, orders = spec.outputs.per_receiver(len(spec.receivers), spec.grid_receiver_count())
+    cir, orders = np.asarray(cir, bool), np.asarray(orders, bool)
+
+    def rank(flags):
+        return np.where(flags, np.cumsum(flags) - 1, -1).astype(np.int64)
+
+    return TallyPlan(bins=TimeBins(sim.t_min_s, sim.time_bin_s, sim.n_bins), n_orders=sim.max_reflections + 1,
+                     n_scatter=sim.scattering_orders + 1, n_rx=len(scene.receivers), cir_rank=rank(cir),
+                     order_rank=rank(orders), group_weights=group_weights(spec, scene))
+
+
+def group_weights(spec: SceneSpec, scene: Scene) -> np.ndarray:
+    """(G, n_tx): weight P_i / sum_group P of each member transmitter in its group's channel."""
+    ids = {t: i for i, t in enumerate(scene.transmitters.ids)}
+    w = np.zeros((len(spec.transmitter_groups), len(scene.transmitters)))
+    for g, group in enumerate(spec.transmitter_groups):
+        members = [ids[t] for t in group.transmitters]
+        power = scene.transmitters.power[members]
+        w[g, members] = power / power.sum()
+    return w
+
+
+def kernel_settings(spec: SceneSpec, scene: Scene) -> KernelSettings:
     """The kernel configuration of the job's algorithm (physics.md section 4)."""
     sim = spec.simulation
     a = sim.algorithm
     step = sim.segment_time_step_s if sim.segment_time_step_s is not None else sim.time_bin_s
     return KernelSettings(
         max_reflections=sim.max_reflections, russian_roulette=sim.russian_roulette,
-        rr_start_depth=sim.rr_start_depth, bins=TimeBins(sim.t_min_s, sim.time_bin_s, sim.n_bins),
+        rr_start_depth=sim.rr_start_depth, tally=tally_plan(spec, scene),
         max_scattering=sim.scattering_orders, free_flight=a == 5, segment_scatter=a in (2, 3, 4),
         strata_length=step * SPEED_OF_LIGHT, max_strata=sim.max_strata,
         equiangular_points=sim.equiangular_points, mis=a == 4)
@@ -80,10 +110,12 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
         spec = validated(spec.model_dump(mode="python"), "the scene with its automatic settings")  # budgets
         scene = None
     scene = scene if scene is not None else build_scene(spec, base_dir)
-    settings = kernel_settings(spec)
-    los_gain, los_delay = line_of_sight(scene)
+    settings = kernel_settings(spec, scene)
+    geometry = los_geometry(scene)
+    los_gain, los_delay = line_of_sight(scene, geometry)
     seen = los_gain.reshape(len(scene.transmitters), len(scene.receivers)).any(axis=0)
-    blocked = unreachable_receivers(scene, seen)  # a direct view proves a receiver reachable
+    masked = np.flatnonzero(scene.masked != "")
+    blocked = unreachable_receivers(scene, seen | (scene.masked != ""))  # a direct view proves reachability
     own = executor is None
     if own:
         executor = SerialExecutor() if workers <= 1 else ProcessExecutor(workers)
@@ -92,14 +124,36 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
         job_ref(scene, str(base_dir) if base_dir is not None else None)
     try:
         directions = _choose_directions(scene, spec, settings, executor, job, los_gain, info)
-        directions[np.isin(np.arange(scene.n_links) % len(scene.receivers), blocked)] = SKIP
+        rx_of_link = np.arange(scene.n_links) % len(scene.receivers)
+        directions[np.isin(rx_of_link, np.concatenate([blocked, masked]).astype(np.int64))] = SKIP
+        if exact_los_only(scene, settings):
+            directions[:] = SKIP
+            info.stop_reason = "exact"
+            info.pilot = {"rule": "max_reflections = 0 without scattering: line of sight only, in closed form"}
         accs = _run(scene, spec, settings, executor, job, directions, los_gain, info, progress, should_stop, t_start)
     finally:
         if own:
             executor.close()
     info.wall_time_s = time.perf_counter() - t_start
     return build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info,
-                        original=original, modeled=modeled, unreachable=blocked)
+                        original=original, modeled=modeled, unreachable=blocked, geometry=geometry)
+
+
+def exact_los_only(scene: Scene, settings: KernelSettings) -> bool:
+    """True when every path the job asks for is a line of sight (computed exactly): no Monte Carlo at all."""
+    scatters = scene.medium is not None and (settings.free_flight or settings.segment_scatter)
+    return settings.max_reflections == 0 and not scatters
+
+
+def batch_size(sim, settings: KernelSettings, n_targets: int) -> int:
+    """Paths per batch: the job's batch_size, capped so that targets x estimates per path stay under
+    PATH_TARGET_BUDGET (the memory of the dense per-path tallies and of one step's estimates)."""
+    per_segment = 1
+    if settings.segment_scatter:
+        per_segment += settings.max_strata + settings.equiangular_points
+    if settings.free_flight:
+        per_segment += settings.equiangular_points
+    return max(1, min(sim.batch_size, PATH_TARGET_BUDGET // max(1, n_targets * per_segment)))
 
 
 def _sources(scene: Scene, directions: np.ndarray) -> list[tuple[str, int, tuple[int, ...]]]:
@@ -112,9 +166,16 @@ def _sources(scene: Scene, directions: np.ndarray) -> list[tuple[str, int, tuple
     return runs
 
 
-def _items(runs, sim, phase: int, n_paths: int | None):
-    """Batches in rounds (one per run per round); endless when n_paths is None."""
-    bs = sim.batch_size
+def _items(runs, sim, settings, phase: int, n_paths: int | None):
+    """Batches in rounds (one per run per round); endless when n_paths is None.
+
+    Every run of a direction has the same batch size (capped by its largest target count), so the
+    plan, and with it the random streams, depends on the scene document only."""
+    sizes = {d: batch_size(sim, settings, max((len(t) for dd, _, t in runs if dd == d), default=1))
+             for d in ("forward", "backward")}
+    bs = min(sizes[d] for d in {r[0] for r in runs}) if runs else sim.batch_size
+    if n_paths is None and len(runs) > 1:  # accuracy mode: a round of many sources checks the target sooner
+        bs = min(bs, max(MIN_PATHS_FOR_STOP, sim.batch_size // len(runs)))
     rounds = itertools.count() if n_paths is None else range(-(-n_paths // bs))
     for b in rounds:
         size = bs if n_paths is None else min(bs, n_paths - b * bs)
@@ -123,8 +184,7 @@ def _items(runs, sim, phase: int, n_paths: int | None):
 
 
 def _new_accumulators(scene, settings) -> dict[str, Accumulator]:
-    return {d: Accumulator(scene.n_links, settings.max_reflections + 1, settings.n_scatter_orders, settings.bins)
-            for d in ("forward", "backward")}
+    return {d: Accumulator(scene.n_links, settings.tally, backward=d == "backward") for d in ("forward", "backward")}
 
 
 def _merge(accs: dict[str, Accumulator], executor, job: JobRef, items, settings, on_batch=None) -> None:
@@ -140,7 +200,7 @@ def _merge(accs: dict[str, Accumulator], executor, job: JobRef, items, settings,
     try:
         for tally in results:
             item = pulled.popleft()
-            accs[item.direction].add(tally, item.batch, item.source if item.direction == "forward" else None)
+            accs[item.direction].add(tally, item.batch, item.source)
             if on_batch is not None and on_batch(item):
                 break
     finally:
@@ -164,18 +224,24 @@ def _choose_directions(scene, spec, settings, executor, job, los_gain, info) -> 
     if sim.max_reflections == 0:
         info.pilot = {"rule": "max_reflections = 0: line of sight only, computed exactly"}
         return np.zeros(scene.n_links, np.int64)
-    if n_rx >= AMORTIZATION_RATIO * n_tx or n_tx >= AMORTIZATION_RATIO * n_rx:
-        side = 0 if n_rx >= n_tx else 1
-        info.pilot = {"rule": f"{n_tx} transmitters x {n_rx} receivers: the "
-                              f"{'transmitter' if side == 0 else 'receiver'} side amortizes its paths, no pilot"}
-        return np.full(scene.n_links, side)
+    if n_rx >= AMORTIZATION_RATIO * n_tx:
+        # A map: forward paths serve every receiver at once, but their next-event estimates from wall points
+        # a few cm from a receiver are heavy-tailed, so the map's worst points converge slowly; paths from each
+        # receiver to the few luminaires do not (benchmarks/map_scale.py measures both).
+        info.pilot = {"rule": f"{n_tx} transmitters x {n_rx} receivers (a map): paths from each receiver to the "
+                              "few transmitters; no pilot"}
+        return np.full(scene.n_links, 1)
+    if n_tx >= AMORTIZATION_RATIO * n_rx:
+        info.pilot = {"rule": f"{n_tx} transmitters x {n_rx} receivers: the receiver side amortizes its paths "
+                              "over the transmitters, no pilot"}
+        return np.full(scene.n_links, 1)
     # Pilot: a short run each way; efficiency = 1 / (relative variance per path x rays per path),
     # rays shared by the links a source serves. Ray counts (not times) keep the choice deterministic.
     cost_eff = []
     for code, direction in enumerate(("forward", "backward")):
         runs = _sources(scene, np.full(scene.n_links, code))
         accs = _new_accumulators(scene, settings)
-        _merge(accs, executor, job, _items(runs, sim, 1, sim.pilot_paths), settings)
+        _merge(accs, executor, job, _items(runs, sim, settings, 1, sim.pilot_paths), settings)
         acc = accs[direction]
         n = acc.n_paths.astype(float)
         mean = acc.s1[:, 0] / n
@@ -206,14 +272,17 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
     runs = _sources(scene, directions)
     accs = _new_accumulators(scene, settings)
     n_paths = sim.n_paths
-    total_batches = len(runs) * -(-n_paths // sim.batch_size) if n_paths is not None else None
+    total_batches = None
+    if n_paths is not None and runs:
+        first = next(_items(runs, sim, settings, 0, n_paths))
+        total_batches = len(runs) * -(-n_paths // first.n_paths)
     state = {"done": 0}
 
     def on_batch(item: WorkItem) -> bool:
         state["done"] += 1
         info.batches = state["done"]
         end_of_round = state["done"] % max(len(runs), 1) == 0
-        rel = combined_rel_stderr(accs.values(), los_gain)
+        rel = reported_rel_stderr(accs, los_gain, scene, settings.tally)
         worst = float(np.max(rel)) if len(rel) else 0.0
         elapsed = time.perf_counter() - t_start
         if total_batches is not None:
@@ -237,8 +306,9 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
                 return True
         return False
 
-    if not runs:  # every link skipped (unreachable receivers): nothing to run, not an endless empty loop
-        info.stop_reason = "nothing_to_simulate"
+    if not runs:  # every link exact or skipped (unreachable receivers): nothing to run, not an endless loop
+        if info.stop_reason != "exact":
+            info.stop_reason = "nothing_to_simulate"
         return accs
-    _merge(accs, executor, job, _items(runs, sim, 0, n_paths), settings, on_batch)
+    _merge(accs, executor, job, _items(runs, sim, settings, 0, n_paths), settings, on_batch)
     return accs

@@ -1,18 +1,29 @@
 """Tallies: what one batch of paths adds, and the ordered merge of batches.
 
-A batch records every connection (next-event estimate) as a contribution
-(target, cell of (target, reflection order k, scattering order s), delay t [s],
-power w per watt, path).
-It reduces them with `np.bincount` on flat indices into:
-- `cir`: power per (link, k, s, time bin) inside the window;
-- `early` / `late`: power arriving before t_min / after t_max, per (link, k, s);
-- `order_sum`, `order_sumsq`: sum of w and w^2 per (link, k, s) — each path makes
-  at most one contribution per (target, k, s), so these are per-path moments;
-- `s1`, `s2`: per-path sums a = sum w, b = sum w t, c = sum w t^2 per link, and
-  the sums of their outer products (for delta-method standard errors of delays).
-Batches are merged in batch order, so results are bit-identical whatever the
-number of workers. Groups (batch index mod N_GROUPS) keep per-bin power for
-batch-spread standard errors and jackknife.
+Only what the job asks is tallied (schemas/outputs.py), so memory and time scale with it:
+
+- every link: the per-path sums a = sum w, b = sum w t, c = sum w t^2 (w the power per
+  watt of a next-event estimate, t its delay [s]) accumulated in dense (3, targets, paths)
+  arrays while the batch runs, then their first and second moments over paths, `s1`
+  (L, 3) and `s2` (L, 3, 3): H0, mean delay and RMS delay spread with delta-method
+  standard errors need nothing else (metrics.delay_metrics);
+- links with a CIR (`TallyPlan.cir_slot` >= 0): power per time bin, power before t_min
+  (`early`) and after t_max (`late`), per batch group for per-bin errors, and split by
+  reflection order k and by scattering order s when the order split is asked too;
+- links with the order split (`order_slot` >= 0): sum of w and of the squared per-path
+  sums per (k, s) cell.
+- backward batches (paths from a receiver, next-event estimates to transmitters): the
+  per-path sums of each transmitter group's channel, sum_i W[g, i] a_i, whose moments give
+  the summed channel's standard error (its links share paths there, so their errors are
+  correlated; forward links of different transmitters are independent and combine later).
+The dense per-path arrays hold targets x paths numbers: the plan caps the batch so that
+this product stays under `simulate.PATH_TARGET_BUDGET` whatever the number of receivers.
+
+Each path adds to a (target, k, s) cell only during one step of the kernel (every step
+raises k + s by one), so per-(path, cell) sums are formed step by step.
+Batches are merged in batch order, so results are bit-identical whatever the number of
+workers. Batch groups (batch index mod N_GROUPS) keep per-bin power and per-link H0 for
+batch-spread standard errors, the jackknife, and the reliability of the error bars.
 """
 from __future__ import annotations
 
@@ -24,7 +35,7 @@ import numpy as np
 N_GROUPS = 16
 
 
-@dataclass
+@dataclass(frozen=True)
 class TimeBins:
     """Bins of width `dt` [s] from `t_min` [s]; `n` bins."""
 
@@ -37,19 +48,65 @@ class TimeBins:
         return self.t_min + self.dt * np.arange(self.n + 1)
 
 
+@dataclass(frozen=True)
+class TallyPlan:
+    """What the job tallies. Slots are per receiver: link (tx, rx) has CIR slot
+    tx * n_cir_rx + cir_rank[rx] when cir_rank[rx] >= 0 (likewise for the order split)."""
+
+    bins: TimeBins
+    n_orders: int  # K + 1
+    n_scatter: int  # S + 1
+    n_rx: int
+    cir_rank: np.ndarray  # (n_rx,) rank among CIR receivers, -1 without CIR
+    order_rank: np.ndarray  # (n_rx,) rank among order-split receivers, -1 without
+    #: (G, n_tx) weight of each transmitter in each group's channel (P_i / sum of the group's P)
+    group_weights: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+
+    @property
+    def n_cir_rx(self) -> int:
+        return int((self.cir_rank >= 0).sum())
+
+    @property
+    def n_order_rx(self) -> int:
+        return int((self.order_rank >= 0).sum())
+
+    def slots(self, links: np.ndarray, rank: np.ndarray, n_ranked: int) -> np.ndarray:
+        """Slot of each global link in a per-(tx, ranked rx) array, -1 where its receiver is not ranked."""
+        tx, rx = np.divmod(np.asarray(links, np.int64), self.n_rx)
+        r = rank.take(rx)
+        return np.where(r >= 0, tx * n_ranked + r, -1)
+
+    def cir_slots(self, links) -> np.ndarray:
+        return self.slots(links, self.cir_rank, self.n_cir_rx)
+
+    def order_slots(self, links) -> np.ndarray:
+        return self.slots(links, self.order_rank, self.n_order_rx)
+
+    @property
+    def by_order_cir(self) -> bool:
+        """True when some receiver has both the CIR and the order split (then the CIR is split too)."""
+        return bool(np.any((self.cir_rank >= 0) & (self.order_rank >= 0)))
+
+
 @dataclass
 class BatchTally:
-    """What one batch adds; arrays over the batch's local links (global ids in `links`)."""
+    """What one batch adds; per-link arrays over the batch's targets (global ids in `links`)."""
 
-    links: np.ndarray  # (L,)
+    links: np.ndarray  # (T,)
     n_paths: int
-    cir: np.ndarray  # (L, K+1, S+1, n_bins)
-    early: np.ndarray  # (L, K+1, S+1)
-    late: np.ndarray  # (L, K+1, S+1)
-    order_sum: np.ndarray  # (L, K+1, S+1)
-    order_sumsq: np.ndarray  # (L, K+1, S+1)
-    s1: np.ndarray  # (L, 3)
-    s2: np.ndarray  # (L, 3, 3)
+    s1: np.ndarray  # (T, 3)
+    s2: np.ndarray  # (T, 3, 3)
+    cir_links: np.ndarray  # (Tc,) global link ids of the targets with a CIR
+    cir: np.ndarray  # (Tc, n_bins)
+    early: np.ndarray  # (Tc,)
+    late: np.ndarray  # (Tc,)
+    cir_k: np.ndarray | None  # (Tc, K+1, n_bins) when the order split is asked too
+    cir_s: np.ndarray | None  # (Tc, S+1, n_bins)
+    order_links: np.ndarray  # (To,)
+    order_sum: np.ndarray  # (To, K+1, S+1)
+    order_sumsq: np.ndarray  # (To, K+1, S+1)
+    channel_s1: np.ndarray | None = None  # (G, 3) backward batches: the groups' channels
+    channel_s2: np.ndarray | None = None  # (G, 3, 3)
     rays_intersect: int = 0
     rays_occluded: int = 0
     surface_power: float = 0.0  # incident power on surfaces (forward paths) [W/W]
@@ -57,132 +114,226 @@ class BatchTally:
     medium_evaluations: int = 0
 
 
-def reduce_contributions(links, n_paths, bins: TimeBins, n_orders: int, n_scatter: int,
-                         target, cell, delay, power, path, several_per_cell: bool = False) -> BatchTally:
-    """Bin a batch's contributions into a BatchTally.
+class BatchBuilder:
+    """Reduces a batch's next-event estimates, step by step, into a BatchTally.
 
-    1-D arrays of equal length: `target` (local link index), `cell` = (target * n_orders
-    + k) * n_scatter + s, `delay` [s], `power` [W/W], `path` (index in the batch).
-    `several_per_cell`: a path may add several contributions to one cell (points
-    along segments); they are summed per (path, cell) before squaring.
+    `links` (T,) are the global links of the batch's targets; `add_step` takes one kernel
+    step's contributions as 1-D arrays: local target index, reflection order k, scattering
+    order s, delay [s], power [W/W], path index in the batch.
     """
-    n_links = len(links)
-    shape_kl = (n_links, n_orders, n_scatter)
-    n_cells = n_links * n_orders * n_scatter
-    b = (delay - bins.t_min) * (1.0 / bins.dt)
-    inside = (b >= 0) & (b < bins.n)
-    if inside.all():
-        cir = np.bincount(cell * bins.n + b.astype(np.int64), power, n_cells * bins.n)
-        early = late = np.zeros(n_cells)
-    else:  # only bins inside the window are cast (a far arrival's index may not fit an int64)
-        sel = np.flatnonzero(inside)
-        cir = np.bincount(cell.take(sel) * bins.n + b.take(sel).astype(np.int64), power.take(sel), n_cells * bins.n)
-        early = np.bincount(cell, np.where(b < 0, power, 0.0), n_cells)
-        late = np.bincount(cell, np.where(b >= bins.n, power, 0.0), n_cells)
-    order_sum = np.bincount(cell, power, n_cells)
-    if several_per_cell and len(cell):
-        keys, inverse = np.unique(path * n_cells + cell, return_inverse=True)
-        per_path_cell = np.bincount(inverse, power, len(keys))
-        order_sumsq = np.bincount(keys % n_cells, per_path_cell * per_path_cell, n_cells)
-    else:
-        order_sumsq = np.bincount(cell, power * power, n_cells)
-    # Per-path sums per link, then their first and second moments over paths.
-    key = target * n_paths + path
-    wt = power * delay
-    abc = np.stack([np.bincount(key, w, n_paths * n_links) for w in (power, wt, wt * delay)])
-    abc = abc.reshape(3, n_links, n_paths).transpose(1, 0, 2)  # (L, 3, paths)
-    s1 = abc.sum(axis=2)
-    s2 = np.matmul(abc, abc.transpose(0, 2, 1))
-    return BatchTally(
-        links=np.asarray(links), n_paths=n_paths,
-        cir=cir.reshape(*shape_kl, bins.n), early=early.reshape(shape_kl), late=late.reshape(shape_kl),
-        order_sum=order_sum.reshape(shape_kl), order_sumsq=order_sumsq.reshape(shape_kl), s1=s1, s2=s2)
+
+    def __init__(self, plan: TallyPlan, links: np.ndarray, n_paths: int, several_per_cell: bool):
+        self.plan, self.links, self.n_paths = plan, np.asarray(links, np.int64), n_paths
+        self.several_per_cell = several_per_cell
+        n_t = len(self.links)
+        self.abc = np.zeros((3, n_t * n_paths))
+        bins = plan.bins
+        cs = plan.cir_slots(self.links)
+        self.cir_local = np.full(n_t, -1, np.int64)
+        self.cir_local[cs >= 0] = np.arange(int((cs >= 0).sum()))
+        self.n_cir = int((cs >= 0).sum())
+        self.cir = np.zeros(self.n_cir * bins.n)
+        self.early = np.zeros(self.n_cir)
+        self.late = np.zeros(self.n_cir)
+        split = plan.by_order_cir
+        self.cir_k = np.zeros(self.n_cir * plan.n_orders * bins.n) if split else None
+        self.cir_s = np.zeros(self.n_cir * plan.n_scatter * bins.n) if split else None
+        os_ = plan.order_slots(self.links)
+        self.order_local = np.full(n_t, -1, np.int64)
+        self.order_local[os_ >= 0] = np.arange(int((os_ >= 0).sum()))
+        self.n_ord = int((os_ >= 0).sum())
+        n_cells = self.n_ord * plan.n_orders * plan.n_scatter
+        self.order_sum = np.zeros(n_cells)
+        self.order_sumsq = np.zeros(n_cells)
+
+    def add_step(self, target, k, s, delay, power, path) -> None:
+        if len(power) == 0:
+            return
+        plan, n = self.plan, self.n_paths
+        # --- per-path moments of every link ------------------------------------------------
+        key = target * n + path
+        size = self.abc.shape[1]
+        wt = power * delay
+        self.abc[0] += np.bincount(key, power, size)
+        self.abc[1] += np.bincount(key, wt, size)
+        self.abc[2] += np.bincount(key, wt * delay, size)
+        # --- binned CIR -----------------------------------------------------------------------
+        if self.n_cir:
+            slot = self.cir_local.take(target)
+            sel = np.flatnonzero(slot >= 0)
+            if len(sel):
+                self._bin(slot.take(sel), k.take(sel), s.take(sel), delay.take(sel), power.take(sel))
+        # --- order split ----------------------------------------------------------------------
+        if self.n_ord:
+            slot = self.order_local.take(target)
+            sel = np.flatnonzero(slot >= 0)
+            if len(sel):
+                n_cells = len(self.order_sum)
+                cell = (slot.take(sel) * plan.n_orders + k.take(sel)) * plan.n_scatter + s.take(sel)
+                p = power.take(sel)
+                self.order_sum += np.bincount(cell, p, n_cells)
+                if self.several_per_cell:  # several estimates of one path in one cell: sum before squaring
+                    keys, inverse = np.unique(path.take(sel) * n_cells + cell, return_inverse=True)
+                    per_path = np.bincount(inverse, p, len(keys))
+                    self.order_sumsq += np.bincount(keys % n_cells, per_path * per_path, n_cells)
+                else:
+                    self.order_sumsq += np.bincount(cell, p * p, n_cells)
+
+    def _bin(self, slot, k, s, delay, power) -> None:
+        bins, plan = self.plan.bins, self.plan
+        b = (delay - bins.t_min) * (1.0 / bins.dt)
+        inside = (b >= 0) & (b < bins.n)
+        if not inside.all():  # only bins inside the window are cast (a far arrival's index may not fit an int64)
+            self.early += np.bincount(slot, np.where(b < 0, power, 0.0), self.n_cir)
+            self.late += np.bincount(slot, np.where(b >= bins.n, power, 0.0), self.n_cir)
+            sel = np.flatnonzero(inside)
+            slot, k, s, b, power = slot.take(sel), k.take(sel), s.take(sel), b.take(sel), power.take(sel)
+        ib = b.astype(np.int64)
+        self.cir += np.bincount(slot * bins.n + ib, power, len(self.cir))
+        if self.cir_k is not None:
+            self.cir_k += np.bincount((slot * plan.n_orders + k) * bins.n + ib, power, len(self.cir_k))
+            self.cir_s += np.bincount((slot * plan.n_scatter + s) * bins.n + ib, power, len(self.cir_s))
+
+    def finish(self, channel_weights: np.ndarray | None = None) -> BatchTally:
+        """The batch's tally; `channel_weights` (G, T) adds the per-path moments of G channels."""
+        plan, n_t = self.plan, len(self.links)
+        abc = self.abc.reshape(3, n_t, self.n_paths)
+        s1 = abc.sum(axis=2).T
+        s2 = np.einsum("qtn,rtn->tqr", abc, abc)
+        ch_s1 = ch_s2 = None
+        if channel_weights is not None and len(channel_weights):
+            ch = np.einsum("gt,qtn->qgn", channel_weights, abc)
+            ch_s1 = ch.sum(axis=2).T
+            ch_s2 = np.einsum("qgn,rgn->gqr", ch, ch)
+        bins = plan.bins
+        cir_sel = np.flatnonzero(self.cir_local >= 0)
+        ord_sel = np.flatnonzero(self.order_local >= 0)
+        return BatchTally(
+            links=self.links, n_paths=self.n_paths, s1=s1, s2=s2,
+            cir_links=self.links.take(cir_sel), cir=self.cir.reshape(self.n_cir, bins.n),
+            early=self.early, late=self.late,
+            cir_k=None if self.cir_k is None else self.cir_k.reshape(self.n_cir, plan.n_orders, bins.n),
+            cir_s=None if self.cir_s is None else self.cir_s.reshape(self.n_cir, plan.n_scatter, bins.n),
+            order_links=self.links.take(ord_sel),
+            order_sum=self.order_sum.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
+            order_sumsq=self.order_sumsq.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
+            channel_s1=ch_s1, channel_s2=ch_s2)
+
+
+def _mean_cov(n: np.ndarray, s1: np.ndarray, s2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean of per-path vectors (..., Q) and the covariance of that mean (..., Q, Q), from n, sums, sums of
+    outer products. Zero with no path (adds nothing when estimators combine); NaN covariance with one path."""
+    nn = n.astype(float)[..., None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mu = np.where(nn > 0, s1 / np.maximum(nn, 1.0), 0.0)
+        cov = (s2 - nn[..., None] * mu[..., :, None] * mu[..., None, :]) / np.maximum(nn - 1, 1)[..., None] \
+            / np.maximum(nn, 1)[..., None]
+    n3 = nn[..., None]
+    return mu, np.where(n3 >= 2, cov, np.where(n3 > 0, np.nan, 0.0))
 
 
 @dataclass
 class Accumulator:
-    """Sums of batch tallies over the whole job, per global link."""
+    """Sums of batch tallies over the whole job for one estimator direction, per global link."""
 
     n_links: int
-    n_orders: int
-    n_scatter: int
-    bins: TimeBins
-    n_paths: np.ndarray = field(init=False)
-    cir: np.ndarray = field(init=False)
-    groups: np.ndarray = field(init=False)  # (N_GROUPS, n_links, n_bins), summed over k, s
-    group_paths: np.ndarray = field(init=False)  # (N_GROUPS, n_links)
+    plan: TallyPlan
+    backward: bool = False
     rays_intersect: int = 0
     rays_occluded: int = 0
     medium_evaluations: int = 0
 
     def __post_init__(self):
-        kl = (self.n_links, self.n_orders, self.n_scatter)
+        plan, bins = self.plan, self.plan.bins
+        n_tx = self.n_links // max(plan.n_rx, 1)
         self.n_paths = np.zeros(self.n_links, np.int64)
-        self.cir = np.zeros((*kl, self.bins.n))
-        self.early = np.zeros(kl)
-        self.late = np.zeros(kl)
-        self.order_sum = np.zeros(kl)
-        self.order_sumsq = np.zeros(kl)
         self.s1 = np.zeros((self.n_links, 3))
         self.s2 = np.zeros((self.n_links, 3, 3))
-        self.groups = np.zeros((N_GROUPS, self.n_links, self.bins.n))
+        n_cir = n_tx * plan.n_cir_rx
+        self.cir = np.zeros((n_cir, bins.n))
+        self.early = np.zeros(n_cir)
+        self.late = np.zeros(n_cir)
+        split = plan.by_order_cir
+        self.cir_k = np.zeros((n_cir, plan.n_orders, bins.n)) if split else None
+        self.cir_s = np.zeros((n_cir, plan.n_scatter, bins.n)) if split else None
+        n_ord = n_tx * plan.n_order_rx
+        self.order_sum = np.zeros((n_ord, plan.n_orders, plan.n_scatter))
+        self.order_sumsq = np.zeros((n_ord, plan.n_orders, plan.n_scatter))
+        self.groups = np.zeros((N_GROUPS, n_cir, bins.n))  # per batch group, summed over k, s
         self.group_paths = np.zeros((N_GROUPS, self.n_links), np.int64)
+        self.group_h0 = np.zeros((N_GROUPS, self.n_links))  # per batch group: sum of per-path H0 estimates
+        n_groups = plan.group_weights.shape[0]
+        self.channel_n = np.zeros((n_groups, plan.n_rx), np.int64)
+        self.channel_s1 = np.zeros((n_groups, plan.n_rx, 3))
+        self.channel_s2 = np.zeros((n_groups, plan.n_rx, 3, 3))
         self.surface_power: dict[int, float] = {}
         self.escaped_power: dict[int, float] = {}
 
-    def add(self, batch: BatchTally, batch_index: int, source: int | None = None) -> None:
-        """Add one batch; call in batch order for bit-identical sums."""
+    def add(self, batch: BatchTally, batch_index: int, source: int) -> None:
+        """Add one batch of `source` (a transmitter forward, a receiver backward); call in batch order."""
         ln = batch.links
         self.n_paths[ln] += batch.n_paths
-        for name in ("cir", "early", "late", "order_sum", "order_sumsq", "s1", "s2"):
-            getattr(self, name)[ln] += getattr(batch, name)
+        self.s1[ln] += batch.s1
+        self.s2[ln] += batch.s2
         g = batch_index % N_GROUPS
-        self.groups[g, ln] += batch.cir.sum(axis=(1, 2))
         self.group_paths[g, ln] += batch.n_paths
+        self.group_h0[g, ln] += batch.s1[:, 0]
+        if len(batch.cir_links):
+            cs = self.plan.cir_slots(batch.cir_links)
+            self.cir[cs] += batch.cir
+            self.early[cs] += batch.early
+            self.late[cs] += batch.late
+            self.groups[g, cs] += batch.cir
+            if batch.cir_k is not None:
+                self.cir_k[cs] += batch.cir_k
+                self.cir_s[cs] += batch.cir_s
+        if len(batch.order_links):
+            os_ = self.plan.order_slots(batch.order_links)
+            self.order_sum[os_] += batch.order_sum
+            self.order_sumsq[os_] += batch.order_sumsq
+        if batch.channel_s1 is not None:
+            self.channel_n[:, source] += batch.n_paths
+            self.channel_s1[:, source] += batch.channel_s1
+            self.channel_s2[:, source] += batch.channel_s2
         self.rays_intersect += batch.rays_intersect
         self.rays_occluded += batch.rays_occluded
         self.medium_evaluations += batch.medium_evaluations
-        if source is not None:
+        if not self.backward:
             self.surface_power[source] = self.surface_power.get(source, 0.0) + batch.surface_power
             self.escaped_power[source] = self.escaped_power.get(source, 0.0) + batch.escaped_power
 
-    def per_path(self, x: np.ndarray) -> np.ndarray:
-        """A per-link sum divided by the link's path count (0 for links this accumulator does not serve)."""
-        n = self.n_paths.astype(float).reshape((-1,) + (1,) * (x.ndim - 1))
-        return np.where(n > 0, x / np.maximum(n, 1.0), 0.0)
+    def paths_of(self, slots_links: np.ndarray) -> np.ndarray:
+        return self.n_paths.take(slots_links)
 
     def moments(self) -> tuple[np.ndarray, np.ndarray]:
-        """Per link: mean of the per-path (a, b, c) (L, 3) and the covariance of that mean (L, 3, 3).
+        """Per link: mean of the per-path (a, b, c) (L, 3) and the covariance of that mean (L, 3, 3)."""
+        return _mean_cov(self.n_paths, self.s1, self.s2)
 
-        Links with no path here get zeros (they add nothing when accumulators combine);
-        links with one path get NaN covariance (no error estimate).
-        """
-        n = self.n_paths.astype(float)[:, None, None]
-        mu = self.per_path(self.s1)
+    def channel_moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per (group, receiver) of backward runs: mean (G, R, 3) and covariance (G, R, 3, 3) of the channel."""
+        return _mean_cov(self.channel_n, self.channel_s1, self.channel_s2)
+
+    def order_moments(self, order_links: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per order-split slot (links given in slot order): mean gain per (k, s) and the variance of that mean."""
+        n = self.n_paths.take(order_links).astype(float)[:, None, None]
         with np.errstate(invalid="ignore", divide="ignore"):
-            cov = (self.s2 - n * mu[:, :, None] * mu[:, None, :]) / np.maximum(n - 1, 1) / np.maximum(n, 1)
-        cov = np.where(n >= 2, cov, np.where(n > 0, np.nan, 0.0))
-        return mu, cov
-
-    def order_moments(self) -> tuple[np.ndarray, np.ndarray]:
-        """Per (link, k, s): mean gain per path and the variance of that mean."""
-        n = self.n_paths.astype(float)[:, None, None]
-        mean = self.per_path(self.order_sum)
-        var = np.maximum(self.per_path(self.order_sumsq) - mean**2, 0.0) / np.maximum(n - 1, 1)
+            mean = np.where(n > 0, self.order_sum / np.maximum(n, 1.0), 0.0)
+            var = np.maximum(np.where(n > 0, self.order_sumsq / np.maximum(n, 1.0), 0.0) - mean ** 2, 0.0) \
+                / np.maximum(n - 1, 1)
         return mean, np.where(n >= 2, var, np.where(n > 0, np.nan, 0.0))
 
 
-def combined_rel_stderr(accs, los: np.ndarray) -> np.ndarray:
-    """Relative standard error of H0 per link over independent accumulators.
-
-    inf where a serving accumulator has fewer than 2 paths; 0 where H0 = 0 exactly.
-    """
+def combined_rel_stderr(accs, los: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    """Relative standard error of H0 per link (or per channel: rows of `weights` (C, L) combine links)
+    over independent accumulators. inf where a serving accumulator has fewer than 2 paths; 0 where H0 = 0."""
     mean = los.astype(float).copy()
     var = np.zeros_like(mean)
     for acc in accs:
         mu, cov = acc.moments()
         mean += mu[:, 0]
         var += cov[:, 0, 0]
+    if weights is not None:
+        mean, var = weights @ mean, (weights ** 2) @ var
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(mean > 0, np.sqrt(np.maximum(var, 0.0)) / mean, 0.0)
     return np.where(np.isnan(var), np.inf, rel)

@@ -48,9 +48,24 @@ def _cmd_validate(args) -> int:
     return 0
 
 
+#: Links above which the command line prints a summary per map instead of one line per link.
+MAX_LINES = 20
+
+
 def _print_links(result: dict) -> None:
     for note in result.get("warnings", []):
         print(f"owcsim: warning: {note}", file=sys.stderr)
+    if len(result["links"]) > MAX_LINES:
+        from owcsim.schemas.maps import format_summary, maps_from_document
+
+        maps, _ = maps_from_document(result)
+        if maps:
+            print(format_summary(maps))
+        worst = result["run"]["max_dc_gain_rel_stderr"]
+        print(f"{len(result['links']):,d} links" + (f", {len(result['channels']):,d} group channels"
+              if result.get("channels") else "") + (f"; largest relative standard error of H0: {worst:.2e}"
+                                                     if worst is not None else "") + "; all in result.json, links.csv")
+        return
     for link in result["links"]:
         err, rms, loss = link["dc_gain_stderr"], link["rms_delay_spread_s"], link["path_loss_db"]
         nan = float("nan")  # a missing figure (None in the JSON), never a 0 taken for missing
@@ -105,8 +120,9 @@ def _cmd_run(args) -> int:
     paths = write_outputs(result, out)
     _print_links(result)
     run = result["run"]
-    print(f"{run['paths_total']:,d} paths in {run['wall_time_s']:.2f} s ({run['stop_reason']}); "
-          f"wrote {', '.join(str(p) for p in paths)}")
+    wrote = ", ".join(str(p) for p in paths) if len(paths) <= 4 else \
+        f"{len(paths)} files in {out} ({', '.join(p.name for p in paths[:3])}, ...)"
+    print(f"{run['paths_total']:,d} paths in {run['wall_time_s']:.2f} s ({run['stop_reason']}); wrote {wrote}")
     return 0
 
 

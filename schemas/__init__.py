@@ -7,14 +7,17 @@ from .geometry import ROOM_FACES, BoxSpec, MeshSpec, RoomReflectance, RoomSpec
 from .medium import (BoxRegionSpec, GridMediumSpec, HenyeyGreensteinPhaseSpec, HomogeneousMediumSpec,
                      IsotropicPhaseSpec, MediumSpec, MeshRegionSpec, MixturePhaseSpec, PhaseSpec, RayleighPhaseSpec,
                      SceneRegionSpec, SchlickPhaseSpec)
-from .scene import SceneSpec
+from .link_budget import LinkBudgetSpec, PhotometrySpec
+from .outputs import OutputsSpec
+from .scene import SceneSpec, TransmitterGroupSpec
 from .simulation import SimulationSpec
 
 __all__ = [
     "BoxRegionSpec", "BoxSpec", "GridMediumSpec", "MeshRegionSpec", "HenyeyGreensteinPhaseSpec", "HomogeneousMediumSpec", "IsotropicPhaseSpec",
     "MediumSpec", "MeshSpec", "MixturePhaseSpec", "PhaseSpec", "RayleighPhaseSpec", "ReceiverGridSpec",
     "ReceiverSpec", "ROOM_FACES", "RoomReflectance", "RoomSpec", "SceneRegionSpec", "SceneSpec",
-    "SchlickPhaseSpec", "SimulationSpec", "TransmitterSpec",
+    "SchlickPhaseSpec", "SimulationSpec", "TransmitterSpec", "LinkBudgetSpec", "PhotometrySpec", "OutputsSpec",
+    "TransmitterGroupSpec",
 ]
 
 # The HTTP service: jobs and problem details.

@@ -7,6 +7,7 @@ from typing import Annotated
 from pydantic import Field, model_validator
 
 from .base import Direction, Point, SpecModel
+from .link_budget import PhotometrySpec
 
 Fov = Annotated[float, Field(ge=1e-6, le=90.0, description="field of view, half-angle [deg], in (0, 90] "
                                                           "(at least 1e-6 deg: below it a concentrator's gain overflows)")]
@@ -25,6 +26,9 @@ class TransmitterSpec(SpecModel):
     power: float = Field(1.0, gt=0.0, description="optical power P_t [W]")
     lambertian_order: float | None = Field(None, ge=0.0, le=1e4, description="Lambertian order m")
     half_power_semi_angle_deg: float | None = Field(None, gt=0.0, lt=90.0, description="Phi_1/2 [deg]")
+    luminous_output: PhotometrySpec | None = Field(
+        None, description="luminous flux [lm] or centre luminous intensity [cd] of the source: gives the "
+                          "illuminance on the receivers (the optical power stays `power`)")
 
     @model_validator(mode="after")
     def _one_pattern(self) -> "TransmitterSpec":
@@ -105,6 +109,18 @@ class ReceiverGridSpec(SpecModel):
     def count(self) -> int:
         nu, nv = self.shape
         return nu * nv
+
+    def ids(self) -> list[str]:
+        """`{id_prefix}[i,j]` of every point, row-major."""
+        nu, nv = self.shape
+        return [f"{self.id_prefix}[{i},{j}]" for i in range(nu) for j in range(nv)]
+
+    def point(self, i: int, j: int) -> ReceiverSpec:
+        """The receiver at grid index (i, j)."""
+        p = tuple(o + self.spacing * (i * a + j * b) for o, a, b in zip(self.origin, self.u, self.v))
+        return ReceiverSpec(id=f"{self.id_prefix}[{i},{j}]", position=p, normal=self.normal, area=self.area,
+                            fov_deg=self.fov_deg, filter_gain=self.filter_gain,
+                            concentrator_index=self.concentrator_index)
 
     def expand(self) -> list[ReceiverSpec]:
         """The grid as individual receivers, row-major in (i along u, j along v)."""

@@ -26,21 +26,28 @@ class CirPublic(PublicModel):
 
     total: list[float]
     total_stderr: list[float | None]
-    by_reflection_order: list[list[float]] = Field(description="[k][bin], k = 0..max_reflections")
-    by_scattering_order: list[list[float]] = Field(description="[s][bin], s = 0..S of the algorithm")
+    by_reflection_order: list[list[float]] | None = Field(
+        None, description="[k][bin], k = 0..max_reflections (when the order split is asked)")
+    by_scattering_order: list[list[float]] | None = Field(
+        None, description="[s][bin], s = 0..S of the algorithm (when the order split is asked)")
 
 
 class LinkPublic(PublicModel):
+    """One transmitter-receiver link. Quantities of a masked receiver (a grid point in furniture or outside
+    the room) are null. The CIR, the figures computed from it and the order split are null when not asked
+    (`outputs`)."""
+
     transmitter: str
     receiver: str
     transmitter_index: int
     receiver_index: int
+    receiver_position: tuple[float, float, float] = Field(description="[m]")
     direction: Literal["forward", "backward", "both", "none"]
     paths: int
-    dc_gain: float
+    dc_gain: float | None
     dc_gain_stderr: float | None
     path_loss_db: float | None
-    received_power_w: float
+    received_power_w: float | None = Field(description="P_t H0 [W]")
     mean_delay_s: float | None
     mean_delay_s_stderr: float | None
     rms_delay_spread_s: float | None
@@ -53,15 +60,74 @@ class LinkPublic(PublicModel):
     truncated_gain_estimate: float | None = Field(
         None, description="estimated power per watt of the reflection (and scattering) orders beyond K (and S), "
                           "not in dc_gain: the last order's gain times rho_max / (1 - rho_max) (albedo for S)")
-    los_gain: float
+    los_gain: float | None
     los_delay_s: float
-    dc_gain_by_reflection_order: list[float]
-    dc_gain_by_reflection_order_stderr: list[float | None]
-    dc_gain_by_scattering_order: list[float]
-    dc_gain_by_scattering_order_stderr: list[float | None]
-    early_gain: float = Field(description="power per watt arriving before t_min_s (not in the CIR)")
-    late_gain: float = Field(description="power per watt arriving after t_max_s (not in the CIR)")
-    cir: CirPublic
+    dc_gain_by_reflection_order: list[float] | None = None
+    dc_gain_by_reflection_order_stderr: list[float | None] | None = None
+    dc_gain_by_scattering_order: list[float] | None = None
+    dc_gain_by_scattering_order_stderr: list[float | None] | None = None
+    early_gain: float | None = Field(None, description="power per watt arriving before t_min_s (not in the CIR)")
+    late_gain: float | None = Field(None, description="power per watt arriving after t_max_s (not in the CIR)")
+    illuminance_lx: float | None = Field(None, description="direct illuminance on the receiver plane [lx] (when "
+                                         "the transmitters give a luminous output)")
+    snr_db: float | None = Field(None, description="electrical SNR [dB] (with `link_budget`)")
+    ber: float | None = Field(None, description="bit-error rate of OOK-NRZ (with `link_budget`)")
+    max_bit_rate_bps: float | None = Field(None, description="bit rate the delay spread allows, 1/(10 tau_rms) "
+                                           "[bit/s] (with `link_budget`)")
+    cir: CirPublic | None = None
+
+
+class ChannelPublic(PublicModel):
+    """A transmitter group's channel at one receiver: h_g = sum_i P_i h_i / sum_i P_i over its members
+    (per watt of the group's total power); received power sum_i P_i H0_i [W]."""
+
+    group: str
+    receiver: str
+    receiver_index: int
+    dc_gain: float | None
+    dc_gain_stderr: float | None
+    path_loss_db: float | None
+    received_power_w: float | None
+    mean_delay_s: float | None
+    mean_delay_s_stderr: float | None
+    rms_delay_spread_s: float | None
+    rms_delay_spread_s_stderr: float | None
+    illuminance_lx: float | None = Field(None, description="direct illuminance on the receiver plane [lx] (when "
+                                         "the transmitters give a luminous output)")
+    snr_db: float | None = Field(None, description="electrical SNR [dB] (with `link_budget`)")
+    ber: float | None = Field(None, description="bit-error rate of OOK-NRZ (with `link_budget`)")
+    max_bit_rate_bps: float | None = Field(None, description="bit rate the delay spread allows, 1/(10 tau_rms) "
+                                           "[bit/s] (with `link_budget`)")
+    cir: CirPublic | None = None
+
+
+class ReceiverPublic(PublicModel):
+    """A receiver of the job; grid points name their grid and (i, j), masked ones say why."""
+
+    id: str
+    position: tuple[float, float, float] = Field(description="[m]")
+    normal: tuple[float, float, float]
+    grid: str | None = None
+    i: int | None = None
+    j: int | None = None
+    masked: str | None = Field(None, description="why this grid point was not simulated (its values are null)")
+
+
+class MapPublic(PublicModel):
+    """Quantities over one receiver grid for one channel (a transmitter group, or a transmitter when the
+    scene has no groups): `values[name][i][j]`, null where masked. Point (i, j) is at origin + i spacing u +
+    j spacing v."""
+
+    grid: str
+    channel: str
+    shape: tuple[int, int]
+    origin: tuple[float, float, float]
+    u: tuple[float, float, float]
+    v: tuple[float, float, float]
+    spacing: float
+    units: dict[str, str]
+    values: dict[str, list[list[float | None]]]
+    stderr: dict[str, list[list[float | None]]] = Field(default_factory=dict)
 
 
 class TimeBinsPublic(PublicModel):
@@ -71,7 +137,7 @@ class TimeBinsPublic(PublicModel):
 
 
 class RunPublic(PublicModel):
-    stop_reason: Literal["paths", "target_reached", "time_budget", "cancelled", "nothing_to_simulate"]
+    stop_reason: Literal["paths", "target_reached", "time_budget", "cancelled", "nothing_to_simulate", "exact"]
     target_rel_error: float | None
     max_dc_gain_rel_stderr: float | None
     wall_time_s: float
@@ -97,6 +163,9 @@ class SimulationResultPublic(PublicModel):
     families: str
     time_bins: TimeBinsPublic
     links: list[LinkPublic]
+    receivers: list[ReceiverPublic] = Field(default_factory=list)
+    channels: list[ChannelPublic] = Field(default_factory=list, description="transmitter groups' channels")
+    maps: list[MapPublic] = Field(default_factory=list, description="receiver grids as 2-D arrays")
     run: RunPublic
     diagnostics: DiagnosticsPublic
     warnings: list[str] = Field(default_factory=list, description="what a careful reader of these numbers should know")

@@ -8,11 +8,25 @@ from pydantic import Field, model_validator
 from .base import SpecModel
 from .devices import ReceiverGridSpec, ReceiverSpec, TransmitterSpec
 from .geometry import BoxSpec, MeshSpec, RoomSpec
+from .link_budget import LinkBudgetSpec
 from .medium import MediumSpec
+from .outputs import OutputsSpec
 from .simulation import SimulationSpec
 
 #: Most tally cells (links x reflection orders x time bins) a job may hold.
 MAX_TALLY_CELLS = 50_000_000
+
+
+class TransmitterGroupSpec(SpecModel):
+    """Transmitters that send the same signal (e.g. the LEDs of one ceiling): their channels add up.
+
+    The group's channel is h_g(t) = sum_i P_i h_i(t) / sum_i P_i (per watt of the group's total
+    power, P_i the members' optical powers); its received power is sum_i P_i H0_i.
+    """
+
+    name: str = Field(min_length=1, max_length=200)
+    transmitters: list[str] = Field(min_length=1, description="ids of the member transmitters (default ids tx0, "
+                                                              "tx1, ... when a transmitter has none)")
 
 
 class SceneSpec(SpecModel):
@@ -27,32 +41,67 @@ class SceneSpec(SpecModel):
     receivers: list[ReceiverSpec] = Field(default_factory=list)
     receiver_grids: list[ReceiverGridSpec] = Field(default_factory=list)
     medium: MediumSpec | None = None
+    transmitter_groups: list[TransmitterGroupSpec] = Field(
+        default_factory=list, description="transmitters that carry one signal: each group's channel (their "
+        "summed response) is reported beside the links, and maps are drawn per group")
+    outputs: OutputsSpec = Field(default_factory=OutputsSpec)
+    link_budget: LinkBudgetSpec | None = Field(
+        None, description="photodiode and receiver electronics: adds SNR, BER of OOK and the bit rate the delay "
+                          "spread allows to links, channels and maps (Komine & Nakagawa 2004 noise model)")
     simulation: SimulationSpec = Field(default_factory=SimulationSpec)
 
     @model_validator(mode="after")
     def _check(self) -> "SceneSpec":
-        rx = self.all_receivers()
-        if not rx:
+        if not self.receivers and not self.receiver_grids:
             raise ValueError("the scene has no receiver: give `receivers` or `receiver_grids`")
-        for kind, devs in (("transmitters", self.transmitters), ("receivers", rx)):
-            ids = [d.id for d in devs if d.id is not None]
+        rx_ids = [r.id for r in self.receivers if r.id is not None] + [
+            i for g in self.receiver_grids for i in g.ids()]
+        for kind, ids in (("transmitters", [d.id for d in self.transmitters if d.id is not None]), ("receivers", rx_ids)):
             dup = sorted(i for i, n in Counter(ids).items() if n > 1)  # linear: grids hold 1e5 receivers
             if dup:
-                raise ValueError(f"{kind}: duplicate ids {dup}")
-        for kind, devs in (("transmitters", self.transmitters), ("receivers", rx)):
+                raise ValueError(f"{kind}: duplicate ids {dup[:20]}")
+        # Explicit devices must be placed sensibly; grid points that are not are masked by the engine.
+        for kind, devs in (("transmitters", self.transmitters), ("receivers", self.receivers)):
             for i, d in enumerate(devs):
-                _check_device_placement(self, f"{kind}[{i}]" + (f" ({d.id})" if d.id else ""), d)
+                problem = placement_problem(self, d.position, d.normal)
+                if problem:
+                    raise ValueError(f"{kind}[{i}]" + (f" ({d.id})" if d.id else "") + f": {problem}")
+        tx_ids = self.transmitter_ids()
+        known = set(tx_ids)
+        names = [g.name for g in self.transmitter_groups]
+        dup = sorted(n for n, c in Counter(names).items() if c > 1)
+        if dup:
+            raise ValueError(f"transmitter_groups: duplicate names {dup}")
+        for gi, g in enumerate(self.transmitter_groups):
+            missing = [t for t in g.transmitters if t not in known]
+            if missing:
+                raise ValueError(f"transmitter_groups[{gi}] ({g.name}): no transmitter with id {missing}; "
+                                 f"the ids are {tx_ids[:10]}{' ...' if len(tx_ids) > 10 else ''}")
+            if len(set(g.transmitters)) != len(g.transmitters):
+                raise ValueError(f"transmitter_groups[{gi}] ({g.name}): a transmitter is listed twice")
         sim = self.simulation
         if not sim.is_resolved:  # the engine checks the budget once it has chosen K, S and the window
             return self
-        orders = (sim.max_reflections + 1) * (sim.scattering_orders + 1)
-        cells = len(self.transmitters) * len(rx) * orders * sim.n_bins
+        cells = self.tally_cells(sim.max_reflections, sim.scattering_orders, sim.n_bins)
         if cells > MAX_TALLY_CELLS:
             raise ValueError(
-                f"{len(self.transmitters)} x {len(rx)} links x {orders} (reflection, scattering) orders x "
-                f"{sim.n_bins} bins = {cells} tally cells, more than the budget of {MAX_TALLY_CELLS}: "
-                "widen `time_bin_s`, shorten the window or lower `max_reflections` / `max_scattering`")
+                f"the binned CIR and order split asked for need {cells} tally cells (links x orders x bins), more "
+                f"than the budget of {MAX_TALLY_CELLS}: widen `time_bin_s`, shorten the window, lower "
+                "`max_reflections` / `max_scattering`, or ask for them on fewer receivers (`outputs`)")
         return self
+
+    def tally_cells(self, max_reflections: int, max_scattering: int, n_bins: int) -> int:
+        """Tally cells the asked outputs hold: CIR bins (per order when the split is asked) and order cells."""
+        n_tx = len(self.transmitters)
+        cir, orders = self.outputs.per_receiver(len(self.receivers), self.grid_receiver_count())
+        n_cir = n_tx * sum(cir)
+        n_ord = n_tx * sum(orders)
+        n_both = n_tx * sum(c and o for c, o in zip(cir, orders))
+        k, s = max_reflections + 1, max_scattering + 1
+        return n_cir * n_bins + n_both * (k + s) * n_bins + n_ord * k * s
+
+    def grid_receiver_count(self) -> int:
+        return sum(g.count for g in self.receiver_grids)
 
     def all_receivers(self) -> list[ReceiverSpec]:
         """Receivers, then every grid expanded, in order."""
@@ -65,23 +114,40 @@ class SceneSpec(SpecModel):
         return [t.id or f"tx{i}" for i, t in enumerate(self.transmitters)]
 
     def receiver_ids(self) -> list[str]:
-        return [r.id or f"rx{i}" for i, r in enumerate(self.all_receivers())]
+        """Ids of the explicit receivers (rx<i> when not given), then of every grid point."""
+        return [r.id or f"rx{i}" for i, r in enumerate(self.receivers)] + [
+            i for g in self.receiver_grids for i in g.ids()]
+
+    def receiver_at(self, index: int) -> ReceiverSpec:
+        """The receiver of global index `index` (explicit receivers first, then the grids' points in order)."""
+        if index < len(self.receivers):
+            return self.receivers[index]
+        index -= len(self.receivers)
+        for g in self.receiver_grids:
+            if index < g.count:
+                return g.point(*divmod(index, g.shape[1]))
+            index -= g.count
+        raise IndexError("receiver index out of range")
 
 
-def _check_device_placement(scene: SceneSpec, where: str, dev) -> None:
-    """A device must be inside the room (on a face is fine if it faces inward), not in furniture."""
-    p, n = dev.position, dev.normal
+def placement_problem(scene: SceneSpec, p, n) -> str | None:
+    """Why a device at `p` with normal `n` cannot see the room, or None.
+
+    Outside the room, strictly inside a furniture box, or on a room face with its normal
+    pointing into the face. A device on a face whose normal lies along the face (a grid
+    point on the edge of the floor, facing up) is fine: half its field of view is open.
+    """
     if scene.room is not None:
         lo, hi = scene.room.lo, scene.room.hi
         tol = 1e-9 * max(1.0, *map(abs, lo), *map(abs, hi))
         for ax in range(3):
             if p[ax] < lo[ax] - tol or p[ax] > hi[ax] + tol:
-                raise ValueError(f"{where}: position {p} is outside the room {lo}..{hi}")
-            if abs(p[ax] - lo[ax]) <= tol and n[ax] <= 0:
-                raise ValueError(f"{where}: sits on a room face at {'xyz'[ax]} = {lo[ax]:g} and faces into it")
-            if abs(p[ax] - hi[ax]) <= tol and n[ax] >= 0:
-                raise ValueError(f"{where}: sits on a room face at {'xyz'[ax]} = {hi[ax]:g} and faces into it")
+                return f"position {tuple(p)} is outside the room {lo}..{hi}"
+            if abs(p[ax] - lo[ax]) <= tol and n[ax] < 0:
+                return f"sits on a room face at {'xyz'[ax]} = {lo[ax]:g} and faces into it"
+            if abs(p[ax] - hi[ax]) <= tol and n[ax] > 0:
+                return f"sits on a room face at {'xyz'[ax]} = {hi[ax]:g} and faces into it"
     for j, box in enumerate(scene.furniture):
-        inside = all(a < c < b for a, b, c in zip(box.min, box.max, p))
-        if inside:
-            raise ValueError(f"{where}: position {p} is inside furniture[{j}]" + (f" ({box.name})" if box.name else ""))
+        if all(a < c < b for a, b, c in zip(box.min, box.max, p)):
+            return f"position {tuple(p)} is inside furniture[{j}]" + (f" ({box.name})" if box.name else "")
+    return None

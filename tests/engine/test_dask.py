@@ -141,7 +141,7 @@ def test_worker_builds_a_different_scene_is_an_error(dask):
     job = JobRef(scene, "", "", None)
     items = [WorkItem("forward", 0, (0,), i, 1024, 7) for i in range(2)]
     with pytest.raises(SceneError, match="different scene"):
-        list(dask.map(job, items, kernel_settings(a)))
+        list(dask.map(job, items, kernel_settings(a, scene)))
 
 
 def test_cancel_reaches_the_cluster(client, dask):
@@ -167,7 +167,8 @@ def test_cancel_reaches_the_cluster(client, dask):
             pulled.append(b)
             yield WorkItem("forward", 0, (0,), b, 8192, 7)
 
-    results = dask.map(JobRef(build_scene(s), "", "", None), endless(), kernel_settings(s))
+    built = build_scene(s)
+    results = dask.map(JobRef(built, "", "", None), endless(), kernel_settings(s, built))
     next(results)
     assert len(pulled) <= dask.window + 1  # a bounded window is in flight
     assert client.run_on_scheduler(_batch_tasks)

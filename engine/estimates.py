@@ -1,0 +1,77 @@
+"""Estimates of every link and of every transmitter group's channel, from the merged tallies.
+
+A link (tx i, rx j) is estimated by the forward paths of transmitter i, the backward paths of
+receiver j, or both (algorithm 4): independent estimators of parts of the same quantity, so
+their means and covariances add; the exactly known line of sight adds to the mean only.
+A group g's channel is the power-weighted sum of its members' links,
+    h_gj = sum_i W[g, i] h_ij,  W[g, i] = P_i / sum_{i' in g} P_i'.
+Forward estimates of different transmitters are independent (Var adds with W^2); backward
+paths from receiver j estimate all its links at once, so the backward part of the channel
+has its own per-path moments (tally.BatchBuilder.finish), which carry the correlation.
+Means are of the per-path vector (a, b, c) = (sum w, sum w t, sum w t^2): metrics.py turns
+them into H0, mean delay and RMS delay spread with standard errors.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .tally import Accumulator, TallyPlan
+
+
+def los_moments(los_gain: np.ndarray, los_delay: np.ndarray) -> np.ndarray:
+    """(L, 3) exactly known part (a, b, c) = (H, H t, H t^2) of the line of sight."""
+    return np.stack([los_gain, los_gain * los_delay, los_gain * los_delay ** 2], axis=-1)
+
+
+def link_moments(accs: dict[str, Accumulator], los_abc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per link: mean (L, 3) and covariance (L, 3, 3) of the estimate, both directions and the LOS."""
+    mean, cov = los_abc.copy(), np.zeros(los_abc.shape + (3,))
+    for acc in accs.values():
+        mu, c = acc.moments()
+        mean += mu
+        cov += c
+    return mean, cov
+
+
+def channel_moments(accs: dict[str, Accumulator], los_abc: np.ndarray, plan: TallyPlan
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Per (group, receiver): mean (G, R, 3) and covariance (G, R, 3, 3) of the group's channel."""
+    w = plan.group_weights
+    n_groups, n_tx = w.shape
+    n_rx = plan.n_rx
+    fwd_mu, fwd_cov = accs["forward"].moments()
+    fwd_mu = (fwd_mu + los_abc).reshape(n_tx, n_rx, 3)
+    fwd_cov = fwd_cov.reshape(n_tx, n_rx, 3, 3)
+    mean = np.einsum("gi,irq->grq", w, fwd_mu)
+    cov = np.einsum("gi,irqs->grqs", w * w, fwd_cov)
+    bwd_mu, bwd_cov = accs["backward"].channel_moments()
+    if n_groups:
+        mean += bwd_mu
+        cov += bwd_cov
+    return mean, cov
+
+
+def _rel(mean: np.ndarray, var: np.ndarray) -> np.ndarray:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.where(mean > 0, np.sqrt(np.maximum(var, 0.0)) / mean, 0.0)
+    return np.where(np.isnan(var), np.inf, rel)
+
+
+def reported_rel_stderr(accs: dict[str, Accumulator], los_gain: np.ndarray, scene, plan: TallyPlan) -> np.ndarray:
+    """Relative standard errors of H0 of what the result reports as channels: every group's channel and
+    every link of a transmitter in no group (accuracy mode stops when all are under the target).
+    inf where an estimator has fewer than 2 paths; 0 where H0 = 0 exactly."""
+    zeros = np.zeros(len(los_gain))
+    los_abc = los_moments(los_gain, zeros)
+    mean, cov = link_moments(accs, los_abc)
+    w = plan.group_weights
+    if not w.size:
+        return _rel(mean[:, 0], cov[:, 0, 0])
+    ch_mean, ch_cov = channel_moments(accs, los_abc, plan)
+    simulated = scene.masked == ""
+    out = [_rel(ch_mean[:, simulated, 0], ch_cov[:, simulated, 0, 0]).ravel()]
+    solo = ~(w > 0).any(axis=0)  # transmitters in no group
+    if solo.any():
+        rel = _rel(mean[:, 0], cov[:, 0, 0]).reshape(w.shape[1], plan.n_rx)
+        out.append(rel[solo].ravel())
+    return np.concatenate(out)

@@ -1,0 +1,91 @@
+"""Illuminance and the link budget of every link, group channel and map point (issue: coverage maps).
+
+- Illuminance [lx] on the receiver's plane, direct light only (Komine & Nakagawa 2004):
+  E = sum_i I0_i cos^m(phi) cos(psi) / d^2 over the transmitters that give a luminous output
+  (link_budget.illuminance_los), blocked by furniture, attenuated by smoke, no FOV limit.
+- With `link_budget`: received power P_r = P_t H0 [W], SNR of the Komine-Nakagawa noise model
+  (shot noise of signal and background, thermal noise of the preamplifier), BER of OOK-NRZ,
+  and the bit rate the delay spread allows, 1 / (10 tau_rms). The signal is the whole received
+  power (P_isi = 0) unless the link has a binned CIR and the budget a bit rate: then the power
+  arriving after the first bit period is ISI (link_budget.isi_split).
+Quantities that do not apply are NaN (null in the document).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import link_budget as lb
+from .los import LosGeometry
+
+
+class Lighting:
+    """Per-link illuminance and link-budget figures, shared by links, channels and maps."""
+
+    def __init__(self, spec, scene, geometry: LosGeometry):
+        self.scene = scene
+        tx, rx = scene.transmitters, scene.receivers
+        self.n_tx, self.n_rx = len(tx), len(rx)
+        i0 = np.array([t.luminous_output.center_intensity(t.m) if t.luminous_output else np.nan
+                       for t in spec.transmitters])
+        self.has_light = bool(np.isfinite(i0).any())
+        shape = (self.n_tx, self.n_rx)
+        self.illuminance = np.full(shape, np.nan)  # per link [lx]
+        if self.has_light:  # link_budget.illuminance_los, one term per link (its sum over transmitters)
+            c_tx, c_rx = geometry.cos_tx.reshape(shape), geometry.cos_rx.reshape(shape)
+            d, clear = geometry.distance.reshape(shape), geometry.clear.reshape(shape)
+            ok = (c_tx > 0) & (c_rx > 0) & (clear > 0)
+            with np.errstate(under="ignore"):
+                e = np.nan_to_num(i0)[:, None] * np.where(ok, c_tx, 1.0) ** tx.order[:, None] * c_rx \
+                    / np.where(ok, d, 1.0) ** 2 * clear
+            self.illuminance = np.where(np.isfinite(i0)[:, None], np.where(ok, e, 0.0), np.nan)
+        self.budget = lb.link_budget_from_spec(spec.link_budget) if spec.link_budget is not None else None
+        self.area = rx.area
+        self.channel_arrays: dict[str, dict[str, np.ndarray]] = {}
+        self.link_arrays: dict[str, np.ndarray] = {}
+
+    def _budget_columns(self, received_power: np.ndarray, rms: np.ndarray, area: np.ndarray) -> dict[str, np.ndarray]:
+        if self.budget is None:
+            return {}
+        with np.errstate(divide="ignore", invalid="ignore"):
+            snr = lb.snr(self.budget, area, np.nan_to_num(received_power), 0.0)
+            snr = np.where(np.isfinite(received_power), snr, np.nan)
+            return {"snr_db": lb.to_db(snr), "ber": lb.ber_ook(snr), "max_bit_rate_bps": lb.max_bit_rate(rms)}
+
+    def add_link_columns(self, cols: dict, h0: np.ndarray, rms: np.ndarray, masked: np.ndarray) -> None:
+        from .result_parts import column
+
+        arrays = {"illuminance_lx": np.where(masked, np.nan, self.illuminance.ravel())}
+        power = h0 * np.repeat(self.scene.transmitters.power, self.n_rx)
+        arrays.update(self._budget_columns(power, rms, np.tile(self.area, self.n_tx)))
+        self.link_arrays = arrays
+        for key, values in arrays.items():
+            cols[key] = column(values)
+
+    def add_channel_columns(self, cols: dict, weights: np.ndarray, h0: np.ndarray, rms: np.ndarray,
+                            group_power: np.ndarray) -> None:
+        """weights (G, n_tx); h0, rms (G, n_rx) of the groups' channels; group_power (G,) [W]."""
+        from .result_parts import column
+
+        member = weights > 0
+        illum = np.where(member[:, :, None], np.nan_to_num(self.illuminance)[None], 0.0).sum(axis=1)
+        has = (member & np.isfinite(self.illuminance).any(axis=1)[None, :]).any(axis=1)
+        arrays = {"illuminance_lx": np.where(has[:, None] & np.isfinite(h0), illum, np.nan)}
+        arrays.update(self._budget_columns(h0 * group_power[:, None], rms, self.area[None, :]))
+        for key, values in arrays.items():
+            cols[key] = column(values.ravel())
+        self.channel_arrays = {"arrays": arrays}
+
+    def map_extra(self, links: list[dict], channels: list[dict]) -> dict[str, dict[str, tuple[np.ndarray, str]]]:
+        """{channel name: {quantity: (values per receiver, unit)}} for grid_maps."""
+        units = {"illuminance_lx": "lx", "snr_db": "dB", "ber": "1", "max_bit_rate_bps": "bit/s"}
+        out: dict[str, dict[str, tuple[np.ndarray, str]]] = {}
+        if channels:
+            arrays = self.channel_arrays.get("arrays", {})
+            names = list(dict.fromkeys(c["group"] for c in channels))
+            for g, name in enumerate(names):
+                out[name] = {q: (a[g], units[q]) for q, a in arrays.items() if np.isfinite(a[g]).any()}
+        else:
+            for i, name in enumerate(self.scene.transmitters.ids):
+                sl = slice(i * self.n_rx, (i + 1) * self.n_rx)
+                out[name] = {q: (a[sl], units[q]) for q, a in self.link_arrays.items() if np.isfinite(a[sl]).any()}
+        return out

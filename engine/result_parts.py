@@ -1,0 +1,210 @@
+"""Pieces of the result document built as arrays: columns, the binned CIR, the order split, maps.
+
+Per-link figures are columns (one array over links) turned into JSON lists once; only the
+links that asked for a CIR (a handful of explicit receivers by default) get per-link work
+(the jackknife of their h^2 delay spread and 3 dB bandwidth).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import metrics
+from .tally import Accumulator, TallyPlan
+
+
+def column(x) -> list:
+    """A float array as a JSON list, NaN and inf as None."""
+    a = np.asarray(x, float)
+    finite = np.isfinite(a)
+    if finite.all():
+        return a.tolist()
+    o = a.astype(object)
+    o[~finite] = None
+    return o.tolist()
+
+
+def document_rows(cols: dict[str, list], n: int) -> list[dict]:
+    """Columns of equal length n as a list of row dicts (the JSON layout of links, receivers, channels)."""
+    keys = list(cols)
+    return [dict(zip(keys, row)) for row in zip(*(cols[k] for k in keys))] if n else []
+
+
+def _per_path(acc: Accumulator, links: np.ndarray, x: np.ndarray) -> np.ndarray:
+    n = acc.n_paths.take(links).astype(float).reshape((-1,) + (1,) * (x.ndim - 1))
+    return np.where(n > 0, x / np.maximum(n, 1.0), 0.0)
+
+
+def _group_estimates(accs, link: int, slot: int):
+    """Per batch group: that group's own estimate of the per-path CIR of one link, summed over directions.
+
+    Returned as (group sums, group weights) for metrics.jackknife / bin_stderr: sum = estimate x weight.
+    """
+    serving = [a for a in accs if a.n_paths[link] > 0]
+    if not serving:
+        return np.zeros((0, 1)), np.zeros(0)
+    used = np.all([a.group_paths[:, link] > 0 for a in serving], axis=0)
+    est = sum(a.groups[used, slot] / a.group_paths[used, link][:, None] for a in serving)
+    weight = sum(a.group_paths[used, link] for a in serving) / len(serving)
+    return est * weight[:, None], weight
+
+
+def cir_block(accs: dict[str, Accumulator], plan: TallyPlan, cir_links: np.ndarray, los_gain, los_delay,
+              cols: dict) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Fill the CIR columns of the links that have one; returns {link: (total per bin, per-group per-path
+    estimates (N_GROUPS, bins))} for the groups' channels."""
+    out: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    if not len(cir_links):
+        return out
+    bins = plan.bins
+    rel_edges = bins.dt * np.arange(bins.n + 1)  # metrics on times from t_min: even edges when t_min >> dt
+    slots = plan.cir_slots(cir_links)
+    pool = list(accs.values())
+    total = sum(_per_path(a, cir_links, a.cir[slots]) for a in pool)
+    early = sum(_per_path(a, cir_links, a.early[slots]) for a in pool)
+    late = sum(_per_path(a, cir_links, a.late[slots]) for a in pool)
+    by_k = by_s = None
+    if plan.by_order_cir:
+        by_k = sum(_per_path(a, cir_links, a.cir_k[slots]) for a in pool)
+        by_s = sum(_per_path(a, cir_links, a.cir_s[slots]) for a in pool)
+    with np.errstate(over="ignore"):  # a delay far outside the window may overflow the bin index: no bin, then
+        pos = (los_delay[cir_links] - bins.t_min) / bins.dt
+    inside = (pos >= 0) & (pos < bins.n)
+    los_bin = np.where(inside, np.floor(np.clip(pos, 0, bins.n)), 0).astype(np.int64)
+    g = los_gain[cir_links]
+    rows = np.arange(len(cir_links))
+    los_vec = np.zeros_like(total)
+    los_vec[rows[inside], los_bin[inside]] = g[inside]
+    total = total + los_vec
+    early = early + np.where(~inside & (los_delay[cir_links] < bins.t_min), g, 0.0)
+    late = late + np.where(~inside & (los_delay[cir_links] >= bins.t_min), g, 0.0)
+    if by_k is not None:
+        by_k[:, 0] += los_vec
+        by_s[:, 0] += los_vec
+    for r, link in enumerate(cir_links.tolist()):  # the few links with a CIR: per-link jackknife
+        groups, weight = _group_estimates(pool, link, int(slots[r]))
+        enough = len(weight) >= 2
+        bin_se = metrics.bin_stderr(groups, weight) if enough else np.full(bins.n, np.nan)
+        w_sum = float(weight.sum()) if len(weight) else 1.0
+
+        def per_path(x, _w=w_sum, _los=los_vec[r]):
+            return x / _w + _los
+
+        t0_h2, rms_h2 = metrics.rms_delay_spread_h2(rel_edges, total[r])
+        rms_h2_se = np.nan
+        if enough:
+            _, rms_h2_se = metrics.jackknife(lambda x: metrics.rms_delay_spread_h2(rel_edges, per_path(x))[1],
+                                             groups, weight)
+        bw = metrics.bandwidth_3db(rel_edges, total[r])
+        bw_se = None
+        if bw is not None and enough:
+            _, bw_se = metrics.jackknife(lambda x: metrics.bandwidth_3db(rel_edges, per_path(x)), groups, weight)
+        cols["mean_delay_h2_s"][link] = _num(bins.t_min + t0_h2)
+        cols["rms_delay_spread_h2_s"][link] = _num(rms_h2)
+        cols["rms_delay_spread_h2_s_stderr"][link] = _num(rms_h2_se)
+        cols["bandwidth_3db_hz"][link] = None if bw is None else _num(bw)
+        cols["bandwidth_3db_hz_stderr"][link] = None if bw_se is None else _num(bw_se)
+        cols["early_gain"][link] = float(early[r])
+        cols["late_gain"][link] = float(late[r])
+        cols["cir"][link] = {"total": total[r].tolist(), "total_stderr": column(bin_se),
+                             "by_reflection_order": None if by_k is None else by_k[r].tolist(),
+                             "by_scattering_order": None if by_s is None else by_s[r].tolist()}
+        est = groups / np.where(weight > 0, weight, 1.0)[:, None] if len(weight) else np.zeros((0, bins.n))
+        out[link] = (total[r], est + los_vec[r])
+    return out
+
+
+def order_block(accs: dict[str, Accumulator], plan: TallyPlan, order_links: np.ndarray, los_gain, cols: dict,
+                rho_max: float, albedo_max: float | None) -> None:
+    """Fill the order-split columns (H0 per reflection and scattering order) and the truncation estimate."""
+    if not len(order_links):
+        return
+    mean = var = 0.0
+    for acc in accs.values():  # rows are in slot order, which is the order of the sorted links
+        m, v = acc.order_moments(order_links)
+        mean = mean + m
+        var = var + v
+    by_k = mean.sum(axis=2)
+    by_k[:, 0] += los_gain[order_links]
+    by_s = mean.sum(axis=1)
+    by_s[:, 0] += los_gain[order_links]
+    by_k_se, by_s_se = np.sqrt(var.sum(axis=2)), np.sqrt(var.sum(axis=1))
+    tail = np.zeros(len(order_links))
+    if by_k.shape[1] > 1:
+        tail += _geometric_tail(by_k[:, -1], rho_max)
+    if albedo_max is not None:
+        tail += _geometric_tail(by_s[:, -1], albedo_max)
+    for r, link in enumerate(order_links.tolist()):
+        cols["dc_gain_by_reflection_order"][link] = by_k[r].tolist()
+        cols["dc_gain_by_reflection_order_stderr"][link] = column(by_k_se[r])
+        cols["dc_gain_by_scattering_order"][link] = by_s[r].tolist()
+        cols["dc_gain_by_scattering_order_stderr"][link] = column(by_s_se[r])
+        cols["truncated_gain_estimate"][link] = _num(tail[r])
+
+
+def _geometric_tail(gain, ratio: float):
+    """Power of the orders past the last one, if each keeps at most `ratio` of the one before."""
+    return gain * ratio / (1.0 - ratio) if ratio < 1.0 else np.full_like(np.asarray(gain, float), np.inf)
+
+
+def _num(x) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+#: Map quantities: (key in the link/channel rows, unit), and the stderr key where one exists.
+MAP_QUANTITIES = {
+    "dc_gain": ("1", "dc_gain_stderr"),
+    "path_loss_db": ("dB", None),
+    "received_power_w": ("W", None),
+    "received_power_dbm": ("dBm", None),
+    "mean_delay_s": ("s", "mean_delay_s_stderr"),
+    "rms_delay_spread_s": ("s", "rms_delay_spread_s_stderr"),
+}
+
+
+def _values(rows: list[dict], key: str) -> np.ndarray:
+    return np.array([r[key] for r in rows], dtype=float)  # None becomes NaN
+
+
+def grid_maps(spec, scene, links: list[dict], channels: list[dict], extra: dict | None = None) -> list[dict]:
+    """Each receiver grid as 2-D arrays, per channel (transmitter group; each transmitter without groups).
+
+    `extra` maps (channel name) -> {quantity: (values over receivers, unit)} added by the link budget.
+    """
+    if not scene.grid_slices:
+        return []
+    n_rx = len(scene.receivers)
+    if channels:
+        names = [g.name for g in spec.transmitter_groups]
+        per_channel = [channels[c * n_rx:(c + 1) * n_rx] for c in range(len(names))]
+    else:
+        names = list(scene.transmitters.ids)
+        per_channel = [links[i * n_rx:(i + 1) * n_rx] for i in range(len(names))]
+    out = []
+    for grid, (first, (nu, nv)) in zip(spec.receiver_grids, scene.grid_slices):
+        sl = slice(first, first + nu * nv)
+        u = np.asarray(grid.u, float) / np.linalg.norm(grid.u)
+        v = np.asarray(grid.v, float) / np.linalg.norm(grid.v)
+        for name, rows in zip(names, per_channel):
+            part = rows[sl]
+            values, stderr, units = {}, {}, {}
+            for q, (unit, se_key) in MAP_QUANTITIES.items():
+                if q == "received_power_dbm":
+                    p = _values(part, "received_power_w")
+                    with np.errstate(divide="ignore", invalid="ignore"):
+                        arr = np.where(p > 0, 10.0 * np.log10(np.where(p > 0, p, 1.0) / 1e-3), np.nan)
+                else:
+                    arr = _values(part, q)
+                values[q] = column(arr.reshape(nu, nv))
+                units[q] = unit
+                if se_key is not None:
+                    stderr[q] = column(_values(part, se_key).reshape(nu, nv))
+            for q, (arr, unit) in (extra or {}).get(name, {}).items():
+                values[q] = column(np.asarray(arr, float)[sl].reshape(nu, nv))
+                units[q] = unit
+            out.append({"grid": grid.id_prefix, "channel": name, "shape": (nu, nv), "origin": tuple(grid.origin),
+                        "u": tuple(u.tolist()), "v": tuple(v.tolist()), "spacing": grid.spacing, "units": units,
+                        "values": values, "stderr": stderr})
+    return out
