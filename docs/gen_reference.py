@@ -53,6 +53,30 @@ NOTES = {
     "ReceiverGridSpec.area": "detector area A of each receiver [m^2]",
     "ReceiverGridSpec.filter_gain": "optical filter gain T_s",
     "ReceiverGridSpec.concentrator_index": "concentrator refractive index n_c",
+    "RoomSpec.origin": "the corner with the smallest coordinates [m]",
+    "RoomSpec.reflectance": "Lambertian reflectance of each face",
+    "BoxSpec.name": "a label",
+    "BoxSpec.min": "corner with the smallest coordinates [m]",
+    "BoxSpec.max": "opposite corner, above `min` on every axis [m]",
+    "MeshSpec.name": "a label",
+    "MeshSpec.vertices": "inline points [m] (with `faces`)",
+    "MeshSpec.faces": "inline triangles: 0-based vertex indices (with `vertices`)",
+    "MeshSpec.file": "a mesh file, relative to the scene document (not accepted by the service)",
+    "MeshSpec.data_base64": "the file's content, base64-encoded (with `format`)",
+    "MeshSpec.format": "file format (default: from the file's suffix)",
+    "HomogeneousMediumSpec.phase": "phase function (default isotropic)",
+    "HomogeneousMediumSpec.region": "where the medium is (default: the whole scene)",
+    "GridMediumSpec.min": "corner of the grid's box with the smallest coordinates [m]",
+    "GridMediumSpec.max": "opposite corner of the grid's box [m]",
+    "GridMediumSpec.shape": "cells along x, y, z (at most 1000 each, 2e7 in all)",
+    "GridMediumSpec.phase": "phase function of every cell (default isotropic)",
+    "BoxRegionSpec.min": "corner with the smallest coordinates [m]",
+    "BoxRegionSpec.max": "opposite corner [m]",
+    "MeshRegionSpec.vertices": "points of a closed triangle mesh [m]",
+    "MeshRegionSpec.faces": "its triangles: 0-based vertex indices; inside = an odd number of crossings",
+    "SchlickPhaseSpec.k": "Schlick's k (give k or g)",
+    "SchlickPhaseSpec.g": "mean cosine; owcsim uses the k whose mean cosine is exactly g",
+    "MixturePhaseSpec.components": "weighted phase functions (e.g. two-term Henyey-Greenstein)",
     "SimulationSpec.algorithm": "estimator 1..5 (see Physics and algorithms), or chosen from the scene",
     "SimulationSpec.direction": "forward (from transmitters), backward (from receivers), or picked per link",
     "SimulationSpec.seed": "random seed: the same document and seed give the same bits",
@@ -266,6 +290,8 @@ class _Writer:
             sub = f"{path}.{name}" if path else name
             tp = self.type_of(info.annotation, sub, extra)
             desc = info.description or NOTES.get(f"{model.__name__}.{name}", "")
+            if not desc and name == "type" and typing.get_origin(info.annotation) is typing.Literal:
+                desc = "selects this kind"
             bounds = _bounds(info.metadata) + [e for e in extra if not e.startswith("(")]
             bounds += [
                 VALIDATOR_WORDS[f.__name__]
