@@ -42,6 +42,8 @@ FORWARD, BACKWARD, BOTH, SKIP = 0, 1, 2, 3
 #: tallies and its step's estimate lists (~150 B each): batches shrink as receivers grow, so a batch of a
 #: 100 000-point map needs about as much memory as one of a single link.
 PATH_TARGET_BUDGET = 1 << 20
+#: Most next-event estimates one kernel step of a batch may hold (points along segments multiply them).
+ESTIMATE_BUDGET = 1 << 22
 
 ProgressFn = Callable[[float, dict], None]
 
@@ -146,14 +148,17 @@ def exact_los_only(scene: Scene, settings: KernelSettings) -> bool:
 
 
 def batch_size(sim, settings: KernelSettings, n_targets: int) -> int:
-    """Paths per batch: the job's batch_size, capped so that targets x estimates per path stay under
-    PATH_TARGET_BUDGET (the memory of the dense per-path tallies and of one step's estimates)."""
+    """Paths per batch: the job's batch_size, capped so that paths x targets stay under PATH_TARGET_BUDGET
+    (the dense per-path tallies) and paths x targets x estimates per segment under ESTIMATE_BUDGET (one
+    step's next-event estimates, ~60 B each)."""
     per_segment = 1
     if settings.segment_scatter:
         per_segment += settings.max_strata + settings.equiangular_points
     if settings.free_flight:
         per_segment += settings.equiangular_points
-    return max(1, min(sim.batch_size, PATH_TARGET_BUDGET // max(1, n_targets * per_segment)))
+    n_targets = max(1, n_targets)
+    return max(1, min(sim.batch_size, PATH_TARGET_BUDGET // n_targets,
+                      ESTIMATE_BUDGET // (n_targets * per_segment)))
 
 
 def _sources(scene: Scene, directions: np.ndarray) -> list[tuple[str, int, tuple[int, ...]]]:

@@ -18,7 +18,7 @@ from owcsim.schemas.errors import PROBLEM_MEDIA_TYPE
 
 from . import problems
 from .dispatcher import Dispatcher
-from .routes import jobs, results, service
+from .routes import docs, jobs, results, service
 from .routes.service import owcsim_version
 from .settings import Settings
 from .store import JobStore
@@ -55,10 +55,10 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
                 await run_in_threadpool(dispatcher.stop)
 
     app = FastAPI(title="owcsim", version=owcsim_version(), description=DESCRIPTION, lifespan=lifespan,
-                  docs_url=f"{API_PREFIX}/docs", redoc_url=None, openapi_url=f"{API_PREFIX}/openapi.json")
+                  docs_url=None, redoc_url=None, openapi_url=f"{API_PREFIX}/openapi.json")  # docs: routes/docs.py
     app.state.settings, app.state.store, app.state.dispatcher, app.state.owners = settings, store, dispatcher, owners
     problems.install(app)
-    for module in (jobs, results, service):
+    for module in (jobs, results, service, docs):
         app.include_router(module.router, prefix=API_PREFIX)
     app.openapi = lambda: _openapi(app)
     return app
