@@ -65,9 +65,10 @@ def _print_links(result: dict) -> None:
         if maps:
             print(format_summary(maps))
         worst = result["run"]["max_dc_gain_rel_stderr"]
+        error = "exact (line of sight in closed form)" if result["run"]["stop_reason"] == "exact" else \
+            f"largest relative standard error of H0: {worst:.2e}" if worst is not None else "no error estimate"
         print(f"{len(result['links']):,d} links" + (f", {len(result['channels']):,d} group channels"
-              if result.get("channels") else "") + (f"; largest relative standard error of H0: {worst:.2e}"
-                                                     if worst is not None else "") + "; all in result.json, links.csv")
+              if result.get("channels") else "") + f"; {error}; all in result.json, links.csv")
         return
     for link in result["links"]:
         err, rms, loss = link["dc_gain_stderr"], link["rms_delay_spread_s"], link["path_loss_db"]
