@@ -41,7 +41,7 @@ class LinkPublic(PublicModel):
     receiver: str
     transmitter_index: int
     receiver_index: int
-    receiver_position: tuple[float, float, float] = Field(description="[m]")
+    receiver_position: tuple[float, float, float] = Field(description="position of the receiver [m]")
     direction: Literal["forward", "backward", "both", "none"]
     paths: int
     dc_gain: float | None
@@ -81,17 +81,17 @@ class ChannelPublic(PublicModel):
     """A transmitter group's channel at one receiver: h_g = sum_i P_i h_i / sum_i P_i over its members
     (per watt of the group's total power); received power sum_i P_i H0_i [W]."""
 
-    group: str
-    receiver: str
-    receiver_index: int
-    dc_gain: float | None
-    dc_gain_stderr: float | None
-    path_loss_db: float | None
-    received_power_w: float | None
-    mean_delay_s: float | None
-    mean_delay_s_stderr: float | None
-    rms_delay_spread_s: float | None
-    rms_delay_spread_s_stderr: float | None
+    group: str = Field(description="the transmitter group's name")
+    receiver: str = Field(description="receiver id")
+    receiver_index: int = Field(description="index of the receiver in `receivers`")
+    dc_gain: float | None = Field(description="H0 of the summed channel, per watt of the group's power [-]")
+    dc_gain_stderr: float | None = Field(description="standard error of dc_gain")
+    path_loss_db: float | None = Field(description="-10 log10 H0 [dB]")
+    received_power_w: float | None = Field(description="sum_i P_i H0_i over the members [W]")
+    mean_delay_s: float | None = Field(description="power-weighted mean delay of the summed channel [s]")
+    mean_delay_s_stderr: float | None = Field(description="standard error of mean_delay_s [s]")
+    rms_delay_spread_s: float | None = Field(description="RMS delay spread of the summed channel [s]")
+    rms_delay_spread_s_stderr: float | None = Field(description="standard error of rms_delay_spread_s [s]")
     illuminance_lx: float | None = Field(None, description="direct illuminance on the receiver plane [lx] (when "
                                          "the transmitters give a luminous output)")
     snr_db: float | None = Field(None, description="electrical SNR [dB] (with `link_budget`)")
@@ -104,12 +104,12 @@ class ChannelPublic(PublicModel):
 class ReceiverPublic(PublicModel):
     """A receiver of the job; grid points name their grid and (i, j), masked ones say why."""
 
-    id: str
+    id: str = Field(description="receiver id (`{id_prefix}[i,j]` for grid points)")
     position: tuple[float, float, float] = Field(description="[m]")
-    normal: tuple[float, float, float]
-    grid: str | None = None
-    i: int | None = None
-    j: int | None = None
+    normal: tuple[float, float, float] = Field(description="unit normal")
+    grid: str | None = Field(None, description="the grid's id_prefix, for grid points")
+    i: int | None = Field(None, description="index along the grid's u axis")
+    j: int | None = Field(None, description="index along the grid's v axis")
     masked: str | None = Field(None, description="why this grid point was not simulated (its values are null)")
 
 
@@ -118,16 +118,17 @@ class MapPublic(PublicModel):
     scene has no groups): `values[name][i][j]`, null where masked. Point (i, j) is at origin + i spacing u +
     j spacing v."""
 
-    grid: str
-    channel: str
-    shape: tuple[int, int]
-    origin: tuple[float, float, float]
-    u: tuple[float, float, float]
-    v: tuple[float, float, float]
-    spacing: float
-    units: dict[str, str]
-    values: dict[str, list[list[float | None]]]
-    stderr: dict[str, list[list[float | None]]] = Field(default_factory=dict)
+    grid: str = Field(description="the grid's id_prefix")
+    channel: str = Field(description="transmitter group name, or transmitter id when the scene has no group")
+    shape: tuple[int, int] = Field(description="(nu, nv) points along u and v")
+    origin: tuple[float, float, float] = Field(description="point (0, 0) [m]")
+    u: tuple[float, float, float] = Field(description="unit vector of the first index")
+    v: tuple[float, float, float] = Field(description="unit vector of the second index")
+    spacing: float = Field(description="distance between neighbouring points [m]")
+    units: dict[str, str] = Field(description="unit of each quantity")
+    values: dict[str, list[list[float | None]]] = Field(description="quantity -> [i][j] values, null where masked")
+    stderr: dict[str, list[list[float | None]]] = Field(default_factory=dict,
+                                                        description="quantity -> [i][j] standard errors")
 
 
 class TimeBinsPublic(PublicModel):

@@ -44,7 +44,8 @@ class SceneSpec(SpecModel):
     transmitter_groups: list[TransmitterGroupSpec] = Field(
         default_factory=list, description="transmitters that carry one signal: each group's channel (their "
         "summed response) is reported beside the links, and maps are drawn per group")
-    outputs: OutputsSpec = Field(default_factory=OutputsSpec)
+    outputs: OutputsSpec = Field(default_factory=OutputsSpec, description="optional quantities to compute: the "
+                                 "binned CIR and the order split (default: for explicit receivers, not grids)")
     link_budget: LinkBudgetSpec | None = Field(
         None, description="photodiode and receiver electronics: adds SNR, BER of OOK and the bit rate the delay "
                           "spread allows to links, channels and maps (Komine & Nakagawa 2004 noise model)")

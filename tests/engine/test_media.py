@@ -19,13 +19,10 @@ from owcsim.engine.media import HomogeneousMedium, medium_from_spec
 from owcsim.engine.regions import MeshRegion
 from owcsim.schemas import SceneSpec
 from tests.scenes import room_doc
+from conftest import SEED, seeded_rng  # noqa: F401
 
-SEED = 12345
 LO, HI = np.array([1.0, 0.0, -1.0]), np.array([2.0, 3.0, 1.0])  # a box region, not a unit cube
 
-
-def _rng():
-    return np.random.default_rng(SEED)
 
 
 def _segments(n, rng, lo=-1.0, hi=4.0, max_len=6.0):
@@ -85,7 +82,7 @@ def test_box_region_length_inside_by_hand(o, d, L, expected):
 
 
 def test_box_containing_every_segment_equals_whole_scene_exactly():
-    rng = _rng()
+    rng = seeded_rng()
     o, d, L = _segments(5000, rng, 0.0, 1.0, 0.3)  # all inside [-1, 2]^3
     whole, box = HomogeneousMedium(0.1, 0.3), HomogeneousMedium(0.1, 0.3, (np.full(3, -1.0), np.full(3, 2.0)))
     assert np.array_equal(whole.optical_depth(o, d, L), box.optical_depth(o, d, L))
@@ -96,7 +93,7 @@ def test_box_containing_every_segment_equals_whole_scene_exactly():
 
 def test_any_array_layout():
     """Transposes of (3, n) arrays (the kernel's layout) give the same answers as (n, 3) arrays."""
-    o, d, L = _segments(300, _rng())
+    o, d, L = _segments(300, seeded_rng())
     o3, d3 = np.ascontiguousarray(o.T), np.ascontiguousarray(d.T)
     for med in (HomogeneousMedium(0.2, 0.1, (LO, HI)), GridMedium(LO, HI, (2, 3, 4), 0.2, np.arange(24) / 10)):
         assert np.array_equal(med.optical_depth(o, d, L), med.optical_depth(o3.T, d3.T, L))
@@ -119,7 +116,7 @@ def _box_probe_segments(rng):
 @pytest.mark.parametrize("shift", [0.0, 5000.0])
 def test_mesh_region_shaped_as_a_box_equals_the_box_region(shift):
     """Also 5 km from the origin: Embree's float32 is re-centred and crossings are recomputed in float64."""
-    rng = _rng()
+    rng = seeded_rng()
     o, d, L = _box_probe_segments(rng)
     o = o + shift
     lo, hi = LO + shift, HI + shift
@@ -169,7 +166,7 @@ def test_mesh_region_sphere_against_analytic_chords():
     r_in = np.abs(np.einsum("ij,ij->i", s.triangles[:, 0] - c, s.face_normals)).min()
     assert 0.999 * R < r_in < R
 
-    o, d, L = _segments(20_000, _rng(), -1.0, 1.5, 3.0)
+    o, d, L = _segments(20_000, seeded_rng(), -1.0, 1.5, 3.0)
 
     def chord(r):
         oc = o - c
@@ -208,7 +205,7 @@ def test_open_mesh_region_is_refused_at_build():
 # --- the 3-D grid ---------------------------------------------------------------------------------
 
 def test_uniform_grid_equals_homogeneous_box():
-    rng = _rng()
+    rng = seeded_rng()
     o, d, L = _segments(20_000, rng)
     grid, box = GridMedium(LO, HI, (7, 5, 3), 0.9, 0.6), HomogeneousMedium(0.9, 0.6, (LO, HI))
     tau_g, tau_b = grid.optical_depth(o, d, L), box.optical_depth(o, d, L)
@@ -257,7 +254,7 @@ def test_grid_flat_index_is_c_order_x_slowest():
 def test_mean_free_path_in_unbounded_medium():
     sigma_t, n = 0.7, 200_000
     med = HomogeneousMedium(0.2, 0.5)
-    t, hit = med.sample_distance(np.zeros((n, 3)), np.tile([0.0, 0, 1], (n, 1)), np.full(n, np.inf), rng=_rng())
+    t, hit = med.sample_distance(np.zeros((n, 3)), np.tile([0.0, 0, 1], (n, 1)), np.full(n, np.inf), rng=seeded_rng())
     assert hit.all()
     se = (1 / sigma_t) / math.sqrt(n)  # the exponential's standard deviation is its mean
     assert abs(t.mean() - 1 / sigma_t) < 5 * se, (t.mean(), 1 / sigma_t, se)
@@ -268,7 +265,7 @@ def test_probability_of_no_collision(method):
     sigma_t, L, n = 1.3, 0.9, 100_000
     med = HomogeneousMedium(1.0, 0.3, (np.array([-1.0, -1, -1]), np.array([1.0, 1, 5])))
     o, d = np.zeros((n, 3)), np.tile(_unit(0, 0.6, 0.8), (n, 1))  # inside the box for all of L
-    rng = _rng()
+    rng = seeded_rng()
     t, hit = med.sample_distance(o, d, np.full(n, L), rng.random(n) if method == "regular" else None,
                                  method=method, rng=rng)
     p = math.exp(-sigma_t * L)
@@ -277,7 +274,7 @@ def test_probability_of_no_collision(method):
 
 
 def test_regular_and_delta_tracking_agree_on_a_random_grid():
-    rng = _rng()
+    rng = seeded_rng()
     shape = (6, 5, 4)
     sa, ss = rng.uniform(0, 0.8, int(np.prod(shape))), rng.uniform(0, 0.5, int(np.prod(shape)))
     sa[rng.random(sa.size) < 0.2] = 0.0  # some cells nearly empty
@@ -302,7 +299,7 @@ def test_delta_tracking_in_a_mesh_region():
     """Delta tracking tests the inside of a sphere point by point; regular tracking walks its intervals."""
     s = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
     med = HomogeneousMedium(0.8, 0.4, region=MeshRegion(s.vertices, s.faces))
-    n, rng = 20_000, _rng()
+    n, rng = 20_000, seeded_rng()
     o, d, L = np.tile([-2.0, 0.3, 0.1], (n, 1)), np.tile([1.0, 0, 0], (n, 1)), np.full(n, 4.0)
     tr, _ = med.sample_distance(o, d, L, rng.random(n))
     td, _ = med.sample_distance(o, d, L, method="delta", rng=rng)
@@ -319,7 +316,7 @@ def test_segments_outside_a_region_cost_nothing(kind):
         med = HomogeneousMedium(0.5, 0.5, region=MeshRegion(_box_mesh(LO, HI).vertices, _box_mesh(LO, HI).faces))
     else:
         med = HomogeneousMedium(0.5, 0.5, (LO, HI))
-    rng = _rng()
+    rng = seeded_rng()
     o, d, L = _segments(1000, rng, 5.0, 9.0, 3.0)  # far from the region, never reaching it
     assert np.all(med.transmittance(o, d, L) == 1.0)
     assert np.all(med.optical_depth(o, d, L) == 0.0)
@@ -439,7 +436,7 @@ def _random_grid_rays(rng, n=300):
 
 def test_grid_optical_depth_against_fine_quadrature():
     # Independent of the traversal: midpoint sums of sigma_t(o + t d) with 200 000 points per ray.
-    rng = _rng()
+    rng = seeded_rng()
     grid, o, d, L = _random_grid_rays(rng)
     tau = grid.optical_depth(o, d, L)
     m = 200_000
@@ -454,7 +451,7 @@ def test_grid_optical_depth_against_fine_quadrature():
 
 
 def test_grid_collision_depth_is_the_one_asked():
-    rng = _rng()
+    rng = seeded_rng()
     grid, o, d, L = _random_grid_rays(rng)
     u = rng.random(len(L))
     t, hit = grid.sample_distance(o, d, L, u)

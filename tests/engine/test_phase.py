@@ -11,15 +11,12 @@ from scipy import integrate, stats
 from owcsim.engine import phase as ph
 from owcsim.engine.sampling import orthonormal_basis
 from owcsim.schemas import medium as sm
+from conftest import SEED, seeded_rng  # noqa: F401
 
 N_SAMPLES = 100_000
-SEED = 12345
 ALPHA = 0.01
 N_BINS = 100  # equal-probability bins: expected count 1000 per bin
 
-
-def _rng():
-    return np.random.default_rng(SEED)
 
 
 def _sidak(m: int) -> float:
@@ -116,7 +113,7 @@ def test_mean_cosine_property_matches_quadrature(f):
 def test_hg_mean_cosine_is_g(g):
     f = ph.HenyeyGreenstein(g)
     assert _mean_quad(f) == pytest.approx(g, abs=1e-8)
-    c = f.sample_cos(_rng().random(N_SAMPLES))
+    c = f.sample_cos(seeded_rng().random(N_SAMPLES))
     se = max(c.std(ddof=1), 1e-12) / np.sqrt(c.size)
     assert abs(c.mean() - g) < 5 * se
 
@@ -130,7 +127,7 @@ def _chi2_pvalue(samples_cos, f):
 
 @pytest.mark.parametrize("f", CHI_CASES, ids=repr)
 def test_sampled_cos_matches_pdf_chi_square(f):
-    rng = _rng()
+    rng = seeded_rng()
     d = rng.normal(size=(3, N_SAMPLES))
     d /= np.linalg.norm(d, axis=0)
     out = f.sample(d, rng.random(N_SAMPLES), rng.random(N_SAMPLES))
@@ -139,7 +136,7 @@ def test_sampled_cos_matches_pdf_chi_square(f):
 
 
 def test_chi_square_has_power():
-    c = ph.HenyeyGreenstein(0.5).sample_cos(_rng().random(N_SAMPLES))
+    c = ph.HenyeyGreenstein(0.5).sample_cos(seeded_rng().random(N_SAMPLES))
     assert _chi2_pvalue(c, ph.HenyeyGreenstein(0.5)) > _sidak(len(CHI_CASES))
     assert _chi2_pvalue(c, ph.HenyeyGreenstein(0.6)) < 1e-6
 
@@ -149,7 +146,7 @@ FIXED_DIRS = [(0, 0, 1), (0, 0, -1), (1, 0, 0), (0.48, -0.6, 0.64)]
 
 @pytest.mark.parametrize("f", [ph.HenyeyGreenstein(0.8), ph.Schlick(-0.5), ph.Rayleigh(), TWO_HG], ids=repr)
 def test_sample_directions_unit_cos_and_uniform_azimuth(f):
-    rng = _rng()
+    rng = seeded_rng()
     u1, u2 = rng.random(N_SAMPLES), rng.random(N_SAMPLES)
     d = rng.normal(size=(3, N_SAMPLES))
     d[:, :4] = np.array(FIXED_DIRS, dtype=float).T
@@ -176,7 +173,7 @@ def test_sample_directions_unit_cos_and_uniform_azimuth(f):
 
 
 def test_isotropic_output_uniform_on_sphere():
-    rng = _rng()
+    rng = seeded_rng()
     d = np.repeat(np.array([[0.0], [0.0], [1.0]]), N_SAMPLES, axis=1)
     o = ph.Isotropic().sample(d, rng.random(N_SAMPLES), rng.random(N_SAMPLES))
     for axis in range(3):  # each component uniform on [-1, 1] (Archimedes)
@@ -188,7 +185,7 @@ def test_limit_g_to_zero():
     c = np.linspace(-1, 1, 1001)
     hg = ph.HenyeyGreenstein(1e-9)
     np.testing.assert_allclose(hg.eval(c), 1 / (4 * np.pi), rtol=1e-6)
-    u = _rng().random(1000)
+    u = seeded_rng().random(1000)
     np.testing.assert_allclose(hg.sample_cos(u), 2 * u - 1, atol=1e-8)
     np.testing.assert_array_equal(ph.HenyeyGreenstein(0.0).sample_cos(u), ph.Isotropic().sample_cos(u))
     for g in (1e-3, -1e-3, 1e-12, -1e-300):
@@ -201,7 +198,7 @@ def test_limit_g_to_one_is_finite(f):
     c = np.concatenate([np.linspace(-1, 1, 2001), [np.nextafter(1, 0), np.nextafter(-1, 0)]])
     p = f.eval(c)
     assert np.all(np.isfinite(p)) and np.all(p > 0)
-    rng = _rng()
+    rng = seeded_rng()
     u = np.concatenate([[0.0, np.nextafter(1, 0), 0.5], rng.random(10_000)])
     cs = f.sample_cos(u)
     assert np.all(np.isfinite(cs)) and np.all(np.abs(cs) <= 1.0)
@@ -215,7 +212,7 @@ def test_limit_g_to_one_is_finite(f):
 @pytest.mark.parametrize("f", [ph.HenyeyGreenstein(0.6), ph.Schlick(0.6), ph.Schlick.from_g(0.6), TWO_HG], ids=repr)
 def test_orientation_positive_is_forward(f):
     # g > 0: the new direction mostly continues along the old propagation direction
-    rng = _rng()
+    rng = seeded_rng()
     d = np.tile([[0.0], [0.0], [1.0]], N_SAMPLES)
     o = f.sample(d, rng.random(N_SAMPLES), rng.random(N_SAMPLES))
     assert f.mean_cosine > 0 and o[2].mean() > 0.3

@@ -8,20 +8,17 @@ import pytest
 from scipy import integrate, stats
 
 from owcsim.engine import sampling as smp
+from conftest import SEED, seeded_rng  # noqa: F401
 
 N_SAMPLES = 100_000
-SEED = 12345
 ALPHA = 0.01
 M_VALUES = (0, 1, 5, 1000)
 CONE_DEGREES = (0.01, 1.0, 30.0, 85.0, 90.0)
 
 
-def _rng():
-    return np.random.default_rng(SEED)
-
 
 def _uniforms(n=N_SAMPLES):
-    rng = _rng()
+    rng = seeded_rng()
     return rng.random(n), rng.random(n)
 
 
@@ -48,7 +45,7 @@ def _special_normals():
 
 
 def _random_normals(n=20_000):
-    return _unit(_rng().standard_normal((n, 3)))
+    return _unit(seeded_rng().standard_normal((n, 3)))
 
 
 @pytest.mark.parametrize("normals", [_special_normals(), _random_normals()],
@@ -84,7 +81,7 @@ def test_to_world_maps_z_to_normal_and_preserves_angles():
     np.testing.assert_allclose(smp.to_world(np.tile([1.0, 0, 0], (n, 1)), normals), s, atol=1e-15)
     np.testing.assert_allclose(smp.to_world(np.tile([0, 1.0, 0], (n, 1)), normals), t, atol=1e-15)
 
-    rng = _rng()
+    rng = seeded_rng()
     a = _unit(rng.standard_normal((n, 3)))
     b = _unit(rng.standard_normal((n, 3)))
     wa, wb = smp.to_world(a, normals), smp.to_world(b, normals)
