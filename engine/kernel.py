@@ -293,11 +293,12 @@ class _Context:
                 to = self.t_pos.take(ti, axis=1) - points.take(pi, axis=1)
                 t_nrm = self.t_nrm.take(ti, axis=1)
             ct = -_dot(to, t_nrm)  # cos at the target, times d
+            front = ct > 0 if targets.front_only else np.ones(len(ct), bool)  # luminaires may emit backwards
             if normals is not None:
                 cs = _dot(to, normals[:, lo:hi] if n_tgt == 1 else normals.take(pi, axis=1))
-                sel = np.flatnonzero((cs > 0) & (ct > 0))
+                sel = np.flatnonzero((cs > 0) & front)
             else:
-                sel = np.flatnonzero(ct > 0)
+                sel = np.flatnonzero(front)
             if len(sel) == 0:
                 continue
             pi, ti, ct = pi.take(sel), ti.take(sel), ct.take(sel)
@@ -309,7 +310,7 @@ class _Context:
                 lobe = cs.take(sel) / d
             else:
                 lobe = scene.phase.eval(_dot(in_dirs.take(pi, axis=1), wdir))
-            f = weights.take(pi) * lobe * targets.response(tgt.take(ti), ct / d) / d2
+            f = weights.take(pi) * lobe * targets.response(tgt.take(ti), ct / d, -wdir.T) / d2
             sel = np.flatnonzero(f > 0)
             if len(sel) == 0:
                 continue
@@ -455,13 +456,13 @@ def _direction_mis(ctx: _Context, j: int, pp: _Paths, points, s, density):
     src_set, dst_set = device_sets(scene, ctx.item.direction)
     i, n = ctx.item.source, len(s)
     cos_src = _dot(pp.directions, src_set.normals[i][:, None])
-    q_self = src_set.response(np.full(n, i), cos_src) / src_set.total_response(i) / (s * s) * density
+    q_self = src_set.response(np.full(n, i), cos_src, pp.directions.T) / src_set.total_response(i) / (s * s) * density
     isect = scene.intersector
     o = dst_set.positions[j] + isect.offset * dst_set.normals[j]
     to_p = points - o[:, None]
     r = np.sqrt(_dot(to_p, to_p))
     w_dir = to_p / r
-    q_other = dst_set.response(np.full(n, j), _dot(w_dir, dst_set.normals[j][:, None])) / dst_set.total_response(j)
+    q_other = dst_set.response(np.full(n, j), _dot(w_dir, dst_set.normals[j][:, None]), w_dir.T) / dst_set.total_response(j)
     live = np.flatnonzero(q_other > 0)
     if len(live):
         origins = np.repeat(o[:, None], len(live), axis=1)

@@ -1,7 +1,7 @@
 """Line-of-sight term, computed exactly for every link (physics.md section 6, LOS closed form).
 
 H_los = R(phi) * A cos(psi) T_s g rect(psi <= FOV) / d^2 * exp(-sigma_t d_in) * V,
-R(phi) = (m+1)/(2 pi) cos^m(phi), arriving at t = d / c. It has no variance, so the
+R(phi) = (m+1)/(2 pi) cos^m(phi) (or a luminaire's tabulated I(gamma, C) / Phi), arriving at t = d / c. It has no variance, so the
 Monte Carlo kernel never samples it; it is added to every estimate as a constant.
 """
 from __future__ import annotations
@@ -25,7 +25,7 @@ def line_of_sight(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     cos_tx = np.einsum("ij,ij->i", wdir, tx.normals[ti])
     cos_rx = -np.einsum("ij,ij->i", wdir, rx.normals[ri])
     with np.errstate(divide="ignore", invalid="ignore"):
-        gain = np.where(coincident, 0.0, tx.response(ti, cos_tx) * rx.response(ri, cos_rx) / np.where(coincident, 1.0, d * d))
+        gain = np.where(coincident, 0.0, tx.response(ti, cos_tx, wdir) * rx.response(ri, cos_rx) / np.where(coincident, 1.0, d * d))
     idx = np.flatnonzero(gain > 0)
     if len(idx):
         isect = scene.intersector

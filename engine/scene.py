@@ -46,7 +46,8 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
     `base_dir` resolves relative mesh file paths (the scene file's folder).
     """
     geometry = build_geometry(spec, Path(base_dir) if base_dir is not None else None)
-    transmitters = transmitters_from_specs(spec.transmitters, spec.transmitter_ids())
+    transmitters = transmitters_from_specs(spec.transmitters, spec.transmitter_ids(),
+                                           Path(base_dir) if base_dir is not None else None)
     receivers = receivers_from_specs(spec.all_receivers(), spec.receiver_ids())
     if len(geometry.faces):  # rays are cast in float32 around the surfaces' centre: devices count too
         check_extent(np.concatenate([geometry.vertices, transmitters.positions, receivers.positions]),
