@@ -1,0 +1,154 @@
+"""Luminaires from photometric files and non-Lambertian surfaces in full simulations.
+
+References are independent of the kernel: tests/reference.py (LOS closed form, Barry
+patch integration), the plain bilinear interpolation and midpoint quadrature of
+test_photometry, closed forms (energy, image source), and the other estimator direction.
+"""
+from __future__ import annotations
+
+import base64
+import math
+
+import numpy as np
+import pytest
+
+from owcsim.engine.errors import SceneError
+from owcsim.engine.simulate import simulate
+from tests import reference as ref
+from tests.engine.test_photometry import (C_FULL, G180, as_written, bilinear, cos_power_table, ies_text, ldt_text,
+                                          midpoint_masses, tilted_lobe)
+from tests.scenes import room_doc, spec, within
+
+BARRY_RHO = {"floor": 0.3, "ceiling": 0.8, "wall_x_min": 0.8, "wall_x_max": 0.8, "wall_y_min": 0.8,
+             "wall_y_max": 0.8}
+
+
+def _b64(text: str) -> str:
+    return base64.b64encode(text.encode()).decode("ascii")
+
+
+def luminaire_doc(text: str, fmt="ies", *, tx=(2.5, 2.5, 3.0), aim=(0, 0, -1), rotation_deg=0.0, **kw) -> dict:
+    doc = room_doc(tx=tx, tx_normal=aim, **kw)
+    doc["transmitters"] = [{"id": "lum", "position": list(tx), "normal": list(aim),
+                            "photometry": {"data_base64": _b64(text), "format": fmt, "rotation_deg": rotation_deg}}]
+    return doc
+
+
+def _link(doc, **kw):
+    return simulate(spec(doc), **kw)["links"][0]
+
+
+G1 = np.arange(0.0, 90.01, 1.0)
+
+
+# ----------------------------------------------------------------------------- cos^m file = generalized Lambertian
+@pytest.mark.parametrize("rx,normal,fov", [((0.5, 1.0, 0.0), (0, 0, 1), 85.0),
+                                           ((4.0, 1.5, 1.0), (-0.3, 0.2, 1.0), 60.0)])
+def test_cos_power_file_los_equals_lambertian_closed_form(rx, normal, fov):
+    m = 2.0
+    table = cos_power_table(m, G1, [0.0])
+    link = _link(luminaire_doc(ies_text(G1, [0.0], table), rx=rx, rx_normal=normal, fov_deg=fov,
+                               max_reflections=0, paths=64))
+    n = np.asarray(normal, float) / np.linalg.norm(normal)
+    h, delay = ref.los_gain((2.5, 2.5, 3.0), (0, 0, -1), m, rx, n, 1e-4, math.radians(fov))
+    # interpolation error of cos^2 on 1 deg steps: h^2/8 |f''| / f <= 1e-4 relative here (phi < 60 deg)
+    assert link["los_gain"] == pytest.approx(h, rel=2e-4)
+    assert link["los_gain"] != pytest.approx(h, rel=1e-7)  # it is the table, not the closed form
+    assert link["los_delay_s"] == pytest.approx(delay, rel=1e-12)
+
+
+@pytest.mark.parametrize("direction", ["forward", "backward"])
+def test_cos_power_file_first_bounce_equals_barry_integration(direction):
+    rx, fov = (0.5, 1.0, 0.0), 85.0
+    text = ies_text(G1, [0.0, 90.0], cos_power_table(1.0, G1, [0.0, 90.0]))  # quadrant-symmetric form
+    link = _link(luminaire_doc(text, rx=rx, fov_deg=fov, max_reflections=1, paths=150_000, batch_size=8192,
+                               direction=direction, seed=11))
+    h1 = ref.first_bounce_box_dc_gain((5.0, 5.0, 3.0), BARRY_RHO, (2.5, 2.5, 3.0), (0, 0, -1), 1.0, rx, (0, 0, 1),
+                                      1e-4, math.radians(fov), rel_tol=1e-4)
+    k1, k1_err = link["dc_gain_by_reflection_order"][1], link["dc_gain_by_reflection_order_stderr"][1]
+    assert k1_err < 0.01 * h1
+    # bias budget: reference 1e-4, table interpolation (1 deg, cos: < 4e-5 of R) 
+    assert within(k1, h1, k1_err, bias=5e-4 * h1), (k1, h1, k1_err)
+
+
+# ----------------------------------------------------------------------------- asymmetric luminaire
+TILTED = as_written(tilted_lobe(G180, C_FULL))
+
+
+@pytest.mark.parametrize("rotation", [0.0, 40.0])
+def test_asymmetric_file_los_against_direct_integration(rotation):
+    """LOS = I(gamma, C) / Phi * A cos(psi) / d^2, I by plain bilinear interpolation, Phi by midpoint quadrature."""
+    receivers = [((3.5, 3.8, 0.0), (0, 0, 1)), ((1.0, 1.0, 0.0), (0, 0, 1)), ((4.5, 2.0, 1.2), (-1, 0, 0)),
+                 ((2.0, 4.0, 2.9), (0, 0, -1)), ((2.5, 2.5, 0.3), (0, 0, 1))]
+    tx = np.array([2.5, 2.5, 1.5])
+    doc = luminaire_doc(ies_text(G180, C_FULL, TILTED), tx=tuple(tx), rotation_deg=rotation, max_reflections=0,
+                        paths=64)
+    doc["receivers"] = [{"id": f"r{k}", "position": list(p), "normal": list(n), "area": 1e-4, "fov_deg": 90.0}
+                        for k, (p, n) in enumerate(receivers)]
+    links = simulate(spec(doc))["links"]
+    flux = midpoint_masses(G180, C_FULL, TILTED, sub=32).sum()
+    r = math.radians(rotation)
+    e0, e90, aim = np.array([math.cos(r), math.sin(r), 0]), np.array([-math.sin(r), math.cos(r), 0]), np.array([0, 0, -1.0])
+    for link, (p, n) in zip(links, receivers):
+        v = np.asarray(p) - tx
+        d = np.linalg.norm(v)
+        u = v / d
+        gamma = math.degrees(math.acos(u @ aim))
+        c = math.degrees(math.atan2(u @ e90, u @ e0)) % 360
+        intensity = bilinear(G180, C_FULL, TILTED, np.array([gamma]), np.array([c]))[0]
+        nn = np.asarray(n, float) / np.linalg.norm(n)
+        expected = intensity / flux * 1e-4 * max(-u @ nn, 0) / d**2
+        assert expected > 0
+        assert link["los_gain"] == pytest.approx(expected, rel=2e-5), link["receiver"]
+
+
+def test_forward_backward_agree_with_a_luminaire_that_also_lights_upward():
+    """The tilted lobe with a backward glow (gamma > 90 deg), mid-room: both directions, every order."""
+    base = dict(tx=(2.0, 2.5, 1.8), rx=(3.5, 3.0, 0.8), fov_deg=80.0, max_reflections=3, paths=60_000, seed=3)
+    text = ies_text(G180, C_FULL, TILTED)
+    f = _link(luminaire_doc(text, direction="forward", **base))
+    b = _link(luminaire_doc(text, direction="backward", **base))
+    err = math.hypot(f["dc_gain_stderr"], b["dc_gain_stderr"])
+    assert err < 0.02 * f["dc_gain"]
+    assert within(f["dc_gain"], b["dc_gain"], err)
+    for k in range(1, 4):
+        ek = math.hypot(f["dc_gain_by_reflection_order_stderr"][k], b["dc_gain_by_reflection_order_stderr"][k])
+        assert within(f["dc_gain_by_reflection_order"][k], b["dc_gain_by_reflection_order"][k], ek)
+
+
+def test_luminaire_energy_closed_room():
+    """Every emitted watt reaches the surfaces: P (1 - rho^K) / (1 - rho), exactly (weights are 1)."""
+    rho, K = 0.5, 40
+    doc = luminaire_doc(ies_text(G180, C_FULL, TILTED), rho_walls=rho, rho_floor=rho, rho_ceiling=rho,
+                        tx=(2.0, 2.5, 1.8), max_reflections=K, paths=5000, direction="forward",
+                        russian_roulette=False, t_max_s=2e-6, time_bin_s=1e-8)
+    res = simulate(spec(doc))
+    assert res["diagnostics"]["power_on_surfaces"]["lum"] == pytest.approx((1 - rho**K) / (1 - rho), rel=1e-9)
+
+
+def test_ldt_luminaire_equals_ies_luminaire():
+    c_all = np.arange(0.0, 360.0, 15.0)
+    ies = ies_text(G180, C_FULL, TILTED)
+    ldt = ldt_text(G180, c_all, TILTED[:-1], 0)
+    base = dict(tx=(2.0, 2.5, 1.8), max_reflections=2, paths=4096, seed=1)
+    a = _link(luminaire_doc(ies, **base))
+    b = _link(luminaire_doc(ldt, fmt="ldt", **base))
+    assert a["dc_gain"] == pytest.approx(b["dc_gain"], rel=1e-9)
+
+
+def test_bad_inline_file_is_a_located_scene_error():
+    text = ies_text(G1, [0.0], cos_power_table(1.0, G1, [0.0])).replace("TILT=NONE", "TILT=lamp.tlt")
+    with pytest.raises(SceneError, match=r"transmitters\[0\]\.photometry: line 5: TILT"):
+        _link(luminaire_doc(text, max_reflections=0, paths=64))
+
+
+def test_photometry_file_path_resolved_against_scene_folder(tmp_path):
+    text = ies_text(G1, [0.0], cos_power_table(1.0, G1, [0.0]))
+    (tmp_path / "lamp.ies").write_text(text)
+    doc = luminaire_doc(text, max_reflections=0, paths=64)
+    doc["transmitters"][0]["photometry"] = {"file": "lamp.ies"}
+    inline = _link(luminaire_doc(text, max_reflections=0, paths=64))
+    assert _link(doc, base_dir=tmp_path)["los_gain"] == inline["los_gain"]
+    with pytest.raises(SceneError, match="photometric file .*missing.ies.* not found"):
+        doc["transmitters"][0]["photometry"] = {"file": "missing.ies"}
+        _link(doc, base_dir=tmp_path)
