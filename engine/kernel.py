@@ -192,16 +192,23 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
             prims = prim.take(si)
             normals = isect.normals_soa.take(prims, axis=1)
             normals *= np.where(_dot(normals, sp.directions) > 0, -1.0, 1.0)  # two-sided: face the arriving ray
-            rho = geo.reflectance.take(prims)
             surface_power += sp.weights.sum()
             spawn = points + isect.offset * normals
             sp.k = sp.k + 1
             # Algorithm 4 estimates the unscattered family from both sides: each counts half.
             share = 0.5 if settings.mis else 1.0
-            ctx.connect(points, spawn, sp.weights * rho * (share / np.pi), sp, normals=normals)
-            sp.weights = sp.weights * rho
-            u = rng.random((2, len(sp)))
-            sp.directions = cosine_about_soa(normals, u[0], u[1])
+            if geo.material is None:  # every surface Lambertian: BRDF rho / pi
+                rho = geo.reflectance.take(prims)
+                ctx.connect(points, spawn, sp.weights * rho * (share / np.pi), sp, normals=normals)
+                sp.weights = sp.weights * rho
+                u = rng.random((2, len(sp)))
+                sp.directions = cosine_about_soa(normals, u[0], u[1])
+            else:  # materials (bsdf.py): NEE evaluates f(incoming, toward target); lobe sampled by albedo
+                mat = geo.material.take(prims)
+                ctx.connect(points, spawn, sp.weights * share, sp, normals=normals, brdf=(mat, sp.directions))
+                u = rng.random((2, len(sp)))
+                sp.directions, factor = mat.sample(sp.directions, normals, u[0], u[1])
+                sp.weights = sp.weights * factor
             sp.origins = spawn
             # after reflection K a path still matters if it can scatter (5) or host segment points (2-4)
             alive = (sp.k < K) | (free_flight & (sp.s < S)) | (segment_scatter & (sp.k <= K))
@@ -270,10 +277,13 @@ class _Context:
         self.out = {k: [] for k in ("target", "cell", "delay", "power", "path")}
 
     def connect(self, points, shadow_origins, weights, paths, normals=None, in_dirs=None,
-                scatter_order=None, extra_length=None):
+                scatter_order=None, extra_length=None, brdf=None):
         """NEE from vertices (3, n) to every target; weights carry everything but the connection.
 
-        Surface vertices give `normals` (factor max(cos, 0)); medium vertices give the
+        Surface vertices give `normals` (factor max(cos, 0)) and, on non-Lambertian scenes,
+        `brdf` = (Materials per vertex, arriving directions (3, n)): the factor becomes
+        f(incoming, toward target) cos (else the caller folds rho / pi into the weights);
+        medium vertices give the
         arriving directions `in_dirs` (factor phase(cos)). Cells use paths.k and
         paths.s (or `scatter_order`); delays use paths.lengths (+ `extra_length`).
         """
@@ -308,6 +318,9 @@ class _Context:
             wdir = to / d
             if normals is not None:
                 lobe = cs.take(sel) / d
+                if brdf is not None:
+                    mat, arriving = brdf
+                    lobe = lobe * mat.take(pi).eval(arriving.take(pi, axis=1), normals.take(pi, axis=1), wdir)
             else:
                 lobe = scene.phase.eval(_dot(in_dirs.take(pi, axis=1), wdir))
             f = weights.take(pi) * lobe * targets.response(tgt.take(ti), ct / d, -wdir.T) / d2
