@@ -151,3 +151,42 @@ def _phong_lobe(n: np.ndarray, cos_a: np.ndarray) -> np.ndarray:
     """(n + 1) / (2 pi) cos^n(alpha) for cos alpha > 0, else 0 (normalised over the sphere of w_o)."""
     safe = np.where(cos_a > 0, cos_a, 1.0)
     return np.where(cos_a > 0, (n + 1.0) / (2 * np.pi) * np.exp(n * np.log(safe)), 0.0)
+
+
+@dataclass
+class MirrorPlane:
+    """A plane holding faces with a perfect-mirror part: unit `normal`, a `point` on it, its `faces` (F,) mask."""
+
+    normal: np.ndarray
+    point: np.ndarray
+    faces: np.ndarray
+
+    def reflect_points(self, p: np.ndarray) -> np.ndarray:
+        """Mirror images of points (3, n): p - 2 ((p - p0) . n) n."""
+        dist = _dot(p - self.point[:, None], self.normal[:, None])
+        return p - 2.0 * dist * self.normal[:, None]
+
+    def reflect_vectors(self, v: np.ndarray) -> np.ndarray:
+        """Mirror images of vectors (3, n): v - 2 (v . n) n."""
+        return v - 2.0 * _dot(v, self.normal[:, None]) * self.normal[:, None]
+
+
+def mirror_planes(vertices: np.ndarray, faces: np.ndarray, rho_m: np.ndarray, tol: float) -> list[MirrorPlane]:
+    """Group the faces with rho_m > 0 by their plane (normals equal up to sign, offsets within `tol` [m])."""
+    idx = np.flatnonzero(rho_m > 0)
+    planes: list[MirrorPlane] = []
+    if len(idx) == 0:
+        return planes
+    tri = vertices[faces[idx]]
+    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    for f, n, p in zip(idx, nrm, tri[:, 0]):
+        for plane in planes:
+            if abs(abs(n @ plane.normal) - 1.0) < 1e-9 and abs((p - plane.point) @ plane.normal) < tol:
+                plane.faces[f] = True
+                break
+        else:
+            mask = np.zeros(len(faces), bool)
+            mask[f] = True
+            planes.append(MirrorPlane(n.copy(), p.copy(), mask))
+    return planes

@@ -1,14 +1,16 @@
 """The engine's view of a scene: geometry on Embree, devices, medium. Built once per process."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from owcsim.schemas import SceneSpec
 
+from .bsdf import mirror_planes
 from .devices import Devices, receivers_from_specs, transmitters_from_specs
+from .errors import SceneError
 from .geometry import Geometry, Intersector, build_geometry, check_extent
 from .media import HomogeneousMedium, medium_from_spec
 from .phase import phase_from_spec
@@ -30,6 +32,8 @@ class Scene:
     phase: object = None
     #: length given to segments that leave the scene: the medium beyond it absorbs everything [m]
     medium_far_distance: float = float("inf")
+    #: planar groups of perfect-mirror faces (bsdf.MirrorPlane): devices are reached through their images
+    mirror_planes: list = field(default_factory=list)
 
     @property
     def n_links(self) -> int:
@@ -53,17 +57,38 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
         check_extent(np.concatenate([geometry.vertices, transmitters.positions, receivers.positions]),
                      "the surfaces and devices")
     medium = medium_from_spec(spec.medium)
+    intersector = Intersector(geometry)
+    planes = _mirror_planes(geometry, intersector, medium)
     return Scene(
         spec=spec,
         geometry=geometry,
-        intersector=Intersector(geometry),
+        intersector=intersector,
         transmitters=transmitters,
         receivers=receivers,
         medium=medium,
         all_visible=spec.room is not None and not spec.furniture and not spec.meshes,
         phase=phase_from_spec(spec.medium.phase) if medium is not None else None,
         medium_far_distance=_far_distance(spec, geometry, medium),
+        mirror_planes=planes,
     )
+
+
+#: most distinct mirror planes a scene may have (each costs one image connection per vertex and target)
+MAX_MIRROR_PLANES = 32
+
+
+def _mirror_planes(geometry: Geometry, intersector: Intersector, medium) -> list:
+    """The planes of the perfect-mirror faces; SceneError where the image method does not apply."""
+    if geometry.material is None or not geometry.material.rho_m.any():
+        return []
+    if medium is not None:
+        raise SceneError("perfect-mirror surfaces cannot be combined with a medium yet: use a Phong material "
+                         "with a large exponent for the specular part")
+    planes = mirror_planes(geometry.vertices, geometry.faces, geometry.material.rho_m, tol=intersector.offset)
+    if len(planes) > MAX_MIRROR_PLANES:
+        raise SceneError(f"the mirror surfaces lie in {len(planes)} distinct planes, more than {MAX_MIRROR_PLANES}: "
+                         "perfect mirrors must be flat (use a Phong material for curved glossy surfaces)")
+    return planes
 
 
 def _far_distance(spec: SceneSpec, geometry: Geometry, medium) -> float:

@@ -268,3 +268,53 @@ def test_lambertian_through_the_material_path_is_bit_identical():
     doc2 = room_doc(max_reflections=3, paths=8192, seed=2, direction="forward")
     doc2["room"]["reflectance"]["floor"] = {"type": "lambertian", "reflectance": 0.3}
     assert simulate(spec(doc2))["links"][0]["dc_gain"] == plain["dc_gain"]
+
+
+# ----------------------------------------------------------------------------- perfect mirrors
+def mirror(rho, r_d=0.0):
+    return {"type": "mirror", "reflectance": rho, "diffuse_fraction": r_d}
+
+
+@pytest.mark.parametrize("direction", ["forward", "backward"])
+def test_mirror_floor_first_reflection_is_the_image_source(direction):
+    """Black room, mirror floor: k = 1 is the image of the Tx in the floor, exactly (no variance)."""
+    link = _link(glossy_doc(mirror(0.9), max_reflections=2, paths=2048, direction=direction))
+    h1 = image_source_gain(0.9)
+    assert link["dc_gain_by_reflection_order"][1] == pytest.approx(h1, rel=1e-9)
+    assert link["dc_gain_by_reflection_order_stderr"][1] < 1e-7 * h1  # zero up to rounding
+    assert link["dc_gain_by_reflection_order"][2] == 0.0  # a black room: nothing else
+    d_img = np.linalg.norm(RX_DOWN - TX * np.array([1, 1, -1]))
+    assert link["mean_delay_s"] == pytest.approx(d_img / 299_792_458.0, rel=1e-9)
+
+
+@pytest.mark.parametrize("direction", ["forward", "backward"])
+def test_half_mirror_floor_is_image_plus_diffuse_quadrature(direction):
+    """Mirror 0.5 + diffuse 0.3: k = 1 = image source (0.5) + Lambertian floor (0.3) by quadrature."""
+    link = _link(glossy_doc(mirror(0.8, 0.375), max_reflections=1, paths=100_000, direction=direction, seed=4))
+    ref_h1 = image_source_gain(0.5) + glossy_floor_first_bounce(0.3, 0.0, 0.0)
+    k1, se = link["dc_gain_by_reflection_order"][1], link["dc_gain_by_reflection_order_stderr"][1]
+    assert 0 < se < 0.01 * ref_h1
+    assert within(k1, ref_h1, se, bias=1e-3 * ref_h1), (k1, ref_h1, se)
+
+
+def test_forward_backward_agree_per_order_with_a_mirror_floor_and_a_luminaire():
+    """Mirror floor, diffuse walls, Phong ceiling, the tilted luminaire: both directions, every order."""
+    base = dict(tx=(2.0, 2.5, 2.2), rx=(3.5, 3.0, 0.8), fov_deg=80.0, max_reflections=4, paths=80_000, seed=12)
+    out = {}
+    for direction in ("forward", "backward"):
+        d = luminaire_doc(ies_text(G180, C_FULL, TILTED), direction=direction, **base)
+        d["room"]["reflectance"] = {"floor": mirror(0.7, 0.3), "ceiling": phong(0.8, 0.5, 10.0), "walls": 0.6}
+        out[direction] = _link(d)
+    f, b = out["forward"], out["backward"]
+    err = math.hypot(f["dc_gain_stderr"], b["dc_gain_stderr"])
+    assert err < 0.02 * f["dc_gain"]
+    assert within(f["dc_gain"], b["dc_gain"], err)
+    for k in range(1, 5):
+        ek = math.hypot(f["dc_gain_by_reflection_order_stderr"][k], b["dc_gain_by_reflection_order_stderr"][k])
+        assert within(f["dc_gain_by_reflection_order"][k], b["dc_gain_by_reflection_order"][k], ek), k
+
+
+def test_mirror_with_smoke_is_refused():
+    doc = glossy_doc(mirror(0.9), medium={"type": "homogeneous", "sigma_a": 0.1, "sigma_s": 0.1}, paths=64)
+    with pytest.raises(SceneError, match="perfect-mirror surfaces cannot be combined with a medium"):
+        _link(doc)
