@@ -318,3 +318,42 @@ def test_mirror_with_smoke_is_refused():
     doc = glossy_doc(mirror(0.9), medium={"type": "homogeneous", "sigma_a": 0.1, "sigma_s": 0.1}, paths=64)
     with pytest.raises(SceneError, match="perfect-mirror surfaces cannot be combined with a medium"):
         _link(doc)
+
+
+# ----------------------------------------------------------------------------- files at the edges
+def test_photometry_files_are_inlined_for_clusters_and_clients_and_refused_by_the_server(tmp_path):
+    from owcsim.clients.scene import scene_document
+    from owcsim.engine.execution_dask import portable_spec
+    from owcsim.server.problems import ProblemError
+    from owcsim.server.settings import Settings
+    from owcsim.server.submission import check_limits
+
+    text = ies_text(G1, [0.0], cos_power_table(1.0, G1, [0.0]))
+    (tmp_path / "lamp.ies").write_text(text)
+    doc = luminaire_doc(text, max_reflections=0, paths=64)
+    doc["transmitters"][0]["photometry"] = {"file": "lamp.ies", "rotation_deg": 10.0}
+    portable = portable_spec(spec(doc), tmp_path).transmitters[0].photometry
+    assert portable.file is None and portable.format == "ies" and portable.rotation_deg == 10.0
+    assert base64.b64decode(portable.data_base64).decode() == text
+    sent = scene_document(doc, base_dir=tmp_path)["transmitters"][0]["photometry"]
+    assert "file" not in sent and sent["format"] == "ies" and base64.b64decode(sent["data_base64"]).decode() == text
+    with pytest.raises(ProblemError):
+        check_limits(spec(doc), Settings())
+
+
+def test_all_algorithms_agree_without_scattering_with_a_luminaire_and_glossy_surfaces():
+    """sigma_s = 0 (absorbing air): algorithms 1 to 5 estimate the same paths (physics.md section 6)."""
+    medium = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.0}
+    res = {}
+    for algorithm in (1, 2, 3, 4, 5):
+        d = luminaire_doc(ies_text(G180, C_FULL, TILTED), tx=(2.0, 2.5, 2.2), rx=(3.5, 3.0, 0.8), fov_deg=80.0,
+                          max_reflections=3, paths=20_000, seed=17, algorithm=algorithm, medium=medium,
+                          direction="forward")
+        if algorithm != 1:
+            d["simulation"]["max_scattering"] = 1
+        d["room"]["reflectance"] = {"floor": phong(0.6, 0.4, 25.0), "ceiling": 0.8, "walls": phong(0.7, 0.6, 4.0)}
+        res[algorithm] = _link(d)
+    ref_link = res[1]
+    for a in (2, 3, 4, 5):
+        err = math.hypot(res[a]["dc_gain_stderr"], ref_link["dc_gain_stderr"])
+        assert within(res[a]["dc_gain"], ref_link["dc_gain"], err), a
