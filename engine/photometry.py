@@ -90,8 +90,8 @@ class Photometry:
         gamma, c = np.asarray(gamma, float), np.mod(np.asarray(c, float), 2 * np.pi)
         g, cc, tab = self.gamma, self.c, self.intensity
         inside = (gamma >= g[0]) & (gamma <= g[-1])
-        i = np.clip(np.searchsorted(g, gamma, side="right") - 1, 0, len(g) - 2)
-        j = np.clip(np.searchsorted(cc, c, side="right") - 1, 0, len(cc) - 2)
+        i = np.clip(_cell_index(g, gamma), 0, len(g) - 2)
+        j = np.clip(_cell_index(cc, c), 0, len(cc) - 2)
         s = np.clip((gamma - g[i]) / (g[i + 1] - g[i]), 0.0, 1.0)
         t = np.clip((c - cc[j]) / (cc[j + 1] - cc[j]), 0.0, 1.0)
         val = ((1 - s) * ((1 - t) * tab[j, i] + t * tab[j + 1, i])
@@ -134,6 +134,17 @@ class Photometry:
         gamma, c = self.sample_angles(u1, u2)
         sg = np.sin(gamma)
         return np.stack((sg * np.cos(c), sg * np.sin(c), np.cos(gamma)), axis=-1)
+
+
+def _cell_index(grid: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Index i of the cell grid[i] <= x < grid[i+1] (unclipped): arithmetic on an even grid, else a search."""
+    step = (grid[-1] - grid[0]) / (len(grid) - 1)
+    if np.allclose(np.diff(grid), step, rtol=1e-9, atol=0.0):  # the usual case: 2.5, 5 or 15 deg steps
+        i = np.floor((x - grid[0]) * (1.0 / step)).astype(np.int64)
+        # rounding at a grid line: step back where x falls below the cell's start
+        i -= (i > 0) & (i < len(grid)) & (x < grid[np.clip(i, 0, len(grid) - 1)])
+        return i
+    return np.searchsorted(grid, x, side="right") - 1
 
 
 def _cell_masses(g: np.ndarray, c: np.ndarray, table: np.ndarray) -> np.ndarray:
