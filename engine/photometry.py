@@ -31,6 +31,7 @@ by the closed-form root of a quadratic.
 """
 from __future__ import annotations
 
+import functools
 import math
 import re
 from dataclasses import dataclass, field
@@ -79,7 +80,7 @@ class Photometry:
         return cls(gamma=g, c=c, intensity=table / flux, flux=flux, declared_flux=declared_flux, source=source,
                    symmetry=symmetry, _cdf=cdf)
 
-    @property
+    @functools.cached_property
     def max_gamma(self) -> float:
         """Largest gamma with light [rad] (> pi/2: the luminaire also emits backwards)."""
         lit = np.flatnonzero(self.intensity.max(axis=0) > 0)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import base64
 import math
+import re
 
 import numpy as np
 import pytest
@@ -357,3 +358,57 @@ def test_all_algorithms_agree_without_scattering_with_a_luminaire_and_glossy_sur
     for a in (2, 3, 4, 5):
         err = math.hypot(res[a]["dc_gain_stderr"], ref_link["dc_gain_stderr"])
         assert within(res[a]["dc_gain"], ref_link["dc_gain"], err), a
+
+
+# ----------------------------------------------------------------------------- schemas and automatic settings
+@pytest.mark.parametrize("change,message", [
+    (lambda t: t.update(lambertian_order=1.0), "give `photometry` or a Lambertian pattern"),
+    (lambda t: t["photometry"].update(data_base64="not base64!"), "`data_base64` is not valid base64"),
+    (lambda t: t["photometry"].pop("format"), "`data_base64` needs `format`"),
+    (lambda t: t.update(photometry={"file": "lamp.xyz"}), "cannot tell the format of 'lamp.xyz'"),
+    (lambda t: t.update(photometry={"file": "a.ies", "data_base64": "AAAA", "format": "ies"}), "exactly one of"),
+])
+def test_photometry_spec_validation(change, message):
+    from pydantic import ValidationError
+
+    doc = luminaire_doc(ies_text(G1, [0.0], cos_power_table(1.0, G1, [0.0])))
+    change(doc["transmitters"][0])
+    with pytest.raises(ValidationError, match=re.escape(message)):
+        spec(doc)
+
+
+@pytest.mark.parametrize("floor,message", [
+    ({"type": "phong", "reflectance": 0.5, "diffuse_fraction": 1.2, "exponent": 10}, "less than or equal to 1"),
+    ({"type": "phong", "reflectance": 0.5, "diffuse_fraction": 0.2}, "exponent"),
+    ({"type": "glass", "reflectance": 0.5}, "does not match any of the expected tags"),
+    ({"type": "mirror", "reflectance": 1.5}, "less than or equal to 1"),
+])
+def test_surface_spec_validation(floor, message):
+    from pydantic import ValidationError
+
+    doc = room_doc()
+    doc["room"]["reflectance"]["floor"] = floor
+    with pytest.raises(ValidationError, match=message):
+        spec(doc)
+
+
+def test_materials_per_face_and_rho_max_is_the_total_reflectance():
+    from owcsim.engine.auto import _max_reflectance
+    from owcsim.engine.scene import build_scene
+
+    doc = room_doc(0.5, 0.3, 0.6)
+    doc["room"]["reflectance"]["floor"] = phong(0.9, 0.2, 40.0)
+    doc["furniture"] = [{"min": [1, 1, 0], "max": [2, 2, 1], "reflectance": mirror(0.7, 0.1)}]
+    s = spec(doc)
+    scene = build_scene(s)
+    g = scene.geometry
+    floor = np.array([n == "room.floor" for n in np.asarray(g.group_names)[g.group]])
+    box = np.array([n == "furniture[0]" for n in np.asarray(g.group_names)[g.group]])
+    np.testing.assert_allclose(g.material.rho_d[floor], 0.18)
+    np.testing.assert_allclose(g.material.rho_s[floor], 0.72)
+    np.testing.assert_allclose(g.material.exponent[floor], 40.0)
+    np.testing.assert_allclose(g.material.rho_m[box], 0.63)
+    np.testing.assert_allclose(g.material.rho_d[box], 0.07)
+    np.testing.assert_allclose(g.reflectance, g.material.total)
+    assert _max_reflectance(s, scene) == pytest.approx(0.9)
+    assert len(scene.mirror_planes) == 6  # the box's six faces
