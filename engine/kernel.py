@@ -374,7 +374,8 @@ class _Context:
             img_nrm = plane.reflect_vectors(self.t_nrm)
             side_t = _dot(self.t_pos - plane.point[:, None], plane.normal[:, None])
             for j in range(len(tgt)):  # a loop over devices
-                ok = live[side_x * side_t[j] > 0]
+                # same side as the target, and off the plane (a vertex on the mirror cannot reflect on it)
+                ok = live[(side_x * side_t[j] > 0) & (np.abs(side_x) > 4.0 * isect.offset)]
                 if len(ok) == 0:
                     continue
                 to = images[:, j:j + 1] - points.take(ok, axis=1)

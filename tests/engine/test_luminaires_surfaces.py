@@ -412,3 +412,13 @@ def test_materials_per_face_and_rho_max_is_the_total_reflectance():
     np.testing.assert_allclose(g.reflectance, g.material.total)
     assert _max_reflectance(s, scene) == pytest.approx(0.9)
     assert len(scene.mirror_planes) == 6  # the box's six faces
+
+
+def test_vertices_on_a_mirror_do_not_reflect_on_it_again():
+    """Half-mirror floor, other faces black, K = 2: nothing reflects twice (floor -> floor is impossible).
+
+    A floor vertex sees the floor's image of the receiver behind itself (cos < 0), and the
+    kernel also skips vertices within a few ray offsets of a mirror plane."""
+    link = _link(glossy_doc(mirror(0.8, 0.375), max_reflections=2, paths=50_000, seed=4))
+    assert link["dc_gain_by_reflection_order"][1] > 0
+    assert link["dc_gain_by_reflection_order"][2] == 0.0
