@@ -10,6 +10,9 @@ serves both directions. Each step intersects the surfaces, then:
 - surface vertex x (reflection k): next-event estimation (NEE) to every target,
       dH = w * rho/pi * cos(theta_x) * R_target(cos) / d^2 * V * T(x -> target),
   tallied at (k, s); then Lambertian reflection (cosine sampling, w *= rho);
+  with materials (bsdf.py: Phong, mirror) rho/pi becomes the BRDF f(incoming, toward
+  target), the outgoing direction is sampled from a lobe chosen by albedo, and planar
+  mirrors reach the targets through their images (`connect_mirrors`);
 - algorithm 1: every segment multiplies w by its transmittance T (extinction only);
 - algorithms 2-4 (`segment_scatter`): points p on each segment (time strata, see
   segments.py) connect to the targets with one scattering event,
@@ -161,8 +164,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         origins=np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1),
         weights=np.full(n, w0), lengths=np.zeros(n), path=np.arange(n),
         k=np.zeros(n, np.int64), s=np.zeros(n, np.int64))
-    if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance)
-        ctx.connect_source_mirrors(sources, i, w0, n)
+    if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each in algorithm 4
+        ctx.connect_source_mirrors(sources, i, w0 * (0.5 if settings.mis else 1.0), n)
     surface_power = escaped_power = 0.0
     # Segments that leave the scene run to where the medium has absorbed everything.
     far = scene.medium_far_distance
@@ -288,9 +291,8 @@ class _Context:
 
         Surface vertices give `normals` (factor max(cos, 0)) and, on non-Lambertian scenes,
         `brdf` = (Materials per vertex, arriving directions (3, n)): the factor becomes
-        f(incoming, toward target) cos (else the caller folds rho / pi into the weights);
-        medium vertices give the
-        arriving directions `in_dirs` (factor phase(cos)). Cells use paths.k and
+        f(incoming, toward target) cos (else the caller folds rho / pi into the weights).
+        Medium vertices give the arriving directions `in_dirs` (factor phase(cos)). Cells use paths.k and
         paths.s (or `scatter_order`); delays use paths.lengths (+ `extra_length`).
         """
         scene, targets, tgt = self.scene, self.targets, self.tgt

@@ -8,16 +8,14 @@ whichever side a ray arrives from.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
 from .base import Point, SpecModel
-from .surfaces import SurfaceSpec
+from .surfaces import Surface  # a Lambertian reflectance, or a material (Phong, mirror; see surfaces.py)
 
 Reflectance = Annotated[float, Field(ge=0.0, le=1.0, description="Lambertian reflectance rho, in [0, 1]")]
-#: a Lambertian reflectance, or a material (Phong, mirror; see surfaces.py)
-Surface = Union[Reflectance, SurfaceSpec]
 
 #: Names of the six faces of the box room, in the order the engine builds them.
 ROOM_FACES = ("floor", "ceiling", "wall_x_min", "wall_x_max", "wall_y_min", "wall_y_max")

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal, Union
 
-from pydantic import Field
+from pydantic import BaseModel, Discriminator, Field, Tag, WrapValidator
 
 from .base import SpecModel
 
@@ -50,6 +50,31 @@ class MirrorSurfaceSpec(SpecModel):
 
 
 SurfaceSpec = Annotated[Union[LambertianSurfaceSpec, PhongSurfaceSpec, MirrorSurfaceSpec], Field(discriminator="type")]
+
+_SURFACE_HELP = "a reflectance is a number in [0, 1] or a material with `type` lambertian, phong or mirror"
+
+
+def _surface_kind(value) -> str | None:
+    if isinstance(value, dict):
+        return value.get("type")
+    if isinstance(value, BaseModel):
+        return getattr(value, "type", None)
+    return "number"
+
+
+def _number_first(value, handler):
+    """Numbers are checked here, so that a wrong one is reported at the field itself."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and not 0.0 <= value <= 1.0:
+        raise ValueError(f"a Lambertian reflectance must lie in [0, 1], found {value:g}")
+    return handler(value)
+
+
+#: A Lambertian reflectance (a number) or a material: what a surface's `reflectance` takes.
+Surface = Annotated[
+    Union[Annotated[Rho, Tag("number")], Annotated[LambertianSurfaceSpec, Tag("lambertian")],
+          Annotated[PhongSurfaceSpec, Tag("phong")], Annotated[MirrorSurfaceSpec, Tag("mirror")]],
+    Discriminator(_surface_kind, custom_error_type="invalid_surface", custom_error_message=_SURFACE_HELP),
+    WrapValidator(_number_first)]
 
 
 def split(surface) -> tuple[float, float, float, float]:
