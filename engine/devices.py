@@ -71,10 +71,15 @@ class Devices:
         cos = np.asarray(cos, float)
         idx = np.asarray(idx)
         if self.kind == "transmitter":
+            tabulated = self.tabulated
+            if len(tabulated) == len(self.ids) == 1:  # one luminaire (the usual backward target): no masks
+                if directions is None:
+                    raise ValueError("a tabulated transmitter's response needs the directions")
+                return self.patterns[0].eval_local(np.asarray(directions, float) @ self.frames[0].T)
             m = self.order.take(idx)
             safe = np.where(cos > 0, cos, 1.0)
             out = np.where(cos > 0, (m + 1) / (2 * np.pi) * np.exp(m * np.log(safe)), 0.0)
-            for j in self.tabulated:  # a loop over devices
+            for j in tabulated:  # a loop over devices
                 sel = np.flatnonzero(idx == j)
                 if len(sel):
                     if directions is None:
