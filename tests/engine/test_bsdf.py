@@ -164,3 +164,18 @@ def test_large_exponent_tends_to_the_mirror():
         errs.append(abs(val - h(r)))
     assert errs[2] < errs[1] < errs[0] and errs[2] < 1e-2 * h(r)
     assert errs[2] / errs[0] < 1.5 * math.sqrt(50 / 2000)
+
+
+def test_glossy_lobe_frame_unit_vectors_and_mean_direction():
+    """Samples are unit vectors and E[w] = E[cos alpha] r = (n+1)/(n+2) r (uniform azimuth, orthonormal frame)."""
+    from owcsim.engine.bsdf import _lobe_about_soa
+
+    rng = np.random.default_rng(11)
+    size, n = 400_000, 7.0
+    for axis in ([0.3, -0.5, 0.81], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]):
+        r = np.asarray(axis) / np.linalg.norm(axis)
+        w = _lobe_about_soa(np.repeat(r[:, None], size, axis=1), np.full(size, n), rng.random(size), rng.random(size))
+        np.testing.assert_allclose(np.einsum("ij,ij->j", w, w), 1.0, atol=1e-6)
+        mean = w.mean(axis=1)
+        se = w.std(axis=1) / math.sqrt(size)
+        assert np.all(np.abs(mean - (n + 1) / (n + 2) * r) < 5 * se + 1e-6), (mean, r)
