@@ -179,3 +179,19 @@ def test_glossy_lobe_frame_unit_vectors_and_mean_direction():
         mean = w.mean(axis=1)
         se = w.std(axis=1) / math.sqrt(size)
         assert np.all(np.abs(mean - (n + 1) / (n + 2) * r) < 5 * se + 1e-6), (mean, r)
+
+
+def test_pdf_is_the_density_of_the_sampled_directions():
+    """Importance-sampling identity: E[g(w) / pdf(w)] = int g dw (= 2 pi / 3 for g = max(cos th_o, 0)^2)."""
+    size = 400_000
+    m = _mat(rho_d=0.3, rho_s=0.5, n=15.0, size=size)
+    d_in, nrm = _incoming(50, size)
+    rng = np.random.default_rng(12)
+    w, _ = m.sample(d_in, nrm, rng.random(size), rng.random(size))
+    g = np.maximum(w[2], 0) ** 2
+    x = g / m.pdf(d_in, nrm, w)
+    se = x.std() / math.sqrt(size)
+    assert abs(x.mean() - 2 * math.pi / 3) < 4 * se + 1e-3
+    # power: a pdf that forgets the lobe's share fails
+    wrong = g / (0.3 / 0.8 * np.maximum(w[2], 0) / np.pi + _mat(rho_s=1.0, n=15.0, size=size).pdf(d_in, nrm, w))
+    assert abs(wrong.mean() - 2 * math.pi / 3) > 4 * se + 1e-3
