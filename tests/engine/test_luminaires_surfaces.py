@@ -423,3 +423,16 @@ def test_vertices_on_a_mirror_do_not_reflect_on_it_again():
     link = _link(glossy_doc(mirror(0.8, 0.375), max_reflections=2, paths=50_000, seed=4))
     assert link["dc_gain_by_reflection_order"][1] > 0
     assert link["dc_gain_by_reflection_order"][2] == 0.0
+
+
+@pytest.mark.parametrize("name", ["office_luminaires.json", "barry_glossy_floor.json"])
+def test_example_scenes_run(name):
+    """The shipped examples (their .ies / .ldt files by path, relative to the scene) build and run."""
+    import json
+
+    from tests.scenes import EXAMPLES
+
+    doc = json.loads((EXAMPLES / name).read_text())
+    doc["simulation"].update(paths=2048, max_reflections=2)
+    res = simulate(spec(doc), base_dir=EXAMPLES)
+    assert all(link["dc_gain"] > 0 and link["dc_gain_stderr"] < 0.1 * link["dc_gain"] for link in res["links"])
