@@ -436,3 +436,14 @@ def test_example_scenes_run(name):
     doc["simulation"].update(paths=2048, max_reflections=2)
     res = simulate(spec(doc), base_dir=EXAMPLES)
     assert all(link["dc_gain"] > 0 and link["dc_gain_stderr"] < 0.1 * link["dc_gain"] for link in res["links"])
+
+
+def test_automatic_settings_with_a_luminaire_and_glossy_surfaces():
+    """K and the window chosen automatically; the tail estimate uses rho_max = the largest total reflectance."""
+    doc = luminaire_doc(ies_text(G180, C_FULL, TILTED), tx=(2.0, 2.5, 2.2), paths=4096, seed=3)
+    doc["room"]["reflectance"] = {"floor": phong(0.9, 0.3, 20.0), "ceiling": 0.5, "walls": mirror(0.6, 0.5)}
+    doc["simulation"].pop("max_reflections")
+    doc["simulation"].pop("t_max_s")
+    res = simulate(spec(doc))
+    assert res["modeled"]["pilot"]["rho_max"] == pytest.approx(0.9)
+    assert res["links"][0]["dc_gain"] > 0
