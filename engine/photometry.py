@@ -6,9 +6,9 @@ type-C photometry: gamma in [0, 180] deg is the polar angle from the luminaire's
 azimuth of the half-plane, C = 90 deg counter-clockwise from C = 0 seen from behind the
 luminaire (from above a downlight; IES LM-63-2019 sec. 5.15, CIE 121-1996).
 
-Interpolation: bilinear in (gamma, C), as CIE 121-1996 sec. 4 and the EULUMDAT
-description prescribe for intermediate angles (LM-63 itself states no rule; linear
-interpolation is what every lighting program applies to it). Outside the file's gamma
+Interpolation: bilinear in (gamma, C). Neither LM-63 nor the EULUMDAT description fixes
+a rule; linear interpolation between the measured angles is what lighting programs apply
+to these tables (CIE 121-1996 discusses the grids it suits). Outside the file's gamma
 range the intensity is 0; C is periodic. Symmetric files (rotational, bilateral about
 C0-C180 or C90-C270, quadrant) are expanded to the full C range first; since the mirror
 images fall on grid lines, interpolating the expanded table is the same as interpolating
