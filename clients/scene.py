@@ -41,4 +41,16 @@ def inline_mesh_files(doc: dict, base_dir: Path) -> dict:
             if not mesh.get("format"):
                 mesh["format"] = path.suffix[1:].lower() or None
             mesh["data_base64"] = base64.b64encode(data).decode("ascii")
+    for tx in doc.get("transmitters") or []:  # luminaires' photometric files (.ies, .ldt), likewise
+        phot = tx.get("photometry") if isinstance(tx, dict) else None
+        if isinstance(phot, dict) and isinstance(phot.get("file"), str):
+            path = Path(phot.pop("file"))
+            path = path if path.is_absolute() else base_dir / path
+            try:
+                data = path.read_bytes()
+            except OSError as exc:
+                raise FileNotFoundError(f"photometric file {str(path)!r}: {exc.strerror}") from None
+            if not phot.get("format"):
+                phot["format"] = path.suffix[1:].lower() or None
+            phot["data_base64"] = base64.b64encode(data).decode("ascii")
     return doc

@@ -8,15 +8,23 @@ src -> x1 ... xk -> dst is then symmetric in the two devices, which is what lets
 one kernel trace from either side: rays leave a device with a pdf proportional to
 its response, carrying the weight `total_response` = integral of the response over
 the sphere (1 for a transmitter per watt; A T_s g pi sin^2(FOV) for a receiver).
+
+A transmitter may instead carry a tabulated pattern (a luminaire's photometric file,
+photometry.py): response I(gamma, C) / Phi [1/sr], with gamma from its aiming axis
+(`normal`) and C from its C = 0 half-plane (`frames`); its response needs the
+direction, not only the cosine, and it may emit behind its normal (gamma > 90 deg).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from owcsim.schemas import ReceiverSpec, TransmitterSpec
 
+from .errors import SceneError
+from .photometry import Photometry, PhotometryError, luminaire_frame, parse_photometry
 from .sampling import sample_cosine_cone, sample_generalized_lambertian, to_world
 
 
@@ -37,18 +45,48 @@ class Devices:
     gain: np.ndarray  # (n,) A T_s g [m^2] (receivers; 1 for transmitters)
     power: np.ndarray  # (n,) P_t [W] (transmitters; 1 for receivers)
     area: np.ndarray  # (n,) collecting area A [m^2] (receivers; 0 for transmitters)
+    #: tabulated patterns (transmitters from photometric files), None for a Lambertian device
+    patterns: list[Photometry | None] = field(default_factory=list)
+    #: (n, 3, 3) rows (e_C0, e_C90, aim) of each tabulated device (unused for the others)
+    frames: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.ids)
 
-    def response(self, idx: np.ndarray, cos: np.ndarray) -> np.ndarray:
-        """Angular response of devices `idx` at cosine `cos` to their normal [1/sr or m^2]."""
+    @property
+    def tabulated(self) -> list[int]:
+        """Indices of the devices with a tabulated pattern."""
+        return [i for i, p in enumerate(self.patterns) if p is not None]
+
+    @property
+    def front_only(self) -> bool:
+        """True when no device responds behind its normal (cos <= 0 gives 0 for all)."""
+        return all(self.patterns[i].max_gamma <= np.pi / 2 + 1e-12 for i in self.tabulated)
+
+    def response(self, idx: np.ndarray, cos: np.ndarray, directions: np.ndarray | None = None) -> np.ndarray:
+        """Angular response of devices `idx` at cosine `cos` to their normal [1/sr or m^2].
+
+        `directions` (n, 3): unit directions from the device (needed by tabulated devices).
+        """
         cos = np.asarray(cos, float)
         idx = np.asarray(idx)
         if self.kind == "transmitter":
+            tabulated = self.tabulated
+            if len(tabulated) == len(self.ids) == 1:  # one luminaire (the usual backward target): no masks
+                if directions is None:
+                    raise ValueError("a tabulated transmitter's response needs the directions")
+                return self.patterns[0].eval_local(np.asarray(directions, float) @ self.frames[0].T)
             m = self.order.take(idx)
             safe = np.where(cos > 0, cos, 1.0)
-            return np.where(cos > 0, (m + 1) / (2 * np.pi) * np.exp(m * np.log(safe)), 0.0)
+            out = np.where(cos > 0, (m + 1) / (2 * np.pi) * np.exp(m * np.log(safe)), 0.0)
+            for j in tabulated:  # a loop over devices
+                sel = np.flatnonzero(idx == j)
+                if len(sel):
+                    if directions is None:
+                        raise ValueError("a tabulated transmitter's response needs the directions")
+                    local = np.asarray(directions, float)[sel] @ self.frames[j].T
+                    out[sel] = self.patterns[j].eval_local(local)
+            return out
         return np.where((cos > 0) & (cos >= self.cos_fov.take(idx)), self.gain.take(idx) * cos, 0.0)
 
     def total_response(self, i: int) -> float:
@@ -60,20 +98,54 @@ class Devices:
     def sample_directions(self, i: int, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
         """Directions leaving device i with pdf response / total_response (exact inversion)."""
         if self.kind == "transmitter":
+            if self.patterns and self.patterns[i] is not None:
+                return self.patterns[i].sample_local(u1, u2) @ self.frames[i]
             local = sample_generalized_lambertian(self.order[i], u1, u2)
         else:
             local = sample_cosine_cone(self.cos_fov[i], u1, u2)
         return to_world(local, self.normals[i])
 
 
-def transmitters_from_specs(specs: list[TransmitterSpec], ids: list[str]) -> Devices:
+def load_photometry(spec, where: str, base_dir: Path | None) -> Photometry:
+    """Read and parse a transmitter's photometric file (inline base64, or a path relative to base_dir)."""
+    import base64
+
+    pspec = spec.photometry
+    fmt = pspec.resolved_format
+    if pspec.file is not None:
+        path = Path(pspec.file)
+        if not path.is_absolute() and base_dir is not None:
+            path = base_dir / path
+        if not path.is_file():
+            raise SceneError(f"{where}: photometric file {str(path)!r} not found")
+        data = path.read_bytes()
+        where = f"{where} ({path.name})"
+    else:
+        data = base64.b64decode(pspec.data_base64, validate=True)
+    return parse_photometry(data, fmt, where)
+
+
+def transmitters_from_specs(specs: list[TransmitterSpec], ids: list[str], base_dir: Path | None = None) -> Devices:
     n = len(specs)
+    patterns: list[Photometry | None] = []
+    frames = np.zeros((n, 3, 3))
+    for i, s in enumerate(specs):
+        if s.photometry is None:
+            patterns.append(None)
+            continue
+        where = f"transmitters[{i}].photometry"
+        patterns.append(load_photometry(s, where, base_dir))
+        try:
+            frames[i] = luminaire_frame(s.normal, s.photometry.c0_direction, s.photometry.rotation_deg)
+        except SceneError as exc:
+            raise PhotometryError(f"transmitters[{i}]: {exc}") from None
     return Devices(
         kind="transmitter", ids=ids,
         positions=np.array([s.position for s in specs], float).reshape(n, 3),
         normals=np.array([s.normal for s in specs], float).reshape(n, 3),
         order=np.array([s.m for s in specs], float), cos_fov=np.zeros(n), gain=np.ones(n),
-        power=np.array([s.power for s in specs], float), area=np.zeros(n))
+        power=np.array([s.power for s in specs], float), area=np.zeros(n),
+        patterns=patterns, frames=frames)
 
 
 def concentrator_gain(fov: float, index: float | None) -> float:
@@ -93,4 +165,4 @@ def receivers_from_specs(specs: list[ReceiverSpec], ids: list[str]) -> Devices:
         positions=np.array([s.position for s in specs], float).reshape(n, 3),
         normals=np.array([s.normal for s in specs], float).reshape(n, 3),
         order=np.zeros(n), cos_fov=cos_fov, gain=gain, power=np.ones(n),
-        area=np.array([s.area for s in specs], float).reshape(n))
+        area=np.array([s.area for s in specs], float).reshape(n), patterns=[None] * n)

@@ -94,6 +94,7 @@ def portable_spec(spec: SceneSpec, base_dir: str | Path | None) -> SceneSpec:
     Paths resolve as `build_scene` resolves them (relative to `base_dir`, else to the
     working directory), so the workers load the same bytes with the same format.
     """
+    spec = _inline_photometry(spec, base_dir)
     if not any(m.file is not None for m in spec.meshes):
         return spec
     meshes = []
@@ -115,13 +116,40 @@ def portable_spec(spec: SceneSpec, base_dir: str | Path | None) -> SceneSpec:
     return spec.model_copy(update={"meshes": meshes})
 
 
+def _inline_photometry(spec: SceneSpec, base_dir: str | Path | None) -> SceneSpec:
+    """Transmitters' photometric `file`s read here and inlined (as `portable_spec` does for meshes)."""
+    if not any(t.photometry is not None and t.photometry.file is not None for t in spec.transmitters):
+        return spec
+    txs = []
+    for i, tx in enumerate(spec.transmitters):
+        phot = tx.photometry
+        if phot is None or phot.file is None:
+            txs.append(tx)
+            continue
+        path = Path(phot.file)
+        if not path.is_absolute() and base_dir is not None:
+            path = Path(base_dir) / path
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise SceneError(f"transmitters[{i}].photometry: cannot read {str(path)!r} to send it to the cluster "
+                             f"({exc.strerror or exc})") from None
+        phot = phot.model_copy(update={"file": None, "data_base64": base64.b64encode(data).decode("ascii"),
+                                       "format": phot.resolved_format})
+        txs.append(tx.model_copy(update={"photometry": phot}))
+    return spec.model_copy(update={"transmitters": txs})
+
+
 def scene_fingerprint(scene: Scene) -> str:
     """Digest of what the kernel reads from a built scene: geometry arrays and device arrays."""
     h = hashlib.sha256()
     g = scene.geometry
     parts = [g.vertices, g.faces, g.reflectance, g.group]
+    if g.material is not None:
+        parts += [g.material.rho_d, g.material.rho_s, g.material.exponent, g.material.rho_m]
     for dev in (scene.transmitters, scene.receivers):
         parts += [dev.positions, dev.normals, dev.order, dev.cos_fov, dev.gain, dev.power]
+        parts += [a for p in dev.patterns if p is not None for a in (p.gamma, p.c, p.intensity)]
     for a in parts:
         a = np.ascontiguousarray(a)
         h.update(f"{a.dtype.str}{a.shape}".encode())

@@ -1,6 +1,7 @@
 """Scene geometry: triangles with per-face reflectance, and batched ray queries on Embree.
 
-All surfaces are Lambertian (BRDF rho/pi). Vertices are re-centred on the scene's
+Surfaces are Lambertian (BRDF rho/pi) unless a face's material says otherwise
+(bsdf.py: Phong lobe, mirror; `Geometry.material`). Vertices are re-centred on the scene's
 bounding-box centre before the float32 Embree build, so a room 5 km from the origin
 keeps millimetre precision; ray origins are re-centred the same way.
 Note: embreex's `EmbreeScene.run` overwrites the `dists` array it is given, so
@@ -20,6 +21,9 @@ from embreex import rtcore_scene
 
 from owcsim.schemas import ROOM_FACES, SceneSpec
 from owcsim.schemas.geometry import BoxSpec, MeshSpec, RoomSpec
+from owcsim.schemas.surfaces import split
+
+from .bsdf import Materials
 
 from .constants import DEGENERATE_AREA_FACTOR, MAX_SCENE_EXTENT, RAY_OFFSET_FACTOR
 from .errors import SceneError
@@ -37,6 +41,8 @@ _CUBE_FACES = {  # name -> two triangles, outward normal for a solid box
 class Geometry:
     """Triangle soup: `vertices` (V,3) [m], `faces` (F,3), per-face `reflectance` and `group` name index.
 
+    `reflectance` is each face's total reflectance rho = rho_d + rho_s + rho_m; `material`
+    holds the split (bsdf.Materials, per face) when some face is not Lambertian, else None.
     `oriented` marks faces whose winding is known to point into free space (the room's
     inward faces, furniture's outward faces); user meshes are two-sided, orientation unknown.
     """
@@ -47,6 +53,7 @@ class Geometry:
     group: np.ndarray
     group_names: list[str]
     oriented: np.ndarray | None = None
+    material: Materials | None = None
 
     @property
     def normals(self) -> np.ndarray:
@@ -68,13 +75,33 @@ def _box_triangles(lo, hi, inward: bool) -> tuple[np.ndarray, np.ndarray, list[s
 def _room(room: RoomSpec):
     verts, faces, names = _box_triangles(room.lo, room.hi, inward=True)
     rho = room.reflectance.by_face()
-    return verts, faces, np.array([rho[n] for n in names]), [f"room.{n}" for n in names]
+    return verts, faces, _surfaces([rho[n] for n in names]), [f"room.{n}" for n in names]
+
+
+def _surfaces(values) -> np.ndarray:
+    """Per-face reflectances as an array: float when all Lambertian numbers, else object (specs)."""
+    if all(isinstance(v, (int, float)) for v in values):
+        return np.array(values, float)
+    out = np.empty(len(values), object)
+    out[:] = list(values)
+    return out
+
+
+def _materials(rho: np.ndarray) -> tuple[np.ndarray, Materials | None]:
+    """(total reflectance per face, Materials or None if every face is Lambertian) from _surfaces' arrays."""
+    if rho.dtype != object:
+        return rho, None
+    parts = np.array([split(v) for v in rho], float).reshape(len(rho), 4)
+    mat = Materials(parts[:, 0].copy(), parts[:, 1].copy(), parts[:, 2].copy(), parts[:, 3].copy())
+    if mat.is_lambertian:
+        return mat.rho_d, None
+    return mat.total, mat
 
 
 def _furniture(i: int, box: BoxSpec):
     verts, faces, names = _box_triangles(box.min, box.max, inward=False)
     label = box.name or f"furniture[{i}]"
-    return verts, faces, np.full(len(faces), box.reflectance), [label] * len(faces)
+    return verts, faces, _surfaces([box.reflectance] * len(faces)), [label] * len(faces)
 
 
 def _load_mesh(i: int, spec: MeshSpec, base_dir: Path | None):
@@ -166,7 +193,8 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
     if not ok.any():
         raise SceneError("every triangle of the scene is degenerate")
     oriented = np.arange(len(faces)) < n_oriented
-    return Geometry(vertices, faces[ok], rho[ok], group[ok], list(group_names), oriented[ok])
+    rho, material = _materials(rho[ok])
+    return Geometry(vertices, faces[ok], rho, group[ok], list(group_names), oriented[ok], material)
 
 
 def _f32(a: np.ndarray) -> np.ndarray:

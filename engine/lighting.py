@@ -25,19 +25,28 @@ class Lighting:
         self.scene = scene
         tx, rx = scene.transmitters, scene.receivers
         self.n_tx, self.n_rx = len(tx), len(rx)
-        i0 = np.array([t.luminous_output.center_intensity(t.m) if t.luminous_output else np.nan
-                       for t in spec.transmitters])
-        self.has_light = bool(np.isfinite(i0).any())
         shape = (self.n_tx, self.n_rx)
+        # Luminous intensity toward a direction [cd] = Phi_v R(dir) (R the response per watt [1/sr], so R / its
+        # integral over the sphere = 1), or I0 R(dir) / R(aim) from the centre intensity I0 (= I0 cos^m(phi)
+        # for a Lambertian source: link_budget.illuminance_los).
+        r_aim = tx.response(np.arange(self.n_tx), np.ones(self.n_tx), tx.normals)
+        scale = np.full(self.n_tx, np.nan)  # [lm]: intensity = scale * R(dir)
+        for i, t in enumerate(spec.transmitters):  # a loop over transmitters
+            out = t.luminous_output
+            if out is not None and out.luminous_flux is not None:
+                scale[i] = out.luminous_flux
+            elif out is not None and r_aim[i] > 0:
+                scale[i] = out.center_luminous_intensity / r_aim[i]
+        self.has_light = bool(np.isfinite(scale).any())
         self.illuminance = np.full(shape, np.nan)  # per link [lx]
-        if self.has_light:  # link_budget.illuminance_los, one term per link (its sum over transmitters)
-            c_tx, c_rx = geometry.cos_tx.reshape(shape), geometry.cos_rx.reshape(shape)
-            d, clear = geometry.distance.reshape(shape), geometry.clear.reshape(shape)
-            ok = (c_tx > 0) & (c_rx > 0) & (clear > 0)
-            with np.errstate(under="ignore"):
-                e = np.nan_to_num(i0)[:, None] * np.where(ok, c_tx, 1.0) ** tx.order[:, None] * c_rx \
+        if self.has_light:
+            ti = np.repeat(np.arange(self.n_tx), self.n_rx)
+            c_rx, d, clear = geometry.cos_rx, geometry.distance, geometry.clear
+            ok = (c_rx > 0) & (clear > 0)
+            with np.errstate(under="ignore", invalid="ignore"):
+                e = np.nan_to_num(scale)[ti] * tx.response(ti, geometry.cos_tx, geometry.directions) * c_rx \
                     / np.where(ok, d, 1.0) ** 2 * clear
-            self.illuminance = np.where(np.isfinite(i0)[:, None], np.where(ok, e, 0.0), np.nan)
+            self.illuminance = np.where(np.isfinite(scale)[ti], np.where(ok, e, 0.0), np.nan).reshape(shape)
         self.budget = lb.link_budget_from_spec(spec.link_budget) if spec.link_budget is not None else None
         self.area = rx.area
         self.channel_arrays: dict[str, dict[str, np.ndarray]] = {}

@@ -1,7 +1,7 @@
 """Line-of-sight term, computed exactly for every link (physics.md section 6, LOS closed form).
 
 H_los = R(phi) * A cos(psi) T_s g rect(psi <= FOV) / d^2 * exp(-sigma_t d_in) * V,
-R(phi) = (m+1)/(2 pi) cos^m(phi), arriving at t = d / c. It has no variance, so the
+R(phi) = (m+1)/(2 pi) cos^m(phi) (or a luminaire's tabulated I(gamma, C) / Phi), arriving at t = d / c. It has no variance, so the
 Monte Carlo kernel never samples it; it is added to every estimate as a constant.
 Shadow rays are cast only where the scene has occluders (furniture, meshes) and only for
 pairs that face each other: an empty box room is convex.
@@ -25,6 +25,7 @@ class LosGeometry:
     cos_rx: np.ndarray
     distance: np.ndarray
     clear: np.ndarray
+    directions: np.ndarray  # (L, 3) unit vectors from the transmitter toward the receiver
 
     @property
     def delay(self) -> np.ndarray:
@@ -42,7 +43,8 @@ def los_geometry(scene: Scene) -> LosGeometry:
     wdir[d == 0] = 0.0
     cos_tx = np.einsum("ij,ij->i", wdir, tx.normals[ti])
     cos_rx = -np.einsum("ij,ij->i", wdir, rx.normals[ri])
-    clear = ((cos_tx > 0) & (cos_rx > 0) & (d > 0)).astype(float)
+    # A luminaire's photometric table may emit behind its aim: then only the receiver side is tested here.
+    clear = (((cos_tx > 0) | (not tx.front_only)) & (cos_rx > 0) & (d > 0)).astype(float)
     idx = np.flatnonzero(clear > 0)
     if len(idx):
         isect = scene.intersector
@@ -53,7 +55,7 @@ def los_geometry(scene: Scene) -> LosGeometry:
             idx = idx[~blocked]
         if scene.medium is not None and len(idx):
             clear[idx] = scene.medium.transmittance(tx.positions[ti[idx]], wdir[idx], d[idx])
-    return LosGeometry(cos_tx, cos_rx, d, clear)
+    return LosGeometry(cos_tx, cos_rx, d, clear, wdir)
 
 
 def line_of_sight(scene: Scene, geometry: LosGeometry | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -63,5 +65,5 @@ def line_of_sight(scene: Scene, geometry: LosGeometry | None = None) -> tuple[np
     ti, ri = np.divmod(np.arange(scene.n_links), len(rx))
     ok = g.clear > 0
     d = np.where(ok, g.distance, 1.0)
-    gain = np.where(ok, tx.response(ti, g.cos_tx) * rx.response(ri, g.cos_rx) / (d * d) * g.clear, 0.0)
+    gain = np.where(ok, tx.response(ti, g.cos_tx, g.directions) * rx.response(ri, g.cos_rx) / (d * d) * g.clear, 0.0)
     return gain, g.delay

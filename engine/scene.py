@@ -1,14 +1,16 @@
 """The engine's view of a scene: geometry on Embree, devices, medium. Built once per process."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from owcsim.schemas import SceneSpec
 
+from .bsdf import mirror_planes
 from .devices import Devices, concentrator_gain, transmitters_from_specs
+from .errors import SceneError
 from .geometry import Geometry, Intersector, build_geometry, check_extent
 from .media import HomogeneousMedium, medium_from_spec
 from .phase import phase_from_spec
@@ -34,6 +36,8 @@ class Scene:
     masked: np.ndarray = None  # type: ignore[assignment]
     #: receiver index range of each grid: (first, shape (nu, nv)) in `spec.receiver_grids` order
     grid_slices: list = None  # type: ignore[assignment]
+    #: planar groups of perfect-mirror faces (bsdf.MirrorPlane): devices are reached through their images
+    mirror_planes: list = field(default_factory=list)
 
     @property
     def n_links(self) -> int:
@@ -50,16 +54,19 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
     `base_dir` resolves relative mesh file paths (the scene file's folder).
     """
     geometry = build_geometry(spec, Path(base_dir) if base_dir is not None else None)
-    transmitters = transmitters_from_specs(spec.transmitters, spec.transmitter_ids())
+    transmitters = transmitters_from_specs(spec.transmitters, spec.transmitter_ids(),
+                                           Path(base_dir) if base_dir is not None else None)
     receivers, grid_slices = receivers_from_scene(spec)
     if len(geometry.faces):  # rays are cast in float32 around the surfaces' centre: devices count too
         check_extent(np.concatenate([geometry.vertices, transmitters.positions, receivers.positions]),
                      "the surfaces and devices")
     medium = medium_from_spec(spec.medium)
+    intersector = Intersector(geometry)
+    planes = _mirror_planes(geometry, intersector, medium)
     return Scene(
         spec=spec,
         geometry=geometry,
-        intersector=Intersector(geometry),
+        intersector=intersector,
         transmitters=transmitters,
         receivers=receivers,
         medium=medium,
@@ -68,6 +75,7 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
         medium_far_distance=_far_distance(spec, geometry, medium, receivers.positions),
         masked=mask_reasons(spec, receivers, len(spec.receivers)),
         grid_slices=grid_slices,
+        mirror_planes=planes,
     )
 
 
@@ -112,7 +120,8 @@ def receivers_from_scene(spec: SceneSpec) -> tuple[Devices, list]:
     positions = np.concatenate([r[0] for r in rows]).reshape(n, 3) if rows else np.zeros((0, 3))
     normals = _unit_rows(per_point([r[1] for r in rows]).reshape(n, 3)) if rows else np.zeros((0, 3))
     devices = Devices(kind="receiver", ids=ids, positions=positions, normals=normals, order=np.zeros(n),
-                      cos_fov=cos_fov, gain=gain, power=np.ones(n), area=per_point([r[2] for r in rows]))
+                      cos_fov=cos_fov, gain=gain, power=np.ones(n), area=per_point([r[2] for r in rows]),
+                      patterns=[None] * n)
     return devices, slices
 
 
@@ -137,6 +146,24 @@ def mask_reasons(spec: SceneSpec, receivers: Devices, n_explicit: int) -> np.nda
         reason[inside] = f"inside furniture[{j}]" + (f" ({box.name})" if box.name else "")
     reason[:n_explicit] = ""  # explicit receivers were checked (and refused) by the schema
     return reason
+
+
+#: most distinct mirror planes a scene may have (each costs one image connection per vertex and target)
+MAX_MIRROR_PLANES = 32
+
+
+def _mirror_planes(geometry: Geometry, intersector: Intersector, medium) -> list:
+    """The planes of the perfect-mirror faces; SceneError where the image method does not apply."""
+    if geometry.material is None or not geometry.material.rho_m.any():
+        return []
+    if medium is not None:
+        raise SceneError("perfect-mirror surfaces cannot be combined with a medium yet: use a Phong material "
+                         "with a large exponent for the specular part")
+    planes = mirror_planes(geometry.vertices, geometry.faces, geometry.material.rho_m, tol=intersector.offset)
+    if len(planes) > MAX_MIRROR_PLANES:
+        raise SceneError(f"the mirror surfaces lie in {len(planes)} distinct planes, more than {MAX_MIRROR_PLANES}: "
+                         "perfect mirrors must be flat (use a Phong material for curved glossy surfaces)")
+    return planes
 
 
 def _far_distance(spec: SceneSpec, geometry: Geometry, medium, rx_positions: np.ndarray) -> float:

@@ -122,9 +122,13 @@ class BatchBuilder:
     order s, delay [s], power [W/W], path index in the batch.
     """
 
-    def __init__(self, plan: TallyPlan, links: np.ndarray, n_paths: int, several_per_cell: bool):
+    def __init__(self, plan: TallyPlan, links: np.ndarray, n_paths: int, several_per_cell: bool,
+                 across_steps: bool = False):
         self.plan, self.links, self.n_paths = plan, np.asarray(links, np.int64), n_paths
         self.several_per_cell = several_per_cell
+        #: a path may add to one order cell in several steps (mirror images): per-cell sums over the batch
+        self.across_steps = across_steps
+        self._order_parts: list[tuple[np.ndarray, np.ndarray]] = []
         n_t = len(self.links)
         self.abc = np.zeros((3, n_t * n_paths))
         bins = plan.bins
@@ -172,7 +176,9 @@ class BatchBuilder:
                 cell = (slot.take(sel) * plan.n_orders + k.take(sel)) * plan.n_scatter + s.take(sel)
                 p = power.take(sel)
                 self.order_sum += np.bincount(cell, p, n_cells)
-                if self.several_per_cell:  # several estimates of one path in one cell: sum before squaring
+                if self.across_steps:
+                    self._order_parts.append((path.take(sel) * n_cells + cell, p))
+                elif self.several_per_cell:  # several estimates of one path in one cell: sum before squaring
                     keys, inverse = np.unique(path.take(sel) * n_cells + cell, return_inverse=True)
                     per_path = np.bincount(inverse, p, len(keys))
                     self.order_sumsq += np.bincount(keys % n_cells, per_path * per_path, n_cells)
@@ -205,6 +211,12 @@ class BatchBuilder:
             ch = np.einsum("gt,qtn->qgn", channel_weights, abc)
             ch_s1 = ch.sum(axis=2).T
             ch_s2 = np.einsum("qgn,rgn->gqr", ch, ch)
+        if self._order_parts:  # per-(path, cell) sums over the whole batch, then their squares
+            n_cells = len(self.order_sum)
+            keys, inverse = np.unique(np.concatenate([k for k, _ in self._order_parts]), return_inverse=True)
+            per_path = np.bincount(inverse, np.concatenate([p for _, p in self._order_parts]), len(keys))
+            self.order_sumsq = np.bincount(keys % n_cells, per_path * per_path, n_cells)
+            self._order_parts = []
         bins = plan.bins
         cir_sel = np.flatnonzero(self.cir_local >= 0)
         ord_sel = np.flatnonzero(self.order_local >= 0)

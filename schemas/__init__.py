@@ -8,7 +8,8 @@ from .medium import (ComplexIndexSpec, MiePhaseSpec, ParticleMediumSpec, Particl
                      BoxRegionSpec, GridMediumSpec, HenyeyGreensteinPhaseSpec, HomogeneousMediumSpec,
                      IsotropicPhaseSpec, MediumSpec, MeshRegionSpec, MixturePhaseSpec, PhaseSpec, RayleighPhaseSpec,
                      SceneRegionSpec, SchlickPhaseSpec)
-from .link_budget import LinkBudgetSpec, PhotometrySpec
+from .link_budget import LinkBudgetSpec, LuminousOutputSpec
+from .photometry import PhotometrySpec
 from .outputs import OutputsSpec
 from .scene import SceneSpec, TransmitterGroupSpec
 from .simulation import SimulationSpec
@@ -17,7 +18,7 @@ __all__ = [
     "BoxRegionSpec", "BoxSpec", "GridMediumSpec", "MeshRegionSpec", "HenyeyGreensteinPhaseSpec", "HomogeneousMediumSpec", "IsotropicPhaseSpec",
     "MediumSpec", "MeshSpec", "MixturePhaseSpec", "PhaseSpec", "RayleighPhaseSpec", "ReceiverGridSpec",
     "ReceiverSpec", "ROOM_FACES", "RoomReflectance", "RoomSpec", "SceneRegionSpec", "SceneSpec",
-    "SchlickPhaseSpec", "SimulationSpec", "TransmitterSpec", "LinkBudgetSpec", "PhotometrySpec", "OutputsSpec",
+    "SchlickPhaseSpec", "SimulationSpec", "TransmitterSpec", "LinkBudgetSpec", "LuminousOutputSpec", "PhotometrySpec", "OutputsSpec",
     "TransmitterGroupSpec", "ComplexIndexSpec", "MiePhaseSpec", "ParticleMediumSpec", "ParticlesSpec",
     "TabulatedPhaseSpec",
 ]

@@ -7,7 +7,8 @@ from typing import Annotated
 from pydantic import Field, model_validator
 
 from .base import Direction, Point, SpecModel
-from .link_budget import PhotometrySpec
+from .link_budget import LuminousOutputSpec
+from .photometry import PhotometrySpec
 
 Fov = Annotated[float, Field(ge=1e-6, le=90.0, description="field of view, half-angle [deg], in (0, 90] "
                                                           "(at least 1e-6 deg: below it a concentrator's gain overflows)")]
@@ -17,7 +18,8 @@ class TransmitterSpec(SpecModel):
     """Point emitter, generalized Lambertian of order m: R(phi) = (m+1)/(2 pi) cos^m(phi).
 
     Give exactly one of `lambertian_order` (m >= 0) and `half_power_semi_angle_deg`
-    (then m = -ln 2 / ln cos(Phi_half)).
+    (then m = -ln 2 / ln cos(Phi_half)), or instead of both a `photometry` file
+    (a luminaire's tabulated intensity, aimed along `normal`; see PhotometrySpec).
     """
 
     id: str | None = None
@@ -26,12 +28,18 @@ class TransmitterSpec(SpecModel):
     power: float = Field(1.0, gt=0.0, description="optical power P_t [W]")
     lambertian_order: float | None = Field(None, ge=0.0, le=1e4, description="Lambertian order m")
     half_power_semi_angle_deg: float | None = Field(None, gt=0.0, lt=90.0, description="Phi_1/2 [deg]")
-    luminous_output: PhotometrySpec | None = Field(
+    luminous_output: LuminousOutputSpec | None = Field(
         None, description="luminous flux [lm] or centre luminous intensity [cd] of the source: gives the "
                           "illuminance on the receivers (the optical power stays `power`)")
+    photometry: PhotometrySpec | None = Field(None, description="tabulated emission from an IES / EULUMDAT file")
 
     @model_validator(mode="after")
     def _one_pattern(self) -> "TransmitterSpec":
+        if self.photometry is not None:
+            if self.lambertian_order is not None or self.half_power_semi_angle_deg is not None:
+                raise ValueError("give `photometry` or a Lambertian pattern (`lambertian_order` / "
+                                 "`half_power_semi_angle_deg`), not both")
+            return self
         if (self.lambertian_order is None) == (self.half_power_semi_angle_deg is None):
             raise ValueError("give exactly one of `lambertian_order` and `half_power_semi_angle_deg`")
         if self.half_power_semi_angle_deg is not None:
@@ -43,7 +51,9 @@ class TransmitterSpec(SpecModel):
 
     @property
     def m(self) -> float:
-        """Lambertian order, from either input form."""
+        """Lambertian order, from either input form (0 for a photometric file: unused)."""
+        if self.photometry is not None:
+            return 0.0
         if self.lambertian_order is not None:
             return self.lambertian_order
         return -math.log(2.0) / math.log(math.cos(math.radians(self.half_power_semi_angle_deg)))

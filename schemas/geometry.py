@@ -1,8 +1,9 @@
 """Surfaces of a scene: the parametric box room, furniture boxes, triangle meshes.
 
 Every surface is Lambertian with reflectance `rho` in [0, 1] (BRDF rho/pi,
-physics.md section 2). The room's faces have inward normals; furniture and
-meshes reflect on whichever side a ray arrives from.
+physics.md section 2) unless its `reflectance` is a material (surfaces.py: Phong,
+mirror). The room's faces have inward normals; furniture and meshes reflect on
+whichever side a ray arrives from.
 """
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from typing import Annotated, Literal
 from pydantic import Field, model_validator
 
 from .base import Point, SpecModel
+from .surfaces import Surface  # a Lambertian reflectance, or a material (Phong, mirror; see surfaces.py)
 
 Reflectance = Annotated[float, Field(ge=0.0, le=1.0, description="Lambertian reflectance rho, in [0, 1]")]
 
@@ -20,15 +22,15 @@ ROOM_FACES = ("floor", "ceiling", "wall_x_min", "wall_x_max", "wall_y_min", "wal
 
 
 class RoomReflectance(SpecModel):
-    """One reflectance per face; `walls` applies to the four walls unless one is named."""
+    """One reflectance (or material) per face; `walls` applies to the four walls unless one is named."""
 
-    floor: Reflectance
-    ceiling: Reflectance
-    walls: Reflectance | None = None
-    wall_x_min: Reflectance | None = None
-    wall_x_max: Reflectance | None = None
-    wall_y_min: Reflectance | None = None
-    wall_y_max: Reflectance | None = None
+    floor: Surface
+    ceiling: Surface
+    walls: Surface | None = None
+    wall_x_min: Surface | None = None
+    wall_x_max: Surface | None = None
+    wall_y_min: Surface | None = None
+    wall_y_max: Surface | None = None
 
     @model_validator(mode="after")
     def _every_wall_known(self) -> "RoomReflectance":
@@ -37,8 +39,8 @@ class RoomReflectance(SpecModel):
             raise ValueError(f"no reflectance for {', '.join(missing)}: give `walls` or each wall")
         return self
 
-    def by_face(self) -> dict[str, float]:
-        """Reflectance of each face, keyed by the names of ROOM_FACES."""
+    def by_face(self) -> dict:
+        """Reflectance (or material) of each face, keyed by the names of ROOM_FACES."""
         out = {"floor": self.floor, "ceiling": self.ceiling}
         for w in ROOM_FACES[2:]:
             v = getattr(self, w)
@@ -74,7 +76,7 @@ class BoxSpec(SpecModel):
     name: str | None = None
     min: Point
     max: Point
-    reflectance: Reflectance
+    reflectance: Surface
 
     @model_validator(mode="after")
     def _ordered(self) -> "BoxSpec":
@@ -99,8 +101,8 @@ class MeshSpec(SpecModel):
     file: str | None = None
     data_base64: str | None = None
     format: Literal["obj", "stl", "ply", "glb", "gltf", "off"] | None = None
-    reflectance: Reflectance
-    group_reflectance: dict[str, Reflectance] = Field(default_factory=dict)
+    reflectance: Surface
+    group_reflectance: dict[str, Surface] = Field(default_factory=dict)
 
     @model_validator(mode="after")
     def _one_source(self) -> "MeshSpec":

@@ -2,7 +2,7 @@
 
 Two input models:
 
-- `PhotometrySpec`: how bright a transmitter is to the eye, as its luminous flux Phi_v [lm]
+- `LuminousOutputSpec`: how bright a transmitter is to the eye, as its luminous flux Phi_v [lm]
   or its centre (on-axis) luminous intensity I_v(0) [cd]. Its optical power stays the
   transmitter's `power` [W]; photometry only adds illuminance [lx] to the results.
 - `LinkBudgetSpec`: the photodiode and its preamplifier, for the SNR and the BER of OOK-NRZ,
@@ -34,7 +34,7 @@ MAX_PHOTOMETRIC = 1e8
 MAX_RATE = 1e13
 
 
-class PhotometrySpec(SpecModel):
+class LuminousOutputSpec(SpecModel):
     """Photometry of a generalized Lambertian transmitter of order m (give exactly one field).
 
     I_v(phi) = I_v(0) cos^m(phi) [cd], so the flux is Phi_v = 2 pi I_v(0) / (m + 1) [lm] and
@@ -50,7 +50,7 @@ class PhotometrySpec(SpecModel):
                                                     description="luminous intensity on the axis I_v(0) [cd]")
 
     @model_validator(mode="after")
-    def _one_of(self) -> "PhotometrySpec":
+    def _one_of(self) -> "LuminousOutputSpec":
         if (self.luminous_flux is None) == (self.center_luminous_intensity is None):
             raise ValueError("give exactly one of `luminous_flux` [lm] and `center_luminous_intensity` [cd]")
         return self

@@ -108,6 +108,10 @@ def check_limits(spec: SceneSpec, settings: Settings) -> None:
                            msg="a mesh cannot be a path on the server: send it inline (`vertices` + `faces`) "
                                "or as `data_base64` + `format` (`owcsim submit` does this for you)")
               for i, m in enumerate(spec.meshes) if m.file is not None]
+    errors += [ProblemField(loc=f"body.transmitters.{i}.photometry.file", type="path_not_allowed",
+                            msg="a photometric file cannot be a path on the server: send it as `data_base64` + "
+                                "`format` (`owcsim submit` does this for you)")
+               for i, t in enumerate(spec.transmitters) if t.photometry is not None and t.photometry.file is not None]
     if errors:
         raise _invalid(errors)
     triangles = (12 if spec.room else 0) + 12 * len(spec.furniture) + sum(len(m.faces or ()) for m in spec.meshes)

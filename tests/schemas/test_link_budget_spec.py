@@ -6,14 +6,14 @@ from pydantic import ValidationError
 
 from owcsim.schemas.base import SpecModel
 from owcsim.schemas.errors import located
-from owcsim.schemas.link_budget import IsiSplit, LinkBudgetSpec, PhotometrySpec
+from owcsim.schemas.link_budget import IsiSplit, LinkBudgetSpec, LuminousOutputSpec
 
 
 class _Doc(SpecModel):
     """A document that embeds both models, to check that errors are located by their path."""
 
     link_budget: LinkBudgetSpec
-    photometry: list[PhotometrySpec] = []
+    photometry: list[LuminousOutputSpec] = []
 
 
 def _errors(doc) -> list[tuple[str, str]]:
@@ -83,14 +83,14 @@ def test_zero_background_is_allowed():
 
 def test_photometry_one_of_and_conversions():
     m = 1.0
-    by_flux = PhotometrySpec(luminous_flux=math.pi * 100.0)   # Lambertian: Phi = pi I0
-    by_cd = PhotometrySpec(center_luminous_intensity=100.0)
+    by_flux = LuminousOutputSpec(luminous_flux=math.pi * 100.0)   # Lambertian: Phi = pi I0
+    by_cd = LuminousOutputSpec(center_luminous_intensity=100.0)
     assert by_flux.center_intensity(m) == pytest.approx(100.0)
     assert by_cd.flux(m) == pytest.approx(math.pi * 100.0)
     assert by_cd.center_intensity(m) == 100.0 and by_flux.flux(m) == math.pi * 100.0
     # Komine's luminaire, 60 x 60 x 0.73 cd at semi-angle 70 deg (m = 0.646): 10031 lm.
     m70 = -math.log(2) / math.log(math.cos(math.radians(70)))
-    assert PhotometrySpec(center_luminous_intensity=2628.0).flux(m70) == pytest.approx(10031.4, abs=0.1)
+    assert LuminousOutputSpec(center_luminous_intensity=2628.0).flux(m70) == pytest.approx(10031.4, abs=0.1)
 
 
 @pytest.mark.parametrize("doc,msg", [
