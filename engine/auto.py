@@ -136,7 +136,7 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
         algorithm = sim.algorithm
         modeled["algorithm_reason"] = f"algorithm {algorithm} requested"
     if algorithm != 5:
-        update["max_scattering"] = {1: 1, 2: 1, 3: 1, 4: 1}[algorithm]  # S is fixed by the algorithm
+        update["max_scattering"] = {1: 1, 2: 1, 3: 1, 4: 2}[algorithm]  # S is fixed by the algorithm (4: s <= 2)
     need_k = sim.max_reflections is None
     need_s = algorithm == 5 and sim.max_scattering is None
     need_t = sim.t_max_s is None

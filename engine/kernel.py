@@ -41,6 +41,7 @@ from .sampling import cosine_about_soa
 from .segments import equiangular, equiangular_density, time_density, time_strata
 from .scene import Scene
 from .tally import BatchTally, TimeBins, reduce_contributions
+from .medium_nee import first_vertex_factor, in_then_out, side_weight, source_factor
 
 #: Upper bound on paths x targets connected in one array operation (memory bound).
 NEE_CHUNK = 1 << 20
@@ -59,6 +60,14 @@ class KernelSettings:
     max_strata: int = 64
     equiangular_points: int = 2  # per segment and target, combined with the time strata (balance heuristic)
     mis: bool = False  # algorithm 4: balance heuristic on the family both directions sample
+    #: algorithm 5 run from both devices: every connection is weighted by the path partition of unity
+    #: of medium_nee.side_weight (bounded weights near point devices)
+    both_sides: bool = False
+
+    @property
+    def in_then_out(self) -> bool:
+        """Algorithm 4 with S = 2: the double-scattering family Tx -> p_in -> (k) -> p_out -> Rx (medium_nee.py)."""
+        return self.segment_scatter and self.mis and self.max_scattering >= 2
 
     @property
     def n_scatter_orders(self) -> int:
@@ -109,7 +118,8 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 class _Paths:
     """Path state as (3, n) component arrays and (n,) arrays; `keep(idx)` compacts with `take`."""
 
-    FIELDS = ("origins", "directions", "weights", "lengths", "path", "k", "s")
+    #: `first`: the source-side density factor of the path's first vertex (medium_nee.first_vertex_factor)
+    FIELDS = ("origins", "directions", "weights", "lengths", "path", "k", "s", "first")
 
     def __init__(self, **arrays):
         for name in self.FIELDS:
@@ -160,7 +170,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         directions=np.ascontiguousarray(sources.sample_directions(i, u[0], u[1]).T),
         origins=np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1),
         weights=np.full(n, w0), lengths=np.zeros(n), path=np.arange(n),
-        k=np.zeros(n, np.int64), s=np.zeros(n, np.int64))
+        k=np.zeros(n, np.int64), s=np.zeros(n, np.int64), first=np.zeros(n))
     surface_power = escaped_power = 0.0
     # Segments that leave the scene run to where the medium has absorbed everything.
     far = scene.medium_far_distance
@@ -175,6 +185,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         collided = np.zeros(len(paths), bool)
         if free_flight:  # algorithm 5: sample the collision distance
             t_col, collided = medium.sample_distance(paths.origins.T, paths.directions.T, t_seg, rng.random(len(paths)))
+            if settings.both_sides and _step == 0:
+                paths.first = first_vertex_factor(ctx, paths, prim, t, t_col, collided)
             if settings.equiangular_points:
                 _equiangular_in_scatter(ctx, paths, t_seg, rng)
         elif medium is not None:
@@ -264,6 +276,7 @@ class _Context:
         self.scene, self.targets, self.tgt, self.settings, self.item = scene, targets, tgt, settings, item
         self.t_pos = np.ascontiguousarray(targets.positions[tgt].T)  # (3, T)
         self.t_nrm = np.ascontiguousarray(targets.normals[tgt].T)
+        self.t_total = np.array([targets.total_response(int(t)) for t in tgt], float)
         self.n_scatter = settings.n_scatter_orders
         self.cell_stride = (settings.max_reflections + 1) * self.n_scatter
         self.source_position = source_position
@@ -310,6 +323,10 @@ class _Context:
             else:
                 lobe = scene.phase.eval(_dot(in_dirs.take(pi, axis=1), wdir))
             f = weights.take(pi) * lobe * targets.response(tgt.take(ti), ct / d) / d2
+            if self.settings.both_sides:  # algorithm 5 from both devices (medium_nee.side_weight)
+                c = cs.take(sel) / d if normals is not None else medium.sigma_t_at(points.take(pi, axis=1).T)
+                f = f * side_weight(paths.first.take(pi),
+                                    targets.response(tgt.take(ti), ct / d) / self.t_total.take(ti) * c / d2)
             sel = np.flatnonzero(f > 0)
             if len(sel) == 0:
                 continue
@@ -361,15 +378,26 @@ def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool) -> N
         w * T(o -> p) * sigma_s(p) / (n_T(s) + n_E(s)),
     and the connection adds phase, response, 1/d^2, visibility and T(p -> target).
     Algorithm 4 multiplies the family both directions sample (the first segment,
-    k = 0) by the direction balance-heuristic weight (`_direction_mis`).
+    k = 0) by the direction balance-heuristic weight (`_direction_mis`), and on the
+    first segment also starts the double-scattering family (medium_nee.in_then_out).
     """
-    scene, settings = ctx.scene, ctx.settings
-    medium = scene.medium
+    settings = ctx.settings
+    if first and settings.in_then_out:
+        in_then_out(ctx, paths, t_seg, rng)
     alive = np.flatnonzero((paths.s == 0) & (paths.k <= settings.max_reflections) & np.isfinite(t_seg))
     if len(alive) == 0:
         return
-    seg_paths = paths.keep(alive)
-    t_seg = t_seg.take(alive)
+    segment_points(ctx, paths.keep(alive), t_seg.take(alive), rng, order=1, direction_mis=settings.mis and first)
+
+
+def segment_points(ctx: _Context, seg_paths: _Paths, t_seg, rng, order: int, direction_mis: bool = False,
+                   weight_fn=None) -> None:
+    """Points on the segments [0, t_seg) of `seg_paths` (time strata + equiangular, balance heuristic),
+    each connected to every target as a scattering event of order `order`.
+
+    `weight_fn(j, pp, points)`, if given, multiplies each point's weight (e.g. a partition of unity).
+    """
+    settings, medium = ctx.settings, ctx.scene.medium
     zeros = np.zeros(len(seg_paths))
     h, n_eq = settings.strata_length, settings.equiangular_points
     for j in range(len(ctx.tgt)):  # strata depend on the target: a loop over devices, not rays
@@ -386,9 +414,11 @@ def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool) -> N
                                 settings.max_strata)
                    + equiangular_density(pp.origins, pp.directions, y_p, np.zeros(len(s)), end, s, n_eq))
         w = pp.weights * medium.transmittance(pp.origins.T, pp.directions.T, s) * sigma_s / density
-        if settings.mis and first:
+        if direction_mis:
             w = w * _direction_mis(ctx, int(ctx.tgt[j]), pp, points, s, density)
-        ctx.connect_one(j, points, w, pp, in_dirs=pp.directions, scatter_order=np.ones(len(pp), np.int64),
+        if weight_fn is not None:
+            w = w * weight_fn(j, pp, points)
+        ctx.connect_one(j, points, w, pp, in_dirs=pp.directions, scatter_order=np.full(len(pp), order, np.int64),
                         extra_length=s)
 
 
@@ -436,6 +466,8 @@ def _equiangular_in_scatter(ctx: _Context, paths: _Paths, t_seg, rng) -> None:
         p_ff = medium.sigma_t_at(points.T) * transmittance
         n_e = equiangular_density(pp.origins, pp.directions, y.take(seg, axis=1), np.zeros(len(s)), end.take(seg), s,
                                   n_eq)
+        if settings.both_sides:  # a point on the first segment is the path's first vertex
+            pp.first = np.where(pp.k + pp.s == 0, source_factor(ctx, points), pp.first)
         pp.s = pp.s + 1
         ctx.connect_one(j, points, pp.weights * transmittance * sigma_s / (p_ff + n_e), pp, in_dirs=pp.directions,
                         extra_length=s)

@@ -1,0 +1,214 @@
+"""Connections of medium vertices to point devices with bounded weights (physics.md section 4, heavy tails).
+
+The problem. A path traced from one device (the source) connects its last vertex x_n to
+the other device y (the target) by next-event estimation (NEE); the connection carries
+R_y(cos) / |x_n - y|^2. Equiangular points cancel the 1/r^2 along one segment, but a
+segment passing at distance h from y still contributes ~1/h, and over random segments
+E[(1/h)^2] = int h^-2 h dh diverges logarithmically: the reported standard errors are
+then unreliable (issue 12: replicate spread up to 5x the reported error at g = 0.9).
+
+The construction: both devices sample every path, and a partition of unity splits
+each path between them. For a path x_1 ... x_n (vertices between the devices, x_1 next
+to the transmitter) define the device factors
+
+    A = R_tx(x_1) / W_tx * c(x_1) / |x_1 - Tx|^2,     B = R_rx(x_n) / W_rx * c(x_n) / |x_n - Rx|^2,
+
+R the device's angular response toward the vertex, W its integral (`Devices.total_response`),
+c = sigma_t(x) at a medium vertex and |cos| toward the device at a surface vertex. A / W-
+normalised is the density (per volume or per area, up to the free-flight transmittance)
+with which the device's own rays put their first vertex at x. The run from the
+transmitter weights its estimate of the path by w_tx = A / (A + B), the run from the
+receiver by w_rx = B / (A + B): both weights are functions of the path alone, computed
+identically by the two runs (each stores its source-side factor in `_Paths.first` at
+the first vertex and computes the target-side factor at the connection, `side_weight`),
+and w_tx + w_rx = 1, so the sum of the two runs is unbiased for the whole family
+(each run is unbiased for its family with any path-dependent weight; Veach 1997, ch. 9).
+Transmittances are left out of A and B: any positive path function gives a partition.
+
+The bound (the worst weight). Paths keep w <= W_src (phase sampling multiplies by the
+albedo, reflections by rho <= 1, and the roulette's survival min(1, w / W_src) only
+raises weights below W_src up to W_src). With the free-flight and equiangular densities
+combined by the balance heuristic, a medium vertex's estimate is at most
+w * albedo * p_max * R_tgt / r_n^2 (the transmittance T(o -> p) sigma_s over
+p_ff = sigma_t T(o -> p) is the albedo), so, with p_max the phase function's maximum,
+
+    contribution <= W_src * albedo * p_max * min(R_tgt,max / r_n^2, W_tgt R_src,max / (W_src r_1^2))
+
+(the second bound: w_src <= A / B). For single scattering (n = 1, x_1 = x_n, the family
+that carries the heavy tail) r_1 + r_n >= D, the distance between the devices, so
+max(r_1, r_n) >= D / 2 and
+
+    contribution <= 4 albedo p_max max(R_tx,max W_rx, R_rx,max W_tx) / D^2,
+
+a bounded weight (HG: p_max = (1 + g) / (4 pi (1 - g)^2); Tx: W = 1, R_max = (m + 1) / 2 pi;
+Rx: W = A pi sin^2 FOV, R_max = A). For n >= 2 the weight is bounded unless x_1 lies
+near the transmitter and x_n near the receiver at once; there the equiangular points
+(density >= N_E h / (pi r_n^2) along the segment) make the second moment finite:
+with c <= (1/h) r_n^2 / (r_1^2 + r_n^2), E[c^2] ~ int dr_1 int r_n dr_n r_n^2 / (r_1^2 + r_n^2)^2
+is finite near r_1 = r_n = 0. Surface vertices (devices on or near a wall) get the
+same treatment, which also bounds the 1/r^2 of a wall point next to a device.
+
+Algorithm 4's double-scattering family (`in_then_out`, the report's section 9): light
+in-scattered from the source at p_in on the source's first ray is carried along a ray
+from p_in (its phase-sampled direction, then k <= K reflections) and out-scattered toward
+the target at points p_out along every later segment. Both runs sample the family
+Tx -> p_in -> (k reflections) -> p_out -> Rx (each from its own side), weighted by
+the same partition A / (A + B) with x_1 = p_in, x_n = p_out. Surface vertices of that
+branch make no connections: Tx -> p_in -> (k) -> Rx is the s = 1 family of algorithm 2,
+estimated elsewhere, so nothing is counted twice.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def side_weight(first, last):
+    """w = first / (first + last) (0 where both vanish): this run's share of a path."""
+    total = first + last
+    return np.where(total > 0, first / np.where(total > 0, total, 1.0), 0.0)
+
+
+def _device_factor(devices, i: int, points, c):
+    """R_i(cos) / W_i * c / r^2 for points (3, n) seen from device i [1/m^2 x c]."""
+    v = points - devices.positions[i][:, None]
+    r2 = _dot(v, v)
+    cos = _dot(v, devices.normals[i][:, None]) / np.sqrt(r2)
+    return devices.response(np.full(len(r2), i), cos) / devices.total_response(i) * c / r2
+
+
+def source_factor(ctx, points):
+    """A for medium points (3, n) as first vertices: the source's factor with c = sigma_t(p)."""
+    from .kernel import device_sets
+
+    src, _ = device_sets(ctx.scene, ctx.item.direction)
+    return _device_factor(src, ctx.item.source, points, ctx.scene.medium.sigma_t_at(points.T))
+
+
+def target_factor(ctx, j: int, points):
+    """B for medium points (3, n) connected to the item's j-th target (c = sigma_t(p))."""
+    return _device_factor(ctx.targets, int(ctx.tgt[j]), points, ctx.scene.medium.sigma_t_at(points.T))
+
+
+def first_vertex_factor(ctx, paths, prim, t, t_col, collided):
+    """`_Paths.first` for paths on their first segment: the source factor at their first vertex.
+
+    The first vertex is the collision (c = sigma_t) or the surface hit (c = |cos| of the
+    surface normal with the ray); paths with neither get 0 (they make no connection).
+    """
+    from .kernel import device_sets
+
+    scene = ctx.scene
+    src, _ = device_sets(scene, ctx.item.direction)
+    i = ctx.item.source
+    hit = prim >= 0
+    t1 = np.where(collided, t_col, np.where(hit, t, 1.0))
+    points = paths.origins + t1 * paths.directions
+    c = np.zeros(len(t1))
+    if collided.any():
+        c[collided] = scene.medium.sigma_t_at(points[:, collided].T)
+    surf = hit & ~collided
+    if surf.any():
+        normals = scene.intersector.normals_soa.take(prim[surf], axis=1)
+        c[surf] = np.abs(_dot(normals, paths.directions[:, surf]))
+    return np.where(collided | hit, _device_factor(src, i, points, c), 0.0)
+
+
+def in_then_out(ctx, paths, t_seg, rng) -> None:
+    """Algorithm 4, s = 2: Tx -> p_in -> (k <= K reflections) -> p_out -> Rx from this run's side.
+
+    p_in is a free-flight collision on the source's first segment (density
+    sigma_t T(o -> p_in): weight x albedo), the branch leaves p_in in a phase-sampled
+    direction, pays extinction on every segment and reflects (cosine sampling, x rho)
+    up to K times; on every branch segment `segment_points` places p_out (time strata
+    + equiangular, balance heuristic) and connects it to the targets at scattering
+    order 2, weighted by side_weight(A(p_in), B(p_out)) (module docstring).
+    """
+    from .kernel import _Paths, segment_points
+    from .sampling import cosine_about_soa
+
+    scene, settings = ctx.scene, ctx.settings
+    medium, isect, geo = scene.medium, scene.intersector, scene.geometry
+    ok = np.flatnonzero(np.isfinite(t_seg) & (paths.k + paths.s == 0))
+    if len(ok) == 0:
+        return
+    base = paths.keep(ok)
+    t_in, col = medium.sample_distance(base.origins.T, base.directions.T, t_seg.take(ok), rng.random(len(ok)))
+    sel = np.flatnonzero(col)
+    if len(sel) == 0:
+        return
+    br = base.keep(sel)
+    t_in = t_in.take(sel)
+    p_in = br.origins + t_in * br.directions
+    br.weights = br.weights * medium.albedo_at(p_in.T)
+    br.first = source_factor(ctx, p_in)
+    u = rng.random((2, len(br)))
+    br.directions = scene.phase.sample(br.directions, u[0], u[1])
+    br.origins, br.lengths, br.s = p_in, br.lengths + t_in, br.s + 1
+    br = br.keep_where(br.weights > 0)
+    K, far = settings.max_reflections, scene.medium_far_distance
+
+    def partition(j, pp, points):
+        return side_weight(pp.first, target_factor(ctx, j, points))
+
+    for _bounce in range(K + 1):
+        if len(br) == 0:
+            return
+        prim, t = isect.intersect(br.origins.T, br.directions.T)
+        hit = prim >= 0
+        seg = np.where(hit, t, far)
+        live = np.flatnonzero(np.isfinite(seg))
+        segment_points(ctx, br.keep(live), seg.take(live), rng, order=2, weight_fn=partition)
+        # continue the branch past the surface it hit (no NEE there: that family is algorithm 2's)
+        nxt = np.flatnonzero(hit & (br.k < K))
+        if len(nxt) == 0:
+            return
+        br = br.keep(nxt)
+        ts = t.take(nxt)
+        br.weights = br.weights * medium.transmittance(br.origins.T, br.directions.T, ts)
+        points = br.origins + ts * br.directions
+        prims = prim.take(nxt)
+        normals = isect.normals_soa.take(prims, axis=1)
+        normals *= np.where(_dot(normals, br.directions) > 0, -1.0, 1.0)
+        br.weights = br.weights * geo.reflectance.take(prims)
+        u = rng.random((2, len(br)))
+        br.directions = cosine_about_soa(normals, u[0], u[1])
+        br.origins = points + isect.offset * normals
+        br.lengths = br.lengths + ts
+        br.k = br.k + 1
+        br = br.keep_where(br.weights > 0)
+
+
+def simulate_two_sided(spec, *, base_dir=None, executor=None):
+    """`simulate` with algorithm 5 run from both devices under the partition of unity (module docstring).
+
+    A stand-in until the planner (engine/simulate.py) offers it: the spec must be
+    resolved (algorithm 5, explicit K, S and window); every link runs both directions
+    with `KernelSettings.both_sides`. Returns the result document.
+    """
+    import dataclasses
+    import time
+
+    from . import simulate as sim_mod
+    from .execution import JobRef, SerialExecutor
+    from .los import line_of_sight
+    from .result import build_result
+    from .scene import build_scene
+
+    t0 = time.perf_counter()
+    if spec.simulation.algorithm != 5 or not spec.simulation.is_resolved:
+        raise ValueError("simulate_two_sided needs a resolved algorithm-5 document")
+    scene = build_scene(spec, base_dir)
+    settings = dataclasses.replace(sim_mod.kernel_settings(spec), both_sides=scene.medium is not None)
+    los_gain, los_delay = line_of_sight(scene)
+    executor = executor or SerialExecutor()
+    info = sim_mod.RunInfo(workers=executor.workers)
+    info.pilot = {"rule": "algorithm 5 from both devices, partition of unity (engine/medium_nee.py)"}
+    directions = np.full(scene.n_links, sim_mod.BOTH)
+    accs = sim_mod._run(scene, spec, settings, executor, JobRef(scene, "", "", None), directions, los_gain, info,
+                        None, None, t0)
+    info.wall_time_s = time.perf_counter() - t0
+    return build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info)
