@@ -24,6 +24,7 @@ from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_re
 from .constants import SPEED_OF_LIGHT
 from .kernel import KernelSettings, WorkItem
 from .auto import resolve, unreachable_receivers, validated
+from . import reliability
 from .los import line_of_sight
 from .result import build_result
 from .scene import Scene, build_scene
@@ -229,7 +230,9 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
             return True
         if total_batches is None and end_of_round:
             served = sum(a.n_paths for a in accs.values())[directions != SKIP]
-            if (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP and worst <= sim.target_rel_error:
+            if (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP and worst <= sim.target_rel_error \
+                    and reliability.may_stop(rel, reliability.from_accumulators(accs.values(), los_gain),
+                                             sim.target_rel_error, directions != SKIP):
                 info.stop_reason = "target_reached"
                 return True
             if elapsed >= sim.time_budget_s:
