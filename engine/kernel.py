@@ -41,7 +41,7 @@ from .sampling import cosine_about_soa
 from .segments import equiangular, equiangular_density, time_density, time_strata
 from .scene import Scene
 from .tally import BatchTally, TimeBins, reduce_contributions
-from .medium_nee import first_vertex_factor, in_then_out, side_weight, source_factor
+from .medium_nee import first_segment_branch, first_vertex_factor, side_weight, source_factor, target_factor
 
 #: Upper bound on paths x targets connected in one array operation (memory bound).
 NEE_CHUNK = 1 << 20
@@ -59,7 +59,11 @@ class KernelSettings:
     strata_length: float = 0.0  # [m] path-length width of the time strata (c dt)
     max_strata: int = 64
     equiangular_points: int = 2  # per segment and target, combined with the time strata (balance heuristic)
-    mis: bool = False  # algorithm 4: balance heuristic on the family both directions sample
+    #: algorithms 2-4 run from both devices: balance heuristic on the family both directions sample
+    #: (k = 0), path partition of unity on the others (medium_nee.py)
+    mis: bool = False
+    #: which single-scattering family algorithms 2-4 estimate: 2 (Tx -> p -> k -> Rx), 3 (Tx -> k -> p -> Rx), 4 (both)
+    segment_family: int = 4
     #: algorithm 5 run from both devices: every connection is weighted by the path partition of unity
     #: of medium_nee.side_weight (bounded weights near point devices)
     both_sides: bool = False
@@ -181,7 +185,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         hit = prim >= 0
         t_seg = np.where(hit, t, far)
         if segment_scatter:  # algorithms 2-4: single scattering along the segment
-            _segment_scatter(ctx, paths, t_seg, rng, first=_step == 0)
+            _segment_scatter(ctx, paths, t_seg, rng, first=_step == 0, prim=prim)
         collided = np.zeros(len(paths), bool)
         if free_flight:  # algorithm 5: sample the collision distance
             t_col, collided = medium.sample_distance(paths.origins.T, paths.directions.T, t_seg, rng.random(len(paths)))
@@ -369,7 +373,7 @@ class _Context:
                                         self.settings.free_flight and self.settings.equiangular_points > 0))
 
 
-def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool) -> None:
+def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool, prim=None) -> None:
     """Single scattering at points of each segment, connected to the targets (algorithms 2-4).
 
     Per target (the strata are ellipsoids with the target as a focus): one point per
@@ -377,17 +381,35 @@ def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool) -> N
     by the balance heuristic: a point at s has weight
         w * T(o -> p) * sigma_s(p) / (n_T(s) + n_E(s)),
     and the connection adds phase, response, 1/d^2, visibility and T(p -> target).
-    Algorithm 4 multiplies the family both directions sample (the first segment,
-    k = 0) by the direction balance-heuristic weight (`_direction_mis`), and on the
-    first segment also starts the double-scattering family (medium_nee.in_then_out).
+    Points on every segment estimate the family source -> (k) -> p -> target (forward:
+    algorithm 3's, backward: algorithm 2's). Run from both devices (`settings.mis`), the
+    family both sample on the first segment (k = 0: Tx -> p -> Rx) gets the direction
+    balance heuristic (`_direction_mis`); for k >= 1 the other device samples the same
+    family by scattering on its own first segment (medium_nee.first_segment_branch), and
+    the two share each path by the partition of unity of medium_nee.side_weight
+    (bounded weights near the devices). Algorithm 4 also starts the double-scattering
+    family on the first segment (the same branch).
     """
     settings = ctx.settings
-    if first and settings.in_then_out:
-        in_then_out(ctx, paths, t_seg, rng)
+    forward = ctx.item.direction == "forward"
+    fam = settings.segment_family
+    points_everywhere = fam == 4 or (fam == 3) == forward  # this side's own family: points on all segments
+    if first and settings.mis:
+        paths.first = first_vertex_factor(ctx, paths, prim, t_seg, np.zeros(len(t_seg)), np.zeros(len(t_seg), bool))
+        chain = fam == 4 or not points_everywhere  # the other side's family, sampled from this side
+        if chain or settings.in_then_out:
+            first_segment_branch(ctx, paths, t_seg, rng, chain=chain, double=settings.in_then_out)
+    if not (points_everywhere or (first and settings.mis)):
+        return
     alive = np.flatnonzero((paths.s == 0) & (paths.k <= settings.max_reflections) & np.isfinite(t_seg))
     if len(alive) == 0:
         return
-    segment_points(ctx, paths.keep(alive), t_seg.take(alive), rng, order=1, direction_mis=settings.mis and first)
+    partition = None
+    if settings.mis and not first:
+        def partition(j, pp, points):
+            return side_weight(pp.first, target_factor(ctx, j, points))
+    segment_points(ctx, paths.keep(alive), t_seg.take(alive), rng, order=1, direction_mis=settings.mis and first,
+                   weight_fn=partition)
 
 
 def segment_points(ctx: _Context, seg_paths: _Paths, t_seg, rng, order: int, direction_mis: bool = False,

@@ -48,7 +48,16 @@ with c <= (1/h) r_n^2 / (r_1^2 + r_n^2), E[c^2] ~ int dr_1 int r_n dr_n r_n^2 / 
 is finite near r_1 = r_n = 0. Surface vertices (devices on or near a wall) get the
 same treatment, which also bounds the 1/r^2 of a wall point next to a device.
 
-Algorithm 4's double-scattering family (`in_then_out`, the report's section 9): light
+Algorithms 2-4 (`first_segment_branch`). The points-on-segments estimators connect a point p of
+the source's k-th segment to the target; the target's own side samples the same single-
+scattering family by a collision p on its first segment, a phase-sampled branch with k
+reflections and next-event estimates at the branch's surface vertices. Run from both
+devices (`KernelSettings.mis`), the two share each path by the same partition (k = 0,
+where both sides place points on their first segment, keeps the exact balance heuristic of
+kernel._direction_mis). Algorithm 2 (3) alone is then the backward (forward) points plus
+the forward (backward) branch; algorithm 4 runs all of them.
+
+Algorithm 4's double-scattering family (`first_segment_branch(double=True)`, the report's section 9): light
 in-scattered from the source at p_in on the source's first ray is carried along a ray
 from p_in (its phase-sampled direction, then k <= K reflections) and out-scattered toward
 the target at points p_out along every later segment. Both runs sample the family
@@ -117,29 +126,42 @@ def first_vertex_factor(ctx, paths, prim, t, t_col, collided):
     return np.where(collided | hit, _device_factor(src, i, points, c), 0.0)
 
 
-def in_then_out(ctx, paths, t_seg, rng) -> None:
-    """Algorithm 4, s = 2: Tx -> p_in -> (k <= K reflections) -> p_out -> Rx from this run's side.
+def _surface_target_factor(ctx, j: int, points, normals):
+    """B for surface points (3, n) with unit normals connected to the j-th target (c = |cos| at the point)."""
+    y = ctx.t_pos[:, j:j + 1]
+    v = y - points
+    c = np.abs(_dot(v, normals)) / np.sqrt(_dot(v, v))
+    return _device_factor(ctx.targets, int(ctx.tgt[j]), points, c)
 
-    p_in is a free-flight collision on the source's first segment (density
-    sigma_t T(o -> p_in): weight x albedo), the branch leaves p_in in a phase-sampled
-    direction, pays extinction on every segment and reflects (cosine sampling, x rho)
-    up to K times; on every branch segment `segment_points` places p_out (time strata
-    + equiangular, balance heuristic) and connects it to the targets at scattering
-    order 2, weighted by side_weight(A(p_in), B(p_out)) (module docstring).
-    """
-    from .kernel import _Paths, segment_points
-    from .sampling import cosine_about_soa
 
-    scene, settings = ctx.scene, ctx.settings
-    medium, isect, geo = scene.medium, scene.intersector, scene.geometry
+def _connect_surface(ctx, j: int, points, spawn, weights, paths, normals) -> None:
+    """NEE from surface points to the item's j-th target only (shadow rays from `spawn`)."""
+    from .kernel import _Context
+
+    sub = _Context(ctx.scene, ctx.targets, ctx.tgt[j:j + 1], ctx.settings, ctx.item, ctx.source_position)
+    sub.connect(points, spawn, weights, paths, normals=normals)
+    for key in ctx.out:
+        if key == "target":
+            ctx.out[key] += [np.full(len(a), j, np.int64) for a in sub.out[key]]
+        elif key == "cell":
+            ctx.out[key] += [a + j * ctx.cell_stride for a in sub.out[key]]
+        else:
+            ctx.out[key] += sub.out[key]
+
+
+def _scatter_on_first_segment(ctx, paths, t_seg, rng):
+    """Branches from a free-flight collision p on the source's first segment (weight x albedo), leaving p
+    in a phase-sampled direction, with `first` = the source factor at p and s = 1; None if none collide."""
+    scene = ctx.scene
+    medium = scene.medium
     ok = np.flatnonzero(np.isfinite(t_seg) & (paths.k + paths.s == 0))
     if len(ok) == 0:
-        return
+        return None
     base = paths.keep(ok)
     t_in, col = medium.sample_distance(base.origins.T, base.directions.T, t_seg.take(ok), rng.random(len(ok)))
     sel = np.flatnonzero(col)
     if len(sel) == 0:
-        return
+        return None
     br = base.keep(sel)
     t_in = t_in.take(sel)
     p_in = br.origins + t_in * br.directions
@@ -148,21 +170,46 @@ def in_then_out(ctx, paths, t_seg, rng) -> None:
     u = rng.random((2, len(br)))
     br.directions = scene.phase.sample(br.directions, u[0], u[1])
     br.origins, br.lengths, br.s = p_in, br.lengths + t_in, br.s + 1
-    br = br.keep_where(br.weights > 0)
+    return br.keep_where(br.weights > 0)
+
+
+def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> None:
+    """Scattering at p on the source's first segment, then a branch with k <= K reflections (one traced branch
+    serves both families below).
+
+    p is a free-flight collision on the source's own first segment (density
+    sigma_t T(o -> p), weight x albedo); the branch leaves p in a phase-sampled direction,
+    pays extinction on every segment and reflects (cosine sampling, x rho) up to K times.
+    - `chain`: single scattering source -> p -> (k = 1..K) -> target: every surface vertex x
+      makes a next-event estimate to the targets at scattering order 1, weighted by
+      side_weight(A(p), B(x)). The other device's points-on-segments estimator
+      (algorithm 2 backward, 3 forward) samples the same family with the complement
+      weight, so its ~1/h tail near this run's source is cut off (module docstring).
+    - `double` (algorithm 4's in-then-out family, report section 9): on every branch
+      segment `segment_points` places p_out (time strata + equiangular, balance
+      heuristic), connected to the targets at scattering order 2, weighted by
+      side_weight(A(p), B(p_out)); the other run samples the family from its side.
+    """
+    from .kernel import segment_points
+    from .sampling import cosine_about_soa
+
+    scene, settings = ctx.scene, ctx.settings
+    medium, isect, geo = scene.medium, scene.intersector, scene.geometry
+    br = _scatter_on_first_segment(ctx, paths, t_seg, rng)
     K, far = settings.max_reflections, scene.medium_far_distance
 
     def partition(j, pp, points):
         return side_weight(pp.first, target_factor(ctx, j, points))
 
     for _bounce in range(K + 1):
-        if len(br) == 0:
+        if br is None or len(br) == 0:
             return
         prim, t = isect.intersect(br.origins.T, br.directions.T)
         hit = prim >= 0
-        seg = np.where(hit, t, far)
-        live = np.flatnonzero(np.isfinite(seg))
-        segment_points(ctx, br.keep(live), seg.take(live), rng, order=2, weight_fn=partition)
-        # continue the branch past the surface it hit (no NEE there: that family is algorithm 2's)
+        if double:
+            seg = np.where(hit, t, far)
+            live = np.flatnonzero(np.isfinite(seg))
+            segment_points(ctx, br.keep(live), seg.take(live), rng, order=2, weight_fn=partition)
         nxt = np.flatnonzero(hit & (br.k < K))
         if len(nxt) == 0:
             return
@@ -173,21 +220,27 @@ def in_then_out(ctx, paths, t_seg, rng) -> None:
         prims = prim.take(nxt)
         normals = isect.normals_soa.take(prims, axis=1)
         normals *= np.where(_dot(normals, br.directions) > 0, -1.0, 1.0)
-        br.weights = br.weights * geo.reflectance.take(prims)
-        u = rng.random((2, len(br)))
-        br.directions = cosine_about_soa(normals, u[0], u[1])
-        br.origins = points + isect.offset * normals
+        rho = geo.reflectance.take(prims)
+        spawn = points + isect.offset * normals
         br.lengths = br.lengths + ts
         br.k = br.k + 1
+        if chain:
+            for j in range(len(ctx.tgt)):
+                w = br.weights * rho / np.pi * side_weight(br.first, _surface_target_factor(ctx, j, points, normals))
+                _connect_surface(ctx, j, points, spawn, w, br, normals)
+        br.weights = br.weights * rho
+        u = rng.random((2, len(br)))
+        br.directions = cosine_about_soa(normals, u[0], u[1])
+        br.origins = spawn
         br = br.keep_where(br.weights > 0)
 
 
 def simulate_two_sided(spec, *, base_dir=None, executor=None):
-    """`simulate` with algorithm 5 run from both devices under the partition of unity (module docstring).
+    """`simulate` with every link run from both devices under the partition of unity (module docstring).
 
     A stand-in until the planner (engine/simulate.py) offers it: the spec must be
-    resolved (algorithm 5, explicit K, S and window); every link runs both directions
-    with `KernelSettings.both_sides`. Returns the result document.
+    resolved (algorithm 2-5, explicit K, S and window). Algorithms 2-4: `mis` and
+    `segment_family`; algorithm 5: `both_sides`. Returns the result document.
     """
     import dataclasses
     import time
@@ -199,14 +252,19 @@ def simulate_two_sided(spec, *, base_dir=None, executor=None):
     from .scene import build_scene
 
     t0 = time.perf_counter()
-    if spec.simulation.algorithm != 5 or not spec.simulation.is_resolved:
-        raise ValueError("simulate_two_sided needs a resolved algorithm-5 document")
+    a = spec.simulation.algorithm
+    if a not in (2, 3, 4, 5) or not spec.simulation.is_resolved:
+        raise ValueError("simulate_two_sided needs a resolved document of algorithm 2, 3, 4 or 5")
     scene = build_scene(spec, base_dir)
-    settings = dataclasses.replace(sim_mod.kernel_settings(spec), both_sides=scene.medium is not None)
+    settings = sim_mod.kernel_settings(spec)
+    if a == 5:
+        settings = dataclasses.replace(settings, both_sides=scene.medium is not None)
+    else:
+        settings = dataclasses.replace(settings, mis=True, segment_family=a)
     los_gain, los_delay = line_of_sight(scene)
     executor = executor or SerialExecutor()
     info = sim_mod.RunInfo(workers=executor.workers)
-    info.pilot = {"rule": "algorithm 5 from both devices, partition of unity (engine/medium_nee.py)"}
+    info.pilot = {"rule": f"algorithm {a} from both devices, partition of unity (engine/medium_nee.py)"}
     directions = np.full(scene.n_links, sim_mod.BOTH)
     accs = sim_mod._run(scene, spec, settings, executor, JobRef(scene, "", "", None), directions, los_gain, info,
                         None, None, t0)

@@ -102,3 +102,21 @@ def test_two_sided_algorithm_5_room_agrees_with_one_sided():
     for s in (1, 2):
         (a, ea), (b, eb) = _order(two, s), _order(one, s)
         assert within(a, b, math.hypot(ea, eb)), (s, a, b)
+
+
+@pytest.mark.parametrize("algorithm", [2, 3])
+def test_two_sided_single_scattering_families_agree_with_one_sided(algorithm):
+    """Algorithms 2 and 3 from both devices (points on one side, scattering branch on the other, partition of
+    unity) estimate the same family, reflection order by reflection order, as the one-sided estimator."""
+    base = dict(medium=SMOKE, algorithm=algorithm, max_reflections=2, **COARSE)
+    one = simulate(spec(room_doc(paths=40_000, seed=51, **base)))["links"][0]
+    two = simulate_two_sided(spec(room_doc(paths=20_000, seed=52, **base)))["links"][0]
+    assert two["direction"] == "both" and one["direction"] != "both"
+    (a, ea), (b, eb) = _order(two, 1), _order(one, 1)
+    assert math.hypot(ea, eb) < 0.03 * b
+    assert within(a, b, math.hypot(ea, eb)), (a, b, ea, eb)
+    assert within(two["dc_gain"], one["dc_gain"], math.hypot(two["dc_gain_stderr"], one["dc_gain_stderr"]))
+    for k in (1, 2):
+        ka, kb = two["dc_gain_by_reflection_order"][k], one["dc_gain_by_reflection_order"][k]
+        kea, keb = two["dc_gain_by_reflection_order_stderr"][k], one["dc_gain_by_reflection_order_stderr"][k]
+        assert within(ka, kb, math.hypot(kea, keb)), (k, ka, kb)
