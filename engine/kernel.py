@@ -122,8 +122,9 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 class _Paths:
     """Path state as (3, n) component arrays and (n,) arrays; `keep(idx)` compacts with `take`."""
 
-    #: `first`: the source-side density factor of the path's first vertex (medium_nee.first_vertex_factor)
-    FIELDS = ("origins", "directions", "weights", "lengths", "path", "k", "s", "first")
+    #: `first`: the source-side density factor of the path's first vertex (medium_nee.first_vertex_factor);
+    #: `first_rho`: the direction density of leaving it (phase, or 1/pi at a surface; medium_nee.side_weight)
+    FIELDS = ("origins", "directions", "weights", "lengths", "path", "k", "s", "first", "first_rho")
 
     def __init__(self, **arrays):
         for name in self.FIELDS:
@@ -174,7 +175,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         directions=np.ascontiguousarray(sources.sample_directions(i, u[0], u[1]).T),
         origins=np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1),
         weights=np.full(n, w0), lengths=np.zeros(n), path=np.arange(n),
-        k=np.zeros(n, np.int64), s=np.zeros(n, np.int64), first=np.zeros(n))
+        k=np.zeros(n, np.int64), s=np.zeros(n, np.int64), first=np.zeros(n), first_rho=np.full(n, 1.0 / np.pi))
     surface_power = escaped_power = 0.0
     # Segments that leave the scene run to where the medium has absorbed everything.
     far = scene.medium_far_distance
@@ -244,7 +245,12 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
                 else:
                     ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions)
                 u = rng.random((2, len(mp)))
+                arriving = mp.directions
                 mp.directions = scene.phase.sample(mp.directions, u[0], u[1])
+                if settings.both_sides:  # leaving the path's first vertex: its phase density (medium_nee)
+                    at_first = mp.k + mp.s == 1
+                    if at_first.any():
+                        mp.first_rho = np.where(at_first, scene.phase.eval(_dot(arriving, mp.directions)), mp.first_rho)
                 mp.origins = points
                 alive = ((mp.k < K) | (mp.s < S)) & (mp.weights > 0)
                 parts.append(mp.keep_where(alive))
@@ -328,9 +334,15 @@ class _Context:
                 lobe = scene.phase.eval(_dot(in_dirs.take(pi, axis=1), wdir))
             f = weights.take(pi) * lobe * targets.response(tgt.take(ti), ct / d) / d2
             if self.settings.both_sides:  # algorithm 5 from both devices (medium_nee.side_weight)
-                c = cs.take(sel) / d if normals is not None else medium.sigma_t_at(points.take(pi, axis=1).T)
-                f = f * side_weight(paths.first.take(pi),
-                                    targets.response(tgt.take(ti), ct / d) / self.t_total.take(ti) * c / d2)
+                several = (paths.k + paths.s).take(pi) >= 2
+                if normals is not None:
+                    c, rho_t = cs.take(sel) / d, 1.0 / np.pi
+                else:
+                    c, rho_t = medium.sigma_t_at(points.take(pi, axis=1).T), lobe
+                a = paths.first.take(pi) * np.where(several, paths.first_rho.take(pi), 1.0)
+                b = (targets.response(tgt.take(ti), ct / d) / self.t_total.take(ti) * c / d2
+                     * np.where(several, rho_t, 1.0))
+                f = f * side_weight(a, b)
             sel = np.flatnonzero(f > 0)
             if len(sel) == 0:
                 continue

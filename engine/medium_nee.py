@@ -24,6 +24,11 @@ the first vertex and computes the target-side factor at the connection, `side_we
 and w_tx + w_rx = 1, so the sum of the two runs is unbiased for the whole family
 (each run is unbiased for its family with any path-dependent weight; Veach 1997, ch. 9).
 Transmittances are left out of A and B: any positive path function gives a partition.
+For paths of two or more vertices, algorithm 5 multiplies A by the density of the
+direction leaving x_1 (the phase function there, or 1/pi at a surface: `_Paths.first_rho`)
+and B likewise at x_n: A / (A + B) is then the balance heuristic of the two
+unidirectional strategies with free-flight distances (Veach 1997, section 10.2), which
+matters for forward-peaked phase functions (the phase factors at both ends).
 
 The bound (the worst weight). Paths keep w <= W_src (phase sampling multiplies by the
 albedo, reflections by rho <= 1, and the roulette's survival min(1, w / W_src) only
@@ -34,7 +39,8 @@ p_ff = sigma_t T(o -> p) is the albedo), so, with p_max the phase function's max
 
     contribution <= W_src * albedo * p_max * min(R_tgt,max / r_n^2, W_tgt R_src,max / (W_src r_1^2))
 
-(the second bound: w_src <= A / B). For single scattering (n = 1, x_1 = x_n, the family
+(the second bound: w_src <= A / B; with the direction factors of multi-vertex paths the same
+holds with p_max folded into the constant). For single scattering (n = 1, x_1 = x_n, the family
 that carries the heavy tail) r_1 + r_n >= D, the distance between the devices, so
 max(r_1, r_n) >= D / 2 and
 
