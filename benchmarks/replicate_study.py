@@ -13,6 +13,13 @@ and algorithms 2, 3, 4, 5 from both devices, engine/medium_nee.py), the script r
 Room: Tx (2.5, 2.5, 3) down, Rx 0.5 m or 3 m below it facing up, K = 3 (algorithm 5: S = 3).
 Unbounded: Tx at the origin facing +x, Rx at (D, 0, 0) facing it, S = 2.
 Run: .venv/bin/python benchmarks/replicate_study.py [--seeds 10] [--paths 4096] [--json out/replicates.json]
+
+`--study accuracy`: accuracy mode (paths = None, target_rel_error) over `--seeds` seeds at
+targets 3 % and 1 % on the smoky rooms (Tx (2.5, 2.5, 3) down, Rx (1, 1, 0) up, FOV 90,
+sigma_s 0.2, sigma_a 0, g 0.5 and g 0.9; K = S = 8): "before" = algorithm 5 as `simulate`
+runs it (one side, chosen by the pilot) stopping on the per-path error alone; "after" =
+algorithm 5 from both devices with engine/reliability.py's stopping rule. The true error
+is measured against a long two-sided run (`--ref-paths` per side) of the same K, S.
 """
 from __future__ import annotations
 
@@ -82,13 +89,113 @@ def _flagged(res) -> bool:
     return any("unreliable error bar" in w for w in res.get("warnings", []))
 
 
+def smoky_room(g: float, seed: int, **sim) -> dict:
+    doc = scene("room", g, 3.0, 5, 4096, seed)
+    doc["receivers"][0]["position"] = [1.0, 1.0, 0.0]
+    doc["simulation"].update(max_reflections=8, max_scattering=8, t_max_s=3e-7, **sim)
+    return doc
+
+
+def accuracy_study(args) -> None:
+    import owcsim.engine.simulate as sim_mod
+
+    print(f"accuracy mode, {args.seeds} seeds per row; true error against a long two-sided run "
+          f"({args.ref_paths:,d} paths per side); batch_size 1024")
+    print(f"{'scene':22s} {'target':>6s} {'variant':8s} {'within 2x':>9s} {'median paths':>12s} "
+          f"{'median |err|/target':>19s} {'worst |err|/target':>18s} {'median s':>8s}")
+    for g in (0.5, 0.9):
+        t = time.perf_counter()
+        ref = simulate_two_sided(SceneSpec.model_validate(smoky_room(g, 999_999, paths=args.ref_paths,
+                                                                     batch_size=32768)))["links"][0]
+        print(f"reference g={g}: H0 = {ref['dc_gain']:.6e} +- {ref['dc_gain_stderr'] / ref['dc_gain']:.3%} "
+              f"({time.perf_counter() - t:.0f} s)", flush=True)
+        for target in (0.03, 0.01):
+            for variant in ("before", "after"):
+                errs, paths, times = [], [], []
+                for seed in range(args.seeds):
+                    doc = smoky_room(g, 500 + seed, paths=None, target_rel_error=target, batch_size=1024,
+                                     time_budget_s=600)
+                    if variant == "before":
+                        doc["simulation"]["direction"] = "auto"
+                        keep = sim_mod.reliability.may_stop
+                        sim_mod.reliability.may_stop = lambda *a, **k: True  # the old rule: per-path error only
+                        try:
+                            t = time.perf_counter()
+                            res = simulate(SceneSpec.model_validate(doc))
+                        finally:
+                            sim_mod.reliability.may_stop = keep
+                    else:
+                        t = time.perf_counter()
+                        res = simulate_two_sided(SceneSpec.model_validate(doc))
+                    times.append(time.perf_counter() - t)
+                    link = res["links"][0]
+                    errs.append(abs(link["dc_gain"] - ref["dc_gain"]) / ref["dc_gain"] / target)
+                    paths.append(res["run"]["paths_total"])
+                errs = np.array(errs)
+                print(f"{'smoky room g=' + str(g):22s} {target:6.0%} {variant:8s} "
+                      f"{int((errs <= 2).sum()):4d}/{len(errs):<4d} {int(np.median(paths)):12,d} "
+                      f"{np.median(errs):19.2f} {errs.max():18.2f} {np.median(times):8.2f}", flush=True)
+
+
+def clear_room(seed: int, **sim) -> dict:
+    """The S1 link of issue 12: the smoky room's geometry without smoke (algorithm 1, K = 40)."""
+    doc = smoky_room(0.5, seed, **sim)
+    del doc["medium"]
+    doc["simulation"].update(algorithm=1, max_reflections=40)
+    doc["simulation"].pop("max_scattering", None)
+    return doc
+
+
+ROULETTE = [(3, 1.0), (5, 1.0), (8, 1.0), (3, 0.5), (3, 0.25), (5, 0.5), (5, 0.25), (3, 0.1), (1000, 1.0)]
+
+
+def roulette_study(args) -> None:
+    """Variance per path x cost per path of roulette start depths and thresholds (KernelSettings)."""
+    print(f"roulette: start depth d (k + s) and threshold theta, survival min(1, w / (theta w0)); "
+          f"{args.paths:,d} paths per side per setting; efficiency = 1 / (rel. variance per path x s per path), "
+          "relative to d = 3, theta = 1 (the old rule); d = 1000: no roulette")
+    cases = [("clear room S1, algorithm 1 backward", lambda seed: clear_room(seed, paths=args.paths,
+                                                                               batch_size=16384), "backward", 0.0003),
+             ("smoky room g 0.5, algorithm 5 both", lambda seed: smoky_room(0.5, seed, paths=args.paths,
+                                                                              batch_size=16384), "both", 0.003)]
+    for name, make, direction, target in cases:
+        print(name)
+        print(f"{'d':>5s} {'theta':>6s} {'rel std/path':>12s} {'us/path':>8s} {'rays/path':>9s} {'efficiency':>10s} "
+              f"{'paths to ' + format(target, '.2%'):>16s} {'s to target':>11s}")
+        base = None
+        for depth, theta in ROULETTE:
+            spec = SceneSpec.model_validate(make(11))
+            t = time.perf_counter()
+            res = simulate_two_sided(spec, direction=direction, rr_start_depth=depth, rr_threshold=theta)
+            el = time.perf_counter() - t
+            link = res["links"][0]
+            n = res["run"]["paths_total"]
+            sides = 2 if direction == "both" else 1
+            rel_std = link["dc_gain_stderr"] / link["dc_gain"] * np.sqrt(n / sides)  # per path of one side
+            per_path = el / n
+            rays = (res["run"]["rays_intersect"] + res["run"]["rays_occluded"]) / n
+            eff = 1.0 / (rel_std**2 * per_path)
+            base = base or eff
+            need = sides * (rel_std / target) ** 2
+            print(f"{depth:5d} {theta:6.2f} {rel_std:12.3f} {per_path * 1e6:8.2f} {rays:9.2f} {eff / base:10.2f} "
+                  f"{need:16,.0f} {need * per_path:11.1f}", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
+    ap.add_argument("--study", choices=["replicates", "accuracy", "roulette"], default="replicates")
+    ap.add_argument("--ref-paths", type=int, default=500_000)
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--paths", type=int, default=4096)
     ap.add_argument("--json", default=None)
     ap.add_argument("--geometries", default="room,unbounded")
     args = ap.parse_args()
+    if args.study == "accuracy":
+        accuracy_study(args)
+        return
+    if args.study == "roulette":
+        roulette_study(args)
+        return
     rows = []
     t0 = time.perf_counter()
     print(f"{args.seeds} seeds x {args.paths} paths per side; ratio = spread / median stderr of H0; "

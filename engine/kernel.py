@@ -25,7 +25,8 @@ serves both directions. Each step intersects the surfaces, then:
 The phase cosine is dot(ray direction, direction to the target) in both directions
 (the phase functions are symmetric). The line-of-sight term (k = s = 0) is exact
 and never sampled (los.py). Russian roulette from `rr_start_depth` (k + s) on, with
-survival probability min(1, w / initial w), keeps every estimator unbiased.
+survival probability min(1, w / (theta initial w)) (`rr_threshold` theta), keeps every
+estimator unbiased.
 
 Every loop here is over steps of the paths; all work inside is array operations.
 """
@@ -67,6 +68,8 @@ class KernelSettings:
     #: algorithm 5 run from both devices: every connection is weighted by the path partition of unity
     #: of medium_nee.side_weight (bounded weights near point devices)
     both_sides: bool = False
+    #: roulette threshold theta: survival min(1, w / (theta w0)); paths above theta w0 always survive
+    rr_threshold: float = 1.0
 
     @property
     def in_then_out(self) -> bool:
@@ -259,7 +262,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         if settings.russian_roulette and len(paths):
             at = np.flatnonzero(paths.k + paths.s >= settings.rr_start_depth)
             if len(at):
-                q = np.minimum(1.0, paths.weights.take(at) * (1.0 / w0))
+                q = np.minimum(1.0, paths.weights.take(at) * (1.0 / (settings.rr_threshold * w0)))
                 survive = rng.random(len(at)) < q
                 paths.weights[at] = paths.weights.take(at) / np.where(survive, q, 1.0)
                 dead = at[~survive]

@@ -241,12 +241,14 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
         br = br.keep_where(br.weights > 0)
 
 
-def simulate_two_sided(spec, *, base_dir=None, executor=None):
+def simulate_two_sided(spec, *, base_dir=None, executor=None, direction: str = "both", **overrides):
     """`simulate` with every link run from both devices under the partition of unity (module docstring).
 
     A stand-in until the planner (engine/simulate.py) offers it: the spec must be
     resolved (algorithm 2-5, explicit K, S and window). Algorithms 2-4: `mis` and
-    `segment_family`; algorithm 5: `both_sides`. Returns the result document.
+    `segment_family`; algorithm 5: `both_sides`. `direction` "forward" / "backward" runs
+    one side only (as `simulate` does, for comparisons); `overrides` replace KernelSettings
+    fields (e.g. rr_start_depth, rr_threshold). Returns the result document.
     """
     import dataclasses
     import time
@@ -259,19 +261,21 @@ def simulate_two_sided(spec, *, base_dir=None, executor=None):
 
     t0 = time.perf_counter()
     a = spec.simulation.algorithm
-    if a not in (2, 3, 4, 5) or not spec.simulation.is_resolved:
-        raise ValueError("simulate_two_sided needs a resolved document of algorithm 2, 3, 4 or 5")
+    if a not in (1, 2, 3, 4, 5) or not spec.simulation.is_resolved or (a == 1 and direction == "both"):
+        raise ValueError("simulate_two_sided needs a resolved document (algorithm 1: one direction)")
     scene = build_scene(spec, base_dir)
     settings = sim_mod.kernel_settings(spec)
-    if a == 5:
+    if direction == "both" and a == 5:
         settings = dataclasses.replace(settings, both_sides=scene.medium is not None)
-    else:
+    elif direction == "both":
         settings = dataclasses.replace(settings, mis=True, segment_family=a)
+    settings = dataclasses.replace(settings, **overrides)
     los_gain, los_delay = line_of_sight(scene)
     executor = executor or SerialExecutor()
     info = sim_mod.RunInfo(workers=executor.workers)
     info.pilot = {"rule": f"algorithm {a} from both devices, partition of unity (engine/medium_nee.py)"}
-    directions = np.full(scene.n_links, sim_mod.BOTH)
+    directions = np.full(scene.n_links, {"both": sim_mod.BOTH, "forward": sim_mod.FORWARD,
+                                         "backward": sim_mod.BACKWARD}[direction])
     accs = sim_mod._run(scene, spec, settings, executor, JobRef(scene, "", "", None), directions, los_gain, info,
                         None, None, t0)
     info.wall_time_s = time.perf_counter() - t0
