@@ -181,9 +181,40 @@ def roulette_study(args) -> None:
                   f"{need:16,.0f} {need * per_path:11.1f}", flush=True)
 
 
+def speed_study(args) -> None:
+    """Paths and wall time to 0.03 % on the clear room (S1) and 0.3 % on the smoky room (g 0.5), accuracy mode,
+    before (roulette from depth 3 with survival min(1, w / w0), one side) and after, in the same run."""
+    from owcsim.engine.kernel import KernelSettings
+
+    after = {"rr_start_depth": args.rr_depth, "rr_threshold": args.rr_theta}
+    before = {"rr_start_depth": 3, "rr_threshold": 1.0}
+    print(f"speed to a target (accuracy mode, batches of 16384 (clear) / 2048 (smoky) paths, "
+          f"engine/reliability.py's stopping rule); after: roulette "
+          f"from depth {args.rr_depth} with theta {args.rr_theta} (kernel default theta "
+          f"{KernelSettings.__dataclass_fields__['rr_threshold'].default}); timings on a shared CPU")
+    print(f"{'case':44s} {'paths':>10s} {'time s':>7s} {'H0':>13s} {'rel err':>8s}")
+    cases = [("clear room S1 to 0.03 %", clear_room, 3e-4, 16384, [("before, backward", "backward", before),
+                                                                    ("after, backward", "backward", after)]),
+             ("smoky room g 0.5 to 0.3 %", lambda seed, **kw: smoky_room(0.5, seed, **kw), 3e-3, 2048,
+              [("before, algorithm 5 backward", "backward", before),
+               ("after, algorithm 5 both sides", "both", after)])]
+    for name, make, target, batch, variants in cases:
+        for label, direction, rr in variants:
+            spec = SceneSpec.model_validate(make(21, paths=None, target_rel_error=target, batch_size=batch,
+                                                 time_budget_s=900))
+            t = time.perf_counter()
+            res = simulate_two_sided(spec, direction=direction, **rr)
+            el = time.perf_counter() - t
+            link = res["links"][0]
+            print(f"{name + ': ' + label:44s} {res['run']['paths_total']:10,d} {el:7.1f} {link['dc_gain']:13.6e} "
+                  f"{link['dc_gain_stderr'] / link['dc_gain']:8.3%}", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--study", choices=["replicates", "accuracy", "roulette"], default="replicates")
+    ap.add_argument("--study", choices=["replicates", "accuracy", "roulette", "speed"], default="replicates")
+    ap.add_argument("--rr-depth", type=int, default=3)
+    ap.add_argument("--rr-theta", type=float, default=0.25)
     ap.add_argument("--ref-paths", type=int, default=500_000)
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--paths", type=int, default=4096)
@@ -195,6 +226,9 @@ def main() -> None:
         return
     if args.study == "roulette":
         roulette_study(args)
+        return
+    if args.study == "speed":
+        speed_study(args)
         return
     rows = []
     t0 = time.perf_counter()

@@ -69,7 +69,7 @@ class KernelSettings:
     #: of medium_nee.side_weight (bounded weights near point devices)
     both_sides: bool = False
     #: roulette threshold theta: survival min(1, w / (theta w0)); paths above theta w0 always survive
-    rr_threshold: float = 1.0
+    rr_threshold: float = 0.25  # measured: benchmarks/replicate_study.py --study roulette (docs/smoke-error-bars.md)
 
     @property
     def in_then_out(self) -> bool:
