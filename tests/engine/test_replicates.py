@@ -124,3 +124,36 @@ def test_replicates_unbounded_close_devices(algorithm):
     vals = np.array([lk["dc_gain_by_scattering_order"][1] for lk in runs])
     errs = np.array([lk["dc_gain_by_scattering_order_stderr"][1] for lk in runs])
     _check(vals, errs, f"algorithm {algorithm} s=1")
+
+
+def _max_contribution(monkeypatch, run):
+    """Largest single connection (power per path per watt) the kernel tallies during `run()`."""
+    from owcsim.engine import kernel
+
+    seen = []
+    real = kernel.reduce_contributions
+
+    def spy(links, n_paths, bins, n_orders, n_scatter, target, cell, delay, power, path, **kw):
+        seen.append(float(power.max()) if len(power) else 0.0)
+        return real(links, n_paths, bins, n_orders, n_scatter, target, cell, delay, power, path, **kw)
+
+    monkeypatch.setattr(kernel, "reduce_contributions", spy)
+    run()
+    return max(seen)
+
+
+def test_single_scattering_weights_obey_the_proven_bound(monkeypatch):
+    """engine/medium_nee.py: from both devices, a single-scattering connection is at most
+    4 albedo p_max max(R_tx,max W_rx, R_rx,max W_tx) / D^2; from one side it is not bounded."""
+    D, g, area = 0.5, 0.7, 1e-4
+    albedo = 0.2 / 0.25
+    p_max = (1 + g) / (4 * math.pi * (1 - g) ** 2)  # HG at cos = 1
+    r_tx_max, w_tx = 2 / (2 * math.pi), 1.0  # m = 1
+    r_rx_max, w_rx = area, area * math.pi  # FOV 90 deg
+    bound = 4 * albedo * p_max * max(r_tx_max * w_rx, r_rx_max * w_tx) / D**2
+    doc = _open_doc(D, g, 5, 20_000, 3, max_scattering=1)
+    two = _max_contribution(monkeypatch, lambda: simulate_two_sided(spec(doc)))
+    assert 0 < two <= bound, (two, bound)
+    one = _max_contribution(monkeypatch, lambda: simulate(spec({**doc, "simulation": {
+        **doc["simulation"], "direction": "forward"}})))
+    assert one > bound, (one, bound)  # the bound is not trivially loose: one side alone exceeds it
