@@ -120,3 +120,25 @@ def test_two_sided_single_scattering_families_agree_with_one_sided(algorithm):
         ka, kb = two["dc_gain_by_reflection_order"][k], one["dc_gain_by_reflection_order"][k]
         kea, keb = two["dc_gain_by_reflection_order_stderr"][k], one["dc_gain_by_reflection_order_stderr"][k]
         assert within(ka, kb, math.hypot(kea, keb)), (k, ka, kb)
+
+
+def test_two_sided_with_several_devices_per_link():
+    """Two transmitters x two receivers: every link of the two-sided estimators equals the one-sided one."""
+    doc = room_doc(medium=SMOKE, max_reflections=2, **COARSE)
+    doc["transmitters"].append({"id": "tx2", "position": [1.0, 4.0, 3.0], "normal": [0, 0, -1],
+                                "lambertian_order": 2})
+    doc["receivers"].append({"id": "rx2", "position": [4.0, 2.0, 0.8], "normal": [0, 0.6, 0.8], "area": 1e-4,
+                             "fov_deg": 70})
+    for algorithm, extra in ((5, {"max_scattering": 2}), (3, {})):
+        one = simulate(spec({**doc, "simulation": {**doc["simulation"], "algorithm": algorithm, "paths": 30_000,
+                                                     "seed": 61, "direction": "forward", **extra}}))["links"]
+        two = simulate_two_sided(spec({**doc, "simulation": {**doc["simulation"], "algorithm": algorithm,
+                                                             "paths": 15_000, "seed": 62, **extra}}))["links"]
+        assert len(one) == len(two) == 4
+        for a, b in zip(one, two):
+            assert (a["transmitter"], a["receiver"]) == (b["transmitter"], b["receiver"])
+            err = math.hypot(a["dc_gain_stderr"], b["dc_gain_stderr"])
+            assert err < 0.03 * a["dc_gain"], (algorithm, a["receiver"], err / a["dc_gain"])
+            assert within(b["dc_gain"], a["dc_gain"], err), (algorithm, a["transmitter"], a["receiver"])
+            (x, ex), (y, ey) = _order(b, 1), _order(a, 1)
+            assert within(x, y, math.hypot(ex, ey)), (algorithm, a["receiver"], x, y)
