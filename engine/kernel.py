@@ -16,12 +16,18 @@ serves both directions. Each step intersects the surfaces, then:
       dH = w * T(o -> p) * sigma_s(p) * phase(cos) * R_target / d^2 * V * T(p -> target) * |stratum|,
   tallied at (k, 1); the path itself stays unscattered (s = 0). Forward this is
   algorithm 3 (Tx -> k reflections -> p -> Rx), backward algorithm 2
-  (Tx -> p -> k reflections -> Rx); algorithm 4 runs both and weights their shared
-  family (k = 0: Tx -> p -> Rx) by the balance heuristic;
+  (Tx -> p -> k reflections -> Rx). Run from both devices (`mis`), the shared family
+  (k = 0: Tx -> p -> Rx) is weighted by the balance heuristic, and each device also
+  scatters on its own first segment (medium_nee.first_segment_branch) to sample the
+  other side's family, shared by a path partition of unity with bounded weights near
+  the devices; algorithm 4 adds the double-scattering family Tx -> p_in -> (k) ->
+  p_out -> Rx at (k, 2) (medium_nee.py);
 - algorithm 5 (`free_flight`): the collision distance is sampled (regular tracking
   of the medium's optical depth); a collision before the surface is a medium vertex:
   w *= albedo, NEE with the phase function at (k, s + 1), new direction from the
-  phase function. Surface vertices keep w (T / P(no collision) = 1).
+  phase function. Surface vertices keep w (T / P(no collision) = 1). Run from both
+  devices (`both_sides`), every connection is weighted by the partition of unity of
+  medium_nee.py (bounded weights near point devices).
 The phase cosine is dot(ray direction, direction to the target) in both directions
 (the phase functions are symmetric). The line-of-sight term (k = s = 0) is exact
 and never sampled (los.py). Russian roulette from `rr_start_depth` (k + s) on, with
