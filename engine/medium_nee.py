@@ -241,6 +241,23 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
         br = br.keep_where(br.weights > 0)
 
 
+def two_sided_settings(settings, algorithm: int, has_medium: bool):
+    """KernelSettings for links run from both devices (the planner must then run every such link both ways).
+
+    Algorithms 2-4: `mis` and `segment_family`; algorithm 5 with a medium: `both_sides`
+    (the partition on every connection); algorithm 5 without one: `mis` (each side
+    counts half of the surface paths). A run whose partner run is missing would count
+    about half: never use these settings for a link served from one side.
+    """
+    import dataclasses
+
+    if algorithm in (2, 3, 4):
+        return dataclasses.replace(settings, mis=True, segment_family=algorithm)
+    if algorithm == 5:
+        return dataclasses.replace(settings, **({"both_sides": True} if has_medium else {"mis": True}))
+    raise ValueError(f"algorithm {algorithm} has no two-sided form")
+
+
 def simulate_two_sided(spec, *, base_dir=None, executor=None, direction: str = "both", **overrides):
     """`simulate` with every link run from both devices under the partition of unity (module docstring).
 
@@ -265,10 +282,8 @@ def simulate_two_sided(spec, *, base_dir=None, executor=None, direction: str = "
         raise ValueError("simulate_two_sided needs a resolved document (algorithm 1: one direction)")
     scene = build_scene(spec, base_dir)
     settings = sim_mod.kernel_settings(spec)
-    if direction == "both" and a == 5:
-        settings = dataclasses.replace(settings, both_sides=scene.medium is not None)
-    elif direction == "both":
-        settings = dataclasses.replace(settings, mis=True, segment_family=a)
+    if direction == "both":
+        settings = two_sided_settings(settings, a, scene.medium is not None)
     settings = dataclasses.replace(settings, **overrides)
     los_gain, los_delay = line_of_sight(scene)
     executor = executor or SerialExecutor()

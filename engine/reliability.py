@@ -132,7 +132,7 @@ def may_stop(rel_stderr, rel: Reliability, target: float, served=None) -> bool:
 
 def warnings(rel: Reliability, ids=None, limit: int = 3) -> list[str]:
     """Result warnings for links whose H0 error bar is itself unreliable (at most one message)."""
-    bad = np.flatnonzero(~rel.trusted() & (rel.estimate > 0))
+    bad = np.flatnonzero(~rel.trusted() & (rel.estimate > 0) & (rel.groups > 0))  # groups 0: link not traced
     if not len(bad):
         return []
     names = [ids[i] if ids is not None else f"link {i}" for i in bad[:limit]]

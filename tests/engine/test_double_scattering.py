@@ -142,3 +142,13 @@ def test_two_sided_with_several_devices_per_link():
             assert within(b["dc_gain"], a["dc_gain"], err), (algorithm, a["transmitter"], a["receiver"])
             (x, ex), (y, ey) = _order(b, 1), _order(a, 1)
             assert within(x, y, math.hypot(ex, ey)), (algorithm, a["receiver"], x, y)
+
+
+def test_two_sided_without_medium_counts_each_path_once():
+    """Algorithm 5 from both devices in a clear room: each side counts half of the surface paths."""
+    doc = room_doc(algorithm=5, max_scattering=2, max_reflections=3)
+    one = simulate(spec({**doc, "simulation": {**doc["simulation"], "paths": 20_000, "seed": 71}}))["links"][0]
+    two = simulate_two_sided(spec({**doc, "simulation": {**doc["simulation"], "paths": 20_000, "seed": 72}}))
+    link = two["links"][0]
+    err = math.hypot(one["dc_gain_stderr"], link["dc_gain_stderr"])
+    assert err < 0.01 * one["dc_gain"] and within(link["dc_gain"], one["dc_gain"], err)
