@@ -48,7 +48,8 @@ from .sampling import cosine_about_soa
 from .segments import equiangular, equiangular_density, time_density, time_strata
 from .scene import Scene
 from .tally import BatchTally, TimeBins, reduce_contributions
-from .medium_nee import first_segment_branch, first_vertex_factor, side_weight, source_factor, target_factor
+from .medium_nee import (connection_weight, connect_from_target, first_medium_factor, first_segment_branch,
+                         first_vertex_factor, side_weight, target_factor)
 
 #: Upper bound on paths x targets connected in one array operation (memory bound).
 NEE_CHUNK = 1 << 20
@@ -242,17 +243,23 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
                 mp.lengths = mp.lengths + tm
                 mp.weights = mp.weights * medium.albedo_at(points.T)
                 mp.s = mp.s + 1
+                origins = mp.origins
+                seg_T = medium.transmittance(origins.T, mp.directions.T, tm) \
+                    if settings.equiangular_points or settings.both_sides else None
+                mid_g = seg_T / (tm * tm) if settings.both_sides else None  # edge factor x_1 -> x_2 (medium_nee)
                 if settings.equiangular_points:  # balance heuristic with the equiangular points
-                    origins = mp.origins
-                    p_ff = medium.sigma_t_at(points.T) * medium.transmittance(origins.T, mp.directions.T, tm)
+                    p_ff = medium.sigma_t_at(points.T) * seg_T
                     end = t_seg.take(mi)
                     for j in range(len(ctx.tgt)):
                         y = np.repeat(ctx.t_pos[:, j:j + 1], len(mp), axis=1)
                         n_e = equiangular_density(origins, mp.directions, y, np.zeros(len(mp)), end, tm,
                                                   settings.equiangular_points)
-                        ctx.connect_one(j, points, mp.weights * p_ff / (p_ff + n_e), mp, in_dirs=mp.directions)
+                        ctx.connect_one(j, points, mp.weights * p_ff / (p_ff + n_e), mp, in_dirs=mp.directions,
+                                        mid_g=mid_g)
                 else:
-                    ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions)
+                    ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions, mid_g=mid_g)
+                if settings.both_sides and S >= 2 and forward:  # third strategy for Tx -> x_1 -> x_2 -> Rx
+                    connect_from_target(ctx, mp, points, rng)
                 u = rng.random((2, len(mp)))
                 arriving = mp.directions
                 mp.directions = scene.phase.sample(mp.directions, u[0], u[1])
@@ -302,12 +309,14 @@ class _Context:
         self.out = {k: [] for k in ("target", "cell", "delay", "power", "path")}
 
     def connect(self, points, shadow_origins, weights, paths, normals=None, in_dirs=None,
-                scatter_order=None, extra_length=None):
+                scatter_order=None, extra_length=None, mid_g=None):
         """NEE from vertices (3, n) to every target; weights carry everything but the connection.
 
         Surface vertices give `normals` (factor max(cos, 0)); medium vertices give the
         arriving directions `in_dirs` (factor phase(cos)). Cells use paths.k and
         paths.s (or `scatter_order`); delays use paths.lengths (+ `extra_length`).
+        `mid_g` (per point): T / r^2 of the edge that reached a medium vertex, for the
+        weights of algorithm 5 from both devices (medium_nee.connection_weight).
         """
         scene, targets, tgt = self.scene, self.targets, self.tgt
         isect, medium = scene.intersector, scene.medium
@@ -342,16 +351,6 @@ class _Context:
             else:
                 lobe = scene.phase.eval(_dot(in_dirs.take(pi, axis=1), wdir))
             f = weights.take(pi) * lobe * targets.response(tgt.take(ti), ct / d) / d2
-            if self.settings.both_sides:  # algorithm 5 from both devices (medium_nee.side_weight)
-                several = (paths.k + paths.s).take(pi) >= 2
-                if normals is not None:
-                    c, rho_t = cs.take(sel) / d, 1.0 / np.pi
-                else:
-                    c, rho_t = medium.sigma_t_at(points.take(pi, axis=1).T), lobe
-                a = paths.first.take(pi) * np.where(several, paths.first_rho.take(pi), 1.0)
-                b = (targets.response(tgt.take(ti), ct / d) / self.t_total.take(ti) * c / d2
-                     * np.where(several, rho_t, 1.0))
-                f = f * side_weight(a, b)
             sel = np.flatnonzero(f > 0)
             if len(sel) == 0:
                 continue
@@ -362,7 +361,11 @@ class _Context:
                                                       d - 2.0 * isect.offset))
                 pi, ti, f, d, wdir = pi.take(keep), ti.take(keep), f.take(keep), d.take(keep), wdir.take(keep, axis=1)
             if medium is not None:
-                f = f * medium.transmittance(points.take(pi, axis=1).T, wdir.T, d)
+                tr = medium.transmittance(points.take(pi, axis=1).T, wdir.T, d)
+                f = f * tr
+                if self.settings.both_sides:  # algorithm 5 from both devices (medium_nee.connection_weight)
+                    f = f * connection_weight(self, paths, pi, ti, d, wdir, tr, normals=normals, in_dirs=in_dirs,
+                                              mid_g=mid_g)
             s_ord = (paths.s if scatter_order is None else scatter_order).take(pi)
             length = paths.lengths.take(pi) + d + (0.0 if extra_length is None else extra_length.take(pi))
             self.out["target"].append(ti)
@@ -509,11 +512,13 @@ def _equiangular_in_scatter(ctx: _Context, paths: _Paths, t_seg, rng) -> None:
         p_ff = medium.sigma_t_at(points.T) * transmittance
         n_e = equiangular_density(pp.origins, pp.directions, y.take(seg, axis=1), np.zeros(len(s)), end.take(seg), s,
                                   n_eq)
+        mid_g = None
         if settings.both_sides:  # a point on the first segment is the path's first vertex
-            pp.first = np.where(pp.k + pp.s == 0, source_factor(ctx, points), pp.first)
+            pp.first = np.where(pp.k + pp.s == 0, first_medium_factor(ctx, points, transmittance), pp.first)
+            mid_g = transmittance / (s * s)
         pp.s = pp.s + 1
         ctx.connect_one(j, points, pp.weights * transmittance * sigma_s / (p_ff + n_e), pp, in_dirs=pp.directions,
-                        extra_length=s)
+                        extra_length=s, mid_g=mid_g)
 
 
 def _direction_mis(ctx: _Context, j: int, pp: _Paths, points, s, density):

@@ -23,12 +23,16 @@ identically by the two runs (each stores its source-side factor in `_Paths.first
 the first vertex and computes the target-side factor at the connection, `side_weight`),
 and w_tx + w_rx = 1, so the sum of the two runs is unbiased for the whole family
 (each run is unbiased for its family with any path-dependent weight; Veach 1997, ch. 9).
-Transmittances are left out of A and B: any positive path function gives a partition.
-For paths of two or more vertices, algorithm 5 multiplies A by the density of the
-direction leaving x_1 (the phase function there, or 1/pi at a surface: `_Paths.first_rho`)
-and B likewise at x_n: A / (A + B) is then the balance heuristic of the two
-unidirectional strategies with free-flight distances (Veach 1997, section 10.2), which
-matters for forward-peaked phase functions (the phase factors at both ends).
+Algorithms 2-4 leave transmittances out of A and B (any positive path function gives a
+partition). Algorithm 5 (`connection_weight`) uses the exact balance heuristic of its
+strategies with free-flight distances (Veach 1997, section 10.2): F = R / W c T(device ->
+x) / r^2 with c = 1 at a medium vertex (sigma_t cancels between the strategies); for paths
+of two or more vertices each factor is multiplied by the density of the direction leaving
+its end vertex (the phase function there, or 1/pi at a surface: `_Paths.first_rho`), which
+matters for forward-peaked phase functions; and the two-medium-vertex family
+Tx -> x_1 -> x_2 -> Rx has a third strategy (`connect_from_target`: x_1 from the
+transmitter, x_2 from the receiver, joined), which carries the corner where x_1 lies near
+the transmitter and x_2 near the receiver.
 
 The bound (the worst weight). Paths keep w <= W_src (phase sampling multiplies by the
 albedo, reflections by rho <= 1, and the roulette's survival min(1, w / W_src) only
@@ -40,7 +44,7 @@ p_ff = sigma_t T(o -> p) is the albedo), so, with p_max the phase function's max
     contribution <= W_src * albedo * p_max * min(R_tgt,max / r_n^2, W_tgt R_src,max / (W_src r_1^2))
 
 (the second bound: w_src <= A / B; with the direction factors of multi-vertex paths the same
-holds with p_max folded into the constant). For single scattering (n = 1, x_1 = x_n, the family
+holds with p_max folded into the constant, and transmittances <= 1). For single scattering (n = 1, x_1 = x_n, the family
 that carries the heavy tail) r_1 + r_n >= D, the distance between the devices, so
 max(r_1, r_n) >= D / 2 and
 
@@ -51,7 +55,10 @@ Rx: W = A pi sin^2 FOV, R_max = A). For n >= 2 the weight is bounded unless x_1 
 near the transmitter and x_n near the receiver at once; there the equiangular points
 (density >= N_E h / (pi r_n^2) along the segment) make the second moment finite:
 with c <= (1/h) r_n^2 / (r_1^2 + r_n^2), E[c^2] ~ int dr_1 int r_n dr_n r_n^2 / (r_1^2 + r_n^2)^2
-is finite near r_1 = r_n = 0. Surface vertices (devices on or near a wall) get the
+is finite near r_1 = r_n = 0 (and for n = 2 the third strategy bounds the corner: there the
+weight is at most p(cos_1) p(cos_2) T / r_12^2 x W_tgt albedo^2, r_12 ~ D). What stays heavy
+at g -> 1 is the product of the two phase peaks on paths nearly collinear with the two
+devices, which no one of the three strategies samples (docs/smoke-error-bars.md). Surface vertices (devices on or near a wall) get the
 same treatment, which also bounds the 1/r^2 of a wall point next to a device.
 
 Algorithms 2-4 (`first_segment_branch`). The points-on-segments estimators connect a point p of
@@ -111,8 +118,11 @@ def target_factor(ctx, j: int, points):
 def first_vertex_factor(ctx, paths, prim, t, t_col, collided):
     """`_Paths.first` for paths on their first segment: the source factor at their first vertex.
 
-    The first vertex is the collision (c = sigma_t) or the surface hit (c = |cos| of the
-    surface normal with the ray); paths with neither get 0 (they make no connection).
+    The first vertex is the collision or the surface hit (c = |cos| of the surface normal
+    with the ray); paths with neither get 0 (they make no connection). Algorithms 2-4
+    (`collided` all False) use R / W c / r^2; algorithm 5 (`KernelSettings.both_sides`)
+    uses F = R / W c T(source -> x_1) / r^2 with c = 1 at a medium vertex
+    (`connection_weight`).
     """
     from .kernel import device_sets
 
@@ -122,14 +132,137 @@ def first_vertex_factor(ctx, paths, prim, t, t_col, collided):
     hit = prim >= 0
     t1 = np.where(collided, t_col, np.where(hit, t, 1.0))
     points = paths.origins + t1 * paths.directions
-    c = np.zeros(len(t1))
-    if collided.any():
+    c = np.where(collided, 1.0, 0.0) if ctx.settings.both_sides else np.zeros(len(t1))
+    if collided.any() and not ctx.settings.both_sides:
         c[collided] = scene.medium.sigma_t_at(points[:, collided].T)
     surf = hit & ~collided
     if surf.any():
         normals = scene.intersector.normals_soa.take(prim[surf], axis=1)
         c[surf] = np.abs(_dot(normals, paths.directions[:, surf]))
-    return np.where(collided | hit, _device_factor(src, i, points, c), 0.0)
+    factor = np.where(collided | hit, _device_factor(src, i, points, c), 0.0)
+    if ctx.settings.both_sides and scene.medium is not None:
+        live = np.flatnonzero(collided | hit)
+        if len(live):
+            factor[live] *= scene.medium.transmittance(paths.origins[:, live].T, paths.directions[:, live].T,
+                                                       t1[live])
+    return factor
+
+
+def first_medium_factor(ctx, points, transmittance):
+    """F for medium points (3, n) as first vertices of algorithm 5: R / W T(source -> p) / r^2."""
+    from .kernel import device_sets
+
+    src, _ = device_sets(ctx.scene, ctx.item.direction)
+    return _device_factor(src, ctx.item.source, points, transmittance)
+
+
+def connection_weight(ctx, paths, pi, ti, d, wdir, tr, normals=None, in_dirs=None, mid_g=None):
+    """This run's share of the paths whose last vertices `paths`[pi] connect to targets ti (algorithm 5).
+
+    With F = `_Paths.first` (the source factor of x_1, transmittance included) and
+    L = R_tgt / W_tgt c T(x_n -> target) / d^2 (c = |cos| at a surface, 1 in the medium):
+    - one vertex (n = 1): F / (F + L);
+    - n >= 2: the balance heuristic of the two unidirectional strategies, F rho_1 / (F rho_1 + L rho_n),
+      rho the direction density leaving the end vertex (phase, or 1/pi at a surface);
+    - two medium vertices and no reflection (Tx -> x_1 -> x_2 -> Rx, `mid_g` = T / r^2 of
+      the edge x_1 -> x_2): the balance heuristic of three strategies, the third being
+      `connect_from_target` (x_1 from the transmitter, x_2 from the receiver, joined):
+      q_self / (q_self + q_other + F L), q_self = F rho_1 g, q_other = L rho_2 g.
+    Every strategy evaluates the same function of the path, so the shares sum to 1.
+    """
+    scene = ctx.scene
+    cos_t = -_dot(wdir, ctx.t_nrm.take(ti, axis=1))
+    resp = ctx.targets.response(ctx.tgt.take(ti), cos_t) / ctx.t_total.take(ti)
+    if normals is not None:
+        c = np.abs(_dot(wdir, normals.take(pi, axis=1)))
+        rho_t = np.full(len(pi), 1.0 / np.pi)
+    else:
+        c = 1.0
+        rho_t = scene.phase.eval(_dot(in_dirs.take(pi, axis=1), wdir))
+    last = resp * c * tr / (d * d)
+    first = paths.first.take(pi)
+    rho_f = paths.first_rho.take(pi)
+    k, s = paths.k.take(pi), paths.s.take(pi)
+    several = k + s >= 2
+    a = first * np.where(several, rho_f, 1.0)
+    b = last * np.where(several, rho_t, 1.0)
+    if mid_g is not None and normals is None:
+        g = mid_g.take(pi)
+        three = (k == 0) & (s == 2)
+        a = np.where(three, a * g, a)
+        b = np.where(three, b * g + first * last, b)
+    return side_weight(a, b)
+
+
+def connect_from_target(ctx, mp, points, rng) -> None:
+    """Third strategy for Tx -> x_1 -> x_2 -> Rx (algorithm 5 from both devices, forward runs only).
+
+    x_1 is this path's first vertex (a collision, `mp` just after it: weight
+    W_src albedo(x_1), arriving direction mp.directions); x_2 is drawn from the target:
+    a direction with pdf R / W_tgt, a free-flight distance along it (density
+    sigma_t T(target -> x_2)); the two are joined:
+        dH = w * p(cos_1) T(x_1 -> x_2) / r_12^2 * albedo(x_2) * p(cos_2) * W_tgt,
+    weighted by F L / (F rho_1 g + L rho_2 g + F L) (`connection_weight`): where x_1 is near
+    the transmitter and x_2 near the receiver, the corner neither unidirectional strategy
+    samples well, this one carries the path, and its estimate there is bounded.
+    """
+    first = np.flatnonzero((mp.k == 0) & (mp.s == 1))
+    if len(first) == 0:
+        return
+    scene, medium, isect = ctx.scene, ctx.scene.medium, ctx.scene.intersector
+    x1 = points.take(first, axis=1)
+    arriving = mp.directions.take(first, axis=1)
+    w, F, lengths, path = (mp.weights.take(first), mp.first.take(first), mp.lengths.take(first),
+                           mp.path.take(first))
+    n = len(first)
+    for j in range(len(ctx.tgt)):
+        t_idx = int(ctx.tgt[j])
+        u = rng.random((3, n))
+        dirs = np.ascontiguousarray(ctx.targets.sample_directions(t_idx, u[0], u[1]).T)
+        pos = ctx.t_pos[:, j:j + 1]
+        origin = pos + isect.offset * ctx.t_nrm[:, j:j + 1]
+        origins = np.repeat(origin, n, axis=1)
+        prim, t_hit = isect.intersect(origins.T, dirs.T)
+        seg = np.where(prim >= 0, t_hit, scene.medium_far_distance)
+        t_y, col = medium.sample_distance(origins.T, dirs.T, seg, u[2])
+        sel = np.flatnonzero(col)
+        if len(sel) == 0:
+            continue
+        y = origins.take(sel, axis=1) + t_y.take(sel) * dirs.take(sel, axis=1)
+        a = x1.take(sel, axis=1)
+        v = y - a
+        r12 = np.sqrt(_dot(v, v))
+        w12 = v / r12
+        keep = np.flatnonzero(r12 > 0)
+        if not scene.all_visible and len(keep):
+            keep = keep[~isect.occluded(a[:, keep].T, w12[:, keep].T, r12[keep] - 2.0 * isect.offset)]
+        if len(keep) == 0:
+            continue
+        sel, y, a, r12, w12 = sel.take(keep), y.take(keep, axis=1), a.take(keep, axis=1), r12.take(keep), \
+            w12.take(keep, axis=1)
+        dj = dirs.take(sel, axis=1)
+        p1 = scene.phase.eval(_dot(arriving.take(sel, axis=1), w12))
+        p2 = scene.phase.eval(-_dot(w12, dj))
+        g = medium.transmittance(a.T, w12.T, r12) / (r12 * r12)
+        to_dev = pos - y
+        r2 = np.sqrt(_dot(to_dev, to_dev))
+        resp = ctx.targets.response(np.full(len(sel), t_idx), _dot(dj, ctx.t_nrm[:, j:j + 1])) / ctx.t_total[j]
+        L = resp * medium.transmittance(y.T, (to_dev / r2).T, r2) / (r2 * r2)
+        Fs = F.take(sel)
+        q_c = Fs * L
+        total = Fs * p1 * g + L * p2 * g + q_c
+        share = np.where(total > 0, q_c / np.where(total > 0, total, 1.0), 0.0)
+        power = w.take(sel) * p1 * g * medium.albedo_at(y.T) * p2 * ctx.t_total[j] * share
+        ok = np.flatnonzero(power > 0)
+        if len(ok) == 0:
+            continue
+        from .constants import SPEED_OF_LIGHT
+
+        ctx.out["target"].append(np.full(len(ok), j, np.int64))
+        ctx.out["cell"].append(np.full(len(ok), j * ctx.cell_stride + 2, np.int64))  # k = 0, s = 2
+        ctx.out["delay"].append((lengths.take(sel.take(ok)) + r12.take(ok) + r2.take(ok)) / SPEED_OF_LIGHT)
+        ctx.out["power"].append(power.take(ok))
+        ctx.out["path"].append(path.take(sel.take(ok)))
 
 
 def _surface_target_factor(ctx, j: int, points, normals):
