@@ -17,13 +17,15 @@ Run: .venv/bin/python benchmarks/replicate_study.py [--seeds 10] [--paths 4096] 
 `--study accuracy`: accuracy mode (paths = None, target_rel_error) over `--seeds` seeds at
 targets 3 % and 1 % on the smoky rooms (Tx (2.5, 2.5, 3) down, Rx (1, 1, 0) up, FOV 90,
 sigma_s 0.2, sigma_a 0, g 0.5 and g 0.9; K = S = 8): "before" = algorithm 5 as `simulate`
-runs it (one side, chosen by the pilot) stopping on the per-path error alone; "after" =
+runs it on main (one side, chosen by the pilot, roulette theta = 1) stopping on the per-path
+error alone; "after" =
 algorithm 5 from both devices with engine/reliability.py's stopping rule. The true error
 is measured against a long two-sided run (`--ref-paths` per side) of the same K, S.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -117,13 +119,15 @@ def accuracy_study(args) -> None:
                                      time_budget_s=600)
                     if variant == "before":
                         doc["simulation"]["direction"] = "auto"
-                        keep = sim_mod.reliability.may_stop
+                        keep = sim_mod.reliability.may_stop, sim_mod.kernel_settings
                         sim_mod.reliability.may_stop = lambda *a, **k: True  # the old rule: per-path error only
+                        sim_mod.kernel_settings = lambda spec, _k=keep[1]: dataclasses.replace(
+                            _k(spec), rr_threshold=1.0)  # and the old roulette
                         try:
                             t = time.perf_counter()
                             res = simulate(SceneSpec.model_validate(doc))
                         finally:
-                            sim_mod.reliability.may_stop = keep
+                            sim_mod.reliability.may_stop, sim_mod.kernel_settings = keep
                     else:
                         t = time.perf_counter()
                         res = simulate_two_sided(SceneSpec.model_validate(doc))
