@@ -95,27 +95,141 @@ def _max_albedo(spec: SceneSpec) -> float:
     return float(np.max(np.where(st > 0, ss / np.where(st > 0, st, 1.0), 0.0)))
 
 
-def _tail_order(gains, errors, ratio: float, allowed: float, cap: int):
-    """Smallest order n whose estimated tail is <= allowed (else the cap), and that tail.
+def tail_ratio(gains, errors, bound: float, last: int = 8) -> tuple[float, str]:
+    """Per-order decay ratio for the geometric tail past the pilot's last measured order, and how it was chosen.
 
-    tail(n) = max(sum of the pilot's gains above n, gain(n) ratio / (1 - ratio)) + 2 sigma:
-    the measured orders, or the geometric tail from order n when the pilot's paths died out
-    before the higher orders could be measured.
+    The pilot's own decay: a weighted least-squares fit of log(gain) against the order
+    over its `last` highest orders measured to 30 % (at least 4), ratio = exp(slope +
+    2 se(slope)). `bound` (rho_max for reflections, albedo_max for scattering) caps it when
+    below 1 (each further order keeps at most that fraction: the diffuse-field
+    assumption), and is used alone when too few orders are measured. With bound = 1 (a
+    white room, or sigma_a = 0) the fit is the only estimate; infinity (no finite bound
+    is stated) when it is not below 1 or too few orders are measured.
+    """
+    g = np.asarray(gains, float)
+    e = np.asarray([x or 0.0 for x in errors], float)
+    good = np.flatnonzero((g > 0) & (e <= 0.3 * np.where(g > 0, g, 1.0)))
+    good = good[good >= 1][-last:]
+    a_priori = (bound, f"at most {bound:.3g} per order (the largest {{what}})")
+    if len(good) < 4:
+        return a_priori if bound < 1.0 else (
+            math.inf, "unbounded: {what} is 1 and the pilot measured too few orders to fit their decay")
+    y = np.log(g[good])
+    w = 1.0 / np.maximum(e[good] / g[good], 1e-3) ** 2  # var(log g) ~ (se / g)^2
+    x = good.astype(float)
+    xm = (w * x).sum() / w.sum()
+    slope = (w * (x - xm) * (y - (w * y).sum() / w.sum())).sum() / (w * (x - xm) ** 2).sum()
+    se = math.sqrt(1.0 / (w * (x - xm) ** 2).sum())
+    r = math.exp(slope + 2.0 * se)
+    if bound < 1.0 and r >= bound:
+        return a_priori
+    if bound < 1.0:
+        return r, (f"{r:.3g} per order, the upper bound (2 se) of a fit to the pilot's orders {good[0]}-{good[-1]} "
+                   f"(below {{what}} = {bound:.3g}; an estimate that assumes geometric decay past them)")
+    if r >= 1.0:
+        return math.inf, (f"unbounded: {{what}} is 1 and the pilot's last orders show no decay (fitted ratio "
+                          f"{math.exp(slope):.3g}, upper bound {r:.3g})")
+    return r, (f"{r:.3g} per order, the upper bound (2 se) of a fit to the pilot's orders {good[0]}-{good[-1]} "
+               f"({{what}} is 1: no a-priori bound; an estimate that assumes geometric decay past them)")
+
+
+def _order_moments(cir_by_order, t_mid):
+    """Per order: (mean delay, mean squared delay) of its binned pilot CIR [s, s^2] (0 where it is empty)."""
+    h = np.asarray(cir_by_order, float)
+    m0 = h.sum(axis=1)
+    safe = np.where(m0 > 0, m0, 1.0)
+    return np.where(m0 > 0, h @ t_mid / safe, 0.0), np.where(m0 > 0, h @ (t_mid * t_mid) / safe, 0.0)
+
+
+def _tail_moments(n, gains, errors, t1, t2, ratio):
+    """Power P of the orders above n and its delay moments P t, P t^2 [per watt, s, s^2].
+
+    The pilot's orders up to its last well-measured one L (relative error <= 30 %) count as
+    measured; past L (or past n, if later) the tail is geometric with the per-order `ratio`
+    from g_L, keeping the mean delay step dt = t1[L] - t1[L-1] per order and the spread of
+    order L; the pilot's own noisy values past L count instead where they are larger;
+    two pilot standard errors of the orders above n are added.
     """
     gains = np.asarray(gains, float)
     errors = np.asarray([e or 0.0 for e in errors], float)
-    factor = ratio / (1.0 - ratio) if ratio < 1.0 else math.inf
-    tail, last = math.inf, None
-    for n in range(0, len(gains)):
-        if gains[n] > 0:
-            last = n
-        # an order the pilot's paths did not reach continues the decay of the last one measured
-        decayed = gains[last] * ratio ** (n - last) if last is not None else 0.0
-        geometric = decayed * factor if decayed > 0 else 0.0
-        tail = max(gains[n + 1:].sum(), geometric) + 2.0 * math.sqrt(float((errors[n + 1:] ** 2).sum()))
-        if tail <= allowed:
-            return n, tail
-    return cap, tail
+    good = np.flatnonzero((gains > 0) & (errors <= 0.3 * np.where(gains > 0, gains, 1.0)))
+    if not len(good):
+        p = gains[n + 1:].sum()
+        noise = 2.0 * math.sqrt(float((errors[n + 1:] ** 2).sum()))
+        return (0.0, 0.0, 0.0) if p + noise == 0 else (math.inf, math.inf, math.inf)
+    L = int(good[-1])
+    upto = slice(n + 1, L + 1)
+    p = gains[upto].sum()
+    p1 = (gains[upto] * t1[upto]).sum()
+    p2 = (gains[upto] * t2[upto]).sum()
+    start = max(L, n)
+    beyond = slice(start + 1, None)
+    measured_beyond = (gains[beyond].sum(), (gains[beyond] * t1[beyond]).sum(), (gains[beyond] * t2[beyond]).sum())
+    if gains[L] > 0:
+        if not math.isfinite(ratio) or ratio >= 1.0:
+            return math.inf, math.inf, math.inf
+        g_start = gains[L] * ratio ** (start - L)
+        step = max(t1[L] - t1[L - 1], 0.0) if L >= 1 and gains[L - 1] > 0 else 0.0
+        var_L = max(t2[L] - t1[L] ** 2, 0.0)
+        s0 = ratio / (1 - ratio)  # sum r^i, i >= 1
+        s1 = ratio / (1 - ratio) ** 2  # sum i r^i
+        s2 = ratio * (1 + ratio) / (1 - ratio) ** 3  # sum i^2 r^i
+        base = t1[L] + (start - L) * step
+        geo = (g_start * s0, g_start * (base * s0 + step * s1),
+               g_start * ((base * base + var_L) * s0 + 2 * base * step * s1 + step * step * s2))
+        extra = geo if geo[0] >= measured_beyond[0] else measured_beyond
+    else:
+        extra = measured_beyond
+    p, p1, p2 = p + extra[0], p1 + extra[1], p2 + extra[2]
+    noise = 2.0 * math.sqrt(float((errors[n + 1:] ** 2).sum()))
+    if p > 0 and noise > 0:  # the pilot's error on the tail, at the tail's delays
+        scale = (p + noise) / p
+        p, p1, p2 = p * scale, p1 * scale, p2 * scale
+    elif noise > 0:
+        p, p1, p2 = noise, noise * t1[min(n, len(t1) - 1)], noise * t2[min(n, len(t2) - 1)]
+    return p, p1, p2
+
+
+def _delay_shift(h0, tau0, tau_rms, p, p1, p2):
+    """(|shift of tau0|, |shift of tau_rms|) [s] when power p with delay moments p1, p2 is left out of a link
+    whose full response has gain h0, mean delay tau0 and RMS delay spread tau_rms."""
+    if not math.isfinite(p) or p >= h0:
+        return math.inf, math.inf
+    if p <= 0:
+        return 0.0, 0.0
+    h, m1, m2 = h0 - p, h0 * tau0 - p1, h0 * (tau_rms**2 + tau0**2) - p2  # what the truncated run measures
+    t0_cut = m1 / h
+    rms_cut = math.sqrt(max(m2 / h - t0_cut**2, 0.0))
+    return abs(t0_cut - tau0), abs(rms_cut - tau_rms)
+
+
+def _tail_order(gains, errors, ratio: float, allowed: float, cap: int, delays=None):
+    """Smallest order n whose tail is within its allowance (else the cap), and that tail [per watt].
+
+    tail(n) = the pilot's orders above n + the geometric tail past its last measured
+    order (`tail_ratio`) + 2 pilot standard errors. With `delays` = (t1, t2, h0, tau0,
+    tau_rms, rel) (per-order delay moments, the link's H0 and delays, the relative
+    allowance), the order must also keep the shifts of tau0 and tau_rms that dropping
+    the tail causes (`_delay_shift`, a late tail weighted by its delay) under
+    rel x tau_rms each. Returns (n, tail power, tau0 shift, tau_rms shift).
+    """
+    n_orders = len(gains)
+    zeros = np.zeros(n_orders)
+    t1, t2 = (delays[0], delays[1]) if delays is not None else (zeros, zeros)
+    last = (math.inf, math.inf, math.inf)
+    for n in range(n_orders):
+        p, p1, p2 = _tail_moments(n, gains, errors, t1, t2, ratio)
+        if delays is not None:
+            h0, tau0, tau_rms, rel = delays[2:]
+            d0, d_rms = _delay_shift(h0, tau0, tau_rms, p, p1, p2)  # the pilot holds every order it reached
+            ok_delay = d0 <= rel * tau_rms and d_rms <= rel * tau_rms
+        else:
+            d0 = d_rms = 0.0
+            ok_delay = True
+        last = (p, d0, d_rms)
+        if p <= allowed and ok_delay:
+            return n, p, d0, d_rms
+    return cap, *last
 
 
 def validated(doc: dict, what: str) -> SceneSpec:
@@ -144,7 +258,7 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
         algorithm = sim.algorithm
         modeled["algorithm_reason"] = f"algorithm {algorithm} requested"
     if algorithm != 5:
-        update["max_scattering"] = {1: 1, 2: 1, 3: 1, 4: 1}[algorithm]  # S is fixed by the algorithm
+        update["max_scattering"] = {1: 1, 2: 1, 3: 1, 4: 2}[algorithm]  # S is fixed by the algorithm (4: s <= 2)
     need_k = sim.max_reflections is None
     need_s = algorithm == 5 and sim.max_scattering is None
     need_t = sim.t_max_s is None
@@ -188,23 +302,52 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
         if any(link["dc_gain"] > 0 for link in links) else sim.tolerance * h0
     rho_max = _max_reflectance(resolved, scene)
     k_tail = s_tail = 0.0
+    t_mid = pilot["time_bins"]["t_min_s"] + pilot["time_bins"]["time_bin_s"] * (np.arange(PILOT_BINS) + 0.5)
+    rel = sim.tolerance / 2  # half the allowance to K, half to S (like the power)
+    notes = []
+
+    def choose(what, key, bound, cap, extra=0):
+        """(order, tail, reason) over the pilot links: the largest order any link needs."""
+        best = None
+        for lk in links:
+            gains, errors = lk[f"dc_gain_by_{key}_order"], lk[f"dc_gain_by_{key}_order_stderr"]
+            ratio, how = tail_ratio(gains, errors, bound)
+            if key == "scattering" and bound >= 1.0 and not len(scene.geometry.faces):
+                ratio, how = math.inf, ("unbounded: {what} is 1 and no surface closes the medium: light diffuses "
+                                        "without loss and the orders decay algebraically, not geometrically")
+            delays = None
+            if lk["mean_delay_s"] is not None and lk["rms_delay_spread_s"]:
+                t1, t2 = _order_moments(lk["cir"][f"by_{key}_order"], t_mid)
+                delays = (t1, t2, lk["dc_gain"], lk["mean_delay_s"], lk["rms_delay_spread_s"], rel)
+            n, tail, d0, d_rms = _tail_order(gains, errors, ratio, allowed / 2, cap, delays)
+            n = max(n, extra)
+            cand = (n, tail, d0, d_rms, how.format(what=what), lk["rms_delay_spread_s"] or 0.0)
+            if best is None or (cand[0], cand[1]) > (best[0], best[1]):
+                best = cand
+        n, tail, d0, d_rms, how, tau_rms = best
+        name = {"reflection": "reflection order", "scattering": "scattering order"}[key]
+        if math.isfinite(tail) and tail <= allowed / 2 and d0 <= rel * tau_rms and d_rms <= rel * tau_rms:
+            reason = (f"{name} capped at {n}: estimated power of higher orders {tail:.2e} per watt <= "
+                      f"{allowed / 2:.2e} (half the allowed truncation); dropping them shifts the mean delay by "
+                      f"{d0:.2e} s and the RMS delay spread by {d_rms:.2e} s (each <= {rel:g} x tau_rms); "
+                      f"tail past the pilot's orders: {how}")
+        elif math.isfinite(tail):
+            reason = (f"{name} capped at {n}, the pilot's highest: the tail could not be brought under the "
+                      f"allowance (estimated {tail:.2e} per watt against {allowed / 2:.2e}; shifts of the mean "
+                      f"delay {d0:.2e} s, of the RMS delay spread {d_rms:.2e} s); tail: {how}")
+        else:
+            reason = (f"{name} capped at {n}, the pilot's highest: no finite bound on the power of higher orders "
+                      f"can be stated ({how}); set it explicitly and compare runs")
+        notes.append(f"{what}: {how}")
+        return n, tail, reason
+
     if need_k:
-        ks, k_tails = zip(*(_tail_order(lk["dc_gain_by_reflection_order"], lk["dc_gain_by_reflection_order_stderr"],
-                                        rho_max, allowed / 2, cap_k) for lk in links))
-        update["max_reflections"] = max(ks)
-        k_tail = max(k_tails)
-        modeled["max_reflections_reason"] = (
-            f"reflection order capped at {max(ks)}: estimated power of higher orders {k_tail:.2e} per watt "
-            f"< {allowed / 2:.2e} (half the allowed truncation)")
+        K, k_tail, modeled["max_reflections_reason"] = choose("rho_max", "reflection", rho_max, cap_k)
+        update["max_reflections"] = K
     if need_s:
-        a_max = _max_albedo(resolved)
-        ss, s_tails = zip(*(_tail_order(lk["dc_gain_by_scattering_order"], lk["dc_gain_by_scattering_order_stderr"],
-                                        a_max, allowed / 2, cap_s) for lk in links))
-        update["max_scattering"] = max(1, max(ss))
-        s_tail = max(s_tails)
-        modeled["max_scattering_reason"] = (
-            f"scattering order capped at {max(1, max(ss))}: estimated power of higher orders {s_tail:.2e} per watt "
-            f"< {allowed / 2:.2e}")
+        S, s_tail, modeled["max_scattering_reason"] = choose("albedo_max", "scattering", _max_albedo(resolved),
+                                                             cap_s, extra=1)
+        update["max_scattering"] = S
     if need_t:
         dt = sim.time_bin_s
         edges = pilot["time_bins"]["t_min_s"] + pilot["time_bins"]["time_bin_s"] * np.arange(PILOT_BINS + 1)
@@ -223,9 +366,11 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
     modeled["pilot"] = {"paths": sim.pilot_paths, "receivers": [scene.receivers.ids[i] for i in pick],
                         "max_reflections": cap_k, "max_scattering": cap_s, "t_max_s": t_long,
                         "allowed_truncation_per_watt": float(allowed), "rho_max": rho_max}
-    modeled["truncation_estimate_per_watt"] = float(k_tail + s_tail)
-    modeled["truncation_note"] = ("estimated: the tail past the pilot's last order assumes each further reflection "
-                                  "(scattering) keeps at most rho_max (albedo_max) of the power")
+    total_tail = float(k_tail + s_tail)
+    modeled["truncation_estimate_per_watt"] = total_tail if math.isfinite(total_tail) else None
+    modeled["truncation_note"] = ("estimated from the pilot: the orders it measured plus a geometric tail past its "
+                                  "last order (" + "; ".join(notes) + "), plus two of its standard errors"
+                                  if notes else "no order was chosen automatically")
     resolved = spec.model_copy(update={**doc_update, "simulation": sim.model_copy(update=update)})
     return resolved, modeled
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import reliability
 from .tally import Accumulator, TallyPlan
 
 
@@ -75,3 +76,50 @@ def reported_rel_stderr(accs: dict[str, Accumulator], los_gain: np.ndarray, scen
         rel = _rel(mean[:, 0], cov[:, 0, 0]).reshape(w.shape[1], plan.n_rx)
         out.append(rel[solo].ravel())
     return np.concatenate(out)
+
+
+def _group_means(accs: dict[str, Accumulator]) -> tuple[np.ndarray, np.ndarray]:
+    """Per batch group and link: the group's per-path H0 estimate summed over directions, and its weight
+    (a group counts for a link only when every direction serving the link filled it)."""
+    served = [a for a in accs.values() if a.n_paths.any()]
+    if not served:
+        n_links = next(iter(accs.values())).n_links
+        return np.zeros((1, n_links)), np.zeros((1, n_links))
+    means = sum(np.where(a.group_paths > 0, a.group_h0 / np.maximum(a.group_paths, 1), 0.0) for a in served)
+    counts = sum(np.where((a.n_paths > 0)[None, :], a.group_paths.astype(float), 0.0) for a in served)
+    filled = np.all([(a.group_paths > 0) | (a.n_paths == 0)[None, :] for a in served], axis=0)
+    return means, np.where(filled, counts / len(served), 0.0)
+
+
+def link_reliability(accs: dict[str, Accumulator], los_gain: np.ndarray) -> reliability.Reliability:
+    """Reliability of every link's H0 error bar (engine/reliability.py), from the batch groups."""
+    means, counts = _group_means(accs)
+    return reliability.group_reliability(means, counts, los_gain)
+
+
+def may_stop(accs: dict[str, Accumulator], los_gain: np.ndarray, scene, plan: TallyPlan, target: float,
+             served: np.ndarray) -> bool:
+    """The accuracy rule (reliability.may_stop) on what the result reports: every group's channel and every
+    link of a transmitter in no group, each on a trusted error bar."""
+    w = plan.group_weights
+    zeros = np.zeros(len(los_gain))
+    mean, cov = link_moments(accs, los_moments(los_gain, zeros))
+    rel_links = _rel(mean[:, 0], cov[:, 0, 0])
+    means, counts = _group_means(accs)
+    if not w.size:
+        return reliability.may_stop(rel_links, reliability.group_reliability(means, counts, los_gain), target, served)
+    n_tx, n_rx = w.shape[1], plan.n_rx
+    ch_mean, ch_cov = channel_moments(accs, los_moments(los_gain, zeros), plan)
+    g_means = np.einsum("gi,bir->bgr", w, means.reshape(-1, n_tx, n_rx)).reshape(means.shape[0], -1)
+    member_counts = np.where(w[:, :, None] > 0, counts.reshape(-1, 1, n_tx, n_rx), np.inf).min(axis=2)
+    g_counts = np.where(np.isfinite(member_counts), member_counts, 0.0).reshape(means.shape[0], -1)
+    g_los = (w @ los_gain.reshape(n_tx, n_rx)).ravel()
+    # a group's channel at a receiver runs when one of its members' links does
+    ch_served = ((w > 0)[:, :, None] & served.reshape(1, n_tx, n_rx)).any(axis=1).ravel()
+    ok = reliability.may_stop(_rel(ch_mean[..., 0], ch_cov[..., 0, 0]).ravel(),
+                              reliability.group_reliability(g_means, g_counts, g_los), target, ch_served)
+    solo = np.repeat(~(w > 0).any(axis=0), n_rx)
+    if ok and solo.any():
+        rel = reliability.group_reliability(means[:, solo], counts[:, solo], los_gain[solo])
+        ok = reliability.may_stop(rel_links[solo], rel, target, served[solo])
+    return ok

@@ -19,16 +19,23 @@ serves both directions. Each step intersects the surfaces, then:
       dH = w * T(o -> p) * sigma_s(p) * phase(cos) * R_target / d^2 * V * T(p -> target) * |stratum|,
   tallied at (k, 1); the path itself stays unscattered (s = 0). Forward this is
   algorithm 3 (Tx -> k reflections -> p -> Rx), backward algorithm 2
-  (Tx -> p -> k reflections -> Rx); algorithm 4 runs both and weights their shared
-  family (k = 0: Tx -> p -> Rx) by the balance heuristic;
+  (Tx -> p -> k reflections -> Rx). Run from both devices (`mis`), the shared family
+  (k = 0: Tx -> p -> Rx) is weighted by the balance heuristic, and each device also
+  scatters on its own first segment (medium_nee.first_segment_branch) to sample the
+  other side's family, shared by a path partition of unity with bounded weights near
+  the devices; algorithm 4 adds the double-scattering family Tx -> p_in -> (k) ->
+  p_out -> Rx at (k, 2) (medium_nee.py);
 - algorithm 5 (`free_flight`): the collision distance is sampled (regular tracking
   of the medium's optical depth); a collision before the surface is a medium vertex:
   w *= albedo, NEE with the phase function at (k, s + 1), new direction from the
-  phase function. Surface vertices keep w (T / P(no collision) = 1).
+  phase function. Surface vertices keep w (T / P(no collision) = 1). Run from both
+  devices (`both_sides`), every connection is weighted by the partition of unity of
+  medium_nee.py (bounded weights near point devices).
 The phase cosine is dot(ray direction, direction to the target) in both directions
 (the phase functions are symmetric). The line-of-sight term (k = s = 0) is exact
 and never sampled (los.py). Russian roulette from `rr_start_depth` (k + s) on, with
-survival probability min(1, w / initial w), keeps every estimator unbiased.
+survival probability min(1, w / (theta initial w)) (`rr_threshold` theta), keeps every
+estimator unbiased.
 
 Every loop here is over steps of the paths; all work inside is array operations.
 """
@@ -44,6 +51,8 @@ from .sampling import cosine_about_soa
 from .segments import equiangular, equiangular_density, time_density, time_strata
 from .scene import Scene
 from .tally import BatchBuilder, BatchTally, TallyPlan, TimeBins
+from .medium_nee import (connection_weight, connect_from_target, first_medium_factor, first_segment_branch,
+                         first_vertex_factor, side_weight, target_factor)
 
 #: Upper bound on paths x targets connected in one array operation (memory bound).
 NEE_CHUNK = 1 << 20
@@ -61,7 +70,21 @@ class KernelSettings:
     strata_length: float = 0.0  # [m] path-length width of the time strata (c dt)
     max_strata: int = 64
     equiangular_points: int = 2  # per segment and target, combined with the time strata (balance heuristic)
-    mis: bool = False  # algorithm 4: balance heuristic on the family both directions sample
+    #: algorithms 2-4 run from both devices: balance heuristic on the family both directions sample
+    #: (k = 0), path partition of unity on the others (medium_nee.py)
+    mis: bool = False
+    #: which single-scattering family algorithms 2-4 estimate: 2 (Tx -> p -> k -> Rx), 3 (Tx -> k -> p -> Rx), 4 (both)
+    segment_family: int = 4
+    #: algorithm 5 run from both devices: every connection is weighted by the path partition of unity
+    #: of medium_nee.side_weight (bounded weights near point devices)
+    both_sides: bool = False
+    #: roulette threshold theta: survival min(1, w / (theta w0)); paths above theta w0 always survive
+    rr_threshold: float = 0.25  # measured: benchmarks/replicate_study.py --study roulette (docs/smoke-error-bars.md)
+
+    @property
+    def in_then_out(self) -> bool:
+        """Algorithm 4 with S = 2: the double-scattering family Tx -> p_in -> (k) -> p_out -> Rx (medium_nee.py)."""
+        return self.segment_scatter and self.mis and self.max_scattering >= 2
 
     @property
     def n_scatter_orders(self) -> int:
@@ -116,7 +139,9 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 class _Paths:
     """Path state as (3, n) component arrays and (n,) arrays; `keep(idx)` compacts with `take`."""
 
-    FIELDS = ("origins", "directions", "weights", "lengths", "path", "k", "s")
+    #: `first`: the source-side density factor of the path's first vertex (medium_nee.first_vertex_factor);
+    #: `first_rho`: the direction density of leaving it (phase, or 1/pi at a surface; medium_nee.side_weight)
+    FIELDS = ("origins", "directions", "weights", "lengths", "path", "k", "s", "first", "first_rho")
 
     def __init__(self, **arrays):
         for name in self.FIELDS:
@@ -160,6 +185,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     free_flight = settings.free_flight and medium is not None
     segment_scatter = settings.segment_scatter and medium is not None
     ctx = _Context(scene, targets, tgt, settings, item, sources.positions[i])
+    ctx.start_tally(item)
 
     w0 = sources.total_response(i)
     u = rng.random((2, n))
@@ -167,7 +193,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         directions=np.ascontiguousarray(sources.sample_directions(i, u[0], u[1]).T),
         origins=np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1),
         weights=np.full(n, w0), lengths=np.zeros(n), path=np.arange(n),
-        k=np.zeros(n, np.int64), s=np.zeros(n, np.int64))
+        k=np.zeros(n, np.int64), s=np.zeros(n, np.int64), first=np.zeros(n), first_rho=np.full(n, 1.0 / np.pi))
     if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each in algorithm 4
         ctx.connect_source_mirrors(sources, i, w0 * (0.5 if settings.mis else 1.0), n)
     surface_power = escaped_power = 0.0
@@ -180,10 +206,12 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         hit = prim >= 0
         t_seg = np.where(hit, t, far)
         if segment_scatter:  # algorithms 2-4: single scattering along the segment
-            _segment_scatter(ctx, paths, t_seg, rng, first=_step == 0)
+            _segment_scatter(ctx, paths, t_seg, rng, first=_step == 0, prim=prim)
         collided = np.zeros(len(paths), bool)
         if free_flight:  # algorithm 5: sample the collision distance
             t_col, collided = medium.sample_distance(paths.origins.T, paths.directions.T, t_seg, rng.random(len(paths)))
+            if settings.both_sides and _step == 0:
+                paths.first = first_vertex_factor(ctx, paths, prim, t, t_col, collided)
             if settings.equiangular_points:
                 _equiangular_in_scatter(ctx, paths, t_seg, rng)
         elif medium is not None:
@@ -235,19 +263,30 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
                 mp.lengths = mp.lengths + tm
                 mp.weights = mp.weights * medium.albedo_at(points.T)
                 mp.s = mp.s + 1
+                origins = mp.origins
+                seg_T = medium.transmittance(origins.T, mp.directions.T, tm) \
+                    if settings.equiangular_points or settings.both_sides else None
+                mid_g = seg_T / (tm * tm) if settings.both_sides else None  # edge factor x_1 -> x_2 (medium_nee)
                 if settings.equiangular_points:  # balance heuristic with the equiangular points
-                    origins = mp.origins
-                    p_ff = medium.sigma_t_at(points.T) * medium.transmittance(origins.T, mp.directions.T, tm)
+                    p_ff = medium.sigma_t_at(points.T) * seg_T
                     end = t_seg.take(mi)
                     for j in range(len(ctx.tgt)):
                         y = np.repeat(ctx.t_pos[:, j:j + 1], len(mp), axis=1)
                         n_e = equiangular_density(origins, mp.directions, y, np.zeros(len(mp)), end, tm,
                                                   settings.equiangular_points)
-                        ctx.connect_one(j, points, mp.weights * p_ff / (p_ff + n_e), mp, in_dirs=mp.directions)
+                        ctx.connect_one(j, points, mp.weights * p_ff / (p_ff + n_e), mp, in_dirs=mp.directions,
+                                        mid_g=mid_g)
                 else:
-                    ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions)
+                    ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions, mid_g=mid_g)
+                if settings.both_sides and S >= 2 and forward:  # third strategy for Tx -> x_1 -> x_2 -> Rx
+                    connect_from_target(ctx, mp, points, rng)
                 u = rng.random((2, len(mp)))
+                arriving = mp.directions
                 mp.directions = scene.phase.sample(mp.directions, u[0], u[1])
+                if settings.both_sides:  # leaving the path's first vertex: its phase density (medium_nee)
+                    at_first = mp.k + mp.s == 1
+                    if at_first.any():
+                        mp.first_rho = np.where(at_first, scene.phase.eval(_dot(arriving, mp.directions)), mp.first_rho)
                 mp.origins = points
                 alive = ((mp.k < K) | (mp.s < S)) & (mp.weights > 0)
                 parts.append(mp.keep_where(alive))
@@ -257,7 +296,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         if settings.russian_roulette and len(paths):
             at = np.flatnonzero(paths.k + paths.s >= settings.rr_start_depth)
             if len(at):
-                q = np.minimum(1.0, paths.weights.take(at) * (1.0 / w0))
+                q = np.minimum(1.0, paths.weights.take(at) * (1.0 / (settings.rr_threshold * w0)))
                 survive = rng.random(len(at)) < q
                 paths.weights[at] = paths.weights.take(at) / np.where(survive, q, 1.0)
                 dead = at[~survive]
@@ -284,19 +323,25 @@ class _Context:
         self.scene, self.targets, self.tgt, self.settings, self.item = scene, targets, tgt, settings, item
         self.t_pos = np.ascontiguousarray(targets.positions[tgt].T)  # (3, T)
         self.t_nrm = np.ascontiguousarray(targets.normals[tgt].T)
+        self.t_total = np.array([targets.total_response(int(t)) for t in tgt], float)
         self.source_position = source_position
         self.out = {k: [] for k in self.KEYS}
         self.mirrors = scene.mirror_planes
+        self.builder: BatchBuilder | None = None  # the batch's tally (trace_batch); sub-contexts only connect
+
+    def start_tally(self, item: WorkItem) -> None:
+        settings = self.settings
         several = settings.segment_scatter or (settings.free_flight and settings.equiangular_points > 0)
-        # Mirror-image estimates reach the cell of the next reflection one step early: a path may then add to
-        # one cell in two steps, so its per-cell sums are formed over the whole batch.
-        self.builder = BatchBuilder(settings.tally, item_links(scene, item), item.n_paths, several,
-                                    across_steps=bool(self.mirrors)) if item is not None else None
+        # Mirror images, and the estimates of both devices' strategies (medium_nee), may reach one order cell
+        # of a path in two kernel steps: its per-cell sums are then formed over the whole batch.
+        across = bool(self.mirrors) or settings.both_sides or settings.in_then_out
+        self.builder = BatchBuilder(settings.tally, item_links(self.scene, item), item.n_paths, several,
+                                    across_steps=across)
 
     KEYS = ("target", "k", "s", "delay", "power", "path")
 
     def connect(self, points, shadow_origins, weights, paths, normals=None, in_dirs=None,
-                scatter_order=None, extra_length=None, brdf=None):
+                scatter_order=None, extra_length=None, brdf=None, mid_g=None):
         """NEE from vertices (3, n) to every target; weights carry everything but the connection.
 
         Surface vertices give `normals` (factor max(cos, 0)) and, on non-Lambertian scenes,
@@ -304,6 +349,8 @@ class _Context:
         f(incoming, toward target) cos (else the caller folds rho / pi into the weights).
         Medium vertices give the arriving directions `in_dirs` (factor phase(cos)). Cells use paths.k and
         paths.s (or `scatter_order`); delays use paths.lengths (+ `extra_length`).
+        `mid_g` (per point): T / r^2 of the edge that reached a medium vertex, for the
+        weights of algorithm 5 from both devices (medium_nee.connection_weight).
         """
         scene, targets, tgt = self.scene, self.targets, self.tgt
         isect, medium = scene.intersector, scene.medium
@@ -352,7 +399,11 @@ class _Context:
                                                       d - 2.0 * isect.offset))
                 pi, ti, f, d, wdir = pi.take(keep), ti.take(keep), f.take(keep), d.take(keep), wdir.take(keep, axis=1)
             if medium is not None:
-                f = f * medium.transmittance(points.take(pi, axis=1).T, wdir.T, d)
+                tr = medium.transmittance(points.take(pi, axis=1).T, wdir.T, d)
+                f = f * tr
+                if self.settings.both_sides:  # algorithm 5 from both devices (medium_nee.connection_weight)
+                    f = f * connection_weight(self, paths, pi, ti, d, wdir, tr, normals=normals, in_dirs=in_dirs,
+                                              mid_g=mid_g)
             s_ord = (paths.s if scatter_order is None else scatter_order).take(pi)
             length = paths.lengths.take(pi) + d + (0.0 if extra_length is None else extra_length.take(pi))
             self.out["target"].append(ti)
@@ -416,7 +467,8 @@ class _Context:
         pos = sources.positions[i][:, None]
         nrm = sources.normals[i][:, None]
         one = _Paths(origins=pos, directions=nrm, weights=np.array([w0]), lengths=np.zeros(1),
-                     path=np.zeros(1, np.int64), k=np.zeros(1, np.int64), s=np.zeros(1, np.int64))
+                     path=np.zeros(1, np.int64), k=np.zeros(1, np.int64), s=np.zeros(1, np.int64),
+                     first=np.zeros(1), first_rho=np.full(1, 1.0 / np.pi))
         mark = len(self.out["power"])
         targets, tgt = self.targets, self.tgt
         for plane in self.mirrors:
@@ -510,7 +562,7 @@ class _Context:
         return self.builder.finish(weights)
 
 
-def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool) -> None:
+def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool, prim=None) -> None:
     """Single scattering at points of each segment, connected to the targets (algorithms 2-4).
 
     Per target (the strata are ellipsoids with the target as a focus): one point per
@@ -518,16 +570,45 @@ def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool) -> N
     by the balance heuristic: a point at s has weight
         w * T(o -> p) * sigma_s(p) / (n_T(s) + n_E(s)),
     and the connection adds phase, response, 1/d^2, visibility and T(p -> target).
-    Algorithm 4 multiplies the family both directions sample (the first segment,
-    k = 0) by the direction balance-heuristic weight (`_direction_mis`).
+    Points on every segment estimate the family source -> (k) -> p -> target (forward:
+    algorithm 3's, backward: algorithm 2's). Run from both devices (`settings.mis`), the
+    family both sample on the first segment (k = 0: Tx -> p -> Rx) gets the direction
+    balance heuristic (`_direction_mis`); for k >= 1 the other device samples the same
+    family by scattering on its own first segment (medium_nee.first_segment_branch), and
+    the two share each path by the partition of unity of medium_nee.side_weight
+    (bounded weights near the devices). Algorithm 4 also starts the double-scattering
+    family on the first segment (the same branch).
     """
-    scene, settings = ctx.scene, ctx.settings
-    medium = scene.medium
+    settings = ctx.settings
+    forward = ctx.item.direction == "forward"
+    fam = settings.segment_family
+    points_everywhere = fam == 4 or (fam == 3) == forward  # this side's own family: points on all segments
+    if first and settings.mis:
+        paths.first = first_vertex_factor(ctx, paths, prim, t_seg, np.zeros(len(t_seg)), np.zeros(len(t_seg), bool))
+        chain = fam == 4 or not points_everywhere  # the other side's family, sampled from this side
+        if chain or settings.in_then_out:
+            first_segment_branch(ctx, paths, t_seg, rng, chain=chain, double=settings.in_then_out)
+    if not (points_everywhere or (first and settings.mis)):
+        return
     alive = np.flatnonzero((paths.s == 0) & (paths.k <= settings.max_reflections) & np.isfinite(t_seg))
     if len(alive) == 0:
         return
-    seg_paths = paths.keep(alive)
-    t_seg = t_seg.take(alive)
+    partition = None
+    if settings.mis and not first:
+        def partition(j, pp, points):
+            return side_weight(pp.first, target_factor(ctx, j, points))
+    segment_points(ctx, paths.keep(alive), t_seg.take(alive), rng, order=1, direction_mis=settings.mis and first,
+                   weight_fn=partition)
+
+
+def segment_points(ctx: _Context, seg_paths: _Paths, t_seg, rng, order: int, direction_mis: bool = False,
+                   weight_fn=None) -> None:
+    """Points on the segments [0, t_seg) of `seg_paths` (time strata + equiangular, balance heuristic),
+    each connected to every target as a scattering event of order `order`.
+
+    `weight_fn(j, pp, points)`, if given, multiplies each point's weight (e.g. a partition of unity).
+    """
+    settings, medium = ctx.settings, ctx.scene.medium
     zeros = np.zeros(len(seg_paths))
     h, n_eq = settings.strata_length, settings.equiangular_points
     for j in range(len(ctx.tgt)):  # strata depend on the target: a loop over devices, not rays
@@ -544,9 +625,11 @@ def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool) -> N
                                 settings.max_strata)
                    + equiangular_density(pp.origins, pp.directions, y_p, np.zeros(len(s)), end, s, n_eq))
         w = pp.weights * medium.transmittance(pp.origins.T, pp.directions.T, s) * sigma_s / density
-        if settings.mis and first:
+        if direction_mis:
             w = w * _direction_mis(ctx, int(ctx.tgt[j]), pp, points, s, density)
-        ctx.connect_one(j, points, w, pp, in_dirs=pp.directions, scatter_order=np.ones(len(pp), np.int64),
+        if weight_fn is not None:
+            w = w * weight_fn(j, pp, points)
+        ctx.connect_one(j, points, w, pp, in_dirs=pp.directions, scatter_order=np.full(len(pp), order, np.int64),
                         extra_length=s)
 
 
@@ -594,9 +677,13 @@ def _equiangular_in_scatter(ctx: _Context, paths: _Paths, t_seg, rng) -> None:
         p_ff = medium.sigma_t_at(points.T) * transmittance
         n_e = equiangular_density(pp.origins, pp.directions, y.take(seg, axis=1), np.zeros(len(s)), end.take(seg), s,
                                   n_eq)
+        mid_g = None
+        if settings.both_sides:  # a point on the first segment is the path's first vertex
+            pp.first = np.where(pp.k + pp.s == 0, first_medium_factor(ctx, points, transmittance), pp.first)
+            mid_g = transmittance / (s * s)
         pp.s = pp.s + 1
         ctx.connect_one(j, points, pp.weights * transmittance * sigma_s / (p_ff + n_e), pp, in_dirs=pp.directions,
-                        extra_length=s)
+                        extra_length=s, mid_g=mid_g)
 
 
 def _direction_mis(ctx: _Context, j: int, pp: _Paths, points, s, density):

@@ -12,9 +12,9 @@ import numpy as np
 
 from owcsim.schemas.results import SimulationResultPublic
 
-from . import metrics, mie
+from . import metrics, mie, reliability
 from .auto import _max_albedo, _scatters
-from .estimates import channel_moments, link_moments, los_moments, reported_rel_stderr
+from .estimates import channel_moments, link_moments, link_reliability, los_moments, reported_rel_stderr
 from .lighting import Lighting
 from .result_parts import cir_block, column, document_rows, grid_maps, order_block
 
@@ -25,7 +25,8 @@ FAMILIES = {
     3: "s = 0 paths up to K reflections, plus single scattering seen directly by the receiver: "
        "Tx -> (k <= K reflections) -> p -> Rx",
     4: "s = 0 paths up to K reflections, plus Tx -> p -> (k <= K) -> Rx and Tx -> (k <= K) -> p -> Rx, "
-       "the shared family Tx -> p -> Rx counted once (balance heuristic)",
+       "the shared family Tx -> p -> Rx counted once, and the report's in-then-out double scattering "
+       "Tx -> p_in -> (k <= K) -> p_out -> Rx (s = 2)",
     5: "all paths with at most K reflections and S scattering events, in any order",
 }
 DIRECTION_NAMES = {0: "forward", 1: "backward", 2: "both", 3: "none"}
@@ -34,7 +35,8 @@ LEFT_OUT = {
     2: ["single scattering reached after reflections from the transmitter (Tx -> k >= 1 -> p -> Rx)",
         "scattering orders s >= 2"],
     3: ["single scattering lit after reflections (Tx -> p -> k >= 1 -> Rx)", "scattering orders s >= 2"],
-    4: ["single scattering with reflections on both sides of p", "scattering orders s >= 2"],
+    4: ["single scattering with reflections on both sides of p",
+        "double scattering with reflections before p_in or after p_out", "scattering orders s >= 3"],
     5: [],
 }
 
@@ -184,8 +186,10 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
     cir_totals = cir_block(accs, plan, cir_links, los_gain, los_delay, cols)
     order_links = np.flatnonzero(plan.order_slots(np.arange(scene.n_links)) >= 0)
     rho_max = float(scene.geometry.reflectance.max()) if len(scene.geometry.reflectance) else 0.0
-    albedo_max = _albedo_max(scene) if settings.max_scattering > 1 and scene.medium is not None else None
-    order_block(accs, plan, order_links, los_gain, cols, rho_max, albedo_max)
+    # the albedo tail concerns algorithm 5's truncated scattering orders (algorithm 4's S = 2 is a family, not a cut)
+    albedo_max = _albedo_max(scene) if settings.free_flight and settings.max_scattering > 1 \
+        and scene.medium is not None else None
+    order_block(accs, plan, order_links, los_gain, cols, rho_max, albedo_max, enclosed=len(scene.geometry.faces) > 0)
     for link in np.flatnonzero(link_masked & (plan.cir_slots(np.arange(scene.n_links)) >= 0)):
         cols["cir"][link] = None
     lighting = Lighting(spec, scene, geometry) if geometry is not None else None
@@ -216,7 +220,9 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
     receivers = _receivers(spec, scene)
     doc = {
         "owcsim_version": _owcsim_version(), "algorithm": spec.simulation.algorithm,
-        "warnings": _warnings(spec, scene) + _window_warnings(links) + _mask_warnings(scene),
+        "warnings": _warnings(spec, scene) + _window_warnings(links) + _mask_warnings(scene)
+        + reliability.warnings(link_reliability(accs, los_gain), [f"{t}-{r}" for t, r in zip(cols["transmitter"],
+                                                                                          cols["receiver"])]),
         "modeled": _modeled(spec, scene, modeled, unreachable, settings),
         "families": FAMILIES[spec.simulation.algorithm],
         "time_bins": {"t_min_s": bins.t_min, "time_bin_s": bins.dt, "n_bins": bins.n},

@@ -116,7 +116,7 @@ def cir_block(accs: dict[str, Accumulator], plan: TallyPlan, cir_links: np.ndarr
 
 
 def order_block(accs: dict[str, Accumulator], plan: TallyPlan, order_links: np.ndarray, los_gain, cols: dict,
-                rho_max: float, albedo_max: float | None) -> None:
+                rho_max: float, albedo_max: float | None, enclosed: bool = True) -> None:
     """Fill the order-split columns (H0 per reflection and scattering order) and the truncation estimate."""
     if not len(order_links):
         return
@@ -130,11 +130,15 @@ def order_block(accs: dict[str, Accumulator], plan: TallyPlan, order_links: np.n
     by_s = mean.sum(axis=1)
     by_s[:, 0] += los_gain[order_links]
     by_k_se, by_s_se = np.sqrt(var.sum(axis=2)), np.sqrt(var.sum(axis=1))
+    from .auto import tail_ratio
+
     tail = np.zeros(len(order_links))
-    if by_k.shape[1] > 1:
-        tail += _geometric_tail(by_k[:, -1], rho_max)
-    if albedo_max is not None:
-        tail += _geometric_tail(by_s[:, -1], albedo_max)
+    for r in range(len(order_links)):  # the decay past the last order: fitted to the measured orders, capped by
+        if by_k.shape[1] > 1:            # rho_max (albedo_max) when below 1 (auto.tail_ratio)
+            tail[r] += _geometric_tail(by_k[r, -1], tail_ratio(by_k[r], by_k_se[r], rho_max)[0])
+        if albedo_max is not None:  # albedo 1 and no surface: algebraic decay, no geometric bound (as auto.py)
+            ratio = tail_ratio(by_s[r], by_s_se[r], albedo_max)[0] if albedo_max < 1.0 or enclosed else np.inf
+            tail[r] += _geometric_tail(by_s[r, -1], ratio)
     for r, link in enumerate(order_links.tolist()):
         cols["dc_gain_by_reflection_order"][link] = by_k[r].tolist()
         cols["dc_gain_by_reflection_order_stderr"][link] = column(by_k_se[r])
@@ -143,9 +147,11 @@ def order_block(accs: dict[str, Accumulator], plan: TallyPlan, order_links: np.n
         cols["truncated_gain_estimate"][link] = _num(tail[r])
 
 
-def _geometric_tail(gain, ratio: float):
-    """Power of the orders past the last one, if each keeps at most `ratio` of the one before."""
-    return gain * ratio / (1.0 - ratio) if ratio < 1.0 else np.full_like(np.asarray(gain, float), np.inf)
+def _geometric_tail(gain: float, ratio: float) -> float:
+    """Power of the orders past the last one, if each keeps at most `ratio` of the one before (inf: no bound)."""
+    if gain == 0:
+        return 0.0
+    return gain * ratio / (1.0 - ratio) if ratio < 1.0 else float("inf")
 
 
 def _num(x) -> float | None:

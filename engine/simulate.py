@@ -25,9 +25,10 @@ from .constants import SPEED_OF_LIGHT
 from .kernel import KernelSettings, WorkItem
 from .auto import resolve, unreachable_receivers, validated
 from .los import line_of_sight, los_geometry
+from .medium_nee import two_sided_settings
 from .result import build_result
 from .scene import Scene, build_scene
-from .estimates import reported_rel_stderr
+from .estimates import may_stop, reported_rel_stderr
 from .tally import Accumulator, TallyPlan, TimeBins
 
 #: Heuristic of the auto direction: with this many times more receivers than
@@ -82,11 +83,25 @@ def group_weights(spec: SceneSpec, scene: Scene) -> np.ndarray:
     return w
 
 
-def kernel_settings(spec: SceneSpec, scene: Scene) -> KernelSettings:
-    """The kernel configuration of the job's algorithm (physics.md section 4)."""
+def two_sided(spec: SceneSpec, scene: Scene) -> bool:
+    """True when every link runs from both devices under the partition of unity of medium_nee.py: algorithms
+    2-4, and algorithm 5 in a medium unless a direction is requested (bounded weights near point devices)."""
+    a = spec.simulation.algorithm
+    return scene.medium is not None and (a in (2, 3, 4) or (a == 5 and spec.simulation.direction == "auto"))
+
+
+def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = None) -> KernelSettings:
+    """The kernel configuration of the job's algorithm (physics.md section 4); `both_devices` (default: the
+    planner's rule, `two_sided`) gives the settings of links run from both devices (medium_nee.py)."""
     sim = spec.simulation
     a = sim.algorithm
     step = sim.segment_time_step_s if sim.segment_time_step_s is not None else sim.time_bin_s
+    settings = _kernel_settings(spec, scene, sim, a, step)
+    both = two_sided(spec, scene) if both_devices is None else both_devices
+    return two_sided_settings(settings, a, scene.medium is not None) if both else settings
+
+
+def _kernel_settings(spec, scene, sim, a, step) -> KernelSettings:
     return KernelSettings(
         max_reflections=sim.max_reflections, russian_roulette=sim.russian_roulette,
         rr_start_depth=sim.rr_start_depth, tally=tally_plan(spec, scene),
@@ -216,6 +231,10 @@ def _choose_directions(scene, spec, settings, executor, job, los_gain, info) -> 
     """Per link: 0 = forward (from the transmitter), 1 = backward (from the receiver)."""
     sim = spec.simulation
     n_tx, n_rx = len(scene.transmitters), len(scene.receivers)
+    if two_sided(spec, scene):
+        info.pilot = {"rule": f"algorithm {sim.algorithm} in a medium: every link from both devices, each path "
+                              "weighted by its share (medium_nee.py: bounded weights near point devices)"}
+        return np.full(scene.n_links, BOTH)
     fixed = {2: ("backward", "algorithm 2 samples in-scattering from the receiver side"),
              3: ("forward", "algorithm 3 samples out-scattering from the transmitter side"),
              4: ("both", "algorithm 4 runs both sides and weights their shared family by MIS")}
@@ -303,7 +322,8 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
             return True
         if total_batches is None and end_of_round:
             served = sum(a.n_paths for a in accs.values())[directions != SKIP]
-            if (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP and worst <= sim.target_rel_error:
+            if (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP and worst <= sim.target_rel_error \
+                    and may_stop(accs, los_gain, scene, settings.tally, sim.target_rel_error, directions != SKIP):
                 info.stop_reason = "target_reached"
                 return True
             if elapsed >= sim.time_budget_s:

@@ -12,8 +12,9 @@ from pathlib import Path
 from .docs import InputError, load_scene
 
 
-def _progress_bar(stream=sys.stderr):
+def _progress_bar(stream=None):
     """A one-line progress bar on a terminal; silent when not a terminal."""
+    stream = stream if stream is not None else sys.stderr  # the stream of now, not of import time
     state = {"last": 0.0}
     tty = stream.isatty()
 

@@ -41,7 +41,7 @@ class SimulationSpec(SpecModel):
     max_reflections: int | None = Field(None, ge=0, le=1000,
                                         description="highest reflection order K (default: from the accuracy asked)")
     max_scattering: int | None = Field(None, ge=1, le=1000, description="highest scattering order S of algorithm 5 "
-                                       "(algorithms 2-4: 1, 1: 0; default: from the accuracy asked)")
+                                       "(algorithms 2-3: 1, 4: 2, 1: 0; default: from the accuracy asked)")
     segment_time_step_s: float | None = Field(
         None, ge=1e-15, description="time strata of the points along segments, algorithms 2-4 [s] (default: time_bin_s)")
     max_strata: int = Field(64, ge=1, le=4096, description="most time strata per segment and target, algorithms 2-4")
@@ -86,7 +86,7 @@ class SimulationSpec(SpecModel):
     @property
     def scattering_orders(self) -> int:
         """Highest scattering order S the algorithm tallies (resolved settings only)."""
-        return {1: 0, 2: 1, 3: 1, 4: 1}.get(self.algorithm, self.max_scattering)
+        return {1: 0, 2: 1, 3: 1, 4: 2}.get(self.algorithm, self.max_scattering)
 
     @property
     def tolerance(self) -> float:

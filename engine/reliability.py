@@ -1,0 +1,144 @@
+"""How far a reported standard error can itself be trusted, and when an accuracy run may stop.
+
+Monte Carlo error bars are estimates: under heavy tails (connections to point-like
+devices, physics.md section 4) a run that has not yet drawn its rare large
+contributions reports an error that is too small, and an accuracy run that stops on
+it stops on a lucky batch. These functions look at the estimate through independent
+batch groups (batch index mod G, engine/tally.py) and report, per link:
+
+- `max_group_share`: the largest single group's share of sum_g n_g |x_g| (x_g the
+  group's per-path estimate, n_g its paths); 1/G for identical groups, near 1 when
+  one group holds a spike the others lack;
+- `effective_groups`: (sum_g n_g x_g)^2 / sum_g (n_g x_g)^2 (Kish 1965), G for
+  identical groups, ~1 when one group dominates;
+- `group_rel_stderr`: the relative standard error of H0 from the spread of the group
+  estimates (batch means; independent of the per-path second moments);
+- `stderr_rel_error`: the relative error of that standard error,
+      0.5 sqrt(2 / (G - 1) + kappa / G),
+  kappa the excess kurtosis of the group estimates (clipped at 0; the variance of a
+  sample variance is sigma^4 (2 / (G - 1) + kappa / G), e.g. Cramer 1946 section 27.4,
+  and the delta method halves it for the standard error).
+
+`may_stop` is the accuracy rule: the per-path relative standard error at or below the
+target is not enough; the group spread must agree (within `GROUP_SLACK`), enough groups
+must be filled, no single group may dominate and the error bar's own relative error
+must be small. `warnings` turns the same figures into result warnings.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Fewest non-empty batch groups before an accuracy run may stop (the spread of fewer is itself too noisy).
+MIN_GROUPS = 8
+#: A group holding more than this multiple of its fair share 1/G of the estimate is a spike.
+SHARE_FACTOR = 2.5
+#: The group-spread error may exceed the target by this factor (its own noise is ~1/sqrt(2 (G - 1))).
+GROUP_SLACK = 1.5
+#: Largest relative error of the standard error for a trusted error bar.
+MAX_STDERR_REL_ERROR = 0.5
+
+
+@dataclass(frozen=True)
+class Reliability:
+    """Per-link reliability figures of the H0 error bar (arrays over links)."""
+
+    groups: np.ndarray  # (L,) non-empty groups
+    estimate: np.ndarray  # (L,) H0 from the groups (in-window power + LOS)
+    group_rel_stderr: np.ndarray  # (L,)
+    max_group_share: np.ndarray  # (L,)
+    effective_groups: np.ndarray  # (L,)
+    stderr_rel_error: np.ndarray  # (L,)
+
+    def trusted(self) -> np.ndarray:
+        """(L,) bool: enough groups, no dominant group, a stable error bar."""
+        fair = 1.0 / np.maximum(self.groups, 1)
+        return ((self.groups >= MIN_GROUPS) & (self.max_group_share <= SHARE_FACTOR * fair)
+                & (self.stderr_rel_error <= MAX_STDERR_REL_ERROR))
+
+
+def group_reliability(group_means, group_paths, los=None) -> Reliability:
+    """Reliability figures from per-group per-path estimates.
+
+    group_means: (G, L) each group's own per-path estimate of H0 (summed over
+    directions, without the exact LOS term); group_paths: (G, L) its paths (weights);
+    los: (L,) exact line-of-sight gain added to every group's estimate.
+    Groups with no path are ignored.
+    """
+    x = np.asarray(group_means, float)
+    n = np.asarray(group_paths, float)
+    if los is not None:
+        x = x + np.asarray(los, float)[None, :]
+    used = n > 0
+    G = used.sum(axis=0)
+    w = np.where(used, n, 0.0)
+    wsum = np.maximum(w.sum(axis=0), 1e-300)
+    mean = (w * x).sum(axis=0) / wsum
+    dev = np.where(used, x - mean, 0.0)
+    # batch means with unequal weights: var(mean) = sum w^2 (x - m)^2 / (sum w)^2 * G / (G - 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        var_mean = (w * w * dev * dev).sum(axis=0) / wsum**2 * G / np.maximum(G - 1, 1)
+        rel = np.where(mean > 0, np.sqrt(var_mean) / mean, np.where(var_mean > 0, np.inf, 0.0))
+        mass = np.where(used, w * np.abs(x), 0.0)
+        share = np.where(mass.sum(axis=0) > 0, mass.max(axis=0) / mass.sum(axis=0), 1.0 / np.maximum(G, 1))
+        contrib = w * x
+        eff = np.where((contrib**2).sum(axis=0) > 0, contrib.sum(axis=0) ** 2 / (contrib**2).sum(axis=0), G)
+        m2 = (np.where(used, dev**2, 0.0)).sum(axis=0) / np.maximum(G, 1)
+        m4 = (np.where(used, dev**4, 0.0)).sum(axis=0) / np.maximum(G, 1)
+        kurt = np.where(m2 > 0, m4 / m2**2 - 3.0, 0.0)
+        se_err = 0.5 * np.sqrt(2.0 / np.maximum(G - 1, 1) + np.maximum(kurt, 0.0) / np.maximum(G, 1))
+    se_err = np.where(G >= 2, se_err, np.inf)
+    rel = np.where(G >= 2, rel, np.inf)
+    return Reliability(groups=G, estimate=mean, group_rel_stderr=rel, max_group_share=share,
+                       effective_groups=eff, stderr_rel_error=se_err)
+
+
+def from_accumulators(accs, los=None) -> Reliability:
+    """`group_reliability` of merged tallies (engine/tally.py Accumulator: groups (G, L, bins), group_paths (G, L)).
+
+    A link served by several accumulators (directions) sums their per-path group
+    estimates; its group weight is the mean of their path counts (as result._group_estimates).
+    """
+    accs = [a for a in accs if a.n_paths.any()]
+    if not accs:
+        z = np.zeros((1, len(los) if los is not None else 0))
+        return group_reliability(z, z, los)
+    means, counts = 0.0, 0.0
+    for a in accs:
+        n = a.group_paths.astype(float)
+        s = a.groups.sum(axis=-1)
+        served = (a.n_paths > 0)[None, :]
+        means = means + np.where(n > 0, s / np.maximum(n, 1.0), 0.0)
+        # a group counts for a link only if every direction serving the link filled it
+        counts = counts + np.where(served, n, 0.0)
+    filled = np.all([(a.group_paths > 0) | (a.n_paths == 0)[None, :] for a in accs], axis=0)
+    return group_reliability(means, np.where(filled, counts / len(accs), 0.0), los)
+
+
+def may_stop(rel_stderr, rel: Reliability, target: float, served=None) -> bool:
+    """The accuracy rule: stop only when every served link meets the target on a trusted error bar.
+
+    rel_stderr: (L,) per-path relative standard error of H0 (tally.combined_rel_stderr);
+    served: (L,) bool, links that run (others are ignored).
+    """
+    rel_stderr = np.asarray(rel_stderr, float)
+    mask = np.ones(len(rel_stderr), bool) if served is None else np.asarray(served, bool)
+    if not mask.any():
+        return True
+    ok = ((rel_stderr <= target) & (rel.group_rel_stderr <= GROUP_SLACK * target) & rel.trusted())
+    return bool(ok[mask].all())
+
+
+def warnings(rel: Reliability, ids=None, limit: int = 3) -> list[str]:
+    """Result warnings for links whose H0 error bar is itself unreliable (at most one message)."""
+    bad = np.flatnonzero(~rel.trusted() & (rel.estimate > 0) & (rel.groups > 0))  # groups 0: link not traced
+    if not len(bad):
+        return []
+    names = [ids[i] if ids is not None else f"link {i}" for i in bad[:limit]]
+    j = bad[0]
+    return [f"{len(bad)} link(s) have an unreliable error bar on H0 (e.g. {', '.join(names)}): "
+            f"{int(rel.groups[j])} batch groups, the largest carries {rel.max_group_share[j]:.0%} of the estimate "
+            f"(fair share {1 / max(int(rel.groups[j]), 1):.0%}), effective groups {rel.effective_groups[j]:.1f}, "
+            f"the standard error itself is uncertain by ~{rel.stderr_rel_error[j]:.0%}; "
+            "run more paths (or another seed) before quoting it"]
