@@ -194,8 +194,9 @@ def _items(runs, sim, settings, phase: int, n_paths: int | None):
     sizes = {d: batch_size(sim, settings, max((len(t) for dd, _, t in runs if dd == d), default=1))
              for d in ("forward", "backward")}
     bs = min(sizes[d] for d in {r[0] for r in runs}) if runs else sim.batch_size
-    if n_paths is None and len(runs) > 1:  # accuracy mode: a round of many sources checks the target sooner
-        bs = min(bs, max(MIN_PATHS_FOR_STOP, sim.batch_size // len(runs)))
+    if n_paths is None:  # accuracy mode: the stopping rule wants reliability.MIN_GROUPS filled batch groups, and
+        # a round of many sources checks the target sooner: batches of a quarter (or 1 / sources) of batch_size
+        bs = min(bs, max(MIN_PATHS_FOR_STOP, sim.batch_size // max(len(runs), 4)))
     rounds = itertools.count() if n_paths is None else range(-(-n_paths // bs))
     for b in rounds:
         size = bs if n_paths is None else min(bs, n_paths - b * bs)
