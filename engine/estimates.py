@@ -78,23 +78,9 @@ def reported_rel_stderr(accs: dict[str, Accumulator], los_gain: np.ndarray, scen
     return np.concatenate(out)
 
 
-def _group_means(accs: dict[str, Accumulator]) -> tuple[np.ndarray, np.ndarray]:
-    """Per batch group and link: the group's per-path H0 estimate summed over directions, and its weight
-    (a group counts for a link only when every direction serving the link filled it)."""
-    served = [a for a in accs.values() if a.n_paths.any()]
-    if not served:
-        n_links = next(iter(accs.values())).n_links
-        return np.zeros((1, n_links)), np.zeros((1, n_links))
-    means = sum(np.where(a.group_paths > 0, a.group_h0 / np.maximum(a.group_paths, 1), 0.0) for a in served)
-    counts = sum(np.where((a.n_paths > 0)[None, :], a.group_paths.astype(float), 0.0) for a in served)
-    filled = np.all([(a.group_paths > 0) | (a.n_paths == 0)[None, :] for a in served], axis=0)
-    return means, np.where(filled, counts / len(served), 0.0)
-
-
 def link_reliability(accs: dict[str, Accumulator], los_gain: np.ndarray) -> reliability.Reliability:
     """Reliability of every link's H0 error bar (engine/reliability.py), from the batch groups."""
-    means, counts = _group_means(accs)
-    return reliability.group_reliability(means, counts, los_gain)
+    return reliability.from_accumulators(accs.values(), los_gain)
 
 
 def may_stop(accs: dict[str, Accumulator], los_gain: np.ndarray, scene, plan: TallyPlan, target: float,
@@ -105,7 +91,7 @@ def may_stop(accs: dict[str, Accumulator], los_gain: np.ndarray, scene, plan: Ta
     zeros = np.zeros(len(los_gain))
     mean, cov = link_moments(accs, los_moments(los_gain, zeros))
     rel_links = _rel(mean[:, 0], cov[:, 0, 0])
-    means, counts = _group_means(accs)
+    means, counts = reliability.group_means(accs.values())
     if not w.size:
         return reliability.may_stop(rel_links, reliability.group_reliability(means, counts, los_gain), target, served)
     n_tx, n_rx = w.shape[1], plan.n_rx

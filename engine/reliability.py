@@ -94,26 +94,25 @@ def group_reliability(group_means, group_paths, los=None) -> Reliability:
                        effective_groups=eff, stderr_rel_error=se_err)
 
 
-def from_accumulators(accs, los=None) -> Reliability:
-    """`group_reliability` of merged tallies (engine/tally.py Accumulator: groups (G, L, bins), group_paths (G, L)).
+def group_means(accs) -> tuple[np.ndarray, np.ndarray]:
+    """Per path group and link (engine/tally.py Accumulator: group_h0, h0_group_paths (G, L)): the group's
+    per-path H0 estimate summed over the directions serving the link, and its weight (a group counts for a
+    link only when every direction serving the link filled it)."""
+    accs = list(accs)
+    served = [a for a in accs if a.n_paths.any()]
+    if not served:
+        n_links = accs[0].n_links if accs else 0
+        return np.zeros((1, n_links)), np.zeros((1, n_links))
+    means = sum(np.where(a.h0_group_paths > 0, a.group_h0 / np.maximum(a.h0_group_paths, 1), 0.0) for a in served)
+    counts = sum(np.where((a.n_paths > 0)[None, :], a.h0_group_paths.astype(float), 0.0) for a in served)
+    filled = np.all([(a.h0_group_paths > 0) | (a.n_paths == 0)[None, :] for a in served], axis=0)
+    return means, np.where(filled, counts / len(served), 0.0)
 
-    A link served by several accumulators (directions) sums their per-path group
-    estimates; its group weight is the mean of their path counts (as result._group_estimates).
-    """
-    accs = [a for a in accs if a.n_paths.any()]
-    if not accs:
-        z = np.zeros((1, len(los) if los is not None else 0))
-        return group_reliability(z, z, los)
-    means, counts = 0.0, 0.0
-    for a in accs:
-        n = a.group_paths.astype(float)
-        s = a.groups.sum(axis=-1)
-        served = (a.n_paths > 0)[None, :]
-        means = means + np.where(n > 0, s / np.maximum(n, 1.0), 0.0)
-        # a group counts for a link only if every direction serving the link filled it
-        counts = counts + np.where(served, n, 0.0)
-    filled = np.all([(a.group_paths > 0) | (a.n_paths == 0)[None, :] for a in accs], axis=0)
-    return group_reliability(means, np.where(filled, counts / len(accs), 0.0), los)
+
+def from_accumulators(accs, los=None) -> Reliability:
+    """`group_reliability` of merged tallies (see `group_means`)."""
+    means, counts = group_means(accs)
+    return group_reliability(means, counts, los)
 
 
 def may_stop(rel_stderr, rel: Reliability, target: float, served=None) -> bool:

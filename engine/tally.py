@@ -105,6 +105,8 @@ class BatchTally:
     order_links: np.ndarray  # (To,)
     order_sum: np.ndarray  # (To, K+1, S+1)
     order_sumsq: np.ndarray  # (To, K+1, S+1)
+    h0_groups: np.ndarray | None = None  # (T, N_GROUPS) sum of per-path H0 estimates per path group
+    h0_group_paths: np.ndarray | None = None  # (N_GROUPS,) paths per path group
     channel_s1: np.ndarray | None = None  # (G, 3) backward batches: the groups' channels
     channel_s2: np.ndarray | None = None  # (G, 3, 3)
     rays_intersect: int = 0
@@ -205,6 +207,12 @@ class BatchBuilder:
         plan, n_t = self.plan, len(self.links)
         abc = self.abc.reshape(3, n_t, self.n_paths)
         s1 = abc.sum(axis=2).T
+        # Path groups (path index mod N_GROUPS): independent sub-samples of this batch for the reliability
+        # figures (engine/reliability.py), filled from the first batch whatever the batch count.
+        member = np.arange(self.n_paths) % N_GROUPS
+        onehot = (member[:, None] == np.arange(N_GROUPS)[None, :]).astype(float)
+        h0_groups = abc[0] @ onehot
+        h0_group_paths = np.bincount(member, minlength=N_GROUPS)
         s2 = np.einsum("qtn,rtn->tqr", abc, abc)
         ch_s1 = ch_s2 = None
         if channel_weights is not None and len(channel_weights):
@@ -229,7 +237,7 @@ class BatchBuilder:
             order_links=self.links.take(ord_sel),
             order_sum=self.order_sum.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
             order_sumsq=self.order_sumsq.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
-            channel_s1=ch_s1, channel_s2=ch_s2)
+            channel_s1=ch_s1, channel_s2=ch_s2, h0_groups=h0_groups, h0_group_paths=h0_group_paths)
 
 
 def _mean_cov(n: np.ndarray, s1: np.ndarray, s2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -273,7 +281,9 @@ class Accumulator:
         self.order_sumsq = np.zeros((n_ord, plan.n_orders, plan.n_scatter))
         self.groups = np.zeros((N_GROUPS, n_cir, bins.n))  # per batch group, summed over k, s
         self.group_paths = np.zeros((N_GROUPS, self.n_links), np.int64)
-        self.group_h0 = np.zeros((N_GROUPS, self.n_links))  # per batch group: sum of per-path H0 estimates
+        #: per path group (path index mod N_GROUPS, in every batch): sum of per-path H0 estimates, and paths
+        self.group_h0 = np.zeros((N_GROUPS, self.n_links))
+        self.h0_group_paths = np.zeros((N_GROUPS, self.n_links), np.int64)
         n_groups = plan.group_weights.shape[0]
         self.channel_n = np.zeros((n_groups, plan.n_rx), np.int64)
         self.channel_s1 = np.zeros((n_groups, plan.n_rx, 3))
@@ -289,7 +299,8 @@ class Accumulator:
         self.s2[ln] += batch.s2
         g = batch_index % N_GROUPS
         self.group_paths[g, ln] += batch.n_paths
-        self.group_h0[g, ln] += batch.s1[:, 0]
+        self.group_h0[:, ln] += batch.h0_groups.T
+        self.h0_group_paths[:, ln] += batch.h0_group_paths[:, None]
         if len(batch.cir_links):
             cs = self.plan.cir_slots(batch.cir_links)
             self.cir[cs] += batch.cir

@@ -152,7 +152,8 @@ def test_cancel_reaches_the_cluster(client, dask):
     res = simulate(spec(doc), executor=dask, progress=lambda f, info: seen.append(info["paths"]),
                    should_stop=lambda: len(seen) >= 6)
     assert res["run"]["stop_reason"] == "cancelled"
-    assert seen == [4096 * (i + 1) for i in range(6)]  # progress flows back, batch by batch
+    # accuracy runs use batches of a quarter of batch_size, at least 2048 paths (simulate._items)
+    assert seen == [2048 * (i + 1) for i in range(6)]  # progress flows back, batch by batch
     serial = simulate(spec(doc), progress=lambda f, info: serial_seen.append(info["paths"]),
                       should_stop=lambda: len(serial_seen) >= 6)
     assert _strip(res) == _strip(serial)
