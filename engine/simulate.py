@@ -35,6 +35,8 @@ from .tally import Accumulator, TallyPlan, TimeBins
 #: transmitters (or the reverse), one side amortizes its paths over so many links
 #: that no pilot is run.
 AMORTIZATION_RATIO = 8
+#: Least time between two evaluations of every link's error for progress reports [s].
+PROGRESS_INTERVAL_S = 0.25
 #: Accuracy mode checks the target only once each link has this many paths.
 MIN_PATHS_FOR_STOP = 2048
 #: Per-link direction codes: paths from the transmitter, from the receiver, or both (algorithm 4).
@@ -301,20 +303,28 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
     if n_paths is not None and runs:
         first = next(_items(runs, sim, settings, 0, n_paths))
         total_batches = len(runs) * -(-n_paths // first.n_paths)
-    state = {"done": 0}
+    state = {"done": 0, "worst": float("inf"), "rel_at": -PROGRESS_INTERVAL_S}
 
     def on_batch(item: WorkItem) -> bool:
         state["done"] += 1
         info.batches = state["done"]
         end_of_round = state["done"] % max(len(runs), 1) == 0
-        rel = reported_rel_stderr(accs, los_gain, scene, settings.tally)
-        worst = float(np.max(rel)) if len(rel) else 0.0
         elapsed = time.perf_counter() - t_start
+        last = total_batches is not None and state["done"] == total_batches
+        # The error of every link costs O(links): computed where the stopping rule needs it (end of a round in
+        # accuracy mode) and for progress at most every PROGRESS_INTERVAL_S, not after each of a map's batches.
+        if (total_batches is None and end_of_round) or (progress is not None and (
+                last or elapsed - state["rel_at"] >= PROGRESS_INTERVAL_S)):
+            rel = reported_rel_stderr(accs, los_gain, scene, settings.tally)
+            state["worst"] = float(np.max(rel)) if len(rel) else 0.0
+            state["rel_at"] = elapsed
+        worst = state["worst"]
         if total_batches is not None:
             frac = state["done"] / total_batches
         else:
             target = sim.target_rel_error
-            frac = min(1.0, max(elapsed / sim.time_budget_s, (target / worst) ** 2 if worst > 0 else 1.0))
+            frac = min(1.0, max(elapsed / sim.time_budget_s,
+                                0.0 if not np.isfinite(worst) else (target / worst) ** 2 if worst > 0 else 1.0))
         if progress is not None:
             progress(frac, {"paths": int(max(a.n_paths.max() for a in accs.values())), "batches": state["done"],
                             "dc_gain_rel_stderr": worst if np.isfinite(worst) else None, "elapsed_s": elapsed})
