@@ -129,7 +129,12 @@ def _cmd_serve(args) -> int:
             f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in err.errors())) from None
     except ValueError as exc:
         raise InputError(str(exc)) from None
-    serve(settings, host=args.host, port=args.port)
+    from owcsim.server.store import StoreError
+
+    try:
+        serve(settings, host=args.host, port=args.port)
+    except StoreError as exc:  # damaged, or held by another server: a clear message, no traceback
+        raise InputError(str(exc)) from None
     return 0
 
 

@@ -5,10 +5,10 @@ and shutdown (uvicorn's lifespan). The OpenAPI document is generated from schema
 """
 from __future__ import annotations
 
-import importlib
 import logging
 from contextlib import asynccontextmanager
 
+import anyio
 from fastapi import FastAPI
 from fastapi.openapi.utils import get_openapi
 from starlette.concurrency import run_in_threadpool
@@ -17,7 +17,9 @@ from owcsim.schemas import SceneSpec
 from owcsim.schemas.errors import PROBLEM_MEDIA_TYPE
 
 from . import problems
-from .dispatcher import Dispatcher
+from .dispatcher import Dispatcher, start_forkserver
+from .limits import RequestLimits
+from .preflight import Preflighter
 from .routes import jobs, results, service
 from .routes.service import owcsim_version
 from .settings import Settings
@@ -38,12 +40,18 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
     """The service. `run_jobs=False` keeps the dispatcher off (jobs stay queued): for API tests."""
     settings = settings or Settings()
     owners = settings.key_owners()
-    store = JobStore(settings.db)
+    store = JobStore(settings.db, server=True)
     dispatcher = Dispatcher(store, settings)
+    preflighter = Preflighter(concurrency=settings.preflight_concurrency, timeout_s=settings.preflight_timeout_s,
+                              memory_bytes=settings.preflight_memory_bytes, max_triangles=settings.max_triangles,
+                              workers=settings.workers_per_job)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
-        await run_in_threadpool(importlib.import_module, "owcsim.engine.simulate")  # the pre-flight's imports
+        # Heavy request work (validation, waiting for a pre-flight, drawing a plot) has its own threads,
+        # so that health and status requests never queue behind it in the default pool.
+        app.state.heavy = anyio.CapacityLimiter(settings.preflight_concurrency + 2)
+        await run_in_threadpool(start_forkserver)  # pre-flights and workers start from it, engine imported
         if run_jobs:
             await run_in_threadpool(dispatcher.start)
         log.info("owcsim service: job store %s, %d job(s) at once, API keys %s", settings.db,
@@ -53,11 +61,15 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
         finally:
             if run_jobs:
                 await run_in_threadpool(dispatcher.stop)
+            store.close()  # checkpoint: the store is one self-contained file again
 
     app = FastAPI(title="owcsim", version=owcsim_version(), description=DESCRIPTION, lifespan=lifespan,
                   docs_url=f"{API_PREFIX}/docs", redoc_url=None, openapi_url=f"{API_PREFIX}/openapi.json")
     app.state.settings, app.state.store, app.state.dispatcher, app.state.owners = settings, store, dispatcher, owners
+    app.state.preflighter = preflighter
+    app.state.heavy = None  # set at startup (an anyio limiter belongs to the running event loop)
     problems.install(app)
+    app.add_middleware(RequestLimits, body_timeout_s=settings.body_timeout_s)
     for module in (jobs, results, service):
         app.include_router(module.router, prefix=API_PREFIX)
     app.openapi = lambda: _openapi(app)

@@ -1,18 +1,40 @@
 """A result document in other forms: the CIR as CSV and as numpy arrays (.npz), h(t) as PNG.
 
-The CSV has the columns of the command line's cir.csv (a test holds the two equal).
+The one place that turns a result document into files. The service renders them once,
+in the job's worker, when the job ends (`render_all`: gzip-compressed files the store
+keeps and the routes send as they are); a plot of one link (`?link=N`) is drawn from
+that link's rows of the stored .npz (`link_png`), read without loading the others.
+The CSV has the columns of the command line's cir.csv (a test holds the two equal);
+ids that a spreadsheet would take for a formula are escaped.
 Plots use matplotlib's object API, never pyplot, so request threads can draw at once.
 """
 from __future__ import annotations
 
 import csv
+import gzip
 import io
+import zipfile
+from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 
+#: Rows of the CSV written per chunk.
+CSV_ROWS_PER_CHUNK = 4096
+#: Renders the worker stores: name -> (media type, gzip-compressed as stored?).
+RENDERS = {"result.json.gz": ("application/json", True), "result.csv.gz": ("text/csv; charset=utf-8", True),
+           "result.npz": ("application/octet-stream", False), "plot.png": ("image/png", False)}
 
-def cir_csv(result: dict) -> str:
-    """Long format: one row per (link, bin); power per bin per watt, h = power / dt [1/s], per order k."""
+
+def csv_cell(text: str) -> str:
+    """A text cell a spreadsheet will not evaluate: a leading =, +, -, @, tab or CR gets a quote (OWASP)."""
+    return "'" + text if text[:1] in ("=", "+", "-", "@", "\t", "\r") else text
+
+
+def cir_csv_chunks(result: dict) -> Iterator[str]:
+    """Long format: one row per (link, bin); power per bin per watt, h = power / dt [1/s], per order k.
+
+    Yields the text in chunks of CSV_ROWS_PER_CHUNK rows (bounded memory for any result)."""
     tb = result["time_bins"]
     dt, t0 = tb["time_bin_s"], tb["t_min_s"]
     k_max = max((len(lk["cir"]["by_reflection_order"]) for lk in result["links"]), default=1) - 1
@@ -20,14 +42,26 @@ def cir_csv(result: dict) -> str:
     w = csv.writer(out)
     w.writerow(["transmitter", "receiver", "t_start_s", "t_end_s", "h_per_s", "power", "power_stderr"]
                + [f"power_k{k}" for k in range(k_max + 1)])
+    rows = 0
     for lk in result["links"]:
         cir = lk["cir"]
+        tx, rx = csv_cell(lk["transmitter"]), csv_cell(lk["receiver"])
         for b, p in enumerate(cir["total"]):
             se = cir["total_stderr"][b]
-            w.writerow([lk["transmitter"], lk["receiver"], f"{t0 + b * dt:.6e}", f"{t0 + (b + 1) * dt:.6e}",
+            w.writerow([tx, rx, f"{t0 + b * dt:.6e}", f"{t0 + (b + 1) * dt:.6e}",
                         f"{p / dt:.9e}", f"{p:.9e}", "" if se is None else f"{se:.3e}"]
                        + [f"{row[b]:.9e}" for row in cir["by_reflection_order"]])
-    return out.getvalue()
+            rows += 1
+            if rows % CSV_ROWS_PER_CHUNK == 0:
+                yield out.getvalue()
+                out.seek(0)
+                out.truncate()
+    yield out.getvalue()
+
+
+def cir_csv(result: dict) -> str:
+    """The whole CSV as one string (small results; the service streams `cir_csv_chunks`)."""
+    return "".join(cir_csv_chunks(result))
 
 
 def _float(values) -> np.ndarray:
@@ -62,6 +96,69 @@ def cir_npz(result: dict) -> bytes:
     buf = io.BytesIO()
     np.savez_compressed(buf, **cir_arrays(result))
     return buf.getvalue()
+
+
+def render_all(result: dict, result_json: str, folder: Path) -> dict[str, Path]:
+    """Write every render of a result into `folder` (names of RENDERS); returns {name: path}.
+
+    Memory: the CSV and JSON are compressed as they are written; the arrays are those of `cir_arrays`."""
+    folder = Path(folder)
+    out = {name: folder / name for name in RENDERS}
+    with gzip.open(out["result.json.gz"], "wt", encoding="utf-8", compresslevel=6) as f:
+        f.write(result_json)
+    with gzip.open(out["result.csv.gz"], "wt", encoding="utf-8", newline="", compresslevel=6) as f:
+        for chunk in cir_csv_chunks(result):
+            f.write(chunk)
+    with open(out["result.npz"], "wb") as f:
+        np.savez_compressed(f, **cir_arrays(result))
+    out["plot.png"].write_bytes(cir_png(result))
+    return out
+
+
+def _npy_header(f) -> tuple[tuple[int, ...], bool, np.dtype]:
+    """(shape, fortran order, dtype) of an .npy stream, positioned at its data afterwards."""
+    major, _ = np.lib.format.read_magic(f)
+    read = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
+    return read(f)
+
+
+def _npy_rows(archive: zipfile.ZipFile, name: str, start: int, count: int = 1) -> np.ndarray:
+    """Rows start..start+count of array `name` (axis 0) of an .npz, read by streaming past the others."""
+    with archive.open(name + ".npy") as f:
+        shape, fortran, dtype = _npy_header(f)
+        if fortran:
+            raise ValueError(f"{name}: Fortran-ordered arrays are not read by rows")
+        row = dtype.itemsize * int(np.prod(shape[1:], dtype=np.int64))
+        skip = row * start
+        while skip > 0:
+            skip -= len(f.read(min(skip, 1 << 20)))
+        data = f.read(row * count)
+    return np.frombuffer(data, dtype).reshape((count, *shape[1:]))
+
+
+def npz_link_count(npz_file) -> int:
+    with zipfile.ZipFile(npz_file) as archive, archive.open("dc_gain.npy") as f:
+        return int(_npy_header(f)[0][0])
+
+
+def link_png(npz_file, link: int) -> bytes:
+    """The plot of one link (as `cir_png(result, link)`), from a stored .npz read row by row."""
+    with zipfile.ZipFile(npz_file) as archive:
+        edges = _npy_rows(archive, "t_edges_s", 0, 2).ravel()
+        with archive.open("t_edges_s.npy") as f:
+            n_bins = int(_npy_header(f)[0][0]) - 1
+        total = _npy_rows(archive, "cir", link)[0]
+        by_k = _npy_rows(archive, "by_reflection_order", link)[0]
+        gain = float(_npy_rows(archive, "dc_gain", link)[0])
+        err = float(_npy_rows(archive, "dc_gain_stderr", link)[0])
+        tx = str(_npy_rows(archive, "transmitter", link)[0])
+        rx = str(_npy_rows(archive, "receiver", link)[0])
+    dt = float(edges[1] - edges[0])
+    doc = {"time_bins": {"t_min_s": float(edges[0]), "time_bin_s": dt, "n_bins": n_bins},
+           "links": [{"transmitter": tx, "receiver": rx, "dc_gain": gain,
+                      "dc_gain_stderr": None if np.isnan(err) else err,
+                      "cir": {"total": total.tolist(), "by_reflection_order": by_k.tolist()}}]}
+    return cir_png(doc)
 
 
 def cir_png(result: dict, link: int | None = None) -> bytes:

@@ -103,7 +103,9 @@ def test_list_pages(tmp_path):
     store = JobStore(tmp_path / "j.sqlite")
     jobs = _submit(store, 5)
     page, nxt = store.list(None, None, 2, None)
-    assert [j.id for j in page] == [jobs[4].id, jobs[3].id] and nxt == jobs[3].seq
+    assert [j.id for j in page] == [jobs[4].id, jobs[3].id] and nxt == jobs[3].id  # opaque: the last id
     page, nxt = store.list(None, ["queued"], 10, nxt)
     assert [j.id for j in page] == [j.id for j in jobs[2::-1]] and nxt is None
     assert store.counts() == {"queued": 5}
+    with pytest.raises(KeyError):  # another owner's job is no cursor of this owner's listing
+        store.list("someone-else", None, 2, jobs[3].id)
