@@ -142,6 +142,7 @@ def _cmd_submit(args) -> int:
     try:
         from owcsim.clients.client import Client
         from owcsim.clients.errors import ApiError, ConnectionFailed, InvalidRequest, JobFailed
+        from owcsim.clients.scene import MeshFileError
     except ImportError as exc:
         raise InputError(f"`owcsim submit` needs the client extra ({exc.name} is missing): "
                          "pip install 'owcsim[client]'") from None
@@ -163,7 +164,7 @@ def _cmd_submit(args) -> int:
                 print(f"owcsim: interrupted; job {job.id} cancelled", file=sys.stderr)
                 return 130
             result = job.result(wait=False)
-    except FileNotFoundError as exc:
+    except (FileNotFoundError, MeshFileError) as exc:
         raise InputError(str(exc)) from None
     except InvalidRequest as exc:
         raise InputError(f"the server refused the scene: {exc}") from None

@@ -568,4 +568,19 @@ class _Transaction:
         return self.con
 
     def __exit__(self, exc_type, exc, tb) -> None:
-        self.con.execute("COMMIT" if exc_type is None else "ROLLBACK")
+        if exc_type is None:
+            try:
+                self.con.execute("COMMIT")
+            except sqlite3.Error:
+                self._rollback()  # e.g. SQLITE_FULL at commit: leave no transaction open
+                raise
+        else:
+            self._rollback()
+
+    def _rollback(self) -> None:
+        """Roll back if a transaction is still open (SQLite ends some by itself, e.g. on SQLITE_FULL)."""
+        if self.con.in_transaction:
+            try:
+                self.con.execute("ROLLBACK")
+            except sqlite3.Error:
+                pass

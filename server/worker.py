@@ -112,8 +112,6 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
     """Entry point of the worker process. `lifeline`: read end of a pipe only the server writes to;
     `memory_bytes`: the job's memory estimate [B] (0: no cap)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the server decides
-    if memory_bytes > 0:
-        cap_address_space(memory_bytes, limits.memory_headroom_bytes)
     from owcsim.engine.errors import EngineError
     from owcsim.engine.simulate import simulate
     from owcsim.schemas import SceneSpec
@@ -123,6 +121,8 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
     store = JobStore(db_path)
     watch = _Watch(store, job_id, token, limits, lifeline)
     executor = None
+    if memory_bytes > 0:  # after the imports (the forkserver has them already) and the store's connection
+        cap_address_space(memory_bytes, limits.memory_headroom_bytes)
     try:
         spec = SceneSpec.model_validate_json(store.scene_json(job_id))
         with warnings.catch_warnings(record=True) as caught:
