@@ -101,8 +101,18 @@ class Settings(BaseSettings):
 
 
 def _default_memory_budget() -> int:
-    """3/4 of the machine's physical memory [bytes] (8 GiB if unknown)."""
+    """3/4 of the memory this server may use [bytes]: the machine's, or its container's (cgroup) limit
+    if lower (8 GiB if neither is known)."""
     try:
-        return int(0.75 * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (ValueError, OSError, AttributeError):
-        return 8 << 30
+        total = 8 << 30
+    for limit_file in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(limit_file).read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit():
+            total = min(total, int(text))
+        break
+    return int(0.75 * total)

@@ -395,3 +395,19 @@ def test_11_client_refuses_mesh_files_that_are_not_small_regular_files(tmp_path,
             pass
     assert not t.is_alive() and out and isinstance(out[0], client_scene.MeshFileError), (kind, out)
     assert str(target) in str(out[0])
+
+
+def test_2_a_result_stored_without_renders_is_rendered_once_on_first_request(api):
+    from owcsim.engine.simulate import simulate
+    from owcsim.schemas import SceneSpec
+    from owcsim.server.formats import cir_csv
+
+    result = simulate(SceneSpec.model_validate(quick_doc()))
+    job = api.post("/v1/jobs", json=quick_doc()).json()
+    store = api.app.state.store
+    _, token = store.claim_next()
+    assert store.finish(job["id"], token, "succeeded", result_json=json.dumps(result))  # as an older server did
+    assert store.render_names(job["id"]) == set()
+    assert api.get(f"{job['url']}/result.csv").text == cir_csv(result)
+    assert len(store.render_names(job["id"])) == 4
+    assert api.get(f"{job['url']}/result").json() == json.loads(json.dumps(result))
