@@ -36,9 +36,9 @@ from .auto import PILOT_CAP
 from .constants import SPEED_OF_LIGHT
 from .tally import N_GROUPS
 
-#: Peak RSS of a worker process with the engine imported and a 12-triangle scene built [B]
-#: (measured: benchmarks/job_memory.py, a 1 000-path job in a fresh forkserver child: ~170 MB).
-BASE_BYTES = 200 * 2**20
+#: Peak RSS of a worker process with the engine imported that runs a 1-link, 50-bin job and renders
+#: its result [B] (benchmarks/job_memory.py: 114 MB measured; rounded up).
+BASE_BYTES = 128 * 2**20
 #: Bytes per scene triangle: vertices and faces (~72 + 24), reflectance, group, normals (2 x 24),
 #: float32 copy for Embree (36) and Embree's BVH (~100) [B].
 BYTES_PER_TRIANGLE = 320
