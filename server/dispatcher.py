@@ -73,8 +73,20 @@ def start_forkserver() -> None:
     pre-flights start from it."""
     from multiprocessing import forkserver
 
-    mp.get_context("forkserver").set_forkserver_preload(["owcsim.server.worker", "owcsim.engine.simulate"])
+    # "__main__" too: each child would import the main module again otherwise (0.1-0.3 s per job and
+    # per pre-flight); a script that builds the app keeps its top level under `if __name__ == "__main__":`.
+    mp.get_context("forkserver").set_forkserver_preload(
+        ["__main__", "owcsim.server.worker", "owcsim.server.preflight", "owcsim.engine.simulate",
+         "owcsim.engine.budget"])
     forkserver.ensure_running()
+    warm = mp.get_context("forkserver").Process(target=_noop, name="owcsim-warm-up")
+    warm.start()  # returns once the forkserver has imported the engine: the first job does not wait for it
+    warm.join()
+    warm.close()
+
+
+def _noop() -> None:
+    pass
 
 
 class Dispatcher:

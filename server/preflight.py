@@ -143,3 +143,4 @@ def preflight(spec: SceneSpec) -> int:
     if out[0] != "ok":
         raise _error(out)
     return out[1]
+
