@@ -1,9 +1,10 @@
 """A result document in other forms: the CIR as CSV and as numpy arrays (.npz), h(t) as PNG.
 
-The one place that turns a result document into files. The service renders them once,
-in the job's worker, when the job ends (`render_all`: gzip-compressed files the store
-keeps and the routes send as they are); a plot of one link (`?link=N`) is drawn from
-that link's rows of the stored .npz (`link_png`), read without loading the others.
+The one place that turns a result document into files. The service renders the JSON, CSV
+and NPZ once, in the job's worker, when the job ends (`render_all`: compressed files the
+store keeps and the routes send as they are). Plots are drawn from the stored .npz
+(`npz_png`: the rows of the links drawn, read without loading the others) when first
+asked for, so that no job pays matplotlib's time; the default plot is then stored too.
 The CSV has the columns of the command line's cir.csv (a test holds the two equal);
 ids that a spreadsheet would take for a formula are escaped.
 Plots use matplotlib's object API, never pyplot, so request threads can draw at once.
@@ -24,6 +25,10 @@ CSV_ROWS_PER_CHUNK = 4096
 #: Renders the worker stores: name -> (media type, gzip-compressed as stored?).
 RENDERS = {"result.json.gz": ("application/json", True), "result.csv.gz": ("text/csv; charset=utf-8", True),
            "result.npz": ("application/octet-stream", False), "plot.png": ("image/png", False)}
+#: Renders made when the job ends (the plot is drawn at its first request).
+AT_JOB_END = ("result.json.gz", "result.csv.gz", "result.npz")
+#: Links drawn in the default plot.
+PLOT_LINKS = 6
 
 
 def csv_cell(text: str) -> str:
@@ -99,11 +104,11 @@ def cir_npz(result: dict) -> bytes:
 
 
 def render_all(result: dict, result_json: str, folder: Path) -> dict[str, Path]:
-    """Write every render of a result into `folder` (names of RENDERS); returns {name: path}.
+    """Write the job-end renders of a result into `folder` (AT_JOB_END); returns {name: path}.
 
     Memory: the CSV and JSON are compressed as they are written; the arrays are those of `cir_arrays`."""
     folder = Path(folder)
-    out = {name: folder / name for name in RENDERS}
+    out = {name: folder / name for name in AT_JOB_END}
     with gzip.open(out["result.json.gz"], "wt", encoding="utf-8", compresslevel=6) as f:
         f.write(result_json)
     with gzip.open(out["result.csv.gz"], "wt", encoding="utf-8", newline="", compresslevel=6) as f:
@@ -111,7 +116,6 @@ def render_all(result: dict, result_json: str, folder: Path) -> dict[str, Path]:
             f.write(chunk)
     with open(out["result.npz"], "wb") as f:
         np.savez_compressed(f, **cir_arrays(result))
-    out["plot.png"].write_bytes(cir_png(result))
     return out
 
 
@@ -141,23 +145,25 @@ def npz_link_count(npz_file) -> int:
         return int(_npy_header(f)[0][0])
 
 
-def link_png(npz_file, link: int) -> bytes:
-    """The plot of one link (as `cir_png(result, link)`), from a stored .npz read row by row."""
+def npz_png(npz_file, link: int | None = None) -> bytes:
+    """The plot `cir_png(result, link)` draws, from a stored .npz read row by row (the first
+    PLOT_LINKS links, or the one asked)."""
     with zipfile.ZipFile(npz_file) as archive:
-        edges = _npy_rows(archive, "t_edges_s", 0, 2).ravel()
+        with archive.open("dc_gain.npy") as f:
+            n_links = int(_npy_header(f)[0][0])
         with archive.open("t_edges_s.npy") as f:
             n_bins = int(_npy_header(f)[0][0]) - 1
-        total = _npy_rows(archive, "cir", link)[0]
-        by_k = _npy_rows(archive, "by_reflection_order", link)[0]
-        gain = float(_npy_rows(archive, "dc_gain", link)[0])
-        err = float(_npy_rows(archive, "dc_gain_stderr", link)[0])
-        tx = str(_npy_rows(archive, "transmitter", link)[0])
-        rx = str(_npy_rows(archive, "receiver", link)[0])
-    dt = float(edges[1] - edges[0])
-    doc = {"time_bins": {"t_min_s": float(edges[0]), "time_bin_s": dt, "n_bins": n_bins},
-           "links": [{"transmitter": tx, "receiver": rx, "dc_gain": gain,
-                      "dc_gain_stderr": None if np.isnan(err) else err,
-                      "cir": {"total": total.tolist(), "by_reflection_order": by_k.tolist()}}]}
+        edges = _npy_rows(archive, "t_edges_s", 0, 2).ravel()
+        first, count = (0, min(n_links, PLOT_LINKS)) if link is None else (link, 1)
+        rows = {name: _npy_rows(archive, name, first, count) for name in
+                ("cir", "by_reflection_order", "dc_gain", "dc_gain_stderr", "transmitter", "receiver")}
+    links = [{"transmitter": str(rows["transmitter"][i]), "receiver": str(rows["receiver"][i]),
+              "dc_gain": float(rows["dc_gain"][i]),
+              "dc_gain_stderr": None if np.isnan(rows["dc_gain_stderr"][i]) else float(rows["dc_gain_stderr"][i]),
+              "cir": {"total": rows["cir"][i].tolist(), "by_reflection_order": rows["by_reflection_order"][i].tolist()}}
+             for i in range(count)]
+    doc = {"time_bins": {"t_min_s": float(edges[0]), "time_bin_s": float(edges[1] - edges[0]), "n_bins": n_bins},
+           "links": links}
     return cir_png(doc)
 
 

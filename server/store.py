@@ -367,8 +367,8 @@ class JobStore:
                 con.close()
         return chunks()
 
-    def put_renders(self, job_id: str, renders: dict[str, Path]) -> None:
-        """Keep renders made after the job ended (a result stored by an older server)."""
+    def put_renders(self, job_id: str, renders: dict[str, Path | bytes]) -> None:
+        """Keep renders made after the job ended (a plot; a result stored by an older server)."""
         with self._tx() as con:
             self._write_renders(con, job_id, renders)
 
@@ -386,9 +386,13 @@ class JobStore:
             con.close()
 
     @staticmethod
-    def _write_renders(con, job_id: str, renders: dict[str, Path]) -> None:
-        """Keep a job's renders: {name: file of gzip bytes}, copied in chunks."""
+    def _write_renders(con, job_id: str, renders: dict[str, Path | bytes]) -> None:
+        """Keep a job's renders: {name: file (copied in chunks) or bytes}."""
         for name, path in renders.items():
+            if isinstance(path, bytes):
+                con.execute("INSERT OR REPLACE INTO job_renders (job_id, name, data) VALUES (?, ?, ?)",
+                            (job_id, name, path))
+                continue
             size = path.stat().st_size
             con.execute("INSERT OR REPLACE INTO job_renders (job_id, name, data) VALUES (?, ?, zeroblob(?))",
                         (job_id, name, size))

@@ -10,8 +10,9 @@ Memory: before anything else the worker caps its own address space (RLIMIT_AS) a
 has mapped already + the job's memory estimate (engine.budget, made at submission) + a
 headroom for the thread stacks and allocator arenas Embree/TBB and numpy reserve but do not
 use; an allocation past it raises MemoryError, reported as "ran out of its memory budget".
-At the end it renders the result once (server.formats.render_all: JSON, CSV, NPZ, PNG,
-compressed) and stores the renders with the outcome: serving a result never re-renders it.
+At the end it renders the result once (server.formats.render_all: JSON, CSV, NPZ,
+compressed) and stores the renders with the outcome: serving a result never re-renders it
+(plots are drawn from the stored NPZ at their first request, so no job pays matplotlib's time).
 """
 from __future__ import annotations
 

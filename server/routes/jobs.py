@@ -28,7 +28,7 @@ IdempotencyKey = Annotated[str | None, Header(
 
 
 @router.post("", status_code=202, operation_id="submit_job", response_model=JobPublic, summary="Submit a scene document as a job",
-             responses={**problems(400, 401, 413, 415, 422, 429),
+             responses={**problems(400, 401, 408, 413, 415, 422, 429, 503, 507),
                         202: {"description": "queued (or, with a known Idempotency-Key, the first job)",
                               "headers": {"Location": {"description": "the job's URL",
                                                        "schema": {"type": "string"}}}, "links": JOB_LINKS}},
@@ -99,7 +99,7 @@ def get_job(job: JobRow = Depends(owned_job)) -> JobPublic:
 
 
 @router.post("/{job_id}/cancel", operation_id="cancel_job", response_model=JobPublic, summary="Cancel a job",
-             responses={**problems(401, 404, 409),
+             responses={**problems(401, 404, 409, 503, 507),
                         202: {"description": "running: asked to stop (its status becomes `cancelled` within "
                                              "seconds)", "model": JobPublic}})
 def cancel_job(response: Response, job: JobRow = Depends(owned_job), owner: str | None = Depends(current_owner),

@@ -3,11 +3,12 @@
 Served once the job has succeeded, and for a cancelled job that stopped with a partial
 result (its `run.stop_reason` is `cancelled`). Otherwise 409 with the job's status.
 
-Nothing is rendered here: the job's worker rendered every form once when the job ended
-(server.formats.render_all) and the store keeps them compressed; an answer streams the
-stored bytes in chunks (as gzip with `Content-Encoding: gzip` to a client that accepts
-it, decompressed on the way otherwise), so serving any result takes bounded memory. A plot
-of one link (`?link=N`) is drawn from that link's rows of the stored .npz.
+Nothing is rendered per request: the job's worker rendered the JSON, CSV and NPZ once when
+the job ended (server.formats.render_all) and the store keeps them compressed; an answer
+streams the stored bytes in chunks (as gzip with `Content-Encoding: gzip` to a client that
+accepts it, decompressed on the way otherwise), so serving any result takes bounded memory.
+A plot is drawn from the rows of its links in the stored .npz (at most 6), in the threads
+for heavy work; the default plot is stored once drawn.
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ from owcsim.schemas.errors import ProblemField
 from owcsim.schemas.results import SimulationResultPublic
 
 from ..deps import get_store, owned_job
-from ..formats import RENDERS, link_png, npz_link_count, render_all
+from ..formats import RENDERS, npz_link_count, npz_png, render_all
 from ..problems import ProblemError
 from ..store import JobRow, JobStore
 from .docs import problems
@@ -115,14 +116,17 @@ async def get_result_npz(request: Request, job: JobRow = Depends(owned_job),
     return await _send(request, job, store, "result.npz", _download(f"{job.id}-cir.npz"))
 
 
-def _link_plot(store: JobStore, job_id: str, link: int) -> bytes:
+def _plot(store: JobStore, job_id: str, link: int | None) -> bytes:
     with store.open_render(job_id, "result.npz") as npz:
         n = npz_link_count(npz)
-        if link >= n:
+        if link is not None and link >= n:
             raise ProblemError(422, "invalid-parameter", f"link {link} does not exist: the result has {n} links",
                                errors=[ProblemField(loc="query.link", msg="no such link", type="value_error")])
         npz.seek(0)
-        return link_png(npz, link)
+        png = npz_png(npz, link)
+    if link is None:
+        store.put_renders(job_id, {"plot.png": png})
+    return png
 
 
 @router.get("/plot.png", operation_id="get_plot", summary="h(t) per reflection order and total (up to 6 links, or the one asked)",
@@ -132,8 +136,8 @@ def _link_plot(store: JobStore, job_id: str, link: int) -> bytes:
 async def get_plot(request: Request,
                    link: Annotated[int | None, Query(ge=0, description="index in the result's `links`")] = None,
                    job: JobRow = Depends(owned_job), store: JobStore = Depends(get_store)) -> Response:
-    if link is None:
-        return await _send(request, job, store, "plot.png")
     await _ensure_renders(request, job, store)
-    png = await anyio.to_thread.run_sync(_link_plot, store, job.id, link, limiter=request.app.state.heavy)
+    if link is None and "plot.png" in await anyio.to_thread.run_sync(store.render_names, job.id):
+        return await _send(request, job, store, "plot.png")
+    png = await anyio.to_thread.run_sync(_plot, store, job.id, link, limiter=request.app.state.heavy)
     return Response(png, media_type="image/png")
