@@ -8,7 +8,10 @@ A monitor calls /v1/health every 0.1 s; the server process's RSS is sampled ever
 Prints throughput, latency percentiles of submit (incl. its 429 retries), result GETs,
 status GETs and health, the 429s met, and the server's peak RSS.
 
-    .venv/bin/python benchmarks/service_load.py [--clients 50] [--per-client 6]
+    .venv/bin/python benchmarks/service_load.py [--clients 50] [--per-client 6] [--baseline /work/main]
+
+`--baseline DIR`: run the same load against the server of another checkout too (its own
+.venv), e.g. the code before issue 11, and print both.
 """
 from __future__ import annotations
 
@@ -49,7 +52,16 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--clients", type=int, default=50)
     ap.add_argument("--per-client", type=int, default=6)
+    ap.add_argument("--baseline", type=Path, help="another checkout to measure the same way")
     args = ap.parse_args()
+    failed = run(args, ROOT, sys.executable, "this checkout")
+    if args.baseline:
+        failed |= run(args, args.baseline, str(args.baseline / ".venv" / "bin" / "python"), f"baseline {args.baseline}")
+    return failed
+
+
+def run(args, root: Path, python: str, label: str) -> int:
+    print(f"--- {label}", flush=True)
     tmp = Path(tempfile.mkdtemp(prefix="owcsim-load-"))
     lat: dict[str, list[float]] = {"submit": [], "result": [], "status": [], "health": []}
     statuses: dict[int, int] = {}
@@ -61,7 +73,7 @@ def main() -> int:
         with lock:
             statuses[response.status_code] = statuses.get(response.status_code, 0) + 1
 
-    with ServerProcess(tmp / "jobs.sqlite", max_concurrent_jobs=2, max_queued_jobs=50, retry_after_s=1,
+    with ServerProcess(tmp / "jobs.sqlite", root=root, python=python, max_concurrent_jobs=2, max_queued_jobs=50, retry_after_s=1,
                        max_queued_per_key=50, max_connections=500) as srv:
         big = quick_doc(paths=1024, direction="forward", t_max_s=2e-7)
         big["receivers"] = []
@@ -153,6 +165,7 @@ def main() -> int:
     print(f"server peak RSS: {peak[0]:.0f} MB (the server process; workers and pre-flights are separate)")
     if errors:
         print(f"errors: {len(errors)}: {errors[:5]}")
+    sys.stdout.flush()
     return 1 if errors else 0
 
 

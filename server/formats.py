@@ -7,13 +7,16 @@ store keeps and the routes send as they are). Plots are drawn from the stored .n
 asked for, so that no job pays matplotlib's time; the default plot is then stored too.
 The CSV has the columns of the command line's cir.csv (a test holds the two equal);
 ids that a spreadsheet would take for a formula are escaped.
-Plots use matplotlib's object API, never pyplot, so request threads can draw at once.
+Plots use matplotlib's object API, never pyplot, and are drawn one at a time (`_DRAWING`):
+matplotlib's mathtext parser (log-axis tick labels) is not thread-safe, and concurrent
+drawing failed under load.
 """
 from __future__ import annotations
 
 import csv
 import gzip
 import io
+import threading
 import zipfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -29,6 +32,8 @@ RENDERS = {"result.json.gz": ("application/json", True), "result.csv.gz": ("text
 AT_JOB_END = ("result.json.gz", "result.csv.gz", "result.npz")
 #: Links drawn in the default plot.
 PLOT_LINKS = 6
+#: One plot drawn at a time in a process (see the module's docstring).
+_DRAWING = threading.Lock()
 
 
 def csv_cell(text: str) -> str:
@@ -169,6 +174,11 @@ def npz_png(npz_file, link: int | None = None) -> bytes:
 
 def cir_png(result: dict, link: int | None = None) -> bytes:
     """h(t) [1/s] per reflection order and total, one panel per link (up to 6, or the one asked)."""
+    with _DRAWING:
+        return _cir_png(result, link)
+
+
+def _cir_png(result: dict, link: int | None) -> bytes:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 

@@ -413,3 +413,16 @@ def test_2_a_result_stored_without_renders_is_rendered_once_on_first_request(api
     assert api.get(f"{job['url']}/result.csv").text == cir_csv(result)
     assert len(store.render_names(job["id"])) == 3
     assert api.get(f"{job['url']}/result").json() == json.loads(json.dumps(result))
+
+
+def test_plots_drawn_from_several_threads_at_once_are_all_correct():
+    from concurrent.futures import ThreadPoolExecutor
+
+    from owcsim.engine.simulate import simulate
+    from owcsim.schemas import SceneSpec
+    from owcsim.server.formats import cir_png
+
+    result = simulate(SceneSpec.model_validate(quick_doc()))
+    first = cir_png(result)
+    with ThreadPoolExecutor(8) as pool:  # matplotlib's mathtext parser failed under concurrent drawing
+        assert all(png == first for png in pool.map(lambda _: cir_png(result), range(24)))
