@@ -426,3 +426,15 @@ def test_plots_drawn_from_several_threads_at_once_are_all_correct():
     first = cir_png(result)
     with ThreadPoolExecutor(8) as pool:  # matplotlib's mathtext parser failed under concurrent drawing
         assert all(png == first for png in pool.map(lambda _: cir_png(result), range(24)))
+
+
+def test_1_only_small_scenes_are_preflighted_in_the_server_process():
+    from owcsim.schemas import SceneSpec
+    from owcsim.server.preflight import is_small
+
+    assert is_small(SceneSpec.model_validate(quick_doc()))
+    assert not is_small(SceneSpec.model_validate(_grid_doc(40)))  # 1 600 receivers
+    glb, _ = _instancing_glb(2, 1)
+    doc = quick_doc()
+    doc["meshes"] = [{"data_base64": base64.b64encode(glb).decode(), "format": "glb", "reflectance": 0.5}]
+    assert not is_small(SceneSpec.model_validate(doc))
