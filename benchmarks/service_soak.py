@@ -60,7 +60,10 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
     rng = random.Random(args.seed)
-    docs = [quick_doc(paths=rng.choice([20_000, 60_000, 200_000]), seed=i) for i in range(args.jobs)]
+    # jobs of about 0.5-3 s each; a share of them is submitted in each round, so every kill meets load
+    docs = [quick_doc(paths=rng.choice([2_000_000, 5_000_000, 10_000_000]), batch_size=4096, seed=i)
+            for i in range(args.jobs)]
+    per_round = -(-args.jobs // args.rounds)
     keys = [f"soak-{args.seed}-{i}" for i in range(args.jobs)]
     tmp = Path(tempfile.mkdtemp(prefix="owcsim-soak-"))
     db = tmp / "jobs.sqlite"
@@ -88,12 +91,12 @@ def main() -> int:
         srv = ServerProcess(db, port=port, log=tmp / "server.log", **settings).start()
         port = srv.port
         stop = threading.Event()
-        todo = [i for i in range(args.jobs) if not ids[i]]
+        todo = [i for i in range(min(args.jobs, (r + 1) * per_round)) if not ids[i]]
         threads = [threading.Thread(target=client, args=(todo[k::args.clients], srv.url, stop), daemon=True)
                    for k in range(args.clients)]
         for t in threads:
             t.start()
-        t_kill = time.monotonic() + rng.uniform(1.0, 6.0)
+        t_kill = time.monotonic() + rng.uniform(1.0, 5.0)
         while time.monotonic() < t_kill:
             peak_rss = max(peak_rss, _rss_mb(srv.proc.pid))
             time.sleep(0.05)
