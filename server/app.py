@@ -51,6 +51,9 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
         # Heavy request work (validation, waiting for a pre-flight, drawing a plot) has its own threads,
         # so that health and status requests never queue behind it in the default pool.
         app.state.heavy = anyio.CapacityLimiter(settings.preflight_concurrency + 2)
+        # Submissions read and check their bodies a few at a time: at most this many x max_body_bytes in memory
+        # (the others wait, their bodies in the kernel's socket buffers, within body_timeout_s).
+        app.state.submissions = anyio.Semaphore(2 * settings.preflight_concurrency + 2)
         await run_in_threadpool(start_forkserver)  # pre-flights and workers start from it, engine imported
         if run_jobs:
             await run_in_threadpool(dispatcher.start)
@@ -67,7 +70,7 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
                   docs_url=f"{API_PREFIX}/docs", redoc_url=None, openapi_url=f"{API_PREFIX}/openapi.json")
     app.state.settings, app.state.store, app.state.dispatcher, app.state.owners = settings, store, dispatcher, owners
     app.state.preflighter = preflighter
-    app.state.heavy = None  # set at startup (an anyio limiter belongs to the running event loop)
+    app.state.heavy = app.state.submissions = None  # set at startup (they belong to the running event loop)
     problems.install(app)
     app.add_middleware(RequestLimits, body_timeout_s=settings.body_timeout_s)
     for module in (jobs, results, service):

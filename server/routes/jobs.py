@@ -39,9 +39,10 @@ async def submit_job(request: Request, response: Response, idempotency_key: Idem
                      dispatcher: Dispatcher = Depends(get_dispatcher)) -> JobPublic:
     """Validate the scene (the document `owcsim run` takes), check the server's limits, pre-flight it in
     the engine, and queue it. Answers 202 with the job and its URL in `Location`."""
-    body = await read_body(request, settings.max_body_bytes)
-    job, created = await anyio.to_thread.run_sync(_submit, body, owner, idempotency_key, store, settings,
-                                                  request.app.state.preflighter, limiter=request.app.state.heavy)
+    async with request.app.state.submissions:  # bodies held in memory: a few at a time, not one per connection
+        body = await read_body(request, settings.max_body_bytes)
+        job, created = await anyio.to_thread.run_sync(_submit, body, owner, idempotency_key, store, settings,
+                                                      request.app.state.preflighter, limiter=request.app.state.heavy)
     if created:
         dispatcher.wake()
     else:
