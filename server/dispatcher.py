@@ -1,4 +1,4 @@
-"""The dispatcher: one thread that starts queued jobs in order, each in its own worker process.
+"""The dispatcher: one thread that starts queued jobs, fairly between owners, each in its own worker process.
 
 At most `max_concurrent_jobs` workers run at once. Worker processes come from a
 forkserver whose state is clean (it never builds an Embree scene), so nothing with
@@ -7,7 +7,8 @@ threads is ever forked. The dispatcher also watches its workers:
 - a worker that exits without recording an outcome (killed, crashed) is requeued once
   (`crash_retries`) and then fails the job with the exit code or signal as the reason;
 - a worker asked to stop (cancel) that is still alive `cancel_grace_s` later is killed,
-  and so is one past the wall-time limit plus that grace;
+  and so is one past the wall-time limit plus that grace, and one that has written no
+  progress for `stall_timeout_s` (hung: it would keep its slot until the wall-time limit);
 - on start, jobs left running by a previous server process are requeued; on stop,
   running jobs are requeued and their workers stopped (they start afresh next time:
   the same seed gives the same result); a job started `max_attempts` times is failed;
@@ -46,6 +47,8 @@ class _Run:
     memory_bytes: int  # the job's memory estimate [B]  # write end of a pipe the worker watches: closed (or the server gone) = stop
     stop_seen: float | None = None  # when the dispatcher first saw that this run should end
     kill_reason: str | None = None
+    progress: float = -1.0  # the last progress (elapsed_s) seen, and when it changed
+    progress_seen: float = 0.0
 
     def end(self) -> None:
         self.lifeline.close()
@@ -239,11 +242,17 @@ class Dispatcher:
                 run.end()
                 del self._runs[job_id]
                 continue
-            token, cancel = flags.get(job_id, (None, False))
+            token, cancel, progress = flags.get(job_id, (None, False, 0.0))
+            if progress != run.progress or not run.progress_seen:
+                run.progress, run.progress_seen = progress, now
             if run.stop_seen is None and (token != run.token or cancel):
                 run.stop_seen = now  # cancelled, or finished and still exiting
             if run.stop_seen is not None and now - run.stop_seen > grace:
                 run.kill_reason = run.kill_reason or "the worker did not stop in time and was killed"
+                run.process.kill()
+            elif self.settings.stall_timeout_s and now - run.progress_seen > self.settings.stall_timeout_s:
+                run.kill_reason = (f"the worker wrote no progress for {self.settings.stall_timeout_s:g} s and was "
+                                   "killed (setting stall_timeout_s)")
                 run.process.kill()
             elif now - run.started > self.settings.max_wall_time_s + grace:
                 run.kill_reason = (f"killed at the server's wall-time limit of {self.settings.max_wall_time_s:g} s "

@@ -29,6 +29,8 @@ class Settings(BaseSettings):
     api_keys_file: Path | None = Field(None, description="file with one bearer token per line (# comments)")
     crash_retries: int = Field(1, ge=0, le=10, description="times a job whose worker process died is requeued")
     cancel_grace_s: float = Field(5.0, gt=0, description="a stopped job's worker still alive after this is killed")
+    stall_timeout_s: float = Field(900.0, ge=0, description="a running job's worker that writes no progress for "
+                                   "this long is killed and the job failed [s] (0: never)")
     progress_interval_s: float = Field(0.5, gt=0, description="least time between progress writes of a job [s]")
     max_queued_per_key: int = Field(200, ge=1, description="queued jobs of one API key (one owner without keys); "
                                     "beyond this that key gets 429, the others are not affected")

@@ -443,10 +443,11 @@ class JobStore:
     def set_worker_pid(self, job_id: str, token: int, pid: int | None) -> None:
         self._con().execute("UPDATE jobs SET worker_pid = ? WHERE id = ? AND run_token = ?", (pid, job_id, token))
 
-    def running_flags(self) -> dict[str, tuple[int, bool]]:
-        """{job id: (run token, cancel requested)} of running jobs."""
-        rows = self._con().execute("SELECT id, run_token, cancel_requested FROM jobs WHERE status = 'running'")
-        return {r[0]: (r[1], bool(r[2])) for r in rows.fetchall()}
+    def running_flags(self) -> dict[str, tuple[int, bool, float]]:
+        """{job id: (run token, cancel requested, elapsed_s of its last progress write)} of running jobs."""
+        rows = self._con().execute("SELECT id, run_token, cancel_requested, elapsed_s FROM jobs "
+                                   "WHERE status = 'running'")
+        return {r[0]: (r[1], bool(r[2]), r[3]) for r in rows.fetchall()}
 
     def take_back_running(self, note: str, max_attempts: int | None = None) -> list[str]:
         """Requeue every running job (server start or stop); a job whose cancel was asked is cancelled,

@@ -442,3 +442,21 @@ def test_1_only_small_scenes_are_preflighted_in_the_server_process():
     doc = quick_doc()
     doc["meshes"] = [{"data_base64": base64.b64encode(glb).decode(), "format": "glb", "reflectance": 0.5}]
     assert not is_small(SceneSpec.model_validate(doc))
+
+
+# -- Low: a hung worker does not keep its slot -------------------------------------------------
+
+def test_a_worker_that_stops_making_progress_is_killed_and_the_job_failed(tmp_path):
+    import signal
+
+    from .helpers import long_doc
+
+    with app_client(tmp_path, run_jobs=True, stall_timeout_s=2.0, progress_interval_s=0.1) as c:
+        job = c.post("/v1/jobs", json=long_doc()).json()
+        deadline = time.monotonic() + 20
+        while not (row := c.app.state.store.get(job["id"])).paths:
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        os.kill(row.worker_pid, signal.SIGSTOP)  # hung: alive, no progress
+        failed = wait_for(c, job["id"], "failed", timeout=15)
+        assert "wrote no progress for 2 s" in failed["error"], failed["error"]
