@@ -1,6 +1,7 @@
 """Jobs: submit (POST /v1/jobs), list, get one, cancel."""
 from __future__ import annotations
 
+import contextlib
 from typing import Annotated
 
 import anyio
@@ -39,7 +40,8 @@ async def submit_job(request: Request, response: Response, idempotency_key: Idem
                      dispatcher: Dispatcher = Depends(get_dispatcher)) -> JobPublic:
     """Validate the scene (the document `owcsim run` takes), check the server's limits, pre-flight it in
     the engine, and queue it. Answers 202 with the job and its URL in `Location`."""
-    async with request.app.state.submissions:  # bodies held in memory: a few at a time, not one per connection
+    # bodies held in memory: a few at a time, not one per connection (no limit if the app runs without its lifespan)
+    async with request.app.state.submissions or contextlib.nullcontext():
         body = await read_body(request, settings.max_body_bytes)
         job, created = await anyio.to_thread.run_sync(_submit, body, owner, idempotency_key, store, settings,
                                                       request.app.state.preflighter, limiter=request.app.state.heavy)
