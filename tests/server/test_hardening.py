@@ -207,15 +207,18 @@ def test_4_jobs_are_admitted_against_the_server_memory_budget(tmp_path):
 
 # -- 5. the served result equals `owcsim run`, bit for bit ---------------------------------------
 
-def test_5_served_result_equals_owcsim_run_with_non_unit_normals(tmp_path, capsys):
-    from owcsim.cli import main
+def test_5_served_result_equals_owcsim_run_with_non_unit_normals(tmp_path):
+    import subprocess
+    import sys
 
     doc = quick_doc(paths=3000)
     doc["transmitters"][0]["normal"] = [0.1, 0.3, -0.7]  # non-unit, and 1/|n| is not exact
     doc["receivers"][0]["normal"] = [0.0, 0.2, 1.3]
     path = tmp_path / "scene.json"
     path.write_text(json.dumps(doc))
-    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 0
+    run = subprocess.run([sys.executable, "-m", "owcsim", "run", str(path), "--out", str(tmp_path / "out")],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
     local = json.loads((tmp_path / "out" / "result.json").read_text())
     with app_client(tmp_path, run_jobs=True) as c:
         job = c.post("/v1/jobs", json=doc).json()
