@@ -1,6 +1,6 @@
 """What the sync and async clients share: retry policy, headers, turning error answers into exceptions.
 
-Retried: connection errors (and timeouts), 429 and 502/503/504, with exponential backoff and
+Retried: connection errors (and timeouts), 429, 502/503/504 and 507 (disk full), with exponential backoff and
 jitter, honouring Retry-After. A submission carries an Idempotency-Key, so a retry after a
 lost answer returns the first job instead of queueing a duplicate.
 """
@@ -18,7 +18,7 @@ from owcsim.schemas.errors import Problem
 
 from .errors import ConnectionFailed, error_for
 
-RETRY_STATUSES = frozenset({429, 502, 503, 504})
+RETRY_STATUSES = frozenset({429, 502, 503, 504, 507})  # 507: the server's disk is full for now
 API = "/v1"
 #: `wait(timeout=T)` may spend up to this long after T on its last status request [s].
 LAST_POLL_S = 1.0

@@ -106,6 +106,13 @@ class Devices:
         return to_world(local, self.normals[i])
 
 
+def unit_normals(specs) -> np.ndarray:
+    """(n, 3) unit normals of device specs: the one normalisation of a document's directions
+    (schemas keep them as given, so a stored document replays to the same bits)."""
+    n = np.array([s.normal for s in specs], float).reshape(len(specs), 3)
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
 def load_photometry(spec, where: str, base_dir: Path | None) -> Photometry:
     """Read and parse a transmitter's photometric file (inline base64, or a path relative to base_dir)."""
     import base64
@@ -142,7 +149,7 @@ def transmitters_from_specs(specs: list[TransmitterSpec], ids: list[str], base_d
     return Devices(
         kind="transmitter", ids=ids,
         positions=np.array([s.position for s in specs], float).reshape(n, 3),
-        normals=np.array([s.normal for s in specs], float).reshape(n, 3),
+        normals=unit_normals(specs),
         order=np.array([s.m for s in specs], float), cos_fov=np.zeros(n), gain=np.ones(n),
         power=np.array([s.power for s in specs], float), area=np.zeros(n),
         patterns=patterns, frames=frames)
@@ -163,6 +170,6 @@ def receivers_from_specs(specs: list[ReceiverSpec], ids: list[str]) -> Devices:
     return Devices(
         kind="receiver", ids=ids,
         positions=np.array([s.position for s in specs], float).reshape(n, 3),
-        normals=np.array([s.normal for s in specs], float).reshape(n, 3),
+        normals=unit_normals(specs),
         order=np.zeros(n), cos_fov=cos_fov, gain=gain, power=np.ones(n),
         area=np.array([s.area for s in specs], float).reshape(n), patterns=[None] * n)

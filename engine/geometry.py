@@ -104,9 +104,17 @@ def _furniture(i: int, box: BoxSpec):
     return verts, faces, _surfaces([box.reflectance] * len(faces)), [label] * len(faces)
 
 
-def _load_mesh(i: int, spec: MeshSpec, base_dir: Path | None):
+def _load_mesh(i: int, spec: MeshSpec, base_dir: Path | None, count_only: bool = False):
+    """(vertices, faces, reflectance, labels) of a mesh, every node's instance flattened.
+
+    `count_only`: return only the number of triangles the mesh flattens to, counted from the
+    file's structure (triangles of each geometry x the nodes instancing it), without
+    transforming or copying anything (a small file may instance a large mesh many times).
+    """
     label = spec.name or f"meshes[{i}]"
     if spec.vertices is not None:
+        if count_only:
+            return len(spec.faces)
         verts = np.asarray(spec.vertices, float)
         faces = np.asarray(spec.faces, np.int64)
         return verts, faces, np.full(len(faces), spec.reflectance), [label] * len(faces)
@@ -129,6 +137,9 @@ def _load_mesh(i: int, spec: MeshSpec, base_dir: Path | None):
         raise
     except Exception as exc:  # trimesh raises many kinds; the user needs the file and the reason
         raise SceneError(f"{label}: cannot read mesh ({type(exc).__name__}: {exc})") from None
+    if count_only:
+        return sum(len(getattr(loaded.geometry.get(name), "faces", ())) * len(nodes)
+                   for name, nodes in loaded.graph.geometry_nodes.items())
     unknown = set(spec.group_reflectance)
     vs, fs, rhos, names, offset = [], [], [], [], 0
     for node in loaded.graph.nodes_geometry:

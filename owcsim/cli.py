@@ -150,7 +150,12 @@ def _cmd_serve(args) -> int:
             f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in err.errors())) from None
     except ValueError as exc:
         raise InputError(str(exc)) from None
-    serve(settings, host=args.host, port=args.port)
+    from owcsim.server.store import StoreError
+
+    try:
+        serve(settings, host=args.host, port=args.port)
+    except StoreError as exc:  # damaged, or held by another server: a clear message, no traceback
+        raise InputError(str(exc)) from None
     return 0
 
 
@@ -158,6 +163,7 @@ def _cmd_submit(args) -> int:
     try:
         from owcsim.clients.client import Client
         from owcsim.clients.errors import ApiError, ConnectionFailed, InvalidRequest, JobFailed
+        from owcsim.clients.scene import MeshFileError
     except ImportError as exc:
         raise InputError(f"`owcsim submit` needs the client extra ({exc.name} is missing): "
                          "pip install 'owcsim[client]'") from None
@@ -179,7 +185,7 @@ def _cmd_submit(args) -> int:
                 print(f"owcsim: interrupted; job {job.id} cancelled", file=sys.stderr)
                 return 130
             result = job.result(wait=False)
-    except FileNotFoundError as exc:
+    except (FileNotFoundError, MeshFileError) as exc:
         raise InputError(str(exc)) from None
     except InvalidRequest as exc:
         raise InputError(f"the server refused the scene: {exc}") from None

@@ -23,15 +23,17 @@ def _finite_vec(v: tuple[float, float, float]) -> tuple[float, float, float]:
     return v
 
 
-def _unit_vec(v: tuple[float, float, float]) -> tuple[float, float, float]:
+def _direction(v: tuple[float, float, float]) -> tuple[float, float, float]:
+    """Finite and of non-zero length; kept as given (the engine normalises it once, when it builds
+    the scene: normalising here would run again at every validation of a stored document, and
+    normalising twice is not bit-for-bit idempotent)."""
     _finite_vec(v)
-    norm = math.sqrt(sum(c * c for c in v))
-    if norm < 1e-12:
+    if not math.sqrt(sum(c * c for c in v)) >= 1e-12:
         raise ValueError("a direction must have a non-zero length")
-    return tuple(c / norm for c in v)  # type: ignore[return-value]
+    return v
 
 
 #: A point [m], three finite numbers.
 Point = Annotated[tuple[float, float, float], AfterValidator(_finite_vec)]
-#: A direction, normalised on input; a zero-length vector is an error.
-Direction = Annotated[tuple[float, float, float], AfterValidator(_unit_vec)]
+#: A direction: three finite numbers, not all zero; any length (the engine normalises it).
+Direction = Annotated[tuple[float, float, float], AfterValidator(_direction)]

@@ -76,6 +76,12 @@ class ReceiverSpec(SpecModel):
     concentrator_index: float | None = Field(None, ge=1.0, le=4.0, description="concentrator refractive index n_c")
 
 
+def _unit(d: tuple[float, float, float]) -> tuple[float, float, float]:
+    """d / |d| (a Direction is validated non-zero and finite, not normalised)."""
+    norm = math.sqrt(sum(c * c for c in d))
+    return tuple(c / norm for c in d)  # type: ignore[return-value]
+
+
 class ReceiverGridSpec(SpecModel):
     """Receivers on a rectangle: `origin` + i * spacing * `u` + j * spacing * `v`.
 
@@ -99,7 +105,7 @@ class ReceiverGridSpec(SpecModel):
 
     @model_validator(mode="after")
     def _sane(self) -> "ReceiverGridSpec":
-        if abs(sum(a * b for a, b in zip(self.u, self.v))) > 1e-6:
+        if abs(sum(a * b for a, b in zip(_unit(self.u), _unit(self.v)))) > 1e-6:
             raise ValueError("grid directions `u` and `v` must be orthogonal")
         if any(not math.isfinite(s) or s < 0 for s in self.size):
             raise ValueError("grid size must be two non-negative lengths [m]")
@@ -126,8 +132,9 @@ class ReceiverGridSpec(SpecModel):
         return [f"{self.id_prefix}[{i},{j}]" for i in range(nu) for j in range(nv)]
 
     def point(self, i: int, j: int) -> ReceiverSpec:
-        """The receiver at grid index (i, j)."""
-        p = tuple(o + self.spacing * (i * a + j * b) for o, a, b in zip(self.origin, self.u, self.v))
+        """The receiver at grid index (i, j) (u and v normalised here: the document keeps them as given)."""
+        u, v = _unit(self.u), _unit(self.v)
+        p = tuple(o + self.spacing * (i * a + j * b) for o, a, b in zip(self.origin, u, v))
         return ReceiverSpec(id=f"{self.id_prefix}[{i},{j}]", position=p, normal=self.normal, area=self.area,
                             fov_deg=self.fov_deg, filter_gain=self.filter_gain,
                             concentrator_index=self.concentrator_index)
@@ -135,12 +142,4 @@ class ReceiverGridSpec(SpecModel):
     def expand(self) -> list[ReceiverSpec]:
         """The grid as individual receivers, row-major in (i along u, j along v)."""
         nu, nv = self.shape
-        out = []
-        for i in range(nu):
-            for j in range(nv):
-                p = tuple(o + self.spacing * (i * a + j * b) for o, a, b in zip(self.origin, self.u, self.v))
-                out.append(ReceiverSpec(
-                    id=f"{self.id_prefix}[{i},{j}]", position=p, normal=self.normal, area=self.area,
-                    fov_deg=self.fov_deg, filter_gain=self.filter_gain,
-                    concentrator_index=self.concentrator_index))
-        return out
+        return [self.point(i, j) for i in range(nu) for j in range(nv)]

@@ -5,10 +5,10 @@ and shutdown (uvicorn's lifespan). The OpenAPI document is generated from schema
 """
 from __future__ import annotations
 
-import importlib
 import logging
 from contextlib import asynccontextmanager
 
+import anyio
 from fastapi import FastAPI
 from fastapi.openapi.utils import get_openapi
 from starlette.concurrency import run_in_threadpool
@@ -17,7 +17,9 @@ from owcsim.schemas import SceneSpec
 from owcsim.schemas.errors import PROBLEM_MEDIA_TYPE
 
 from . import problems
-from .dispatcher import Dispatcher
+from .dispatcher import Dispatcher, start_forkserver
+from .limits import RequestLimits
+from .preflight import Preflighter
 from .routes import docs, jobs, results, service
 from .routes.service import owcsim_version
 from .settings import Settings
@@ -38,12 +40,21 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
     """The service. `run_jobs=False` keeps the dispatcher off (jobs stay queued): for API tests."""
     settings = settings or Settings()
     owners = settings.key_owners()
-    store = JobStore(settings.db)
+    store = JobStore(settings.db, server=True)
     dispatcher = Dispatcher(store, settings)
+    preflighter = Preflighter(concurrency=settings.preflight_concurrency, timeout_s=settings.preflight_timeout_s,
+                              memory_bytes=settings.preflight_memory_bytes, max_triangles=settings.max_triangles,
+                              workers=settings.workers_per_job)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
-        await run_in_threadpool(importlib.import_module, "owcsim.engine.simulate")  # the pre-flight's imports
+        # Heavy request work (validation, waiting for a pre-flight, drawing a plot) has its own threads,
+        # so that health and status requests never queue behind it in the default pool.
+        app.state.heavy = anyio.CapacityLimiter(settings.preflight_concurrency + 2)
+        # Submissions read and check their bodies a few at a time: at most this many x max_body_bytes in memory
+        # (the others wait, their bodies in the kernel's socket buffers, within body_timeout_s).
+        app.state.submissions = anyio.Semaphore(2 * settings.preflight_concurrency + 2)
+        await run_in_threadpool(start_forkserver)  # pre-flights and workers start from it, engine imported
         if run_jobs:
             await run_in_threadpool(dispatcher.start)
         log.info("owcsim service: job store %s, %d job(s) at once, API keys %s", settings.db,
@@ -53,11 +64,15 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
         finally:
             if run_jobs:
                 await run_in_threadpool(dispatcher.stop)
+            store.close()  # checkpoint: the store is one self-contained file again
 
     app = FastAPI(title="owcsim", version=owcsim_version(), description=DESCRIPTION, lifespan=lifespan,
                   docs_url=None, redoc_url=None, openapi_url=f"{API_PREFIX}/openapi.json")  # docs: routes/docs.py
     app.state.settings, app.state.store, app.state.dispatcher, app.state.owners = settings, store, dispatcher, owners
+    app.state.preflighter = preflighter
+    app.state.heavy = app.state.submissions = None  # set at startup (they belong to the running event loop)
     problems.install(app)
+    app.add_middleware(RequestLimits, body_timeout_s=settings.body_timeout_s)
     for module in (jobs, results, service, docs):
         app.include_router(module.router, prefix=API_PREFIX)
     app.openapi = lambda: _openapi(app)

@@ -1,12 +1,29 @@
 """Engine pre-flight of a submitted scene, so that what the engine cannot run is refused at once.
 
-The scene is built (geometry on Embree: an unreadable base64 mesh fails here) and the
-engine runs its own entry point on it with the smallest possible settings (one path,
-line of sight only, one time bin, stopped after the first batch). Whatever the engine
-refuses (SceneError, UnsupportedError, an algorithm it lacks) becomes a 422 problem
-with the engine's message, instead of a job that fails after waiting in the queue.
+The pre-flight of a scene that can be large (meshes given as file content, more than
+SMALL_RECEIVERS receivers or SMALL_TRIANGLES inline triangles) runs in its own short-lived
+process (from the forkserver the dispatcher uses, engine imported already), never in the
+server: its address space is capped (`preflight_memory_bytes`), it is killed past
+`preflight_timeout_s`, and at most `preflight_concurrency` run at once. A small scene (a
+room, boxes, a few devices: milliseconds and kilobytes) is pre-flighted in the calling
+thread, which saves the process start. The steps:
+
+1. meshes given as file content are decoded and their triangles counted from the file's
+   structure (triangles of each geometry x the nodes instancing it) before anything is
+   flattened: a small file that instances a large mesh thousands of times is refused
+   against `max_triangles` in milliseconds;
+2. the scene is built (geometry on Embree: an unreadable base64 mesh fails here) and the
+   engine runs its own entry point on it with the smallest possible settings (one path,
+   line of sight only, one time bin, stopped after the first batch). Whatever the engine
+   refuses (SceneError, UnsupportedError, an algorithm it lacks) becomes a 422 problem
+   with the engine's message, instead of a job that fails after waiting in the queue;
+3. the job's memory estimate (engine.budget) is made with the scene's triangles and extent.
 """
 from __future__ import annotations
+
+import multiprocessing as mp
+import threading
+from dataclasses import dataclass
 
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.errors import ProblemField
@@ -14,24 +31,138 @@ from owcsim.schemas.errors import ProblemField
 from .problems import ProblemError
 
 
-def preflight(spec: SceneSpec) -> int:
-    """Build and dry-run the scene; returns its number of triangles. Raises ProblemError (422)."""
+#: A scene with at most this many receivers (grids expanded), no file-content meshes and at most
+#: SMALL_TRIANGLES inline triangles is pre-flighted in the server's thread, not in a process.
+SMALL_RECEIVERS = 1000
+SMALL_TRIANGLES = 10_000
+
+
+def is_small(spec: SceneSpec) -> bool:
+    receivers = len(spec.receivers) + sum(g.count for g in spec.receiver_grids)
+    triangles = sum(len(m.faces or ()) for m in spec.meshes)
+    return (receivers <= SMALL_RECEIVERS and len(spec.transmitters) <= SMALL_RECEIVERS
+            and triangles <= SMALL_TRIANGLES and all(m.vertices is not None for m in spec.meshes)
+            and spec.medium is None)  # (a grid medium may be large)
+
+
+@dataclass(frozen=True)
+class Preflight:
+    triangles: int
+    memory_bytes: int  # the job's memory estimate [B]
+
+
+def _problem(kind: str, loc: str, msg: str, type_: str, status: int = 422) -> tuple:
+    return ("problem", status, kind, msg, [(loc, msg, type_)])
+
+
+def _run(spec: SceneSpec, max_triangles: int, workers: int) -> tuple:
+    """The pre-flight itself (in the pre-flight process): ("ok", triangles, memory) or ("problem", ...)."""
+    import numpy as np
+
+    from owcsim.engine.budget import job_memory_bytes
     from owcsim.engine.errors import EngineError
+    from owcsim.engine.geometry import _load_mesh
     from owcsim.engine.scene import build_scene
     from owcsim.engine.simulate import simulate
 
-    sim = spec.simulation
-    tiny = sim.model_copy(update={
-        "max_reflections": 0, "t_min_s": 0.0, "t_max_s": sim.time_bin_s, "paths": 1, "target_rel_error": None,
-        "batch_size": 64, "direction": "forward", "pilot_paths": 256})
     try:
+        counted = (12 if spec.room else 0) + 12 * len(spec.furniture)
+        for i, mesh in enumerate(spec.meshes):
+            counted += _load_mesh(i, mesh, None, count_only=True)
+            if counted > max_triangles:
+                return _problem("limit-exceeded", f"body.meshes.{i}",
+                                f"the scene has at least {counted:,d} triangles (meshes counted with every instance "
+                                f"of their nodes); this server accepts at most {max_triangles:,d} (setting "
+                                "max_triangles)", "limit_exceeded")
+        sim = spec.simulation
+        tiny = sim.model_copy(update={
+            "max_reflections": 0, "t_min_s": 0.0, "t_max_s": sim.time_bin_s, "paths": 1, "target_rel_error": None,
+            "batch_size": 64, "direction": "forward", "pilot_paths": 256})
         scene = build_scene(spec, None)
         simulate(spec.model_copy(update={"simulation": tiny}), scene=scene, should_stop=lambda: True)
     except EngineError as exc:
-        raise ProblemError(422, "scene-not-runnable", f"the engine cannot run this scene: {exc}",
-                           errors=[ProblemField(loc="body", msg=str(exc), type="engine_error")]) from None
+        return _problem("scene-not-runnable", "body", f"the engine cannot run this scene: {exc}", "engine_error")
     except ArithmeticError as exc:  # e.g. a half-power angle so small that cos() rounds to 1
         msg = f"a number is out of the range the simulator can compute with ({type(exc).__name__}: {exc})"
-        raise ProblemError(422, "scene-not-runnable", f"the engine cannot run this scene: {msg}",
-                           errors=[ProblemField(loc="body", msg=msg, type="value_error")]) from None
-    return len(scene.geometry.faces)
+        return _problem("scene-not-runnable", "body", f"the engine cannot run this scene: {msg}", "value_error")
+    triangles = len(scene.geometry.faces)
+    points = [scene.geometry.vertices, scene.transmitters.positions, scene.receivers.positions]
+    extent = float(np.ptp(np.concatenate(points), axis=0).max())
+    return ("ok", triangles, job_memory_bytes(spec, triangles=triangles, extent_m=extent, workers=workers))
+
+
+def _child(conn, scene_json: str, max_triangles: int, workers: int, memory_bytes: int) -> None:
+    """Entry point of the pre-flight process: cap the address space, run, send the outcome."""
+    import warnings
+
+    from .worker import cap_address_space
+
+    cap_address_space(memory_bytes, 0)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the job's run records them
+            out = _run(SceneSpec.model_validate_json(scene_json), max_triangles, workers)
+    except MemoryError:
+        out = _problem("limit-exceeded", "body", f"the pre-flight of this scene needs more than this server's "
+                       f"{memory_bytes / 2**30:.3g} GB (setting preflight_memory_bytes): a smaller mesh or fewer "
+                       "receivers", "limit_exceeded")
+    conn.send(out)
+    conn.close()
+
+
+class Preflighter:
+    """Runs pre-flights in their own processes, at most `concurrency` at once."""
+
+    def __init__(self, *, concurrency: int, timeout_s: float, memory_bytes: int, max_triangles: int, workers: int):
+        self._slots = threading.BoundedSemaphore(concurrency)
+        self.timeout_s, self.memory_bytes = timeout_s, memory_bytes
+        self.max_triangles, self.workers = max_triangles, workers
+        self._ctx = mp.get_context("forkserver")
+
+    def __call__(self, spec: SceneSpec, scene_json: str) -> Preflight:
+        """Blocking (call it from a worker thread); raises ProblemError with the refusal."""
+        if is_small(spec):
+            out = _run(spec, self.max_triangles, self.workers)
+            if out[0] != "ok":
+                raise _error(out)
+            return Preflight(triangles=out[1], memory_bytes=out[2])
+        with self._slots:
+            receive, send = self._ctx.Pipe(duplex=False)
+            proc = self._ctx.Process(target=_child, name="owcsim-preflight", daemon=True,
+                                     args=(send, scene_json, self.max_triangles, self.workers, self.memory_bytes))
+            proc.start()
+            send.close()
+            try:
+                out = receive.recv() if receive.poll(self.timeout_s) else None
+            except EOFError:  # it died without an answer (e.g. killed at its memory limit by the kernel)
+                out = ()
+            finally:
+                receive.close()
+                if proc.is_alive():
+                    proc.kill()
+                proc.join()
+                proc.close()
+        if out is None:
+            raise _error(_problem("limit-exceeded", "body", f"the pre-flight of this scene took longer than this "
+                                  f"server's {self.timeout_s:g} s (setting preflight_timeout_s)", "limit_exceeded"))
+        if not out:
+            raise _error(_problem("limit-exceeded", "body", "the pre-flight of this scene ended without an answer "
+                                  f"(more memory than this server's {self.memory_bytes / 2**30:.3g} GB for it?)",
+                                  "limit_exceeded"))
+        if out[0] != "ok":
+            raise _error(out)
+        return Preflight(triangles=out[1], memory_bytes=out[2])
+
+
+def _error(out: tuple) -> ProblemError:
+    _, status, kind, detail, errors = out
+    return ProblemError(status, kind, detail, errors=[ProblemField(loc=loc, msg=msg, type=t) for loc, msg, t in errors])
+
+
+def preflight(spec: SceneSpec) -> int:
+    """In-process pre-flight (tools and tests); returns the scene's triangles. Raises ProblemError (422)."""
+    out = _run(spec, 2**62, 1)
+    if out[0] != "ok":
+        raise _error(out)
+    return out[1]
+

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import re
+import sqlite3
 import uuid
 from http import HTTPStatus
 
@@ -93,6 +94,19 @@ def install(app: FastAPI) -> None:
             detail = f"{request.method} is not allowed on {request.url.path}; allowed: {headers['Allow']}"
         return problem_response(request, exc.status_code, _KIND_BY_STATUS.get(exc.status_code, ""), detail,
                                 headers=headers)
+
+    @app.exception_handler(sqlite3.OperationalError)
+    async def _store(request: Request, exc: sqlite3.OperationalError):
+        """Disk full: 507; the store busy (locked past the timeout): 503. Both retryable."""
+        from .store import is_disk_full
+
+        if is_disk_full(exc):
+            log.error("job store: disk full on %s %s", request.method, request.url.path)
+            return problem_response(request, 507, "insufficient-storage", "the server's disk is full: nothing was "
+                                    "changed; try again later", headers={"Retry-After": "30"})
+        log.warning("job store busy on %s %s: %s", request.method, request.url.path, exc)
+        return problem_response(request, 503, "store-busy", "the job store is busy: nothing was changed; try "
+                                "again later", headers={"Retry-After": "5"})
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception):

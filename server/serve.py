@@ -5,14 +5,27 @@ import logging
 
 from .settings import Settings
 
+#: Largest request head (request line + headers) a client may send [bytes].
+MAX_HEAD_BYTES = 64 * 1024
+
+
+def uvicorn_config(settings: Settings, host: str, port: int, log_level: str = "info"):
+    """uvicorn's Config: the app, and limits on connections, idle time, header time and head size."""
+    import uvicorn
+
+    from .app import create_app
+    from .limits import protocol_with_header_timeout
+
+    return uvicorn.Config(create_app(settings), host=host, port=port, log_level=log_level,
+                          timeout_graceful_shutdown=10, server_header=False,
+                          http=protocol_with_header_timeout(settings.header_timeout_s),
+                          timeout_keep_alive=settings.keep_alive_s, limit_concurrency=settings.max_connections,
+                          h11_max_incomplete_event_size=MAX_HEAD_BYTES)
+
 
 def serve(settings: Settings, host: str = "127.0.0.1", port: int = 8000, log_level: str = "info") -> None:
     """Serve until SIGINT/SIGTERM; running jobs are requeued on the way out (see Dispatcher.stop)."""
     import uvicorn
 
-    from .app import create_app
-
     logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    app = create_app(settings)
-    uvicorn.run(app, host=host, port=port, log_level=log_level, timeout_graceful_shutdown=10,
-                server_header=False)
+    uvicorn.Server(uvicorn_config(settings, host, port, log_level)).run()

@@ -4,11 +4,23 @@ Every process and thread opens its own connection: the server's request threads,
 dispatcher, and each job's worker process. Writes that race (a worker finishing while
 the dispatcher settles it, a restart requeueing a job) are decided by the job's
 `run_token`, which grows each time the job is started or taken back: a write that
-carries an old token changes nothing. Documents are stored zlib-compressed.
+carries an old token changes nothing. Documents are stored zlib-compressed; a job's renders
+(result.json, CSV, NPZ, PNG, made once by its worker) gzip-compressed, read back in chunks.
+
+The server process holds an exclusive lock on `<store>.lock` (a second server on the same file
+refuses to start), checks the file's integrity at start, and checkpoints the WAL into the
+main file when it stops. Files are created 0600. Dispatch is fair between owners (API keys):
+the next job is the oldest of the owner with the fewest running jobs, ties broken by whose
+turn came longest ago; each owner has its own queue quota.
 """
 from __future__ import annotations
 
+import contextlib
+import errno
+import fcntl
+import io
 import json
+import os
 import sqlite3
 import threading
 import time
@@ -17,7 +29,7 @@ import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS jobs (
@@ -55,13 +67,47 @@ CREATE TABLE IF NOT EXISTS job_documents (
 );
 """
 
+#: Version 1 -> 2: per-job memory estimate, stored renders, owners' dispatch turns.
+_SCHEMA_2 = """
+ALTER TABLE jobs ADD COLUMN memory_bytes INTEGER NOT NULL DEFAULT 0;
+CREATE TABLE IF NOT EXISTS job_renders (
+    job_id TEXT NOT NULL REFERENCES jobs (id),
+    name TEXT NOT NULL,
+    data BLOB NOT NULL,
+    PRIMARY KEY (job_id, name)
+);
+CREATE TABLE IF NOT EXISTS owner_turns (
+    owner TEXT PRIMARY KEY,
+    last_turn INTEGER NOT NULL
+);
+"""
+
+#: Bytes read from a stored render at a time.
+CHUNK_BYTES = 256 * 1024
+
 _COLUMNS = ("seq, id, owner, name, status, created_at, started_at, finished_at, fraction, paths, batches, "
             "rel_stderr, elapsed_s, cancel_requested, attempts, crashes, run_token, worker_pid, error, warnings, "
-            "has_result, idempotency_key, request_hash")
+            "has_result, idempotency_key, request_hash, memory_bytes")
 
 
 class QueueFull(Exception):
-    """The queue holds `max_queued_jobs` jobs already."""
+    """The queue holds `max_queued_jobs` jobs already (`per_owner`: this owner's quota is used up)."""
+
+    def __init__(self, per_owner: bool = False):
+        super().__init__("queue full")
+        self.per_owner = per_owner
+
+
+class StoreError(Exception):
+    """The job store file cannot be used (damaged, not a database, locked by another server)."""
+
+
+def is_disk_full(exc: BaseException) -> bool:
+    """An SQLite error that means the disk (or the database's size cap) is full."""
+    if isinstance(exc, OSError):
+        return exc.errno in (errno.ENOSPC, errno.EDQUOT)
+    code = getattr(exc, "sqlite_errorcode", None)
+    return isinstance(exc, sqlite3.Error) and (code == sqlite3.SQLITE_FULL or "disk is full" in str(exc))
 
 
 class IdempotencyConflict(Exception):
@@ -97,6 +143,7 @@ class JobRow:
     has_result: bool = False
     idempotency_key: str | None = None
     request_hash: str = ""
+    memory_bytes: int = 0
 
     @classmethod
     def from_db(cls, r: tuple) -> "JobRow":
@@ -112,19 +159,66 @@ def _pack(text: str | bytes) -> bytes:
 
 
 class JobStore:
-    """Jobs in one SQLite file. Safe to share between threads (one connection per thread)."""
+    """Jobs in one SQLite file. Safe to share between threads (one connection per thread).
 
-    def __init__(self, path: str | Path):
+    `server=True` (the server process): take the exclusive lock and check the file's integrity
+    first; `close()` then checkpoints the WAL. Workers open the store without either.
+    """
+
+    def __init__(self, path: str | Path, *, server: bool = False):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._local = threading.local()
         self._all: list[sqlite3.Connection] = []
         self._lock = threading.Lock()
-        con = self._con()
-        con.execute("PRAGMA journal_mode=WAL")
-        if con.execute("PRAGMA user_version").fetchone()[0] == 0:
-            con.executescript(_SCHEMA)
-            con.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
+        self._lock_fd: int | None = None
+        self.server = server
+        if server:
+            self._take_lock()
+        try:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)  # before SQLite: -wal/-shm inherit its mode
+            os.close(fd)
+            con = self._con()
+            if server:
+                self._check_integrity(con)
+            con.execute("PRAGMA journal_mode=WAL")
+            version = con.execute("PRAGMA user_version").fetchone()[0]
+            if version == 0:
+                con.executescript(_SCHEMA)
+                con.executescript(_SCHEMA_2)
+                con.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
+            elif version == 1:
+                with self._tx() as tx:
+                    for stmt in filter(str.strip, _SCHEMA_2.split(";")):
+                        tx.execute(stmt)
+                    tx.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
+            elif version > SCHEMA_VERSION:
+                raise StoreError(f"job store {str(self.path)!r} was written by a newer owcsim (schema {version}, "
+                                 f"this one reads up to {SCHEMA_VERSION})")
+        except sqlite3.DatabaseError as exc:
+            self.close(checkpoint=False)
+            raise StoreError(f"job store {str(self.path)!r} cannot be used: {exc} (restore it from a backup, "
+                             "or move it away to start with an empty store)") from None
+        except BaseException:
+            self.close(checkpoint=False)
+            raise
+
+    def _take_lock(self) -> None:
+        lock_path = self.path.with_name(self.path.name + ".lock")
+        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o600)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise StoreError(f"job store {str(self.path)!r} is in use by another owcsim server (lock file "
+                             f"{str(lock_path)!r}): run one server per store file") from None
+        self._lock_fd = fd
+
+    def _check_integrity(self, con: sqlite3.Connection) -> None:
+        rows = [r[0] for r in con.execute("PRAGMA quick_check").fetchall()]
+        if rows != ["ok"]:
+            raise StoreError(f"job store {str(self.path)!r} is damaged (SQLite quick_check: {'; '.join(rows[:3])})"
+                             ": restore it from a backup, or move it away to start with an empty store")
 
     def _con(self) -> sqlite3.Connection:
         con = getattr(self._local, "con", None)
@@ -137,11 +231,20 @@ class JobStore:
                 self._all.append(con)
         return con
 
-    def close(self) -> None:
+    def close(self, checkpoint: bool = True) -> None:
+        """Close every connection; the server's store first moves the WAL into the main file."""
         with self._lock:
+            if checkpoint and self.server and self._all:
+                try:
+                    self._all[0].execute("PRAGMA wal_checkpoint(TRUNCATE)")
+                except sqlite3.Error:
+                    pass  # e.g. a worker still reading: SQLite checkpoints at the next open
             for con in self._all:
                 con.close()
             self._all.clear()
+            if self._lock_fd is not None:
+                os.close(self._lock_fd)
+                self._lock_fd = None
         self._local = threading.local()
 
     def _tx(self):
@@ -150,7 +253,8 @@ class JobStore:
     # -- submission -------------------------------------------------------------------------
 
     def submit(self, *, owner: str, scene_json: str, name: str | None, request_hash: str,
-               idempotency_key: str | None, max_queued: int) -> tuple[JobRow, bool]:
+               idempotency_key: str | None, max_queued: int, max_queued_per_owner: int | None = None,
+               memory_bytes: int = 0) -> tuple[JobRow, bool]:
         """Queue a job; returns (job, created). With a known Idempotency-Key: the first job, not created."""
         packed = _pack(scene_json)
         with self._tx() as con:
@@ -161,10 +265,15 @@ class JobStore:
             queued = con.execute("SELECT COUNT(*) FROM jobs WHERE status = 'queued'").fetchone()[0]
             if queued >= max_queued:
                 raise QueueFull()
+            if max_queued_per_owner is not None:
+                mine = con.execute("SELECT COUNT(*) FROM jobs WHERE status = 'queued' AND owner = ?",
+                                   (owner,)).fetchone()[0]
+                if mine >= max_queued_per_owner:
+                    raise QueueFull(per_owner=True)
             job_id = uuid.uuid4().hex
-            con.execute("INSERT INTO jobs (id, owner, idempotency_key, request_hash, name, status, created_at) "
-                        "VALUES (?, ?, ?, ?, ?, 'queued', ?)",
-                        (job_id, owner, idempotency_key, request_hash, name, time.time()))
+            con.execute("INSERT INTO jobs (id, owner, idempotency_key, request_hash, name, status, created_at, "
+                        "memory_bytes) VALUES (?, ?, ?, ?, ?, 'queued', ?, ?)",
+                        (job_id, owner, idempotency_key, request_hash, name, time.time(), memory_bytes))
             con.execute("INSERT INTO job_documents (job_id, scene) VALUES (?, ?)", (job_id, packed))
             row = con.execute(f"SELECT {_COLUMNS} FROM jobs WHERE id = ?", (job_id,)).fetchone()
         return JobRow.from_db(row), True
@@ -196,8 +305,18 @@ class JobStore:
         return JobRow.from_db(row) if row else None
 
     def list(self, owner: str | None, statuses: list[str] | None, limit: int,
-             before_seq: int | None) -> tuple[list[JobRow], int | None]:
-        """Newest first; returns (page, seq to pass as `before_seq` for the next page or None)."""
+             after: str | None) -> tuple[list[JobRow], str | None]:
+        """Newest first; returns (page, the id to pass as `after` for the next page or None).
+
+        `after` is the last job id of the previous page: opaque (ids are random) and checked
+        against the owner (another owner's id is KeyError, as an unknown one).
+        """
+        before_seq = None
+        if after is not None:
+            ref = self.get(after, owner)
+            if ref is None:
+                raise KeyError(after)
+            before_seq = ref.seq
         where, args = [], []
         if owner is not None:
             where.append("owner = ?")
@@ -211,7 +330,7 @@ class JobStore:
         sql = f"SELECT {_COLUMNS} FROM jobs" + (" WHERE " + " AND ".join(where) if where else "")
         rows = self._con().execute(sql + " ORDER BY seq DESC LIMIT ?", args + [limit + 1]).fetchall()
         jobs = [JobRow.from_db(r) for r in rows[:limit]]
-        return jobs, (jobs[-1].seq if len(rows) > limit else None)
+        return jobs, (jobs[-1].id if len(rows) > limit else None)
 
     def counts(self) -> dict[str, int]:
         rows = self._con().execute("SELECT status, COUNT(*) FROM jobs GROUP BY status").fetchall()
@@ -222,38 +341,127 @@ class JobStore:
         return zlib.decompress(row[0]).decode()
 
     def result_json(self, job_id: str) -> bytes | None:
+        """The whole result document (for tests and small results; routes stream `render_chunks`)."""
         row = self._con().execute("SELECT result FROM job_documents WHERE job_id = ?", (job_id,)).fetchone()
         return zlib.decompress(row[0]) if row and row[0] is not None else None
 
+    def render_names(self, job_id: str) -> set[str]:
+        rows = self._con().execute("SELECT name FROM job_renders WHERE job_id = ?", (job_id,)).fetchall()
+        return {r[0] for r in rows}
+
+    def render_chunks(self, job_id: str, name: str):
+        """The stored gzip bytes of a render, in chunks of CHUNK_BYTES (a fresh connection: a generator
+        may be read from another thread); None if there is no such render."""
+        con = sqlite3.connect(self.path, timeout=30.0, isolation_level=None, check_same_thread=False)
+        row = con.execute("SELECT rowid FROM job_renders WHERE job_id = ? AND name = ?", (job_id, name)).fetchone()
+        if row is None:
+            con.close()
+            return None
+
+        def chunks():
+            try:
+                with con.blobopen("job_renders", "data", row[0], readonly=True) as blob:
+                    while chunk := blob.read(CHUNK_BYTES):
+                        yield chunk
+            finally:
+                con.close()
+        return chunks()
+
+    def put_renders(self, job_id: str, renders: dict[str, Path | bytes]) -> None:
+        """Keep renders made after the job ended (a plot; a result stored by an older server)."""
+        with self._tx() as con:
+            self._write_renders(con, job_id, renders)
+
+    @contextlib.contextmanager
+    def open_render(self, job_id: str, name: str):
+        """A stored render as a read-only, seekable file (an SQLite blob), e.g. for zipfile."""
+        con = sqlite3.connect(self.path, timeout=30.0, isolation_level=None)
+        try:
+            row = con.execute("SELECT rowid FROM job_renders WHERE job_id = ? AND name = ?", (job_id, name)).fetchone()
+            if row is None:
+                raise FileNotFoundError(f"job {job_id} has no render {name}")
+            with con.blobopen("job_renders", "data", row[0], readonly=True) as blob:
+                yield _BlobFile(blob)
+        finally:
+            con.close()
+
+    @staticmethod
+    def _write_renders(con, job_id: str, renders: dict[str, Path | bytes]) -> None:
+        """Keep a job's renders: {name: file (copied in chunks) or bytes}."""
+        for name, path in renders.items():
+            if isinstance(path, bytes):
+                con.execute("INSERT OR REPLACE INTO job_renders (job_id, name, data) VALUES (?, ?, ?)",
+                            (job_id, name, path))
+                continue
+            size = path.stat().st_size
+            con.execute("INSERT OR REPLACE INTO job_renders (job_id, name, data) VALUES (?, ?, zeroblob(?))",
+                        (job_id, name, size))
+            rowid = con.execute("SELECT rowid FROM job_renders WHERE job_id = ? AND name = ?",
+                                (job_id, name)).fetchone()[0]
+            with con.blobopen("job_renders", "data", rowid) as blob, open(path, "rb") as src:
+                while chunk := src.read(CHUNK_BYTES):
+                    blob.write(chunk)
+
     # -- the dispatcher ---------------------------------------------------------------------
 
-    def claim_next(self) -> tuple[str, int] | None:
-        """Mark the oldest queued job running; returns (job id, its new run token)."""
+    _NEXT = """
+        WITH q AS (SELECT owner, MIN(seq) AS first FROM jobs WHERE status = 'queued' GROUP BY owner),
+             r AS (SELECT owner, COUNT(*) AS n FROM jobs WHERE status = 'running' GROUP BY owner)
+        SELECT j.id, j.memory_bytes FROM q JOIN jobs j ON j.seq = q.first
+        LEFT JOIN r ON r.owner = q.owner LEFT JOIN owner_turns t ON t.owner = q.owner
+        ORDER BY COALESCE(r.n, 0), COALESCE(t.last_turn, -1), q.first LIMIT 1"""
+
+    def claim_next(self, free_memory: int | None = None) -> tuple[str, int] | None:
+        """Mark the next queued job running; returns (job id, its new run token).
+
+        The next job is the oldest of the owner with the fewest running jobs (then: whose turn
+        came longest ago). None if nothing is queued, or if that job's memory estimate exceeds
+        `free_memory` [B] (it waits for room: smaller jobs do not overtake it).
+        """
         with self._tx() as con:
-            row = con.execute("SELECT id FROM jobs WHERE status = 'queued' ORDER BY seq LIMIT 1").fetchone()
-            if row is None:
+            row = con.execute(self._NEXT).fetchone()
+            if row is None or (free_memory is not None and row[1] > free_memory):
                 return None
             con.execute("UPDATE jobs SET status = 'running', started_at = ?, run_token = run_token + 1, "
                         "attempts = attempts + 1, fraction = 0, paths = 0, batches = 0, rel_stderr = NULL, "
                         "elapsed_s = 0, worker_pid = NULL WHERE id = ?", (time.time(), row[0]))
-            token = con.execute("SELECT run_token FROM jobs WHERE id = ?", (row[0],)).fetchone()[0]
+            token, owner = con.execute("SELECT run_token, owner FROM jobs WHERE id = ?", (row[0],)).fetchone()
+            turn = con.execute("SELECT COALESCE(MAX(last_turn), 0) + 1 FROM owner_turns").fetchone()[0]
+            con.execute("INSERT OR REPLACE INTO owner_turns (owner, last_turn) VALUES (?, ?)", (owner, turn))
         return row[0], token
+
+    def next_queued(self) -> tuple[str, int] | None:
+        """(id, memory estimate [B]) of the job `claim_next` would start, or None."""
+        row = self._con().execute(self._NEXT).fetchone()
+        return (row[0], row[1]) if row else None
+
+    def fail_queued(self, job_id: str, reason: str) -> None:
+        """Fail a queued job that can never start (e.g. larger than the server's memory budget)."""
+        self._con().execute("UPDATE jobs SET status = 'failed', finished_at = ?, error = ?, run_token = run_token + 1 "
+                            "WHERE id = ? AND status = 'queued'", (time.time(), reason, job_id))
 
     def set_worker_pid(self, job_id: str, token: int, pid: int | None) -> None:
         self._con().execute("UPDATE jobs SET worker_pid = ? WHERE id = ? AND run_token = ?", (pid, job_id, token))
 
-    def running_flags(self) -> dict[str, tuple[int, bool]]:
-        """{job id: (run token, cancel requested)} of running jobs."""
-        rows = self._con().execute("SELECT id, run_token, cancel_requested FROM jobs WHERE status = 'running'")
-        return {r[0]: (r[1], bool(r[2])) for r in rows.fetchall()}
+    def running_flags(self) -> dict[str, tuple[int, bool, float]]:
+        """{job id: (run token, cancel requested, elapsed_s of its last progress write)} of running jobs."""
+        rows = self._con().execute("SELECT id, run_token, cancel_requested, elapsed_s FROM jobs "
+                                   "WHERE status = 'running'")
+        return {r[0]: (r[1], bool(r[2]), r[3]) for r in rows.fetchall()}
 
-    def take_back_running(self, note: str) -> list[str]:
-        """Requeue every running job (server start or stop); a job whose cancel was asked is cancelled."""
+    def take_back_running(self, note: str, max_attempts: int | None = None) -> list[str]:
+        """Requeue every running job (server start or stop); a job whose cancel was asked is cancelled,
+        one that has started `max_attempts` times already is failed."""
         now = time.time()
         with self._tx() as con:
             ids = [r[0] for r in con.execute("SELECT id FROM jobs WHERE status = 'running'").fetchall()]
             con.execute("UPDATE jobs SET status = 'cancelled', finished_at = ?, run_token = run_token + 1 "
                         "WHERE status = 'running' AND cancel_requested = 1", (now,))
+            if max_attempts is not None:
+                con.execute("UPDATE jobs SET status = 'failed', finished_at = ?, run_token = run_token + 1, error = ? "
+                            "WHERE status = 'running' AND attempts >= ?",
+                            (now, f"{note}; it was started {max_attempts} times without finishing (setting "
+                                  "max_attempts)", max_attempts))
             con.execute("UPDATE jobs SET status = 'queued', run_token = run_token + 1, started_at = NULL, "
                         "fraction = 0, paths = 0, batches = 0, rel_stderr = NULL, elapsed_s = 0, worker_pid = NULL, "
                         "error = ? WHERE status = 'running'", (note,))
@@ -310,8 +518,9 @@ class JobStore:
         return cur.rowcount == 1
 
     def finish(self, job_id: str, token: int, status: str, *, result_json: str | None = None,
-               error: str | None = None, warnings: list[str] = ()) -> bool:
-        """Record a run's outcome; False (nothing written) if the job is no longer this run's."""
+               error: str | None = None, warnings: list[str] = (), renders: dict[str, Path] | None = None) -> bool:
+        """Record a run's outcome and its renders ({name: file of gzip bytes}) in one transaction;
+        False (nothing written) if the job is no longer this run's."""
         packed = _pack(result_json) if result_json is not None else None
         with self._tx() as con:
             cur = con.execute(
@@ -323,7 +532,34 @@ class JobStore:
                 return False
             if packed is not None:
                 con.execute("UPDATE job_documents SET result = ? WHERE job_id = ?", (packed, job_id))
+            if renders:
+                self._write_renders(con, job_id, renders)
         return True
+
+
+class _BlobFile(io.RawIOBase):
+    """An SQLite blob as a binary file object (zipfile wants `seekable()` and friends)."""
+
+    def __init__(self, blob):
+        self.blob = blob
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return True
+
+    def readinto(self, b) -> int:
+        data = self.blob.read(len(b))
+        b[:len(data)] = data
+        return len(data)
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        self.blob.seek(offset, whence)
+        return self.blob.tell()
+
+    def tell(self) -> int:
+        return self.blob.tell()
 
 
 class _Transaction:
@@ -337,4 +573,19 @@ class _Transaction:
         return self.con
 
     def __exit__(self, exc_type, exc, tb) -> None:
-        self.con.execute("COMMIT" if exc_type is None else "ROLLBACK")
+        if exc_type is None:
+            try:
+                self.con.execute("COMMIT")
+            except sqlite3.Error:
+                self._rollback()  # e.g. SQLITE_FULL at commit: leave no transaction open
+                raise
+        else:
+            self._rollback()
+
+    def _rollback(self) -> None:
+        """Roll back if a transaction is still open (SQLite ends some by itself, e.g. on SQLITE_FULL)."""
+        if self.con.in_transaction:
+            try:
+                self.con.execute("ROLLBACK")
+            except sqlite3.Error:
+                pass

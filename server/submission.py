@@ -1,7 +1,8 @@
-"""From a request body to an accepted scene document: size, JSON, schema, server limits, engine pre-flight.
+"""From a request body to an accepted scene document: size, JSON, text lengths, schema, server limits,
+engine pre-flight (in its own process, see preflight.py) and the job's memory estimate.
 
-Every refusal is a ProblemError that names the wrong field. Runs in a worker thread
-(validation and the pre-flight can take a moment for large meshes).
+Every refusal is a ProblemError that names the wrong field. Runs in a worker thread of
+the server's limiter for heavy work (never the one health and status requests use).
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from pydantic import ValidationError
 from owcsim.schemas import ReceiverGridSpec, SceneSpec
 from owcsim.schemas.errors import ProblemField
 
-from .preflight import preflight
+from .preflight import Preflight, Preflighter
 from .problems import ProblemError, field_errors
 from .settings import Settings
 
@@ -65,6 +66,7 @@ def parse_scene(body: bytes, settings: Settings) -> SceneSpec:
                        "malformed-json", 400) from None
     if not isinstance(doc, dict):
         raise _invalid([ProblemField(loc="body", msg="a scene document is a JSON object", type="dict_type")])
+    _check_text_lengths(doc, settings.max_text_chars)
     _check_receiver_count(doc, settings)
     try:
         return SceneSpec.model_validate(doc)
@@ -79,6 +81,35 @@ def parse_scene(body: bytes, settings: Settings) -> SceneSpec:
 def _out_of_range(loc: str, exc: ArithmeticError) -> ProblemField:
     return ProblemField(loc=loc, type="value_error",
                         msg=f"a number is out of the range the simulator can compute with ({exc})")
+
+
+#: Fields whose text may be long: file content.
+_LONG_TEXT = frozenset({"data_base64"})
+
+
+def _check_text_lengths(doc, max_chars: int) -> None:
+    """Every string (and object key) of the document at most `max_chars` long, file content excepted."""
+    errors: list[ProblemField] = []
+    stack: list[tuple[object, str]] = [(doc, "body")]
+    while stack and len(errors) < 10:
+        node, loc = stack.pop()
+        if isinstance(node, dict):
+            for k, v in node.items():
+                if len(k) > max_chars:
+                    errors.append(ProblemField(loc=loc, type="string_too_long",
+                                               msg=f"a key of {len(k):,d} characters; at most {max_chars:,d} "
+                                                   "(setting max_text_chars)"))
+                    continue
+                if k not in _LONG_TEXT:
+                    stack.append((v, f"{loc}.{k}"))
+        elif isinstance(node, list):
+            stack.extend((v, f"{loc}.{i}") for i, v in enumerate(node))
+        elif isinstance(node, str) and len(node) > max_chars:
+            errors.append(ProblemField(loc=loc, type="string_too_long",
+                                       msg=f"text of {len(node):,d} characters; this server accepts at most "
+                                           f"{max_chars:,d} (setting max_text_chars)"))
+    if errors:
+        raise _invalid(errors, "limit-exceeded")
 
 
 def _check_receiver_count(doc: dict, settings: Settings) -> None:
@@ -120,7 +151,7 @@ def check_limits(spec: SceneSpec, settings: Settings) -> None:
                      f"{settings.max_triangles:,d} (setting max_triangles)")
     sim = spec.simulation
     if sim.n_paths is not None:
-        n_tx, n_rx = len(spec.transmitters), len(spec.all_receivers())
+        n_tx, n_rx = len(spec.transmitters), len(spec.receivers) + sum(g.count for g in spec.receiver_grids)
         # source devices: exact for a fixed direction; for auto the fewest the engine can use
         sources = {"forward": n_tx, "backward": n_rx}.get(sim.direction, min(n_tx, n_rx))
         if sim.n_paths * sources > settings.max_paths_per_job:
@@ -133,13 +164,22 @@ def check_limits(spec: SceneSpec, settings: Settings) -> None:
                      "per job (setting max_wall_time_s)")
 
 
-def check_runnable(spec: SceneSpec, settings: Settings) -> None:
-    """The server's limits and the engine's pre-flight on a validated scene; raises ProblemError."""
+def check_runnable(spec: SceneSpec, scene_json: str, settings: Settings, preflighter: Preflighter) -> Preflight:
+    """The server's limits, the engine's pre-flight and the memory estimate of a validated scene;
+    returns the pre-flight's figures, raises ProblemError."""
     check_limits(spec, settings)
-    triangles = preflight(spec)
-    if triangles > settings.max_triangles:
-        raise _limit("body.meshes", f"the scene has {triangles:,d} triangles; this server accepts at most "
+    out = preflighter(spec, scene_json)
+    if out.triangles > settings.max_triangles:
+        raise _limit("body.meshes", f"the scene has {out.triangles:,d} triangles; this server accepts at most "
                      f"{settings.max_triangles:,d} (setting max_triangles)")
+    cap = settings.job_memory_cap
+    if out.memory_bytes > cap:
+        raise _limit("body.simulation", f"this job would need about {out.memory_bytes / 2**30:.3g} GB of memory "
+                     f"(estimated from its links, orders, time bins, batch_size and triangles); this server allows "
+                     f"{cap / 2**30:.3g} GB per job (setting max_job_memory_bytes): ask for fewer receivers, "
+                     "orders or time bins (give max_reflections and t_max_s: automatic ones are counted at the "
+                     "most the engine may choose), or a smaller batch_size")
+    return out
 
 
 def request_hash(canonical: str) -> str:

@@ -1,11 +1,13 @@
 """Jobs: submit (POST /v1/jobs), list, get one, cancel."""
 from __future__ import annotations
 
+import contextlib
 from typing import Annotated
 
+import anyio
 from fastapi import APIRouter, Depends, Header, Query, Request, Response
-from starlette.concurrency import run_in_threadpool
 
+from owcsim.schemas.errors import ProblemField
 from owcsim.schemas.jobs import JobListPublic, JobPublic, JobStatus
 
 from ..auth import NO_AUTH_OWNER, current_owner
@@ -27,7 +29,7 @@ IdempotencyKey = Annotated[str | None, Header(
 
 
 @router.post("", status_code=202, operation_id="submit_job", response_model=JobPublic, summary="Submit a scene document as a job",
-             responses={**problems(400, 401, 413, 415, 422, 429),
+             responses={**problems(400, 401, 408, 413, 415, 422, 429, 503, 507),
                         202: {"description": "queued (or, with a known Idempotency-Key, the first job)",
                               "headers": {"Location": {"description": "the job's URL",
                                                        "schema": {"type": "string"}}}, "links": JOB_LINKS}},
@@ -38,8 +40,11 @@ async def submit_job(request: Request, response: Response, idempotency_key: Idem
                      dispatcher: Dispatcher = Depends(get_dispatcher)) -> JobPublic:
     """Validate the scene (the document `owcsim run` takes), check the server's limits, pre-flight it in
     the engine, and queue it. Answers 202 with the job and its URL in `Location`."""
-    body = await read_body(request, settings.max_body_bytes)
-    job, created = await run_in_threadpool(_submit, body, owner, idempotency_key, store, settings)
+    # bodies held in memory: a few at a time, not one per connection (no limit if the app runs without its lifespan)
+    async with request.app.state.submissions or contextlib.nullcontext():
+        body = await read_body(request, settings.max_body_bytes)
+        job, created = await anyio.to_thread.run_sync(_submit, body, owner, idempotency_key, store, settings,
+                                                      request.app.state.preflighter, limiter=request.app.state.heavy)
     if created:
         dispatcher.wake()
     else:
@@ -48,7 +53,7 @@ async def submit_job(request: Request, response: Response, idempotency_key: Idem
     return job_public(job)
 
 
-def _submit(body: bytes, owner, key, store: JobStore, settings: Settings) -> tuple[JobRow, bool]:
+def _submit(body: bytes, owner, key, store: JobStore, settings: Settings, preflighter) -> tuple[JobRow, bool]:
     owner = owner if owner is not None else NO_AUTH_OWNER
     spec = parse_scene(body, settings)
     canonical = spec.model_dump_json()
@@ -56,11 +61,14 @@ def _submit(body: bytes, owner, key, store: JobStore, settings: Settings) -> tup
     try:
         if key is not None and (first := store.find_idempotent(owner, key, digest)) is not None:
             return first, False  # a retry (e.g. after a client timeout): no second pre-flight
-        check_runnable(spec, settings)
+        checked = check_runnable(spec, canonical, settings, preflighter)
         return store.submit(owner=owner, scene_json=canonical, name=spec.name, request_hash=digest,
-                            idempotency_key=key, max_queued=settings.max_queued_jobs)
-    except QueueFull:
-        raise ProblemError(429, "queue-full", f"the queue is full ({settings.max_queued_jobs} jobs): try again later",
+                            idempotency_key=key, max_queued=settings.max_queued_jobs,
+                            max_queued_per_owner=settings.max_queued_per_key, memory_bytes=checked.memory_bytes)
+    except QueueFull as exc:
+        what = (f"this API key's queue is full ({settings.max_queued_per_key} jobs, setting max_queued_per_key)"
+                if exc.per_owner else f"the queue is full ({settings.max_queued_jobs} jobs)")
+        raise ProblemError(429, "queue-full", f"{what}: try again later",
                            headers={"Retry-After": str(settings.retry_after_s)}) from None
     except IdempotencyConflict as exc:
         raise ProblemError(422, "idempotency-key-reused",
@@ -71,17 +79,20 @@ def _submit(body: bytes, owner, key, store: JobStore, settings: Settings) -> tup
 @router.get("", operation_id="list_jobs", response_model=JobListPublic, summary="List jobs, newest first", responses=problems(401, 422))
 def list_jobs(status: Annotated[list[JobStatus] | None, Query(description="only jobs in these states")] = None,
               limit: Annotated[int, Query(ge=1, le=500, description="jobs per page")] = 50,
-              cursor: Annotated[str | None, Query(pattern=r"^[0-9]{1,18}$",
-                                                  description="`next_cursor` of the previous page")] = None,
+              cursor: Annotated[str | None, Query(pattern=r"^[0-9a-f]{32}$",
+                                                  description="`next_cursor` of the previous page (opaque)")] = None,
               owner: str | None = Depends(current_owner), store: JobStore = Depends(get_store)) -> JobListPublic:
     """Jobs of the caller (of every caller when the server has no API keys)."""
-    rows, next_seq = store.list(owner, status, limit, int(cursor) if cursor else None)
+    try:
+        rows, after = store.list(owner, status, limit, cursor)
+    except KeyError:
+        raise ProblemError(422, "invalid-parameter", "query.cursor: not a cursor of this API key's listing",
+                           errors=[ProblemField(loc="query.cursor", msg="unknown cursor", type="value_error")]) from None
     nxt = None
-    if next_seq is not None:
+    if after is not None:
         query = "".join(f"&status={s}" for s in status or ())
-        nxt = f"{API_PREFIX}/jobs?limit={limit}&cursor={next_seq}{query}"
-    return JobListPublic(items=[job_public(r) for r in rows], next_cursor=str(next_seq) if next_seq else None,
-                         next=nxt)
+        nxt = f"{API_PREFIX}/jobs?limit={limit}&cursor={after}{query}"
+    return JobListPublic(items=[job_public(r) for r in rows], next_cursor=after, next=nxt)
 
 
 @router.get("/{job_id}", operation_id="get_job", response_model=JobPublic, summary="Get a job: state, progress, timestamps",
@@ -91,7 +102,7 @@ def get_job(job: JobRow = Depends(owned_job)) -> JobPublic:
 
 
 @router.post("/{job_id}/cancel", operation_id="cancel_job", response_model=JobPublic, summary="Cancel a job",
-             responses={**problems(401, 404, 409),
+             responses={**problems(401, 404, 409, 503, 507),
                         202: {"description": "running: asked to stop (its status becomes `cancelled` within "
                                              "seconds)", "model": JobPublic}})
 def cancel_job(response: Response, job: JobRow = Depends(owned_job), owner: str | None = Depends(current_owner),

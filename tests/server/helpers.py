@@ -62,22 +62,26 @@ def free_port() -> int:
 class ServerProcess:
     """`owcsim serve` on 127.0.0.1 in a child process; settings from OWCSIM_* variables."""
 
-    def __init__(self, db: Path, port: int | None = None, log: Path | None = None, **settings):
+    def __init__(self, db: Path, port: int | None = None, log: Path | None = None, *, root: Path = ROOT,
+                 python: str = sys.executable, address_space_bytes: int | None = None, **settings):
+        """`root`, `python`: another checkout and its interpreter (a baseline for benchmarks);
+        `address_space_bytes`: soft RLIMIT_AS of the server (inherited by its children)."""
+        self.root, self.python, self.address_space_bytes = Path(root), python, address_space_bytes
         self.db, self.port = db, port or free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.log = log or db.with_suffix(".log")
         self.env = {k: v for k, v in os.environ.items() if not k.startswith("OWCSIM_")}  # only what we set
         self.env.update({f"OWCSIM_{k.upper()}": str(v) for k, v in settings.items()})
-        self.env["PYTHONPATH"] = str(ROOT)
+        self.env["PYTHONPATH"] = str(self.root)
         self.proc: subprocess.Popen | None = None
         self._groups: list[int] = []
 
     def start(self, timeout: float = 60.0) -> "ServerProcess":
         out = open(self.log, "a")
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "owcsim", "serve", "--host", "127.0.0.1", "--port", str(self.port),
-             "--db", str(self.db)], env=self.env, stdout=out, stderr=subprocess.STDOUT, cwd=ROOT,
-            start_new_session=True)
+            [self.python, "-m", "owcsim", "serve", "--host", "127.0.0.1", "--port", str(self.port),
+             "--db", str(self.db)], env=self.env, stdout=out, stderr=subprocess.STDOUT, cwd=self.root,
+            start_new_session=True, preexec_fn=self._cap if self.address_space_bytes else None)
         self._groups.append(self.proc.pid)
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
@@ -90,6 +94,11 @@ class ServerProcess:
             time.sleep(0.1)
         self.kill()
         raise AssertionError(f"server did not start: {self.log.read_text()[-3000:]}")
+
+    def _cap(self) -> None:
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_AS, (self.address_space_bytes, resource.RLIM_INFINITY))
 
     def stop(self, sig: int = signal.SIGTERM, timeout: float = 30.0) -> int:
         """Send `sig` to the server process only (its workers notice on their own)."""

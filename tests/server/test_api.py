@@ -123,6 +123,10 @@ def test_engine_refusal_is_a_422_with_its_message(api, monkeypatch):
         raise UnsupportedError("algorithm 4 is not available in this version; use algorithm 1")
 
     monkeypatch.setattr(owcsim.engine.simulate, "simulate", refuse)
+    # the pre-flight runs in its own process: here, in this one, so that the patch applies
+    from owcsim.server import preflight as pf
+
+    api.app.state.preflighter = lambda spec, text: pf.Preflight(pf.preflight(spec), 0)
     p = problem(api.post("/v1/jobs", json=quick_doc(algorithm=4)), 422, "scene-not-runnable")
     assert "algorithm 4 is not available" in p["detail"] and locs(p) == {"body"}
     assert api.get("/v1/jobs").json()["items"] == []
@@ -179,7 +183,7 @@ def test_idempotency_key_returns_the_first_job(api, monkeypatch):
 
     preflights = []
     real = routes.check_runnable
-    monkeypatch.setattr(routes, "check_runnable", lambda *a: (preflights.append(1), real(*a)))
+    monkeypatch.setattr(routes, "check_runnable", lambda *a: (preflights.append(1), real(*a))[1])
     first = api.post("/v1/jobs", json=quick_doc(), headers={"Idempotency-Key": "abc-1"})
     again = api.post("/v1/jobs", json=quick_doc(), headers={"Idempotency-Key": "abc-1"})
     assert first.status_code == again.status_code == 202

@@ -107,6 +107,7 @@ def _strip(res: dict) -> dict:
     return res
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
 def test_restart_while_a_job_runs_loses_nothing(tmp_path, sig):
     """Stop the server process mid-job (crash or orderly stop), start it again: every job completes."""

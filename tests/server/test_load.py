@@ -10,6 +10,7 @@ import threading
 import time
 
 import httpx
+import pytest
 
 from owcsim.clients import Client, RetryPolicy
 
@@ -24,6 +25,7 @@ def _pct(values, q):
     return values[min(len(values) - 1, int(round(q / 100 * (len(values) - 1))))]
 
 
+@pytest.mark.slow
 def test_200_submissions_from_20_clients(tmp_path):
     statuses: dict[int, int] = {}
     lock = threading.Lock()
@@ -99,3 +101,56 @@ def test_200_submissions_from_20_clients(tmp_path):
           f"p99 {_pct(latency, 99):.3f} s, max {max(latency):.3f} s; answers {dict(sorted(statuses.items()))}")
     print(f"load: /v1/health during the run ({len(health)} probes): p50 {1e3 * statistics.median(health):.1f} ms, "
           f"p99 {1e3 * _pct(health, 99):.1f} ms, max {1e3 * max(health):.1f} ms")
+
+
+@pytest.mark.slow
+def test_health_answers_while_60_clients_download_large_results(tmp_path):
+    """Issue 11, item 3: 60 concurrent CSV downloads of a result of 900 links x 200 bins (~19 MB each)
+    must not hold up /v1/health (the old routes rendered each CSV in the shared thread pool: 60 s)."""
+    doc = quick_doc(paths=1024, direction="forward", t_max_s=2e-7)
+    doc["receivers"] = []
+    doc["receiver_grids"] = [{"id_prefix": "g", "origin": [0.5, 0.5, 0.0], "size": [4.0, 4.0],
+                              "spacing": 4.0 / 29, "area": 1e-4}]
+    with ServerProcess(tmp_path / "jobs.sqlite", max_connections=500) as srv:
+        with Client(srv.url) as owc:
+            job = owc.submit(doc)
+            job.wait(timeout=120)
+        url = f"{srv.url}/v1/jobs/{job.id}/result.csv"
+        health: list[float] = []
+        failures: list[str] = []
+        stop = threading.Event()
+
+        def download():
+            try:
+                with httpx.Client(timeout=120, headers={"Accept-Encoding": "identity"}) as h:
+                    for _ in range(2):
+                        with h.stream("GET", url) as r:
+                            assert r.status_code == 200
+                            for _chunk in r.iter_raw():
+                                pass
+            except Exception as exc:  # noqa: BLE001
+                failures.append(repr(exc))
+
+        def monitor():
+            with httpx.Client(base_url=srv.url, timeout=30) as h:
+                while not stop.is_set():
+                    t0 = time.perf_counter()
+                    assert h.get("/v1/health").status_code == 200
+                    health.append(time.perf_counter() - t0)
+                    time.sleep(0.05)
+
+        mon = threading.Thread(target=monitor)
+        mon.start()
+        threads = [threading.Thread(target=download) for _ in range(60)]
+        t0 = time.perf_counter()
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        wall = time.perf_counter() - t0
+        stop.set()
+        mon.join()
+    print(f"\n60 clients x 2 CSV downloads in {wall:.1f} s; /v1/health p50 {_pct(health, 50) * 1e3:.0f} ms, "
+          f"p99 {_pct(health, 99) * 1e3:.0f} ms, max {max(health) * 1e3:.0f} ms over {len(health)} calls")
+    assert not failures, failures[:3]
+    assert max(health) < 2.0  # the container's health check allows 5 s

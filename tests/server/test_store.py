@@ -103,7 +103,35 @@ def test_list_pages(tmp_path):
     store = JobStore(tmp_path / "j.sqlite")
     jobs = _submit(store, 5)
     page, nxt = store.list(None, None, 2, None)
-    assert [j.id for j in page] == [jobs[4].id, jobs[3].id] and nxt == jobs[3].seq
+    assert [j.id for j in page] == [jobs[4].id, jobs[3].id] and nxt == jobs[3].id  # opaque: the last id
     page, nxt = store.list(None, ["queued"], 10, nxt)
     assert [j.id for j in page] == [j.id for j in jobs[2::-1]] and nxt is None
     assert store.counts() == {"queued": 5}
+    with pytest.raises(KeyError):  # another owner's job is no cursor of this owner's listing
+        store.list("someone-else", None, 2, jobs[3].id)
+
+
+def test_restarts_count_toward_the_attempt_limit(tmp_path):
+    store = JobStore(tmp_path / "j.sqlite")
+    job = _submit(store)[0]
+    for attempt in range(1, 4):
+        store.claim_next()
+        store.take_back_running("restart", max_attempts=3)
+        assert store.get(job.id).status == ("queued" if attempt < 3 else "failed")
+    assert "started 3 times" in store.get(job.id).error and store.claim_next() is None
+
+
+def test_an_old_store_is_upgraded_in_place(tmp_path):
+    path = tmp_path / "j.sqlite"
+    con = sqlite3.connect(path)
+    from owcsim.server import store as store_module
+
+    con.executescript(store_module._SCHEMA)
+    con.execute("PRAGMA user_version=1")
+    con.execute("INSERT INTO jobs (id, owner, request_hash, status, created_at) VALUES ('a', '', 'h', 'queued', 0)")
+    con.execute("INSERT INTO job_documents (job_id, scene) VALUES ('a', ?)", (store_module._pack("{}"),))
+    con.commit()
+    con.close()
+    store = JobStore(path, server=True)
+    assert store.get("a").memory_bytes == 0 and store.claim_next()[0] == "a"
+    store.close()

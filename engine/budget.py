@@ -1,0 +1,133 @@
+"""Memory budget of a job: an estimate of its peak memory [bytes] from its settings, before it runs.
+
+The HTTP service admits jobs against a server-wide budget with this estimate and caps each
+worker's address space from it; `benchmarks/job_memory.py` compares it with the measured
+peak RSS of real jobs. Every term is named (`MemoryEstimate`), so that a change of the
+tally shapes (engine/tally.py) is one edit here.
+
+The terms follow the arrays the engine allocates:
+
+- `base`: the interpreter with numpy, scipy, trimesh and Embree imported (measured RSS of a
+  fresh worker, BASE_BYTES);
+- `geometry`: per triangle the float64 vertices and int64 faces, reflectance, group,
+  normals (two layouts), the float32 copy handed to Embree and Embree's BVH
+  (BYTES_PER_TRIANGLE, about 100 B of it Embree's);
+- `devices`: per transmitter and receiver its spec object (grids expanded), id and arrays;
+- `accumulators`: two `tally.Accumulator`s (forward and backward) of n_links x (K+1) x (S+1)
+  x n_bins float64 plus N_GROUPS x n_links x n_bins float64 (+ the per-cell moments);
+- `batch`: batches in flight (1 serial, 2 x workers in a pool) each with its dense
+  `BatchTally` (targets x (K+1) x (S+1) x n_bins), its contribution lists (batch_size x
+  targets x (K+S+2) entries of ~40 B) and the per-path link moments of
+  `tally.reduce_contributions` (3 x batch_size x targets float64, and a copy);
+- `result`: the result document, per link n_bins x (K+S+4) numbers as Python floats in
+  lists and again as JSON text (~70 B each).
+
+When K, S or the time window are "auto", the estimate takes the most the engine may choose
+(auto.PILOT_CAP orders; the pilot's longest window), i.e. an upper bound.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+from owcsim.schemas import SceneSpec
+
+from .auto import PILOT_CAP
+from .constants import SPEED_OF_LIGHT
+from .tally import N_GROUPS
+
+#: Peak RSS of a worker process with the engine imported that runs a 1-link, 50-bin job and renders
+#: its result [B] (benchmarks/job_memory.py: 114 MB measured; rounded up).
+BASE_BYTES = 128 * 2**20
+#: Bytes per scene triangle: vertices and faces (~72 + 24), reflectance, group, normals (2 x 24),
+#: float32 copy for Embree (36) and Embree's BVH (~100) [B].
+BYTES_PER_TRIANGLE = 320
+#: Bytes per device: pydantic spec object of a (grid-expanded) receiver, its id, its array rows [B].
+BYTES_PER_DEVICE = 3_000
+#: Bytes per contribution of a batch (target, cell, delay, power, path and temporaries) [B].
+BYTES_PER_CONTRIBUTION = 40
+#: Bytes per number of the result document (Python float in a list + JSON text) [B].
+BYTES_PER_RESULT_NUMBER = 70
+#: Extent assumed for the automatic time window when the scene's is unknown [m] (as engine/auto.py).
+DEFAULT_EXTENT_M = 10.0
+
+
+@dataclass(frozen=True)
+class MemoryEstimate:
+    """The terms of a job's peak memory [B]; `total` is their sum."""
+
+    base: int
+    geometry: int
+    devices: int
+    accumulators: int
+    batch: int
+    result: int
+
+    @property
+    def total(self) -> int:
+        return sum(asdict(self).values())
+
+
+def _triangles(spec: SceneSpec) -> int:
+    """Triangles of the room, furniture and inline meshes (file/base64 meshes: pass `triangles`)."""
+    return (12 if spec.room is not None else 0) + 12 * len(spec.furniture) + sum(len(m.faces or ()) for m in spec.meshes)
+
+
+def _extent(spec: SceneSpec) -> float:
+    if spec.room is not None:
+        return float(max(spec.room.size))
+    return DEFAULT_EXTENT_M
+
+
+def memory_estimate(spec: SceneSpec, *, triangles: int | None = None, extent_m: float | None = None,
+                    workers: int = 1) -> MemoryEstimate:
+    """Peak memory of `spec` run with `workers` engine processes [B], term by term.
+
+    `triangles`: the scene's triangle count if known (meshes given as files); `extent_m`: the
+    scene's largest side [m] if known (bounds the automatic window).
+    """
+    sim = spec.simulation
+    n_tx = len(spec.transmitters)
+    n_rx = sum(1 for _ in spec.receivers) + sum(g.count for g in spec.receiver_grids)
+    n_links = n_tx * n_rx
+    k = sim.max_reflections if sim.max_reflections is not None else PILOT_CAP
+    if sim.algorithm == 5:
+        s = sim.max_scattering if sim.max_scattering is not None else PILOT_CAP
+    elif sim.algorithm == "auto":
+        s = PILOT_CAP if spec.medium is not None else 1
+    else:
+        s = sim.scattering_orders
+    if sim.t_max_s is not None:
+        n_bins = sim.n_bins
+    else:  # the pilot's window (auto.resolve): the automatic window ends inside it
+        extent = extent_m if extent_m is not None else _extent(spec)
+        t_long = (k + s + 3) * 1.8 * extent / SPEED_OF_LIGHT
+        n_bins = max(1, math.ceil(t_long / sim.time_bin_s))
+    cells = (k + 1) * (s + 1)
+    targets = {"forward": n_rx, "backward": n_tx}.get(sim.direction, max(n_rx, n_tx))
+    batch_paths = sim.batch_size
+    tri = triangles if triangles is not None else _triangles(spec)
+
+    accumulators = 2 * (n_links * cells * (n_bins + 4) * 8 + N_GROUPS * n_links * n_bins * 8
+                        + n_links * (N_GROUPS + 13) * 8)
+    per_batch = (targets * cells * (n_bins + 4) * 8 * 2  # BatchTally.cir and the bincount it came from
+                 + batch_paths * targets * (k + s + 2) * BYTES_PER_CONTRIBUTION
+                 + 2 * 3 * batch_paths * targets * 8)  # per-path link moments (abc) and their transposed copy
+    in_flight = 1 if workers <= 1 else 2 * workers
+    geometry = tri * BYTES_PER_TRIANGLE
+    # A pool's workers each hold the scene and compute one batch at a time.
+    pool = 0 if workers <= 1 else workers * (BASE_BYTES + geometry + per_batch)
+    return MemoryEstimate(
+        base=BASE_BYTES,
+        geometry=geometry,
+        devices=(n_tx + n_rx) * BYTES_PER_DEVICE,
+        accumulators=accumulators,
+        batch=in_flight * per_batch + pool,
+        result=n_links * n_bins * (k + s + 4) * BYTES_PER_RESULT_NUMBER,
+    )
+
+
+def job_memory_bytes(spec: SceneSpec, *, triangles: int | None = None, extent_m: float | None = None,
+                     workers: int = 1) -> int:
+    """Estimated peak memory of the job [B] (see `memory_estimate` for the terms)."""
+    return memory_estimate(spec, triangles=triangles, extent_m=extent_m, workers=workers).total
