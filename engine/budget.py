@@ -13,14 +13,16 @@ The terms follow the arrays the engine allocates:
   normals (two layouts), the float32 copy handed to Embree and Embree's BVH
   (BYTES_PER_TRIANGLE, about 100 B of it Embree's);
 - `devices`: per transmitter and receiver its spec object (grids expanded), id and arrays;
-- `accumulators`: two `tally.Accumulator`s (forward and backward) of n_links x (K+1) x (S+1)
-  x n_bins float64 plus N_GROUPS x n_links x n_bins float64 (+ the per-cell moments);
-- `batch`: batches in flight (1 serial, 2 x workers in a pool) each with its dense
-  `BatchTally` (targets x (K+1) x (S+1) x n_bins), its contribution lists (batch_size x
-  targets x (K+S+2) entries of ~40 B) and the per-path link moments of
-  `tally.reduce_contributions` (3 x batch_size x targets float64, and a copy);
-- `result`: the result document, per link n_bins x (K+S+4) numbers as Python floats in
-  lists and again as JSON text (~70 B each).
+- `accumulators`: two `tally.Accumulator`s (forward and backward): per link the per-path moments
+  (s1, s2, path counts, N_GROUPS path-group and batch-group sums: ~45 numbers); per link with a
+  binned CIR (the job's `outputs`; by default the explicit receivers only) n_bins x (1 + N_GROUPS,
+  + (K+1) + (S+1) with the order split) numbers; per link with the order split 2 (K+1)(S+1);
+  the groups' channels G x n_rx x 13;
+- `batch`: batches in flight (1 serial, 2 x workers in a pool); a batch holds paths x targets capped
+  by `simulate.PATH_TARGET_BUDGET` (dense per-path tallies: 3 arrays and temporaries, ~10 numbers
+  per pair) and one step's next-event estimates capped by `simulate.ESTIMATE_BUDGET` (~60 B each);
+- `result`: the result document: ~40 numbers per link (~70 B each as Python floats and JSON text),
+  plus the CIR links' bins x (K+S+4) and the maps (~12 quantities per grid point and channel).
 
 When K, S or the time window are "auto", the estimate takes the most the engine may choose
 (auto.PILOT_CAP orders; the pilot's longest window), i.e. an upper bound.
@@ -36,6 +38,10 @@ from .auto import PILOT_CAP
 from .constants import SPEED_OF_LIGHT
 from .tally import N_GROUPS
 
+#: The batch caps of engine/simulate.py (copied: simulate imports the whole engine, this module stays light).
+PATH_TARGET_BUDGET = 1 << 20
+ESTIMATE_BUDGET = 1 << 22
+
 #: Peak RSS of a worker process with the engine imported that runs a 1-link, 50-bin job and renders
 #: its result [B] (benchmarks/job_memory.py: 114 MB measured; rounded up).
 BASE_BYTES = 128 * 2**20
@@ -44,8 +50,8 @@ BASE_BYTES = 128 * 2**20
 BYTES_PER_TRIANGLE = 320
 #: Bytes per device: pydantic spec object of a (grid-expanded) receiver, its id, its array rows [B].
 BYTES_PER_DEVICE = 3_000
-#: Bytes per contribution of a batch (target, cell, delay, power, path and temporaries) [B].
-BYTES_PER_CONTRIBUTION = 40
+#: Bytes per next-event estimate of a step (target, k, s, delay, power, path and temporaries) [B].
+BYTES_PER_CONTRIBUTION = 60
 #: Bytes per number of the result document (Python float in a list + JSON text) [B].
 BYTES_PER_RESULT_NUMBER = 70
 #: Extent assumed for the automatic time window when the scene's is unknown [m] (as engine/auto.py).
@@ -105,25 +111,33 @@ def memory_estimate(spec: SceneSpec, *, triangles: int | None = None, extent_m: 
         n_bins = max(1, math.ceil(t_long / sim.time_bin_s))
     cells = (k + 1) * (s + 1)
     targets = {"forward": n_rx, "backward": n_tx}.get(sim.direction, max(n_rx, n_tx))
-    batch_paths = sim.batch_size
     tri = triangles if triangles is not None else _triangles(spec)
-
-    accumulators = 2 * (n_links * cells * (n_bins + 4) * 8 + N_GROUPS * n_links * n_bins * 8
-                        + n_links * (N_GROUPS + 13) * 8)
-    per_batch = (targets * cells * (n_bins + 4) * 8 * 2  # BatchTally.cir and the bincount it came from
-                 + batch_paths * targets * (k + s + 2) * BYTES_PER_CONTRIBUTION
-                 + 2 * 3 * batch_paths * targets * 8)  # per-path link moments (abc) and their transposed copy
+    cir, orders = spec.outputs.per_receiver(len(spec.receivers), n_rx - len(spec.receivers))
+    n_cir, n_ord = n_tx * sum(cir), n_tx * sum(orders)
+    n_split = n_tx * sum(c and o for c, o in zip(cir, orders))
+    n_groups = len(spec.transmitter_groups)
+    per_cir_link = n_bins * (1 + N_GROUPS) + 2 + n_split / max(n_cir, 1) * n_bins * ((k + 1) + (s + 1))
+    accumulators = 2 * 8 * (n_links * 45 + int(n_cir * per_cir_link) + n_ord * 2 * cells + n_groups * n_rx * 13)
+    # Paths per batch as simulate.batch_size caps them (targets x paths and estimates per step bounded).
+    per_segment = 1 + (sim.max_strata + sim.equiangular_points if sim.algorithm in (2, 3, 4, "auto") and
+                       spec.medium is not None else 0)
+    batch_paths = max(1, min(sim.batch_size, PATH_TARGET_BUDGET // max(targets, 1),
+                             ESTIMATE_BUDGET // max(targets * per_segment, 1)))
+    pairs = batch_paths * targets
+    per_batch = pairs * 14 * 8 + min(pairs * per_segment, ESTIMATE_BUDGET) * BYTES_PER_CONTRIBUTION \
+        + (n_cir * n_bins * 8 * 2 if n_cir else 0)
     in_flight = 1 if workers <= 1 else 2 * workers
     geometry = tri * BYTES_PER_TRIANGLE
     # A pool's workers each hold the scene and compute one batch at a time.
     pool = 0 if workers <= 1 else workers * (BASE_BYTES + geometry + per_batch)
+    map_numbers = (n_rx - len(spec.receivers)) * max(n_groups, 1 if n_groups else n_tx) * 12
     return MemoryEstimate(
         base=BASE_BYTES,
         geometry=geometry,
         devices=(n_tx + n_rx) * BYTES_PER_DEVICE,
         accumulators=accumulators,
         batch=in_flight * per_batch + pool,
-        result=n_links * n_bins * (k + s + 4) * BYTES_PER_RESULT_NUMBER,
+        result=(n_links * 40 + n_cir * n_bins * (k + s + 4) + map_numbers) * BYTES_PER_RESULT_NUMBER,
     )
 
 

@@ -199,3 +199,16 @@ def test_command_line_prints_a_map_summary_and_writes_map_files(tmp_path, capsys
     names = {p.name for p in (tmp_path / "out").iterdir()}
     assert {"result.json", "links.csv", "map_plane.nc", "maps.mat", "map_plane_ceiling_illuminance_lx.png"} <= names
     assert "cir.csv" not in names  # no link asked for a CIR
+
+
+def test_memory_estimate_follows_the_batch_cap_and_stays_bounded_for_large_maps():
+    """engine/budget.py copies the batch caps (it must not import the engine's heavy modules): they agree, and
+    a map's estimate grows with receivers only through per-link numbers, not links x bins."""
+    from owcsim.engine import budget
+
+    assert (budget.PATH_TARGET_BUDGET, budget.ESTIMATE_BUDGET) == (simulate_module.PATH_TARGET_BUDGET,
+                                                                   simulate_module.ESTIMATE_BUDGET)
+    small = budget.memory_estimate(spec(komine_doc(spacing=0.5, algorithm=1, max_reflections=20, t_max_s=4e-7)))
+    large = budget.memory_estimate(spec(komine_doc(spacing=0.0156, algorithm=1, max_reflections=20, t_max_s=4e-7)))
+    assert large.batch <= 2 * small.batch + 2**20  # the batch is capped whatever the receiver count
+    assert large.total < 2 * 2**30  # a 99 856-point map in under 2 GB

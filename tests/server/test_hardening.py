@@ -82,14 +82,13 @@ def _grid_doc(n_side: int, **sim) -> dict:
     doc["receivers"] = []
     doc["receiver_grids"] = [{"id_prefix": "g", "origin": [0.5, 0.5, 0.0], "size": [4.0, 4.0],
                               "spacing": 4.0 / (n_side - 1), "area": 1e-4}]
+    doc["outputs"] = {"cir": True, "orders": True}  # a grid gets no CIR unless asked: these jobs are large on purpose
     return doc
 
 
 def test_2_results_are_streamed_from_stored_renders_in_bounded_memory(tmp_path):
     with app_client(tmp_path, run_jobs=True) as c:
-        doc = _grid_doc(40, t_max_s=2e-7)
-        doc["outputs"] = {"cir": True, "orders": True}  # a grid gets no CIR unless asked: here, a large one
-        job = c.post("/v1/jobs", json=doc).json()  # 1 600 links x 200 bins
+        job = c.post("/v1/jobs", json=_grid_doc(40, t_max_s=2e-7)).json()  # 1 600 links x 200 bins
         wait_for(c, job["id"], "succeeded", timeout=60)
         store = c.app.state.store
         assert store.render_names(job["id"]) == {"result.json.gz", "result.csv.gz", "result.npz"}
@@ -153,9 +152,10 @@ def test_4_estimate_terms_follow_the_tally_shapes():
 
     small = memory_estimate(SceneSpec.model_validate(_grid_doc(10, t_max_s=1e-7)))
     more_bins = memory_estimate(SceneSpec.model_validate(_grid_doc(10, t_max_s=2e-7)))
-    links, cells = 100, (1 + 1) * (0 + 1)  # K = 1, algorithm 1: S = 0
-    # doubling the bins adds the accumulators of the added 100 bins exactly (2 directions, float64)
-    assert more_bins.accumulators - small.accumulators == 2 * (links * cells + N_GROUPS * links) * 100 * 8
+    links, orders = 100, (1 + 1) + (0 + 1)  # K = 1, algorithm 1: S = 0; CIR split by k and by s
+    # doubling the bins adds the accumulators of the added 100 bins exactly (2 directions, float64): per CIR link
+    # the total, N_GROUPS batch groups and the split by order
+    assert more_bins.accumulators - small.accumulators == 2 * links * (1 + N_GROUPS + orders) * 100 * 8
     auto = memory_estimate(SceneSpec.model_validate(_grid_doc(10, t_max_s=None, max_reflections=None)))
     assert auto.accumulators > 10 * small.accumulators  # automatic K and window: the most the engine may choose
 
