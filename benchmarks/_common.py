@@ -22,3 +22,15 @@ def best_of(repeats: int, fn):
         value = fn()
         best = min(best, time.perf_counter() - t)
     return best, value
+
+
+def rss_mb(pid: int) -> float:
+    """Resident memory of process `pid` [MB] (Linux /proc), 0 when it is gone."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return 0.0

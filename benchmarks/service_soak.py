@@ -32,18 +32,10 @@ sys.path.insert(0, str(ROOT))
 import httpx  # noqa: E402
 
 from owcsim.clients import Client, RetryPolicy  # noqa: E402
+from benchmarks._common import rss_mb  # noqa: E402
 from tests.server.helpers import ServerProcess, quick_doc  # noqa: E402
 
 
-def _rss_mb(pid: int) -> float:
-    try:
-        with open(f"/proc/{pid}/status") as f:
-            for line in f:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1]) / 1024
-    except OSError:
-        pass
-    return 0.0
 
 
 def _strip(result: dict) -> dict:
@@ -98,7 +90,7 @@ def main() -> int:
             t.start()
         t_kill = time.monotonic() + rng.uniform(1.0, 5.0)
         while time.monotonic() < t_kill:
-            peak_rss = max(peak_rss, _rss_mb(srv.proc.pid))
+            peak_rss = max(peak_rss, rss_mb(srv.proc.pid))
             time.sleep(0.05)
         workers = _running_workers(db)
         if workers and rng.random() < 0.4:
@@ -125,7 +117,7 @@ def main() -> int:
     deadline = time.monotonic() + 600
     with httpx.Client(base_url=srv.url, timeout=30) as h:
         while True:
-            peak_rss = max(peak_rss, _rss_mb(srv.proc.pid))
+            peak_rss = max(peak_rss, rss_mb(srv.proc.pid))
             jobs = h.get("/v1/jobs", params={"limit": 500}).json()["items"]
             if all(j["status"] in ("succeeded", "failed", "cancelled") for j in jobs) or time.monotonic() > deadline:
                 break

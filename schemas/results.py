@@ -32,7 +32,18 @@ class CirPublic(PublicModel):
         None, description="[s][bin], s = 0..S of the algorithm (when the order split is asked)")
 
 
-class LinkPublic(PublicModel):
+class LightingPublic(PublicModel):
+    """Illuminance and link-budget figures of a link or a group's channel (null when not asked)."""
+
+    illuminance_lx: float | None = Field(None, description="direct illuminance on the receiver plane [lx] (when "
+                                         "the transmitters give a luminous output)")
+    snr_db: float | None = Field(None, description="electrical SNR [dB] (with `link_budget`)")
+    ber: float | None = Field(None, description="bit-error rate of OOK-NRZ (with `link_budget`)")
+    max_bit_rate_bps: float | None = Field(None, description="bit rate the delay spread allows, 1/(10 tau_rms) "
+                                           "[bit/s] (with `link_budget`)")
+
+
+class LinkPublic(LightingPublic):
     """One transmitter-receiver link. Quantities of a masked receiver (a grid point in furniture or outside
     the room) are null. The CIR, the figures computed from it and the order split are null when not asked
     (`outputs`)."""
@@ -68,16 +79,10 @@ class LinkPublic(PublicModel):
     dc_gain_by_scattering_order_stderr: list[float | None] | None = None
     early_gain: float | None = Field(None, description="power per watt arriving before t_min_s (not in the CIR)")
     late_gain: float | None = Field(None, description="power per watt arriving after t_max_s (not in the CIR)")
-    illuminance_lx: float | None = Field(None, description="direct illuminance on the receiver plane [lx] (when "
-                                         "the transmitters give a luminous output)")
-    snr_db: float | None = Field(None, description="electrical SNR [dB] (with `link_budget`)")
-    ber: float | None = Field(None, description="bit-error rate of OOK-NRZ (with `link_budget`)")
-    max_bit_rate_bps: float | None = Field(None, description="bit rate the delay spread allows, 1/(10 tau_rms) "
-                                           "[bit/s] (with `link_budget`)")
     cir: CirPublic | None = None
 
 
-class ChannelPublic(PublicModel):
+class ChannelPublic(LightingPublic):
     """A transmitter group's channel at one receiver: h_g = sum_i P_i h_i / sum_i P_i over its members
     (per watt of the group's total power); received power sum_i P_i H0_i [W]."""
 
@@ -92,12 +97,6 @@ class ChannelPublic(PublicModel):
     mean_delay_s_stderr: float | None = Field(description="standard error of mean_delay_s [s]")
     rms_delay_spread_s: float | None = Field(description="RMS delay spread of the summed channel [s]")
     rms_delay_spread_s_stderr: float | None = Field(description="standard error of rms_delay_spread_s [s]")
-    illuminance_lx: float | None = Field(None, description="direct illuminance on the receiver plane [lx] (when "
-                                         "the transmitters give a luminous output)")
-    snr_db: float | None = Field(None, description="electrical SNR [dB] (with `link_budget`)")
-    ber: float | None = Field(None, description="bit-error rate of OOK-NRZ (with `link_budget`)")
-    max_bit_rate_bps: float | None = Field(None, description="bit rate the delay spread allows, 1/(10 tau_rms) "
-                                           "[bit/s] (with `link_budget`)")
     cir: CirPublic | None = None
 
 

@@ -36,6 +36,21 @@ def room_doc(rho_walls=0.8, rho_floor=0.3, rho_ceiling=0.8, *, tx=(2.5, 2.5, 3.0
     return doc
 
 
+#: Homogeneous smoke of the scattering tests (albedo 0.8, HG g = 0.5).
+SMOKE = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2, "phase": {"type": "hg", "g": 0.5}}
+
+
+def open_doc(D=3.0, medium=SMOKE, **simulation) -> dict:
+    """No surfaces: Tx at the origin facing +x, Rx at (D, 0, 0) facing it, FOV 90 deg."""
+    sim = {"max_reflections": 0, "time_bin_s": 1e-9, "t_max_s": 1e-7, "paths": 40_000, "seed": 17}
+    sim.update(simulation)
+    return {
+        "transmitters": [{"id": "tx", "position": [0, 0, 0], "normal": [1, 0, 0], "lambertian_order": 1}],
+        "receivers": [{"id": "rx", "position": [D, 0, 0], "normal": [-1, 0, 0], "area": 1e-4, "fov_deg": 90}],
+        "medium": medium, "simulation": sim,
+    }
+
+
 def spec(doc: dict) -> SceneSpec:
     return SceneSpec.model_validate(copy.deepcopy(doc))
 

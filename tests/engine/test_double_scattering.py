@@ -8,22 +8,13 @@ from owcsim.engine.medium_nee import simulate_two_sided
 from owcsim.engine.simulate import simulate
 from tests.reference_double import double_scattering
 from tests.reference_volume import single_scattering
-from tests.scenes import room_doc, spec, within
+from tests.scenes import SMOKE, open_doc, room_doc, spec, within
 
-SMOKE = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2, "phase": {"type": "hg", "g": 0.5}}
 # coarse strata: the s = 2 points need not resolve the 1 ns bins for the DC gain (faster per path)
 COARSE = {"segment_time_step_s": 5e-9, "max_strata": 8}
 
 
-def _open_doc(D=3.0, medium=SMOKE, **simulation):
-    """No surfaces: Tx at the origin facing +x, Rx at (D, 0, 0) facing it, FOV 90 deg."""
-    sim = {"max_reflections": 0, "time_bin_s": 1e-9, "t_max_s": 1e-7, "paths": 40_000, "seed": 17}
-    sim.update(simulation)
-    return {
-        "transmitters": [{"id": "tx", "position": [0, 0, 0], "normal": [1, 0, 0], "lambertian_order": 1}],
-        "receivers": [{"id": "rx", "position": [D, 0, 0], "normal": [-1, 0, 0], "area": 1e-4, "fov_deg": 90}],
-        "medium": medium, "simulation": sim,
-    }
+_open_doc = open_doc  # the open-medium scene of tests/scenes.py
 
 
 @pytest.fixture(scope="module")

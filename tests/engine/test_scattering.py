@@ -7,24 +7,15 @@ import pytest
 from owcsim.engine.simulate import simulate
 from tests import reference as ref
 from tests.reference_volume import single_scattering
-from tests.scenes import room_doc, spec, within
+from tests.scenes import SMOKE, open_doc, room_doc, spec, within
 
-SMOKE = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2, "phase": {"type": "hg", "g": 0.5}}
 
 
 def _link(doc, **kw):
     return simulate(spec(doc), **kw)["links"][0]
 
 
-def _open_doc(D=3.0, medium=SMOKE, **simulation):
-    """No surfaces: Tx at the origin facing +x, Rx at (D, 0, 0) facing it, FOV 90 deg."""
-    sim = {"max_reflections": 0, "time_bin_s": 1e-9, "t_max_s": 1e-7, "paths": 40_000, "seed": 17}
-    sim.update(simulation)
-    return {
-        "transmitters": [{"id": "tx", "position": [0, 0, 0], "normal": [1, 0, 0], "lambertian_order": 1}],
-        "receivers": [{"id": "rx", "position": [D, 0, 0], "normal": [-1, 0, 0], "area": 1e-4, "fov_deg": 90}],
-        "medium": medium, "simulation": sim,
-    }
+_open_doc = open_doc  # the open-medium scene of tests/scenes.py
 
 
 CIR_EDGES = np.arange(0, 201) * 2e-10  # 0.2 ns bins up to 40 ns
