@@ -8,10 +8,3 @@ class EngineError(Exception):
 class SceneError(EngineError, ValueError):
     """The scene cannot be simulated as given (message says where and why)."""
 
-
-class UnsupportedError(EngineError):
-    """The request is valid but this version of the engine does not provide it."""
-
-
-class CancelledError(EngineError):
-    """The run was cancelled by its caller."""

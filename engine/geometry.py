@@ -43,8 +43,6 @@ class Geometry:
 
     `reflectance` is each face's total reflectance rho = rho_d + rho_s + rho_m; `material`
     holds the split (bsdf.Materials, per face) when some face is not Lambertian, else None.
-    `oriented` marks faces whose winding is known to point into free space (the room's
-    inward faces, furniture's outward faces); user meshes are two-sided, orientation unknown.
     """
 
     vertices: np.ndarray
@@ -52,7 +50,6 @@ class Geometry:
     reflectance: np.ndarray
     group: np.ndarray
     group_names: list[str]
-    oriented: np.ndarray | None = None
     material: Materials | None = None
 
     @property
@@ -181,8 +178,6 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
     pieces += [_load_mesh(i, m, base_dir) for i, m in enumerate(spec.meshes)]
     if not pieces:
         return Geometry(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0), np.zeros(0, np.int64), [])
-    n_oriented = sum(len(p[1]) for p in pieces[:1 + len(spec.furniture)]) if spec.room is not None else \
-        sum(len(p[1]) for p in pieces[:len(spec.furniture)])
     verts, faces, rho, labels, offset = [], [], [], [], 0
     for v, f, r, names in pieces:
         if not np.all(np.isfinite(v)):
@@ -203,9 +198,8 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
         warnings.warn(f"dropped {int((~ok).sum())} degenerate (zero-area) triangles from {bad}", stacklevel=2)
     if not ok.any():
         raise SceneError("every triangle of the scene is degenerate")
-    oriented = np.arange(len(faces)) < n_oriented
     rho, material = _materials(rho[ok])
-    return Geometry(vertices, faces[ok], rho, group[ok], list(group_names), oriented[ok], material)
+    return Geometry(vertices, faces[ok], rho, group[ok], list(group_names), material)
 
 
 def _f32(a: np.ndarray) -> np.ndarray:

@@ -184,7 +184,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     K, S = settings.max_reflections, settings.max_scattering
     free_flight = settings.free_flight and medium is not None
     segment_scatter = settings.segment_scatter and medium is not None
-    ctx = _Context(scene, targets, tgt, settings, item, sources.positions[i])
+    ctx = _Context(scene, targets, tgt, settings, item)
     ctx.start_tally(item)
 
     w0 = sources.total_response(i)
@@ -319,12 +319,11 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
 class _Context:
     """Per-batch connection machinery and contribution lists (tallied by `reduce`)."""
 
-    def __init__(self, scene, targets, tgt, settings, item, source_position):
+    def __init__(self, scene, targets, tgt, settings, item):
         self.scene, self.targets, self.tgt, self.settings, self.item = scene, targets, tgt, settings, item
         self.t_pos = np.ascontiguousarray(targets.positions[tgt].T)  # (3, T)
         self.t_nrm = np.ascontiguousarray(targets.normals[tgt].T)
         self.t_total = np.array([targets.total_response(int(t)) for t in tgt], float)
-        self.source_position = source_position
         self.out = {k: [] for k in self.KEYS}
         self.mirrors = scene.mirror_planes
         self.builder: BatchBuilder | None = None  # the batch's tally (trace_batch); sub-contexts only connect
@@ -538,7 +537,7 @@ class _Context:
 
     def connect_one(self, j: int, points, weights, paths, **kw) -> None:
         """`connect` to the item's j-th target only (weights that depend on the target)."""
-        sub = _Context(self.scene, self.targets, self.tgt[j:j + 1], self.settings, None, self.source_position)
+        sub = _Context(self.scene, self.targets, self.tgt[j:j + 1], self.settings, None)
         sub.connect(points, points, weights, paths, **kw)
         for key in self.out:
             if key == "target":

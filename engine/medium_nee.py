@@ -279,7 +279,7 @@ def _connect_surface(ctx, j: int, points, spawn, weights, paths, normals) -> Non
     """NEE from surface points to the item's j-th target only (shadow rays from `spawn`)."""
     from .kernel import _Context
 
-    sub = _Context(ctx.scene, ctx.targets, ctx.tgt[j:j + 1], ctx.settings, ctx.item, ctx.source_position)
+    sub = _Context(ctx.scene, ctx.targets, ctx.tgt[j:j + 1], ctx.settings, ctx.item)
     sub.connect(points, spawn, weights, paths, normals=normals)
     for key in ctx.out:
         if key == "target":

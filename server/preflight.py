@@ -15,7 +15,7 @@ thread, which saves the process start. The steps:
 2. the scene is built (geometry on Embree: an unreadable base64 mesh fails here) and the
    engine runs its own entry point on it with the smallest possible settings (one path,
    line of sight only, one time bin, stopped after the first batch). Whatever the engine
-   refuses (SceneError, UnsupportedError, an algorithm it lacks) becomes a 422 problem
+   refuses (a SceneError: an input it cannot simulate) becomes a 422 problem
    with the engine's message, instead of a job that fails after waiting in the queue;
 3. the job's memory estimate (engine.budget) is made with the scene's triangles and extent.
 """
