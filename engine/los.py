@@ -49,8 +49,14 @@ def los_geometry(scene: Scene) -> LosGeometry:
     if len(idx):
         isect = scene.intersector
         if not scene.all_visible:
+            # Off both devices along their normals: a receiver on a floor or a desk top is not hidden by the
+            # surface it sits on, whatever the incidence (ending the ray short of the receiver along the ray
+            # instead dips below that surface past 60 deg from a lamp facing down).
             org = tx.positions[ti[idx]] + isect.offset * tx.normals[ti[idx]]
-            blocked = isect.occluded(org, wdir[idx], d[idx] - 2.0 * isect.offset)
+            end = rx.positions[ri[idx]] + isect.offset * rx.normals[ri[idx]]
+            seg = end - org
+            length = np.linalg.norm(seg, axis=1)
+            blocked = isect.occluded(org, seg / length[:, None], length - isect.offset)
             clear[idx[blocked]] = 0.0
             idx = idx[~blocked]
         if scene.medium is not None and len(idx):

@@ -59,7 +59,7 @@ MAX_LINES = 20
 def _print_links(result: dict) -> None:
     for note in result.get("warnings", []):
         print(f"owcsim: warning: {note}", file=sys.stderr)
-    if len(result["links"]) > MAX_LINES:
+    if result.get("maps") or len(result["links"]) > MAX_LINES:
         from owcsim.schemas.maps import format_summary, maps_from_document
 
         maps, _ = maps_from_document(result)
@@ -77,6 +77,12 @@ def _print_links(result: dict) -> None:
         print(f"{link['transmitter']} -> {link['receiver']} ({link['direction']}): "
               f"H0 = {link['dc_gain']:.6e} ± {nan if err is None else err:.1e}, "
               f"path loss {nan if loss is None else loss:.2f} dB, "
+              f"tau_rms = {(nan if rms is None else rms) * 1e9:.3f} ns")
+    for ch in result.get("channels", []):  # transmitter groups: their summed channel
+        err, rms, loss = ch["dc_gain_stderr"], ch["rms_delay_spread_s"], ch["path_loss_db"]
+        nan = float("nan")
+        print(f"group {ch['group']} -> {ch['receiver']}: H0 = {nan if ch['dc_gain'] is None else ch['dc_gain']:.6e} "
+              f"± {nan if err is None else err:.1e}, path loss {nan if loss is None else loss:.2f} dB, "
               f"tau_rms = {(nan if rms is None else rms) * 1e9:.3f} ns")
 
 

@@ -212,3 +212,38 @@ def test_memory_estimate_follows_the_batch_cap_and_stays_bounded_for_large_maps(
     large = budget.memory_estimate(spec(komine_doc(spacing=0.0156, algorithm=1, max_reflections=20, t_max_s=4e-7)))
     assert large.batch <= 2 * small.batch + 2**20  # the batch is capped whatever the receiver count
     assert large.total < 2 * 2**30  # a 99 856-point map in under 2 GB
+
+
+def test_los_to_a_work_plane_on_a_desk_top_is_not_hidden_by_the_desk():
+    """Grazing links (incidence past 60 deg) to points lying on a desk top: the desk must not shadow them.
+
+    (A shadow ray ended along the ray short of the receiver dipped under the desk top past 60 deg.)"""
+    doc = komine_doc(spacing=0.2, max_reflections=0)
+    doc["furniture"] = [{"name": "desk", "min": [0.8, 0.8, 0.0], "max": [1.2, 1.2, 0.75], "reflectance": 0.5}]
+    doc["receiver_grids"][0].update(origin=[0.8, 0.8, 0.75], size=[0.4, 0.4])
+    res = simulate(spec(doc))
+    grid = res["maps"][0]
+    pts = np.array([r["position"] for r in res["receivers"]])
+    g = doc["receiver_grids"][0]
+    ref = _closed_form_los(pts, np.array(g["normal"], float), g["area"], g["fov_deg"], 70.0)
+    got = np.array(grid["values"]["dc_gain"], float).ravel()
+    np.testing.assert_allclose(got, ref / 4, rtol=1e-12)
+    v = np.array([3.75, 3.75, 3.0]) - pts[0]
+    assert math.degrees(math.acos(v[2] / np.linalg.norm(v))) > 60  # the case that failed is in the grid
+
+
+def test_command_line_summarises_any_map_and_prints_group_channels(tmp_path, capsys):
+    from owcsim.cli import main
+
+    doc = komine_doc(spacing=0.7, max_reflections=0)
+    doc["receiver_grids"][0]["size"] = [0.0, 0.0]  # a one-point grid is still a map
+    scene = tmp_path / "one.json"
+    scene.write_text(json.dumps(doc))
+    assert main(["run", str(scene), "--out", str(tmp_path / "a")]) == 0
+    out = capsys.readouterr().out
+    assert "plane/ceiling" in out and "led1 ->" not in out
+    doc["receivers"], doc["receiver_grids"] = [{"id": "desk", "position": [2.5, 2.5, 0.85], "normal": [0, 0, 1],
+                                                "area": 1e-4}], []
+    scene.write_text(json.dumps(doc))
+    assert main(["run", str(scene), "--out", str(tmp_path / "b")]) == 0
+    assert "group ceiling -> desk: H0 =" in capsys.readouterr().out
