@@ -49,7 +49,7 @@ class Lighting:
             self.illuminance = np.where(np.isfinite(scale)[ti], np.where(ok, e, 0.0), np.nan).reshape(shape)
         self.budget = lb.link_budget_from_spec(spec.link_budget) if spec.link_budget is not None else None
         self.area = rx.area
-        self.channel_arrays: dict[str, dict[str, np.ndarray]] = {}
+        self.channel_arrays: dict[str, np.ndarray] = {}  # quantity -> (G, n_rx)
         self.link_arrays: dict[str, np.ndarray] = {}
 
     def _budget_columns(self, received_power: np.ndarray, rms: np.ndarray, area: np.ndarray) -> dict[str, np.ndarray]:
@@ -82,14 +82,14 @@ class Lighting:
         arrays.update(self._budget_columns(h0 * group_power[:, None], rms, self.area[None, :]))
         for key, values in arrays.items():
             cols[key] = column(values.ravel())
-        self.channel_arrays = {"arrays": arrays}
+        self.channel_arrays = arrays
 
     def map_extra(self, links: list[dict], channels: list[dict]) -> dict[str, dict[str, tuple[np.ndarray, str]]]:
         """{channel name: {quantity: (values per receiver, unit)}} for grid_maps."""
         units = {"illuminance_lx": "lx", "snr_db": "dB", "ber": "1", "max_bit_rate_bps": "bit/s"}
         out: dict[str, dict[str, tuple[np.ndarray, str]]] = {}
         if channels:
-            arrays = self.channel_arrays.get("arrays", {})
+            arrays = self.channel_arrays
             names = list(dict.fromkeys(c["group"] for c in channels))
             for g, name in enumerate(names):
                 out[name] = {q: (a[g], units[q]) for q, a in arrays.items() if np.isfinite(a[g]).any()}

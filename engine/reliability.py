@@ -118,7 +118,7 @@ def from_accumulators(accs, los=None) -> Reliability:
 def may_stop(rel_stderr, rel: Reliability, target: float, served=None) -> bool:
     """The accuracy rule: stop only when every served link meets the target on a trusted error bar.
 
-    rel_stderr: (L,) per-path relative standard error of H0 (tally.combined_rel_stderr);
+    rel_stderr: (L,) per-path relative standard error of H0 (estimates._rel of the merged moments);
     served: (L,) bool, links that run (others are ignored).
     """
     rel_stderr = np.asarray(rel_stderr, float)

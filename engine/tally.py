@@ -325,9 +325,6 @@ class Accumulator:
             self.surface_power[source] = self.surface_power.get(source, 0.0) + batch.surface_power
             self.escaped_power[source] = self.escaped_power.get(source, 0.0) + batch.escaped_power
 
-    def paths_of(self, slots_links: np.ndarray) -> np.ndarray:
-        return self.n_paths.take(slots_links)
-
     def moments(self) -> tuple[np.ndarray, np.ndarray]:
         """Per link: mean of the per-path (a, b, c) (L, 3) and the covariance of that mean (L, 3, 3)."""
         return _mean_cov(self.n_paths, self.s1, self.s2)
@@ -344,19 +341,3 @@ class Accumulator:
             var = np.maximum(np.where(n > 0, self.order_sumsq / np.maximum(n, 1.0), 0.0) - mean ** 2, 0.0) \
                 / np.maximum(n - 1, 1)
         return mean, np.where(n >= 2, var, np.where(n > 0, np.nan, 0.0))
-
-
-def combined_rel_stderr(accs, los: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-    """Relative standard error of H0 per link (or per channel: rows of `weights` (C, L) combine links)
-    over independent accumulators. inf where a serving accumulator has fewer than 2 paths; 0 where H0 = 0."""
-    mean = los.astype(float).copy()
-    var = np.zeros_like(mean)
-    for acc in accs:
-        mu, cov = acc.moments()
-        mean += mu[:, 0]
-        var += cov[:, 0, 0]
-    if weights is not None:
-        mean, var = weights @ mean, (weights ** 2) @ var
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rel = np.where(mean > 0, np.sqrt(np.maximum(var, 0.0)) / mean, 0.0)
-    return np.where(np.isnan(var), np.inf, rel)
