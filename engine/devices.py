@@ -24,6 +24,7 @@ import numpy as np
 from owcsim.schemas import ReceiverSpec, TransmitterSpec
 
 from .errors import SceneError
+from .inputs import read_input
 from .photometry import Photometry, PhotometryError, luminaire_frame, parse_photometry
 from .sampling import sample_cosine_cone, sample_generalized_lambertian, to_world
 
@@ -115,21 +116,11 @@ def unit_normals(specs) -> np.ndarray:
 
 def load_photometry(spec, where: str, base_dir: Path | None) -> Photometry:
     """Read and parse a transmitter's photometric file (inline base64, or a path relative to base_dir)."""
-    import base64
-
     pspec = spec.photometry
-    fmt = pspec.resolved_format
-    if pspec.file is not None:
-        path = Path(pspec.file)
-        if not path.is_absolute() and base_dir is not None:
-            path = base_dir / path
-        if not path.is_file():
-            raise SceneError(f"{where}: photometric file {str(path)!r} not found")
-        data = path.read_bytes()
+    data, path = read_input(pspec.file, pspec.data_base64, base_dir, f"{where}: photometric file")
+    if path is not None:
         where = f"{where} ({path.name})"
-    else:
-        data = base64.b64decode(pspec.data_base64, validate=True)
-    return parse_photometry(data, fmt, where)
+    return parse_photometry(data, pspec.resolved_format, where)
 
 
 def transmitters_from_specs(specs: list[TransmitterSpec], ids: list[str], base_dir: Path | None = None) -> Devices:

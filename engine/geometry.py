@@ -9,7 +9,6 @@ every call passes a fresh array.
 """
 from __future__ import annotations
 
-import base64
 import io
 import warnings
 from dataclasses import dataclass
@@ -27,6 +26,7 @@ from .bsdf import Materials
 
 from .constants import DEGENERATE_AREA_FACTOR, MAX_SCENE_EXTENT, RAY_OFFSET_FACTOR
 from .errors import SceneError
+from .inputs import read_input
 
 # Unit-cube corners and the two triangles of each face, wound so normals point outward.
 _CUBE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
@@ -117,16 +117,9 @@ def _load_mesh(i: int, spec: MeshSpec, base_dir: Path | None, count_only: bool =
         return verts, faces, np.full(len(faces), spec.reflectance), [label] * len(faces)
     fmt = spec.format
     try:
-        if spec.file is not None:
-            path = Path(spec.file)
-            if not path.is_absolute() and base_dir is not None:
-                path = base_dir / path
-            if not path.is_file():
-                raise SceneError(f"{label}: mesh file {str(path)!r} not found")
+        data, path = read_input(spec.file, spec.data_base64, base_dir, f"{label}: mesh file")
+        if path is not None:
             fmt = fmt or path.suffix[1:].lower()
-            data = path.read_bytes()
-        else:
-            data = base64.b64decode(spec.data_base64, validate=True)
         # OBJ objects and groups become separate geometries (trimesh merges them otherwise).
         kw = {"split_objects": True, "split_groups": True} if fmt == "obj" else {}
         loaded = trimesh.load_scene(io.BytesIO(data), file_type=fmt, process=False, **kw)

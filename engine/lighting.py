@@ -16,6 +16,7 @@ import numpy as np
 
 from . import link_budget as lb
 from .los import LosGeometry
+from .result_parts import column
 
 
 class Lighting:
@@ -49,8 +50,6 @@ class Lighting:
             self.illuminance = np.where(np.isfinite(scale)[ti], np.where(ok, e, 0.0), np.nan).reshape(shape)
         self.budget = lb.link_budget_from_spec(spec.link_budget) if spec.link_budget is not None else None
         self.area = rx.area
-        self.channel_arrays: dict[str, np.ndarray] = {}  # quantity -> (G, n_rx)
-        self.link_arrays: dict[str, np.ndarray] = {}
 
     def _budget_columns(self, received_power: np.ndarray, rms: np.ndarray, area: np.ndarray) -> dict[str, np.ndarray]:
         if self.budget is None:
@@ -61,20 +60,15 @@ class Lighting:
             return {"snr_db": lb.to_db(snr), "ber": lb.ber_ook(snr), "max_bit_rate_bps": lb.max_bit_rate(rms)}
 
     def add_link_columns(self, cols: dict, h0: np.ndarray, rms: np.ndarray, masked: np.ndarray) -> None:
-        from .result_parts import column
-
         arrays = {"illuminance_lx": np.where(masked, np.nan, self.illuminance.ravel())}
         power = h0 * np.repeat(self.scene.transmitters.power, self.n_rx)
         arrays.update(self._budget_columns(power, rms, np.tile(self.area, self.n_tx)))
-        self.link_arrays = arrays
         for key, values in arrays.items():
             cols[key] = column(values)
 
     def add_channel_columns(self, cols: dict, weights: np.ndarray, h0: np.ndarray, rms: np.ndarray,
                             group_power: np.ndarray) -> None:
         """weights (G, n_tx); h0, rms (G, n_rx) of the groups' channels; group_power (G,) [W]."""
-        from .result_parts import column
-
         member = weights > 0
         illum = np.where(member[:, :, None], np.nan_to_num(self.illuminance)[None], 0.0).sum(axis=1)
         has = (member & np.isfinite(self.illuminance).any(axis=1)[None, :]).any(axis=1)
@@ -82,19 +76,3 @@ class Lighting:
         arrays.update(self._budget_columns(h0 * group_power[:, None], rms, self.area[None, :]))
         for key, values in arrays.items():
             cols[key] = column(values.ravel())
-        self.channel_arrays = arrays
-
-    def map_extra(self, links: list[dict], channels: list[dict]) -> dict[str, dict[str, tuple[np.ndarray, str]]]:
-        """{channel name: {quantity: (values per receiver, unit)}} for grid_maps."""
-        units = {"illuminance_lx": "lx", "snr_db": "dB", "ber": "1", "max_bit_rate_bps": "bit/s"}
-        out: dict[str, dict[str, tuple[np.ndarray, str]]] = {}
-        if channels:
-            arrays = self.channel_arrays
-            names = list(dict.fromkeys(c["group"] for c in channels))
-            for g, name in enumerate(names):
-                out[name] = {q: (a[g], units[q]) for q, a in arrays.items() if np.isfinite(a[g]).any()}
-        else:
-            for i, name in enumerate(self.scene.transmitters.ids):
-                sl = slice(i * self.n_rx, (i + 1) * self.n_rx)
-                out[name] = {q: (a[sl], units[q]) for q, a in self.link_arrays.items() if np.isfinite(a[sl]).any()}
-        return out

@@ -196,7 +196,7 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
     if lighting is not None:
         lighting.add_link_columns(cols, h0, nan_masked["rms_delay_spread_s"], link_masked)
     links = document_rows(cols, scene.n_links)
-    channels = _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting)
+    channels, channel_cols = _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting)
     rel = reported_rel_stderr(accs, los_gain, scene, plan)
     all_accs = list(accs.values())
     fwd = accs["forward"]
@@ -227,7 +227,8 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
         "families": FAMILIES[spec.simulation.algorithm],
         "time_bins": {"t_min_s": bins.t_min, "time_bin_s": bins.dt, "n_bins": bins.n},
         "links": links, "receivers": receivers, "channels": channels,
-        "maps": grid_maps(spec, scene, links, channels, lighting.map_extra(links, channels) if lighting else None),
+        "maps": grid_maps(spec, scene, channel_cols, [g.name for g in spec.transmitter_groups]) if channels
+        else grid_maps(spec, scene, cols, list(tx.ids)),
         "run": run, "diagnostics": diagnostics, "scene": (original or spec).model_dump(mode="json"),
     }
     return doc
@@ -256,11 +257,11 @@ def _receivers(spec, scene) -> list[dict]:
     return document_rows(cols, len(rx))
 
 
-def _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=None) -> list[dict]:
-    """The transmitter groups' channels at every receiver (group-major)."""
+def _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=None) -> tuple[list[dict], dict]:
+    """The transmitter groups' channels at every receiver (group-major), as rows and as columns."""
     w = plan.group_weights
     if not w.size:
-        return []
+        return [], {}
     mean, cov = channel_moments(accs, los_abc, plan)
     d = metrics.delay_metrics_from_moments(mean, cov)
     n_groups, n_rx = mean.shape[:2]
@@ -294,4 +295,4 @@ def _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=
             groups = sum(wi * m[1] for wi, m in parts)
             se = metrics.bin_stderr(groups, np.ones(len(groups))) if len(groups) >= 2 else np.full(len(total), np.nan)
             cols["cir"][g * n_rx + j] = {"total": total.tolist(), "total_stderr": column(se)}
-    return document_rows(cols, n_groups * n_rx)
+    return document_rows(cols, n_groups * n_rx), cols

@@ -159,7 +159,7 @@ def _num(x) -> float | None:
     return x if math.isfinite(x) else None
 
 
-#: Map quantities: (key in the link/channel rows, unit), and the stderr key where one exists.
+#: Map quantities: key in the link / channel columns -> (unit, the key of its standard error or None).
 MAP_QUANTITIES = {
     "dc_gain": ("1", "dc_gain_stderr"),
     "path_loss_db": ("dB", None),
@@ -168,48 +168,40 @@ MAP_QUANTITIES = {
     "mean_delay_s": ("s", "mean_delay_s_stderr"),
     "rms_delay_spread_s": ("s", "rms_delay_spread_s_stderr"),
 }
+#: Quantities a map has when the scene asks for them (luminous output, link budget): included where finite.
+OPTIONAL_MAP_QUANTITIES = {"illuminance_lx": "lx", "snr_db": "dB", "ber": "1", "max_bit_rate_bps": "bit/s"}
 
 
-def _values(rows: list[dict], key: str) -> np.ndarray:
-    return np.array([r[key] for r in rows], dtype=float)  # None becomes NaN
-
-
-def grid_maps(spec, scene, links: list[dict], channels: list[dict], extra: dict | None = None) -> list[dict]:
-    """Each receiver grid as 2-D arrays, per channel (transmitter group; each transmitter without groups).
-
-    `extra` maps (channel name) -> {quantity: (values over receivers, unit)} added by the link budget.
-    """
+def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[dict]:
+    """Each receiver grid as 2-D arrays per channel: `columns` are the result's link columns (one channel per
+    transmitter) or its group-channel columns, channel-major over the receivers; `names` the channels."""
     if not scene.grid_slices:
         return []
     n_rx = len(scene.receivers)
-    if channels:
-        names = [g.name for g in spec.transmitter_groups]
-        per_channel = [channels[c * n_rx:(c + 1) * n_rx] for c in range(len(names))]
-    else:
-        names = list(scene.transmitters.ids)
-        per_channel = [links[i * n_rx:(i + 1) * n_rx] for i in range(len(names))]
     out = []
     for grid, (first, (nu, nv)) in zip(spec.receiver_grids, scene.grid_slices):
-        sl = slice(first, first + nu * nv)
         u = np.asarray(grid.u, float) / np.linalg.norm(grid.u)
         v = np.asarray(grid.v, float) / np.linalg.norm(grid.v)
-        for name, rows in zip(names, per_channel):
-            part = rows[sl]
+        for c, name in enumerate(names):
+            sl = slice(c * n_rx + first, c * n_rx + first + nu * nv)
+
+            def part(key):
+                return np.array(columns[key][sl], dtype=float).reshape(nu, nv)  # None becomes NaN
+
             values, stderr, units = {}, {}, {}
             for q, (unit, se_key) in MAP_QUANTITIES.items():
                 if q == "received_power_dbm":
-                    p = _values(part, "received_power_w")
+                    p = part("received_power_w")
                     with np.errstate(divide="ignore", invalid="ignore"):
                         arr = np.where(p > 0, 10.0 * np.log10(np.where(p > 0, p, 1.0) / 1e-3), np.nan)
                 else:
-                    arr = _values(part, q)
-                values[q] = column(arr.reshape(nu, nv))
-                units[q] = unit
+                    arr = part(q)
+                values[q], units[q] = column(arr), unit
                 if se_key is not None:
-                    stderr[q] = column(_values(part, se_key).reshape(nu, nv))
-            for q, (arr, unit) in (extra or {}).get(name, {}).items():
-                values[q] = column(np.asarray(arr, float)[sl].reshape(nu, nv))
-                units[q] = unit
+                    stderr[q] = column(part(se_key))
+            for q, unit in OPTIONAL_MAP_QUANTITIES.items():
+                if q in columns and np.isfinite(arr := part(q)).any():
+                    values[q], units[q] = column(arr), unit
             out.append({"grid": grid.id_prefix, "channel": name, "shape": (nu, nv), "origin": tuple(grid.origin),
                         "u": tuple(u.tolist()), "v": tuple(v.tolist()), "spacing": grid.spacing, "units": units,
                         "values": values, "stderr": stderr})
