@@ -51,6 +51,7 @@ from .sampling import cosine_about_soa
 from .segments import equiangular, equiangular_density, time_density, time_strata
 from .scene import Scene
 from .tally import BatchBuilder, BatchTally, TallyPlan, TimeBins
+from .mirrors import connect_mirrors, connect_source_mirrors
 from .medium_nee import (connection_weight, connect_from_target, first_medium_factor, first_segment_branch,
                          first_vertex_factor, side_weight, target_factor)
 
@@ -195,7 +196,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         weights=np.full(n, w0), lengths=np.zeros(n), path=np.arange(n),
         k=np.zeros(n, np.int64), s=np.zeros(n, np.int64), first=np.zeros(n), first_rho=np.full(n, 1.0 / np.pi))
     if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each in algorithm 4
-        ctx.connect_source_mirrors(sources, i, w0 * (0.5 if settings.mis else 1.0), n)
+        connect_source_mirrors(ctx, sources, i, w0 * (0.5 if settings.mis else 1.0), n)
     surface_power = escaped_power = 0.0
     # Segments that leave the scene run to where the medium has absorbed everything.
     far = scene.medium_far_distance
@@ -244,7 +245,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
                 mat = geo.material.take(prims)
                 ctx.connect(points, spawn, sp.weights * share, sp, normals=normals, brdf=(mat, sp.directions))
                 if ctx.mirrors:  # ... -> x -> mirror -> target, through the target's mirror images
-                    ctx.connect_mirrors(points, spawn, sp.weights * share, sp, normals=normals,
+                    connect_mirrors(ctx, points, spawn, sp.weights * share, sp, normals=normals,
                                         brdf=(mat, sp.directions))
                 u = rng.random((2, len(sp)))
                 sp.directions, factor = mat.sample(sp.directions, normals, u[0], u[1])
@@ -411,129 +412,6 @@ class _Context:
             self.out["delay"].append(length * (1.0 / SPEED_OF_LIGHT))
             self.out["power"].append(f)
             self.out["path"].append(paths.path.take(pi))
-
-    def connect_mirrors(self, points, shadow_origins, weights, paths, normals, brdf=None):
-        """NEE from surface vertices to the targets through one perfect-mirror reflection (image method).
-
-        For a mirror plane, the target t seen through it is its image t' (normal and
-        C-frame reflected): the connection x -> y -> t has length |t' - x|, leaves x
-        toward t', and adds the reflection at y (k + 1) with factor rho_m(y). It counts
-        when x and t lie on the same side of the plane, the ray x -> t' first meets a
-        mirror face of that plane (at y), and y sees t. Weights are as for `connect`
-        (Lambertian: rho / pi folded in by the caller; `brdf` = (Materials, arriving dirs)).
-        Paths with two or more consecutive mirror reflections next to the target are not
-        estimated (second-order images).
-        """
-        scene, targets, tgt = self.scene, self.targets, self.tgt
-        isect, geo = scene.intersector, scene.geometry
-        K = self.settings.max_reflections
-        live = np.flatnonzero(paths.k + 1 <= K)
-        if len(live) == 0:
-            return
-        mat_rho_m = geo.material.rho_m
-        for plane in self.mirrors:
-            side_x = _dot(points.take(live, axis=1) - plane.point[:, None], plane.normal[:, None])
-            images = plane.reflect_points(self.t_pos)  # (3, T)
-            img_nrm = plane.reflect_vectors(self.t_nrm)
-            side_t = _dot(self.t_pos - plane.point[:, None], plane.normal[:, None])
-            for j in range(len(tgt)):  # a loop over devices
-                # same side as the target, and off the plane (a vertex on the mirror cannot reflect on it)
-                ok = live[(side_x * side_t[j] > 0) & (np.abs(side_x) > 4.0 * isect.offset)]
-                if len(ok) == 0:
-                    continue
-                to = images[:, j:j + 1] - points.take(ok, axis=1)
-                d2 = _dot(to, to)
-                d = np.sqrt(d2)
-                wdir = to / d
-                ct = -_dot(to, img_nrm[:, j:j + 1]) / d
-                cs = _dot(to, normals.take(ok, axis=1)) / d
-                keep = np.flatnonzero((cs > 0) & ((ct > 0) | (not targets.front_only)))
-                if len(keep) == 0:
-                    continue
-                ok, d, d2, wdir, ct, cs = ok.take(keep), d.take(keep), d2.take(keep), wdir.take(keep, axis=1), \
-                    ct.take(keep), cs.take(keep)
-                lobe = cs
-                if brdf is not None:
-                    mat, arriving = brdf
-                    lobe = lobe * mat.take(ok).eval(arriving.take(ok, axis=1), normals.take(ok, axis=1), wdir)
-                back = -plane.reflect_vectors(wdir)  # from the real target toward y
-                f = weights.take(ok) * lobe * targets.response(np.full(len(ok), tgt[j]), ct, back.T) / d2
-                self._record_mirror(plane, j, points, shadow_origins, ok, f, d, wdir, paths, mat_rho_m)
-
-    def connect_source_mirrors(self, sources, i, w0, n_paths):
-        """Source -> one mirror reflection -> target: a constant every path of the batch adds."""
-        isect = self.scene.intersector
-        pos = sources.positions[i][:, None]
-        nrm = sources.normals[i][:, None]
-        one = _Paths(origins=pos, directions=nrm, weights=np.array([w0]), lengths=np.zeros(1),
-                     path=np.zeros(1, np.int64), k=np.zeros(1, np.int64), s=np.zeros(1, np.int64),
-                     first=np.zeros(1), first_rho=np.full(1, 1.0 / np.pi))
-        mark = len(self.out["power"])
-        targets, tgt = self.targets, self.tgt
-        for plane in self.mirrors:
-            side_x = _dot(pos - plane.point[:, None], plane.normal[:, None])
-            images = plane.reflect_points(self.t_pos)
-            img_nrm = plane.reflect_vectors(self.t_nrm)
-            side_t = _dot(self.t_pos - plane.point[:, None], plane.normal[:, None])
-            for j in range(len(tgt)):
-                if not side_x[0] * side_t[j] > 0:
-                    continue
-                to = images[:, j:j + 1] - pos
-                d = np.sqrt(_dot(to, to))
-                wdir = to / d
-                ct = -_dot(to, img_nrm[:, j:j + 1]) / d
-                src = sources.response(np.array([i]), _dot(wdir, nrm), wdir.T) / sources.total_response(i)
-                back = -plane.reflect_vectors(wdir)
-                f = w0 * src * targets.response(np.array([tgt[j]]), ct, back.T) / (d * d)
-                if f[0] > 0:
-                    self._record_mirror(plane, j, pos, pos + isect.offset * wdir, np.zeros(1, np.int64), f, d, wdir,
-                                        one, self.scene.geometry.material.rho_m)
-        for key in self.out:  # every path of the batch carries the same contribution
-            added = self.out[key][mark:]
-            self.out[key][mark:] = [np.tile(np.arange(n_paths), len(a)) if key == "path" else np.repeat(a, n_paths)
-                                    for a in added]
-
-    def _record_mirror(self, plane, j, points, shadow_origins, ok, f, d, wdir, paths, rho_m):
-        """Visibility x -> y (first hit on the plane's mirror faces) and y -> target, rho_m(y); then record."""
-        scene, isect, medium = self.scene, self.scene.intersector, self.scene.medium
-        sel = np.flatnonzero(f > 0)
-        if len(sel) == 0:
-            return
-        ok, f, d, wdir = ok.take(sel), f.take(sel), d.take(sel), wdir.take(sel, axis=1)
-        x, so = points.take(ok, axis=1), shadow_origins.take(ok, axis=1)
-        cos_p = np.maximum(np.abs(_dot(wdir, plane.normal[:, None])), 1e-300)
-        # distances to the plane along wdir from the vertex (to y) and from the shadow-ray origin
-        t_y = np.abs(_dot(x - plane.point[:, None], plane.normal[:, None])) / cos_p
-        t_s = np.abs(_dot(so - plane.point[:, None], plane.normal[:, None])) / cos_p
-        prim, t_hit = isect.intersect(so.T, wdir.T)
-        hit = (prim >= 0) & (np.abs(t_hit - t_s) <= 4.0 * isect.offset + 1e-6 * t_s)
-        hit[hit] = plane.faces[prim[hit]]
-        sel = np.flatnonzero(hit)
-        if len(sel) == 0:
-            return
-        ok, f, d, wdir, t_y, prim = ok.take(sel), f.take(sel), d.take(sel), wdir.take(sel, axis=1), \
-            t_y.take(sel), prim.take(sel)
-        f = f * rho_m.take(prim)
-        y = points.take(ok, axis=1) + t_y * wdir
-        out_dir = plane.reflect_vectors(wdir)
-        rest = d - t_y
-        side = np.sign(_dot(points.take(ok, axis=1) - plane.point[:, None], plane.normal[:, None]))
-        y_off = y + isect.offset * side * plane.normal[:, None]
-        vis = ~isect.occluded(y_off.T, out_dir.T, rest - 2.0 * isect.offset)
-        sel = np.flatnonzero(vis & (f > 0))
-        if len(sel) == 0:
-            return
-        ok, f, d, wdir, t_y, out_dir, y = ok.take(sel), f.take(sel), d.take(sel), wdir.take(sel, axis=1), \
-            t_y.take(sel), out_dir.take(sel, axis=1), y.take(sel, axis=1)
-        if medium is not None:
-            f = f * medium.transmittance(points.take(ok, axis=1).T, wdir.T, t_y) \
-                * medium.transmittance(y.T, out_dir.T, d - t_y)
-        self.out["target"].append(np.full(len(ok), j, np.int64))
-        self.out["k"].append(paths.k.take(ok) + 1)
-        self.out["s"].append(paths.s.take(ok))
-        self.out["delay"].append((paths.lengths.take(ok) + d) * (1.0 / SPEED_OF_LIGHT))
-        self.out["power"].append(f)
-        self.out["path"].append(paths.path.take(ok))
 
     def connect_one(self, j: int, points, weights, paths, **kw) -> None:
         """`connect` to the item's j-th target only (weights that depend on the target)."""
