@@ -1,13 +1,15 @@
-"""Write a result document to a folder: result.json, links.csv, and what the job computed:
-cir.csv and cir.png for links with a binned CIR; map files (netCDF, .mat, heatmaps) for receiver grids."""
+"""Write a result to a folder: result.json, links.csv, and what the job computed: cir.csv and cir.png
+for links with a binned CIR; map files (netCDF, .mat, heatmaps) for receiver grids.
+
+The result is the typed model (schemas.results.SimulationResultPublic, or the client's Result);
+it becomes JSON here, where its bytes leave the process."""
 from __future__ import annotations
 
 import csv
 import json
-import math
 from pathlib import Path
 
-from .plot import plot_cir
+from owcsim.schemas.results import SimulationResultPublic
 
 #: Scalar columns of links.csv (and of the command line's summaries).
 LINK_COLUMNS = ("transmitter", "receiver", "direction", "paths", "dc_gain", "dc_gain_stderr", "path_loss_db",
@@ -17,17 +19,6 @@ LINK_COLUMNS = ("transmitter", "receiver", "direction", "paths", "dc_gain", "dc_
 COMPACT_JSON_LINKS = 200
 
 
-def _clean(x):
-    """JSON has no NaN/inf: map them to null (the engine already does; this guards the file)."""
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, dict):
-        return {k: _clean(v) for k, v in x.items()}
-    if isinstance(x, list):
-        return [_clean(v) for v in x]
-    return x
-
-
 def safe_cell(value):
     """A CSV cell that a spreadsheet will not run as a formula (ids starting with = + - @ are quoted)."""
     if isinstance(value, str) and value[:1] in ("=", "+", "-", "@", "\t", "\r"):
@@ -35,51 +26,61 @@ def safe_cell(value):
     return "" if value is None else value
 
 
-def write_cir_csv(result: dict, path: Path) -> bool:
+def write_cir_csv(result: SimulationResultPublic, path: Path) -> bool:
     """Long format: one row per (link with a CIR, bin); power per bin per watt, h = power / dt [1/s], per order k.
     Returns False (and writes nothing) when no link has a CIR."""
-    links = [lk for lk in result["links"] if lk.get("cir")]
+    links = [lk for lk in result.links if lk.cir is not None]
     if not links:
         return False
-    tb = result["time_bins"]
-    dt, t0 = tb["time_bin_s"], tb["t_min_s"]
-    k_max = max(len(lk["cir"].get("by_reflection_order") or []) for lk in links) - 1
+    tb = result.time_bins
+    dt, t0 = tb.time_bin_s, tb.t_min_s
+    k_max = max(len(lk.cir.by_reflection_order or []) for lk in links if lk.cir) - 1
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["transmitter", "receiver", "t_start_s", "t_end_s", "h_per_s", "power", "power_stderr"]
                    + [f"power_k{k}" for k in range(k_max + 1)])
         for lk in links:
-            cir = lk["cir"]
-            by_k = cir.get("by_reflection_order") or []
-            for b, p in enumerate(cir["total"]):
-                se = cir["total_stderr"][b]
-                w.writerow([safe_cell(lk["transmitter"]), safe_cell(lk["receiver"]), f"{t0 + b * dt:.6e}",
+            cir = lk.cir
+            assert cir is not None
+            by_k = cir.by_reflection_order or []
+            for b, p in enumerate(cir.total):
+                se = cir.total_stderr[b]
+                w.writerow([safe_cell(lk.transmitter), safe_cell(lk.receiver), f"{t0 + b * dt:.6e}",
                             f"{t0 + (b + 1) * dt:.6e}", f"{p / dt:.9e}", f"{p:.9e}", "" if se is None else f"{se:.3e}"]
                            + [f"{row[b]:.9e}" for row in by_k])
     return True
 
 
-def write_links_csv(result: dict, path: Path) -> None:
+def write_links_csv(result: SimulationResultPublic, path: Path) -> None:
     """One row per link with its scalar figures (empty cells where a figure does not exist)."""
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(LINK_COLUMNS + ("receiver_x_m", "receiver_y_m", "receiver_z_m"))
-        for lk in result["links"]:
-            pos = lk.get("receiver_position") or (None, None, None)
-            w.writerow([safe_cell(lk.get(c)) for c in LINK_COLUMNS] + list(pos))
+        for lk in result.links:
+            w.writerow([safe_cell(getattr(lk, c)) for c in LINK_COLUMNS] + list(lk.receiver_position))
 
 
-def write_outputs(result: dict, out: Path) -> list[Path]:
+def result_json(result: SimulationResultPublic, raw: dict | None = None) -> str:
+    """result.json's text: the document as served when `raw` is given (fields a newer server adds are kept),
+    else the model's; indented for a few links, compact for a map (COMPACT_JSON_LINKS). NaN and inf are null."""
+    indent = 1 if len(result.links) <= COMPACT_JSON_LINKS else None
+    if raw is not None:
+        return json.dumps(raw, indent=indent)
+    return result.model_dump_json(indent=indent)
+
+
+def write_outputs(result: SimulationResultPublic, out: Path, raw: dict | None = None) -> list[Path]:
     out = Path(out)
     paths = [out / "result.json", out / "links.csv"]
-    indent = 1 if len(result["links"]) <= COMPACT_JSON_LINKS else None
-    paths[0].write_text(json.dumps(_clean(result), indent=indent))
+    paths[0].write_text(result_json(result, raw))
     write_links_csv(result, paths[1])
     if write_cir_csv(result, out / "cir.csv"):
+        from .plot import plot_cir  # matplotlib: only when a PNG is written
+
         paths.append(out / "cir.csv")
         plot_cir(result, out / "cir.png")
         paths.append(out / "cir.png")
-    if result.get("maps"):
+    if result.maps:
         paths += write_map_outputs(result, out)
     return paths
 
@@ -90,10 +91,10 @@ def write_outputs(result: dict, out: Path) -> list[Path]:
 HEATMAPS = ("dc_gain", "received_power_dbm", "mean_delay_s", "rms_delay_spread_s", "illuminance_lx", "snr_db")
 
 
-def write_map_outputs(result: dict, out: Path) -> list[Path]:
+def write_map_outputs(result: SimulationResultPublic, out: Path) -> list[Path]:
     """netCDF (one file per grid), maps.mat and heatmap PNGs (HEATMAPS) of the maps (owcsim.schemas.maps)."""
-    from owcsim.schemas.maps import maps_from_document, write_map_files
+    from owcsim.schemas.maps import maps_of_result, write_map_files
 
-    maps, decor = maps_from_document(result)
+    maps, decor = maps_of_result(result)
     drawn = [q for q in HEATMAPS if any(q in m.values for m in maps)]
     return write_map_files(maps, out, decor=decor, heatmaps=drawn)

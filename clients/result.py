@@ -11,20 +11,28 @@ from owcsim.schemas.results import LinkPublic, SimulationResultPublic
 
 
 class Result(SimulationResultPublic):
-    """schemas.results.SimulationResultPublic plus helpers. `raw` is the document exactly as served
-    (fields a newer server adds are kept there, and in the files `save` writes)."""
+    """schemas.results.SimulationResultPublic plus helpers: the same type from `owcsim.simulate` (in this
+    process) and from the HTTP client. `raw` is the document exactly as a server sent it (fields a newer
+    server adds are kept there, and in the result.json `save` writes); an in-process result has none."""
 
-    _raw: dict = PrivateAttr(default_factory=dict)
+    _raw: dict | None = PrivateAttr(default=None)
 
     @classmethod
     def from_document(cls, doc: dict) -> "Result":
+        """A result document received as JSON (the HTTP client)."""
         out = cls.model_validate(doc)
         out._raw = doc
         return out
 
+    @classmethod
+    def of(cls, result: SimulationResultPublic) -> "Result":
+        """The engine's typed result as a Result (its fields shared, not copied or validated again)."""
+        return cls.model_construct(_fields_set=result.model_fields_set, **dict(result))
+
     @property
     def raw(self) -> dict:
-        return self._raw or self.model_dump(mode="json")
+        """The document as served, or this result as a JSON-ready dict."""
+        return self._raw if self._raw is not None else self.model_dump(mode="json")
 
     def link(self, transmitter: str, receiver: str) -> LinkPublic:
         """The link between two devices, by id."""
@@ -35,9 +43,9 @@ class Result(SimulationResultPublic):
 
     def grid_maps(self):
         """The receiver grids as `owcsim.schemas.maps.GridMap`s (2-D arrays with coordinates, units, masks)."""
-        from owcsim.schemas.maps import maps_from_document
+        from owcsim.schemas.maps import maps_of_result
 
-        return maps_from_document(self.raw)[0]
+        return maps_of_result(self)[0]
 
     def to_xarray(self, grid: str | None = None):
         """One grid's maps (all channels) as an xarray Dataset (dims channel, i, j); the first grid by default."""
@@ -58,7 +66,8 @@ class Result(SimulationResultPublic):
 
         from .output import LINK_COLUMNS
 
-        return pd.DataFrame([{c: lk.get(c) for c in LINK_COLUMNS} for lk in self.raw["links"]])
+        return pd.DataFrame([lk.model_dump(mode="json", include=set(LINK_COLUMNS)) for lk in self.links],
+                            columns=list(LINK_COLUMNS))
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The arrays of the server's result.npz: t_edges_s (n_bins + 1) [s]; per link (axis 0, in `links`
@@ -91,7 +100,7 @@ class Result(SimulationResultPublic):
         """h(t) per reflection order and total (clients.plot.plot_cir); saved to `path` if given."""
         from .plot import plot_cir
 
-        return plot_cir(self.raw, path, link)
+        return plot_cir(self, path, link)
 
     def save(self, folder: str | Path) -> list[Path]:
         """Write result.json, cir.csv and cir.png, as `owcsim run` does."""
@@ -99,7 +108,7 @@ class Result(SimulationResultPublic):
 
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
-        return write_outputs(self.raw, folder)
+        return write_outputs(self, folder, self._raw)
 
     def to_json(self) -> str:
-        return json.dumps(self.raw)
+        return json.dumps(self._raw) if self._raw is not None else self.model_dump_json()

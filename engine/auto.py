@@ -1,7 +1,8 @@
 """Model only what the scene requires: the algorithm, K, S and the time window from the accuracy asked.
 
-`resolve(spec)` turns "auto" settings into explicit ones and says why (the `modeled`
-section of the result). Rules (explicit settings always win):
+`plan(spec, scene)` and `finish(step, pilot_result)` turn "auto" settings into explicit ones
+and say why (the `modeled` section of the result); the job runner (engine/simulate.py) runs
+the pilot `plan` asks for between the two, on the job's built scene. Rules (explicit settings always win):
 - algorithm: no medium or sigma_t = 0 everywhere -> vacuum paths (algorithm 1, no
   medium); sigma_s = 0 -> algorithm 1 (exact for a purely absorbing medium);
   scattering -> algorithm 5, the only one that covers every family. In
@@ -21,19 +22,22 @@ which holds for the diffuse field of a closed room; the result says so.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
-
 from pydantic import ValidationError
 
-from owcsim.schemas import SceneSpec
+from owcsim.schemas import OutputsSpec, SceneSpec
+from owcsim.schemas.algorithms import algorithm
+from owcsim.schemas.results import LinkPublic, SimulationResultPublic
 from owcsim.schemas.errors import located
 from owcsim.schemas.simulation import check_bin_budget
 
 from .constants import SPEED_OF_LIGHT
 from .errors import SceneError
-from .media import medium_from_spec
+from .scene import Scene
 
 #: Highest orders the truncation pilot measures.
 PILOT_CAP = 40
@@ -43,12 +47,12 @@ PILOT_RECEIVERS = 8
 PILOT_BINS = 400
 
 
-def choose_algorithm(spec: SceneSpec, scene_bounds=None) -> tuple[int, str, bool]:
-    """(algorithm, reason, drop_medium) for spec.simulation.algorithm = "auto"."""
+def choose_algorithm(spec: SceneSpec, engine_medium, scene_bounds=None) -> tuple[int, str, bool]:
+    """(algorithm, reason, drop_medium) for spec.simulation.algorithm = "auto"; `engine_medium` is the built
+    medium of the scene (media.medium_from_spec(spec.medium): None when sigma_t = 0)."""
     med = spec.medium
     if med is None:
         return 1, "no medium: vacuum paths only (algorithm 1)", True
-    engine_medium = medium_from_spec(med)
     if engine_medium is None:
         return 1, "sigma_t = 0: vacuum paths only (algorithm 1)", True
     bounds = getattr(engine_medium, "bounds", None)
@@ -241,41 +245,83 @@ def validated(doc: dict, what: str) -> SceneSpec:
         raise SceneError(f"{what}: {problems}") from None
 
 
-def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dict]:
-    """Explicit settings for every "auto" one, and the `modeled` section explaining them."""
+@dataclass(frozen=True)
+class PilotRun:
+    """The truncation pilot the job runner must run: its document and its scene (the job's scene with the
+    chosen receivers: nothing rebuilt), the receivers it traces and the caps it measures up to."""
+
+    spec: SceneSpec
+    scene: Scene
+    receivers: list[int]
+    cap_k: int
+    cap_s: int
+    t_long: float
+
+
+@dataclass(frozen=True)
+class Resolution:
+    """The job's settings so far: `spec` (explicit where decided), the `scene` it runs on, the `modeled`
+    section explaining them, the `update`s still to apply after the `pilot` (None: no pilot needed)."""
+
+    original: SceneSpec
+    spec: SceneSpec
+    scene: Scene
+    modeled: dict
+    pilot: PilotRun | None = None
+    update: dict = field(default_factory=dict)
+    doc_update: dict = field(default_factory=dict)
+
+
+def _apply(spec: SceneSpec, scene: Scene, update: dict, doc_update: dict) -> tuple[SceneSpec, Scene]:
+    """The scene document with the chosen settings, and its scene (the built one, its medium dropped when the
+    algorithm runs without it); the budgets that need K, S and the window are checked here."""
+    resolved = spec.model_copy(update={**doc_update, "simulation": spec.simulation.model_copy(update=update)})
+    if resolved.simulation.is_resolved:
+        try:
+            resolved.check_tally_budget()
+        except ValueError as exc:
+            raise SceneError(f"the scene with its automatic settings: {exc}") from None
+    if "medium" in doc_update and scene.medium is not None:
+        return resolved, dataclasses.replace(scene, spec=resolved, medium=None, phase=None,
+                                             medium_far_distance=math.inf)
+    return resolved, dataclasses.replace(scene, spec=resolved)
+
+
+def plan(spec: SceneSpec, scene: Scene) -> Resolution:
+    """First step of the resolution: the algorithm, and the settings known without a pilot; the pilot to run if
+    K, S or the window are automatic (`finish` reads its result)."""
     sim = spec.simulation
     modeled: dict = {"rules": "engine/auto.py", "left_out": []}
     update: dict = {}
     doc_update: dict = {}
     if sim.algorithm == "auto":
         room_bounds = (np.asarray(spec.room.lo), np.asarray(spec.room.hi)) if spec.room is not None else None
-        algorithm, why, drop_medium = choose_algorithm(spec, room_bounds)
-        update["algorithm"] = algorithm
+        number, why, drop_medium = choose_algorithm(spec, scene.medium, room_bounds)
+        update["algorithm"] = number
         modeled["algorithm_reason"] = why
         if drop_medium and spec.medium is not None:
             doc_update["medium"] = None
     else:
-        algorithm = sim.algorithm
-        modeled["algorithm_reason"] = f"algorithm {algorithm} requested"
-    if algorithm != 5:
-        update["max_scattering"] = {1: 1, 2: 1, 3: 1, 4: 2}[algorithm]  # S is fixed by the algorithm (4: s <= 2)
+        number = sim.algorithm
+        modeled["algorithm_reason"] = f"algorithm {number} requested"
+    alg = algorithm(number)
+    if alg.scattering_orders is not None:  # S is fixed by the algorithm (schemas/algorithms.py); the document's
+        update["max_scattering"] = max(alg.scattering_orders, 1)  # field is >= 1 (algorithm 1 tallies S = 0)
     need_k = sim.max_reflections is None
-    need_s = algorithm == 5 and sim.max_scattering is None
+    need_s = alg.scattering_orders is None and sim.max_scattering is None
     need_t = sim.t_max_s is None
-    resolved = spec.model_copy(update={**doc_update, "simulation": sim.model_copy(update=update)})
-    if need_t and not need_k and algorithm == 1 and sim.max_reflections == 0:
+    if need_t and not need_k and number == 1 and sim.max_reflections == 0:
         # Line of sight only: every arrival is a direct path, known without a pilot.
         longest = max(math.dist(t.position, r.position) for t in spec.transmitters for r in _extreme_receivers(spec))
         n_bins = max(1, math.ceil((longest / SPEED_OF_LIGHT - sim.t_min_s) / sim.time_bin_s + 1e-9) + 1)
         update["t_max_s"] = sim.t_min_s + n_bins * sim.time_bin_s
         modeled["time_window_reason"] = "line of sight only: the window ends after the longest direct path"
         need_t = False
-        resolved = spec.model_copy(update={**doc_update, "simulation": sim.model_copy(update=update)})
+    resolved, job_scene = _apply(spec, scene, update, doc_update)
     if not (need_k or need_s or need_t):
         modeled["pilot"] = None
-        return resolved, modeled
-    # --- the truncation pilot ---------------------------------------------------------------
-    scene = scene_builder(resolved)
+        return Resolution(spec, resolved, job_scene, modeled)
+    # --- the truncation pilot: the job's scene with up to PILOT_RECEIVERS of its receivers -------------------
     extent = float(np.ptp(np.concatenate([scene.geometry.vertices, scene.transmitters.positions,
                                           scene.receivers.positions]), axis=0).max()) if len(
         scene.geometry.vertices) else 10.0
@@ -287,22 +333,48 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
         usable = np.arange(len(scene.receivers))
     pick = sorted(set(usable[np.linspace(0, len(usable) - 1, min(len(usable), PILOT_RECEIVERS)).round().astype(int)]
                       .tolist()))
-    pilot_doc = resolved.model_dump(mode="python")
-    pilot_doc["receivers"] = [resolved.receiver_at(i).model_dump(mode="python") for i in pick]
-    pilot_doc["receiver_grids"] = []
-    pilot_doc["transmitter_groups"] = []
-    pilot_doc["outputs"] = {"cir": True, "orders": True}  # the pilot reads the order split and the CIR
-    pilot_doc["simulation"].update(
-        max_reflections=cap_k, max_scattering=cap_s, t_max_s=t_long, time_bin_s=(t_long - sim.t_min_s) / PILOT_BINS,
-        paths=sim.pilot_paths, target_rel_error=None, seed=sim.seed + 1, batch_size=min(sim.batch_size, 4096))
-    pilot = simulate_fn(validated(pilot_doc, "the pilot run that chooses the automatic settings"))
-    links = pilot["links"]
-    h0 = max(max(link["dc_gain"] for link in links), 1e-300)
-    allowed = sim.tolerance * min(link["dc_gain"] for link in links if link["dc_gain"] > 0) \
-        if any(link["dc_gain"] > 0 for link in links) else sim.tolerance * h0
-    rho_max = _max_reflectance(resolved, scene)
+    pilot_spec = resolved.model_copy(update={
+        "receivers": [resolved.receiver_at(i) for i in pick], "receiver_grids": [], "transmitter_groups": [],
+        "outputs": OutputsSpec(cir=True, orders=True),  # the pilot reads the order split and the CIR
+        "simulation": resolved.simulation.model_copy(update=dict(
+            max_reflections=cap_k, max_scattering=cap_s, t_max_s=t_long, time_bin_s=(t_long - sim.t_min_s) / PILOT_BINS,
+            paths=sim.pilot_paths, target_rel_error=None, seed=sim.seed + 1, batch_size=min(sim.batch_size, 4096)))})
+    if not (scene.masked[pick] == "").all():  # every grid point masked: the document check says why
+        pilot_spec = validated(pilot_spec.model_dump(mode="python"), "the pilot run that chooses the automatic settings")
+    pilot = PilotRun(pilot_spec, with_receivers(job_scene, pilot_spec), pick, cap_k, cap_s, t_long)
+    return Resolution(spec, resolved, job_scene, modeled, pilot, update, doc_update)
+
+
+def with_receivers(scene: Scene, spec: SceneSpec) -> Scene:
+    """The built scene with the receivers of `spec` (same surfaces, transmitters and medium): what
+    build_scene(spec) would give, without building the geometry or the medium again."""
+    from .scene import _far_distance, mask_reasons, receivers_from_scene
+
+    receivers, grid_slices = receivers_from_scene(spec)
+    return dataclasses.replace(
+        scene, spec=spec, receivers=receivers, grid_slices=grid_slices,
+        masked=mask_reasons(spec, receivers, len(spec.receivers)),
+        medium_far_distance=_far_distance(spec, scene.geometry, scene.medium, receivers.positions))
+
+
+def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
+    """Second step of the resolution: K, S and the window from the truncation pilot's result."""
+    spec, scene, run = step.original, step.scene, step.pilot
+    assert run is not None
+    sim = spec.simulation
+    modeled, update = dict(step.modeled), dict(step.update)
+    alg = algorithm(update.get("algorithm", sim.algorithm))
+    need_k = sim.max_reflections is None
+    need_s = alg.scattering_orders is None and sim.max_scattering is None
+    need_t = "t_max_s" not in update and sim.t_max_s is None
+    links = pilot.links
+    h0 = max(max(link.dc_gain or 0.0 for link in links), 1e-300)
+    gains = [link.dc_gain for link in links if link.dc_gain]
+    allowed = sim.tolerance * min(gains) if gains else sim.tolerance * h0
+    rho_max = _max_reflectance(spec, scene)
     k_tail = s_tail = 0.0
-    t_mid = pilot["time_bins"]["t_min_s"] + pilot["time_bins"]["time_bin_s"] * (np.arange(PILOT_BINS) + 0.5)
+    bins = pilot.time_bins
+    t_mid = bins.t_min_s + bins.time_bin_s * (np.arange(PILOT_BINS) + 0.5)
     rel = sim.tolerance / 2  # half the allowance to K, half to S (like the power)
     notes = []
 
@@ -310,18 +382,18 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
         """(order, tail, reason) over the pilot links: the largest order any link needs."""
         best = None
         for lk in links:
-            gains, errors = lk[f"dc_gain_by_{key}_order"], lk[f"dc_gain_by_{key}_order_stderr"]
+            gains, errors = getattr(lk, f"dc_gain_by_{key}_order"), getattr(lk, f"dc_gain_by_{key}_order_stderr")
             ratio, how = tail_ratio(gains, errors, bound)
             if key == "scattering" and bound >= 1.0 and not len(scene.geometry.faces):
                 ratio, how = math.inf, ("unbounded: {what} is 1 and no surface closes the medium: light diffuses "
                                         "without loss and the orders decay algebraically, not geometrically")
             delays = None
-            if lk["mean_delay_s"] is not None and lk["rms_delay_spread_s"]:
-                t1, t2 = _order_moments(lk["cir"][f"by_{key}_order"], t_mid)
-                delays = (t1, t2, lk["dc_gain"], lk["mean_delay_s"], lk["rms_delay_spread_s"], rel)
+            if lk.mean_delay_s is not None and lk.rms_delay_spread_s:
+                t1, t2 = _order_moments(getattr(lk.cir, f"by_{key}_order"), t_mid)
+                delays = (t1, t2, lk.dc_gain, lk.mean_delay_s, lk.rms_delay_spread_s, rel)
             n, tail, d0, d_rms = _tail_order(gains, errors, ratio, allowed / 2, cap, delays)
             n = max(n, extra)
-            cand = (n, tail, d0, d_rms, how.format(what=what), lk["rms_delay_spread_s"] or 0.0)
+            cand = (n, tail, d0, d_rms, how.format(what=what), lk.rms_delay_spread_s or 0.0)
             if best is None or (cand[0], cand[1]) > (best[0], best[1]):
                 best = cand
         n, tail, d0, d_rms, how, tau_rms = best
@@ -342,15 +414,15 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
         return n, tail, reason
 
     if need_k:
-        K, k_tail, modeled["max_reflections_reason"] = choose("rho_max", "reflection", rho_max, cap_k)
+        K, k_tail, modeled["max_reflections_reason"] = choose("rho_max", "reflection", rho_max, run.cap_k)
         update["max_reflections"] = K
     if need_s:
-        S, s_tail, modeled["max_scattering_reason"] = choose("albedo_max", "scattering", _max_albedo(resolved),
-                                                             cap_s, extra=1)
+        S, s_tail, modeled["max_scattering_reason"] = choose("albedo_max", "scattering", _max_albedo(step.spec),
+                                                             run.cap_s, extra=1)
         update["max_scattering"] = S
     if need_t:
         dt = sim.time_bin_s
-        edges = pilot["time_bins"]["t_min_s"] + pilot["time_bins"]["time_bin_s"] * np.arange(PILOT_BINS + 1)
+        edges = bins.t_min_s + bins.time_bin_s * np.arange(PILOT_BINS + 1)
         t_end = max(_window_end(edges, lk, allowed / 2) for lk in links)
         t_end = max(t_end, sim.t_min_s + dt)
         try:
@@ -363,16 +435,16 @@ def resolve(spec: SceneSpec, scene_builder, simulate_fn) -> tuple[SceneSpec, dic
             f"window ends at {update['t_max_s'] * 1e9:.1f} ns: the power arriving later, extrapolated from the "
             f"pilot's exponential decay, is < {allowed / 2:.2e} per watt (late power is counted in late_gain, "
             "not dropped)")
-    modeled["pilot"] = {"paths": sim.pilot_paths, "receivers": [scene.receivers.ids[i] for i in pick],
-                        "max_reflections": cap_k, "max_scattering": cap_s, "t_max_s": t_long,
+    modeled["pilot"] = {"paths": sim.pilot_paths, "receivers": [scene.receivers.ids[i] for i in run.receivers],
+                        "max_reflections": run.cap_k, "max_scattering": run.cap_s, "t_max_s": run.t_long,
                         "allowed_truncation_per_watt": float(allowed), "rho_max": rho_max}
     total_tail = float(k_tail + s_tail)
     modeled["truncation_estimate_per_watt"] = total_tail if math.isfinite(total_tail) else None
     modeled["truncation_note"] = ("estimated from the pilot: the orders it measured plus a geometric tail past its "
                                   "last order (" + "; ".join(notes) + "), plus two of its standard errors"
                                   if notes else "no order was chosen automatically")
-    resolved = spec.model_copy(update={**doc_update, "simulation": sim.model_copy(update=update)})
-    return resolved, modeled
+    resolved, job_scene = _apply(spec, scene, update, step.doc_update)
+    return Resolution(spec, resolved, job_scene, modeled)
 
 
 def _extreme_receivers(spec: SceneSpec):
@@ -425,7 +497,7 @@ def unreachable_receivers(scene, seen: np.ndarray | None = None, n_rays: int = 6
     return out
 
 
-def _window_end(edges, link, allowed: float) -> float:
+def _window_end(edges, link: LinkPublic, allowed: float) -> float:
     """Time after which less than `allowed` power arrives, for one pilot link.
 
     The pilot measures the power arriving after each time well while it is a sizeable
@@ -434,8 +506,9 @@ def _window_end(edges, link, allowed: float) -> float:
     extrapolated from a fit of log(power after t) over the well-measured range
     (3e-2 .. 1e-3 of H0), aiming at a third of `allowed`.
     """
-    after = np.cumsum(np.asarray(link["cir"]["total"])[::-1])[::-1] + link["late_gain"]  # after each left edge
-    h0 = link["dc_gain"]
+    assert link.cir is not None and link.dc_gain is not None  # the pilot asks for the CIR of every link
+    after = np.cumsum(np.asarray(link.cir.total)[::-1])[::-1] + (link.late_gain or 0.0)  # after each left edge
+    h0 = link.dc_gain
     if h0 <= 0:
         return float(edges[0])
     direct = np.flatnonzero(after <= allowed)

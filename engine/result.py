@@ -1,4 +1,9 @@
-"""Turn merged tallies into the result document (schemas.results.SimulationResultPublic).
+"""Turn merged tallies into the typed result (schemas.results.SimulationResultPublic).
+
+The result is built as columns (one array per figure over links), turned into rows once and
+validated once into the pydantic model, which the engine returns: the schemas layer sits below
+the engine, so the wire model is the engine's result type too, and the command line, the
+server and the client read its attributes; it becomes JSON only where bytes leave the process.
 
 A link is estimated by one direction's paths, or by both (algorithm 4): independent
 estimators of the same quantity, so means and variances add.
@@ -10,6 +15,7 @@ from importlib.metadata import PackageNotFoundError, version
 
 import numpy as np
 
+from owcsim.schemas.algorithms import Direction, algorithm
 from owcsim.schemas.results import SimulationResultPublic
 
 from . import metrics, mie, reliability
@@ -17,29 +23,6 @@ from .auto import _max_albedo, _scatters
 from .estimates import channel_moments, link_moments, link_reliability, los_moments, reported_rel_stderr
 from .lighting import Lighting
 from .result_parts import cir_block, column, document_rows, grid_maps, order_block
-
-FAMILIES = {
-    1: "paths without scattering (s = 0), reflection orders 0..K; extinction on every segment",
-    2: "s = 0 paths up to K reflections, plus single scattering lit directly by the transmitter: "
-       "Tx -> p -> (k <= K reflections) -> Rx",
-    3: "s = 0 paths up to K reflections, plus single scattering seen directly by the receiver: "
-       "Tx -> (k <= K reflections) -> p -> Rx",
-    4: "s = 0 paths up to K reflections, plus Tx -> p -> (k <= K) -> Rx and Tx -> (k <= K) -> p -> Rx, "
-       "the shared family Tx -> p -> Rx counted once, and the report's in-then-out double scattering "
-       "Tx -> p_in -> (k <= K) -> p_out -> Rx (s = 2)",
-    5: "all paths with at most K reflections and S scattering events, in any order",
-}
-DIRECTION_NAMES = {0: "forward", 1: "backward", 2: "both", 3: "none"}
-LEFT_OUT = {
-    1: ["scattered light (s >= 1)"],
-    2: ["single scattering reached after reflections from the transmitter (Tx -> k >= 1 -> p -> Rx)",
-        "scattering orders s >= 2"],
-    3: ["single scattering lit after reflections (Tx -> p -> k >= 1 -> Rx)", "scattering orders s >= 2"],
-    4: ["single scattering with reflections on both sides of p",
-        "double scattering with reflections before p_in or after p_out", "scattering orders s >= 3"],
-    5: [],
-}
-
 
 def _num(x) -> float | None:
     x = float(x)
@@ -59,12 +42,12 @@ PEAKED_PHASE_G = 0.95
 
 def _warnings(spec, scene) -> list[str]:
     out = []
-    sim = spec.simulation
-    if scene.phase is not None and sim.algorithm > 1 and abs(scene.phase.mean_cosine) > PEAKED_PHASE_G:
+    alg = algorithm(spec.simulation.algorithm)
+    if scene.phase is not None and alg.counts_scattering and abs(scene.phase.mean_cosine) > PEAKED_PHASE_G:
         out.append(f"phase function mean cosine {scene.phase.mean_cosine:.4g}: connections from scattering "
                    "points to point-like devices are heavy-tailed, so the scattered part converges slowly and its "
                    "error bars may be too small; compare runs with different seeds")
-    if sim.algorithm == 1 and _scatters(spec.medium):
+    if not alg.counts_scattering and _scatters(spec.medium):
         out.append("algorithm 1 counts only unscattered light: with sigma_s > 0 it underestimates "
                    "(use algorithm 4 or 5 for scattered light)")
     out += _size_warnings(scene)
@@ -75,10 +58,10 @@ def _warnings(spec, scene) -> list[str]:
 OUTSIDE_WINDOW_WARNING = 0.1
 
 
-def _window_warnings(links) -> list[str]:
+def _window_warnings(cols: dict[str, list]) -> list[str]:
     """Links with much of H0 arriving before t_min_s or after t_max_s (early_gain + late_gain)."""
-    outside = [(lk["early_gain"] + lk["late_gain"]) / lk["dc_gain"] for lk in links
-               if lk["dc_gain"] and lk["early_gain"] is not None]
+    outside = [(early + late) / h0 for h0, early, late in zip(cols["dc_gain"], cols["early_gain"], cols["late_gain"])
+               if h0 and early is not None]
     worst = max(outside, default=0.0)
     if worst <= OUTSIDE_WINDOW_WARNING:
         return []
@@ -117,14 +100,15 @@ def _geometric_tail(gain: float, ratio: float) -> float:
 
 def _modeled(spec, scene, modeled, unreachable, settings) -> dict:
     sim = spec.simulation
+    alg = algorithm(sim.algorithm)
     out = dict(modeled or {"algorithm_reason": f"algorithm {sim.algorithm} requested", "pilot": None})
-    left = list(LEFT_OUT[sim.algorithm]) if spec.medium is not None and _scatters(spec.medium) else []
+    left = list(alg.left_out) if spec.medium is not None and _scatters(spec.medium) else []
     left.append(f"reflection orders above K = {sim.max_reflections}")
-    if sim.algorithm == 5 and scene.medium is not None:
+    if alg.scattering_orders is None and scene.medium is not None:  # S chosen, not fixed by the algorithm
         left.append(f"scattering orders above S = {sim.max_scattering}")
     left.append(f"arrivals after t_max_s = {settings.bins.edges[-1]:.4g} s in the binned CIR (counted in late_gain)")
     out["algorithm"] = sim.algorithm
-    out["families"] = FAMILIES[sim.algorithm] if scene.medium is not None else "vacuum paths, reflection orders 0..K"
+    out["families"] = alg.families if scene.medium is not None else "vacuum paths, reflection orders 0..K"
     out["left_out"] = left
     out["medium"] = mie.medium_report(spec.medium, scene.phase)  # derived coefficients, g, visibility
     out["max_reflections"] = sim.max_reflections
@@ -140,14 +124,14 @@ def _modeled(spec, scene, modeled, unreachable, settings) -> dict:
 def _paths_traced(accs, n_tx: int, n_rx: int) -> int:
     """Paths traced, not path-link pairs: a forward path serves every link of its transmitter
     (the largest count among them), a backward path every link of its receiver."""
-    fwd = accs["forward"].n_paths.reshape(n_tx, n_rx)
-    bwd = accs["backward"].n_paths.reshape(n_tx, n_rx)
+    fwd = accs[Direction.FORWARD].n_paths.reshape(n_tx, n_rx)
+    bwd = accs[Direction.BACKWARD].n_paths.reshape(n_tx, n_rx)
     return int(fwd.max(axis=1).sum() + bwd.max(axis=0).sum())
 
 
 def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info, original=None, modeled=None,
-                 unreachable=(), geometry=None) -> dict:
-    """The result document; every per-link figure is computed for all links at once as arrays."""
+                 unreachable=(), geometry=None) -> SimulationResultPublic:
+    """The typed result; every per-link figure is computed for all links at once as arrays."""
     plan = settings.tally
     bins = plan.bins
     tx, rx = scene.transmitters, scene.receivers
@@ -166,7 +150,7 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
         "transmitter": [tx.ids[i] for i in link_tx], "receiver": [rx.ids[j] for j in link_rx],
         "transmitter_index": link_tx.tolist(), "receiver_index": link_rx.tolist(),
         "receiver_position": [tuple(p) for p in rx.positions[link_rx].tolist()],
-        "direction": [DIRECTION_NAMES[int(d)] for d in directions], "paths": n_paths.tolist(),
+        "direction": [Direction.of_code(d) for d in directions], "paths": n_paths.tolist(),
         "dc_gain": column(h0), "dc_gain_stderr": column(nan_masked["dc_gain_stderr"]),
         "path_loss_db": column(metrics.path_loss_db(h0)),
         "received_power_w": column(h0 * tx.power[link_tx]),
@@ -199,7 +183,7 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
     channels, channel_cols = _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting)
     rel = reported_rel_stderr(accs, los_gain, scene, plan)
     all_accs = list(accs.values())
-    fwd = accs["forward"]
+    fwd = accs[Direction.FORWARD]
     run = {
         "stop_reason": info.stop_reason, "target_rel_error": spec.simulation.target_rel_error,
         "max_dc_gain_rel_stderr": _num(rel.max()) if len(rel) else None,
@@ -220,18 +204,18 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
     receivers = _receivers(spec, scene)
     doc = {
         "owcsim_version": _owcsim_version(), "algorithm": spec.simulation.algorithm,
-        "warnings": _warnings(spec, scene) + _window_warnings(links) + _mask_warnings(scene)
+        "warnings": _warnings(spec, scene) + _window_warnings(cols) + _mask_warnings(scene)
         + reliability.warnings(link_reliability(accs, los_gain), [f"{t}-{r}" for t, r in zip(cols["transmitter"],
                                                                                           cols["receiver"])]),
         "modeled": _modeled(spec, scene, modeled, unreachable, settings),
-        "families": FAMILIES[spec.simulation.algorithm],
+        "families": algorithm(spec.simulation.algorithm).families,
         "time_bins": {"t_min_s": bins.t_min, "time_bin_s": bins.dt, "n_bins": bins.n},
         "links": links, "receivers": receivers, "channels": channels,
         "maps": grid_maps(spec, scene, channel_cols, [g.name for g in spec.transmitter_groups]) if channels
         else grid_maps(spec, scene, cols, list(tx.ids)),
-        "run": run, "diagnostics": diagnostics, "scene": (original or spec).model_dump(mode="json"),
+        "run": run, "diagnostics": diagnostics, "scene": original or spec,  # the model itself: not validated again
     }
-    return doc
+    return SimulationResultPublic.model_validate(doc)
 
 
 def _mask_warnings(scene) -> list[str]:

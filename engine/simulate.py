@@ -1,17 +1,22 @@
-"""Run a job: plan the batches, choose directions, execute, merge, stop on accuracy.
+"""Run a job: build the scene once, choose the automatic settings, plan the batches, execute, merge, stop.
 
-`simulate(spec)` is the engine's entry point. The plan is a function of the scene
-document only (batches, their sizes and their random streams), so the same seed
-gives bit-identical results with any number of workers. In accuracy mode batches
-are issued in rounds (one batch per source) and the run stops after the first
-round at which every link's relative standard error of H0 is at or below the
-target, or when the time budget is spent (the result says which).
+`simulate(spec)` is the engine's entry point and its job runner: it builds the engine
+`Scene` once (or takes a built one), resolves "auto" settings on that scene (engine/auto.py
+says what to run; a truncation pilot, when one is needed, runs here on a receiver subset of
+the same scene), then runs the job and returns the typed result (schemas.results
+.SimulationResultPublic). The plan is a function of the scene document only (batches, their
+sizes and their random streams), so the same seed gives bit-identical results with any
+number of workers. In accuracy mode batches are issued in rounds (one batch per source) and
+the run stops after the first round at which every link's relative standard error of H0 is
+at or below the target, or when the time budget is spent (the result says which).
 """
 from __future__ import annotations
 
 import itertools
 import time
 from collections import deque
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -19,11 +24,13 @@ from typing import Callable
 import numpy as np
 
 from owcsim.schemas import SceneSpec
+from owcsim.schemas.algorithms import Direction, TwoSided, algorithm
+from owcsim.schemas.results import SimulationResultPublic, StopReason
 
+from . import auto
 from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
 from .constants import SPEED_OF_LIGHT
 from .kernel import KernelSettings, WorkItem
-from .auto import resolve, unreachable_receivers, validated
 from .los import line_of_sight, los_geometry
 from .medium_nee import two_sided_settings
 from .result import build_result
@@ -39,8 +46,8 @@ AMORTIZATION_RATIO = 8
 PROGRESS_INTERVAL_S = 0.25
 #: Accuracy mode checks the target only once each link has this many paths.
 MIN_PATHS_FOR_STOP = 2048
-#: Per-link direction codes: paths from the transmitter, from the receiver, or both (algorithm 4).
-FORWARD, BACKWARD, BOTH, SKIP = 0, 1, 2, 3
+#: Per-link direction codes (Direction.code): paths from the transmitter, from the receiver, both, or none.
+FORWARD, BACKWARD, BOTH, SKIP = (d.code for d in Direction)
 #: Most (path, target) pairs, times the estimates per segment, that one batch holds in its dense per-path
 #: tallies and its step's estimate lists (~150 B each): batches shrink as receivers grow, so a batch of a
 #: 100 000-point map needs about as much memory as one of a single link.
@@ -48,15 +55,28 @@ PATH_TARGET_BUDGET = 1 << 20
 #: Most next-event estimates one kernel step of a batch may hold (points along segments multiply them).
 ESTIMATE_BUDGET = 1 << 22
 
-ProgressFn = Callable[[float, dict], None]
+
+@dataclass(frozen=True, slots=True)
+class Progress:
+    """How far a run is, after its latest batch (the server stores it as schemas.jobs.JobProgress)."""
+
+    fraction: float  # estimated fraction done, 0..1
+    paths: int  # paths traced so far by the busiest link
+    batches: int  # batches merged so far
+    dc_gain_rel_stderr: float | None  # current worst relative standard error of H0 (None: not known yet)
+    elapsed_s: float  # since the job started [s]
+
+
+ProgressFn = Callable[[Progress], None]
 
 
 @dataclass
 class RunInfo:
-    stop_reason: str = "paths"
+    stop_reason: StopReason = StopReason.PATHS
     wall_time_s: float = 0.0
     workers: int = 1
     batches: int = 0
+    #: how the directions were chosen (the result's run.direction_choice)
     pilot: dict = field(default_factory=dict)
 
 
@@ -86,73 +106,94 @@ def group_weights(spec: SceneSpec, scene: Scene) -> np.ndarray:
 
 
 def two_sided(spec: SceneSpec, scene: Scene) -> bool:
-    """True when every link runs from both devices under the partition of unity of medium_nee.py: algorithms
-    2-4, and algorithm 5 in a medium unless a direction is requested (bounded weights near point devices)."""
-    a = spec.simulation.algorithm
-    return scene.medium is not None and (a in (2, 3, 4) or (a == 5 and spec.simulation.direction == "auto"))
+    """True when every link runs from both devices under the partition of unity of medium_nee.py: in a
+    medium, algorithms 2-4 always, algorithm 5 unless a direction is requested (bounded weights near point
+    devices); the registry's `two_sided` says which (schemas/algorithms.py)."""
+    rule = algorithm(spec.simulation.algorithm).two_sided
+    return scene.medium is not None and (rule is TwoSided.ALWAYS or (
+        rule is TwoSided.AUTO_DIRECTION and spec.simulation.direction == "auto"))
 
 
 def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = None) -> KernelSettings:
-    """The kernel configuration of the job's algorithm (physics.md section 4); `both_devices` (default: the
-    planner's rule, `two_sided`) gives the settings of links run from both devices (medium_nee.py)."""
+    """The kernel configuration of the job's algorithm (physics.md section 4; its flags from the registry,
+    schemas/algorithms.py); `both_devices` (default: the planner's rule, `two_sided`) gives the settings of
+    links run from both devices (medium_nee.py)."""
     sim = spec.simulation
-    a = sim.algorithm
+    alg = algorithm(sim.algorithm)
     step = sim.segment_time_step_s if sim.segment_time_step_s is not None else sim.time_bin_s
-    settings = _kernel_settings(spec, scene, sim, a, step)
-    both = two_sided(spec, scene) if both_devices is None else both_devices
-    return two_sided_settings(settings, a, scene.medium is not None) if both else settings
-
-
-def _kernel_settings(spec, scene, sim, a, step) -> KernelSettings:
-    return KernelSettings(
+    settings = KernelSettings(
         max_reflections=sim.max_reflections, russian_roulette=sim.russian_roulette,
-        rr_start_depth=sim.rr_start_depth, tally=tally_plan(spec, scene),
-        max_scattering=sim.scattering_orders, free_flight=a == 5, segment_scatter=a in (2, 3, 4),
-        strata_length=step * SPEED_OF_LIGHT, max_strata=sim.max_strata,
-        equiangular_points=sim.equiangular_points, mis=a == 4)
+        rr_start_depth=sim.rr_start_depth, tally=tally_plan(spec, scene), max_scattering=sim.scattering_orders,
+        strata_length=step * SPEED_OF_LIGHT, max_strata=sim.max_strata, equiangular_points=sim.equiangular_points,
+        **alg.kernel)
+    both = two_sided(spec, scene) if both_devices is None else both_devices
+    return two_sided_settings(settings, alg.number, scene.medium is not None) if both else settings
+
+
+@contextmanager
+def _executor(executor: Executor | None, workers: int) -> Iterator[Executor]:
+    """The given executor (left open: a long-lived pool serves many jobs), or one for this job only."""
+    if executor is not None:
+        yield executor
+        return
+    own: Executor = SerialExecutor() if workers <= 1 else ProcessExecutor(workers)
+    try:
+        yield own
+    finally:
+        own.close()
 
 
 def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: int = 1,
              progress: ProgressFn | None = None, should_stop: Callable[[], bool] | None = None,
-             scene: Scene | None = None, executor: Executor | None = None) -> dict:
-    """Simulate the scene document; return the result document (see schemas.results).
+             scene: Scene | None = None, executor: Executor | None = None) -> SimulationResultPublic:
+    """Simulate the scene document; return its typed result (schemas.results.SimulationResultPublic).
 
-    `workers` > 1 starts a process pool for this call; pass a long-lived `executor`
-    instead to reuse warm workers across jobs (it is not closed here).
+    The scene is built once (`scene`: one already built from `spec`, e.g. by a pre-flight) and every
+    step of the job uses it: the automatic settings, their pilot (on a receiver subset of the same
+    scene) and the run. `workers` > 1 starts a process pool for this call; pass a long-lived
+    `executor` instead to reuse warm workers across jobs (it is not closed here). `progress` gets a
+    `Progress` after batches; `should_stop` is asked after every batch of the run (True stops it:
+    stop reason "cancelled").
     """
     t_start = time.perf_counter()
-    original = spec
-    modeled = None
-    if not spec.simulation.is_resolved:
-        spec, modeled = resolve(spec, lambda s: build_scene(s, base_dir),
-                                lambda s: simulate(s, base_dir=base_dir, executor=executor, workers=workers))
-        spec = validated(spec.model_dump(mode="python"), "the scene with its automatic settings")  # budgets
-        scene = None
     scene = scene if scene is not None else build_scene(spec, base_dir)
+    with _executor(executor, workers) as ex:
+        resolved, scene, modeled = _resolve(spec, scene, ex, base_dir)
+        return _run_job(resolved, scene, ex, base_dir, progress, should_stop, t_start, original=spec,
+                        modeled=modeled)
+
+
+def _resolve(spec: SceneSpec, scene: Scene, executor: Executor, base_dir) -> tuple[SceneSpec, Scene, dict | None]:
+    """Explicit settings for the "auto" ones (engine/auto.py), on the built scene: (spec, scene, modeled)."""
+    if spec.simulation.is_resolved:
+        return spec, scene, None
+    step = auto.plan(spec, scene)
+    if step.pilot is not None:  # the truncation pilot: a short run of K, S, window up to their caps
+        pilot = _run_job(step.pilot.spec, step.pilot.scene, executor, base_dir, None, None, time.perf_counter())
+        step = auto.finish(step, pilot)
+    return step.spec, step.scene, step.modeled
+
+
+def _run_job(spec: SceneSpec, scene: Scene, executor: Executor, base_dir, progress, should_stop, t_start: float,
+             original: SceneSpec | None = None, modeled: dict | None = None) -> SimulationResultPublic:
+    """Run a resolved job on its built scene."""
     settings = kernel_settings(spec, scene)
     geometry = los_geometry(scene)
     los_gain, los_delay = line_of_sight(scene, geometry)
     seen = los_gain.reshape(len(scene.transmitters), len(scene.receivers)).any(axis=0)
     masked = np.flatnonzero(scene.masked != "")
-    blocked = unreachable_receivers(scene, seen | (scene.masked != ""))  # a direct view proves reachability
-    own = executor is None
-    if own:
-        executor = SerialExecutor() if workers <= 1 else ProcessExecutor(workers)
+    blocked = auto.unreachable_receivers(scene, seen | (scene.masked != ""))  # a direct view proves reachability
     info = RunInfo(workers=executor.workers)
     job = JobRef(scene, "", "", None) if isinstance(executor, SerialExecutor) else \
         job_ref(scene, str(base_dir) if base_dir is not None else None)
-    try:
-        directions = _choose_directions(scene, spec, settings, executor, job, los_gain, info)
-        rx_of_link = np.arange(scene.n_links) % len(scene.receivers)
-        directions[np.isin(rx_of_link, np.concatenate([blocked, masked]).astype(np.int64))] = SKIP
-        if exact_los_only(scene, settings):
-            directions[:] = SKIP
-            info.stop_reason = "exact"
-            info.pilot = {"rule": "max_reflections = 0 without scattering: line of sight only, in closed form"}
-        accs = _run(scene, spec, settings, executor, job, directions, los_gain, info, progress, should_stop, t_start)
-    finally:
-        if own:
-            executor.close()
+    directions = _choose_directions(scene, spec, settings, executor, job, los_gain, info)
+    rx_of_link = np.arange(scene.n_links) % len(scene.receivers)
+    directions[np.isin(rx_of_link, np.concatenate([blocked, masked]).astype(np.int64))] = SKIP
+    if exact_los_only(scene, settings):
+        directions[:] = SKIP
+        info.stop_reason = StopReason.EXACT
+        info.pilot = {"rule": "max_reflections = 0 without scattering: line of sight only, in closed form"}
+    accs = _run(scene, spec, settings, executor, job, directions, los_gain, info, progress, should_stop, t_start)
     info.wall_time_s = time.perf_counter() - t_start
     return build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info,
                         original=original, modeled=modeled, unreachable=blocked, geometry=geometry)
@@ -178,14 +219,20 @@ def batch_size(sim, settings: KernelSettings, n_targets: int) -> int:
                       ESTIMATE_BUDGET // (n_targets * per_segment)))
 
 
-def _sources(scene: Scene, directions: np.ndarray) -> list[tuple[str, int, tuple[int, ...]]]:
+def _sources(scene: Scene, directions: np.ndarray) -> list[tuple[Direction, int, tuple[int, ...]]]:
     """(direction, source, targets) runs that cover every link in its chosen direction(s)."""
     n_rx = len(scene.receivers)
     codes = directions.reshape(len(scene.transmitters), n_rx)
     fwd, bwd = (codes == FORWARD) | (codes == BOTH), (codes == BACKWARD) | (codes == BOTH)
-    runs = [("forward", i, tuple(np.flatnonzero(fwd[i]).tolist())) for i in range(fwd.shape[0]) if fwd[i].any()]
-    runs += [("backward", j, tuple(np.flatnonzero(bwd[:, j]).tolist())) for j in range(n_rx) if bwd[:, j].any()]
+    runs = [(Direction.FORWARD, i, tuple(np.flatnonzero(fwd[i]).tolist())) for i in range(fwd.shape[0])
+            if fwd[i].any()]
+    runs += [(Direction.BACKWARD, j, tuple(np.flatnonzero(bwd[:, j]).tolist())) for j in range(n_rx)
+             if bwd[:, j].any()]
     return runs
+
+
+#: The random-stream phase of WorkItem.rng: the main run's batches and the direction pilot's are independent.
+MAIN_PHASE, PILOT_PHASE = 0, 1
 
 
 def _items(runs, sim, settings, phase: int, n_paths: int | None):
@@ -194,7 +241,7 @@ def _items(runs, sim, settings, phase: int, n_paths: int | None):
     Every run of a direction has the same batch size (capped by its largest target count), so the
     plan, and with it the random streams, depends on the scene document only."""
     sizes = {d: batch_size(sim, settings, max((len(t) for dd, _, t in runs if dd == d), default=1))
-             for d in ("forward", "backward")}
+             for d in (Direction.FORWARD, Direction.BACKWARD)}
     bs = min(sizes[d] for d in {r[0] for r in runs}) if runs else sim.batch_size
     if n_paths is None:  # accuracy mode: the stopping rule wants reliability.MIN_GROUPS filled batch groups, and
         # a round of many sources checks the target sooner: batches of a quarter (or 1 / sources) of batch_size
@@ -206,11 +253,12 @@ def _items(runs, sim, settings, phase: int, n_paths: int | None):
             yield WorkItem(direction, source, targets, b, size, sim.seed, phase)
 
 
-def _new_accumulators(scene, settings) -> dict[str, Accumulator]:
-    return {d: Accumulator(scene.n_links, settings.tally, backward=d == "backward") for d in ("forward", "backward")}
+def _new_accumulators(scene, settings) -> dict[Direction, Accumulator]:
+    return {d: Accumulator(scene.n_links, settings.tally, backward=d is Direction.BACKWARD)
+            for d in (Direction.FORWARD, Direction.BACKWARD)}
 
 
-def _merge(accs: dict[str, Accumulator], executor, job: JobRef, items, settings, on_batch=None) -> None:
+def _merge(accs: dict[Direction, Accumulator], executor, job: JobRef, items, settings, on_batch=None) -> None:
     """Feed items to the executor and merge their tallies in order; `on_batch` may stop the run."""
     pulled: deque[WorkItem] = deque()
 
@@ -231,55 +279,54 @@ def _merge(accs: dict[str, Accumulator], executor, job: JobRef, items, settings,
 
 
 def _choose_directions(scene, spec, settings, executor, job, los_gain, info) -> np.ndarray:
-    """Per link: 0 = forward (from the transmitter), 1 = backward (from the receiver)."""
+    """Per link: the Direction.code its paths run in (SKIP is set later for links not simulated)."""
     sim = spec.simulation
+    alg = algorithm(sim.algorithm)
     n_tx, n_rx = len(scene.transmitters), len(scene.receivers)
     if two_sided(spec, scene):
         info.pilot = {"rule": f"algorithm {sim.algorithm} in a medium: every link from both devices, each path "
                               "weighted by its share (medium_nee.py: bounded weights near point devices)"}
         return np.full(scene.n_links, BOTH)
-    fixed = {2: ("backward", "algorithm 2 samples in-scattering from the receiver side"),
-             3: ("forward", "algorithm 3 samples out-scattering from the transmitter side"),
-             4: ("both", "algorithm 4 runs both sides and weights their shared family by MIS")}
-    if sim.algorithm in fixed:
-        side, why = fixed[sim.algorithm]
-        info.pilot = {"rule": why}
-        return np.full(scene.n_links, {"forward": FORWARD, "backward": BACKWARD, "both": BOTH}[side])
+    if alg.direction is not None:
+        info.pilot = {"rule": alg.direction_reason}
+        return np.full(scene.n_links, alg.direction.code)
     if sim.direction != "auto":
         info.pilot = {"rule": f"requested: {sim.direction}"}
-        return np.full(scene.n_links, 0 if sim.direction == "forward" else 1)
+        return np.full(scene.n_links, Direction(sim.direction).code)
     if sim.max_reflections == 0:
         info.pilot = {"rule": "max_reflections = 0: line of sight only, computed exactly"}
-        return np.zeros(scene.n_links, np.int64)
+        return np.full(scene.n_links, FORWARD)
     if n_rx >= AMORTIZATION_RATIO * n_tx:
         # A map: forward paths serve every receiver at once, but their next-event estimates from wall points
         # a few cm from a receiver are heavy-tailed, so the map's worst points converge slowly; paths from each
         # receiver to the few luminaires do not (benchmarks/map_scale.py measures both).
         info.pilot = {"rule": f"{n_tx} transmitters x {n_rx} receivers (a map): paths from each receiver to the "
                               "few transmitters; no pilot"}
-        return np.full(scene.n_links, 1)
+        return np.full(scene.n_links, BACKWARD)
     if n_tx >= AMORTIZATION_RATIO * n_rx:
         info.pilot = {"rule": f"{n_tx} transmitters x {n_rx} receivers: the receiver side amortizes its paths "
                               "over the transmitters, no pilot"}
-        return np.full(scene.n_links, 1)
+        return np.full(scene.n_links, BACKWARD)
     # Pilot: a short run each way; efficiency = 1 / (relative variance per path x rays per path),
     # rays shared by the links a source serves. Ray counts (not times) keep the choice deterministic.
+    # Its paths are not merged into the result: the choice depends on their sample variance (and mean), so
+    # the chosen side's pilot paths are a selected sample, not an unbiased one (CHANGELOG, pilot reuse).
     cost_eff = []
-    for code, direction in enumerate(("forward", "backward")):
-        runs = _sources(scene, np.full(scene.n_links, code))
+    for direction in (Direction.FORWARD, Direction.BACKWARD):
+        runs = _sources(scene, np.full(scene.n_links, direction.code))
         accs = _new_accumulators(scene, settings)
-        _merge(accs, executor, job, _items(runs, sim, settings, 1, sim.pilot_paths), settings)
+        _merge(accs, executor, job, _items(runs, sim, settings, PILOT_PHASE, sim.pilot_paths), settings)
         acc = accs[direction]
         n = acc.n_paths.astype(float)
         mean = acc.s1[:, 0] / n
         var = np.maximum(acc.s2[:, 0, 0] / n - mean**2, 0.0)
         h0 = mean + los_gain
         rays_per_path = (acc.rays_intersect + acc.rays_occluded) / max(n.sum(), 1)
-        links_per_source = n_rx if direction == "forward" else n_tx
+        links_per_source = n_rx if direction is Direction.FORWARD else n_tx
         with np.errstate(divide="ignore", invalid="ignore"):
             rel_var = np.where(h0 > 0, var / h0**2, np.inf)
             cost_eff.append((rel_var * rays_per_path / links_per_source, np.sqrt(rel_var), rays_per_path))
-    choice = np.where(cost_eff[1][0] < cost_eff[0][0], 1, 0)
+    choice = np.where(cost_eff[1][0] < cost_eff[0][0], BACKWARD, FORWARD)
     info.pilot = {
         "rule": "pilot: lower relative variance x rays per path, per link",
         "paths_per_direction": sim.pilot_paths,
@@ -301,7 +348,7 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
     n_paths = sim.n_paths
     total_batches = None
     if n_paths is not None and runs:
-        first = next(_items(runs, sim, settings, 0, n_paths))
+        first = next(_items(runs, sim, settings, MAIN_PHASE, n_paths))
         total_batches = len(runs) * -(-n_paths // first.n_paths)
     state = {"done": 0, "worst": float("inf"), "rel_at": -PROGRESS_INTERVAL_S}
 
@@ -326,25 +373,27 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
             frac = min(1.0, max(elapsed / sim.time_budget_s,
                                 0.0 if not np.isfinite(worst) else (target / worst) ** 2 if worst > 0 else 1.0))
         if progress is not None:
-            progress(frac, {"paths": int(max(a.n_paths.max() for a in accs.values())), "batches": state["done"],
-                            "dc_gain_rel_stderr": worst if np.isfinite(worst) else None, "elapsed_s": elapsed})
+            progress(Progress(fraction=frac, paths=int(max(a.n_paths.max() for a in accs.values())),
+                              batches=state["done"], dc_gain_rel_stderr=worst if np.isfinite(worst) else None,
+                              elapsed_s=elapsed))
         if should_stop is not None and should_stop():
-            info.stop_reason = "cancelled"
+            info.stop_reason = StopReason.CANCELLED
             return True
         if total_batches is None and end_of_round:
             served = sum(a.n_paths for a in accs.values())[directions != SKIP]
-            if (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP and worst <= sim.target_rel_error \
+            if (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP \
+                    and worst <= sim.target_rel_error \
                     and may_stop(accs, los_gain, scene, settings.tally, sim.target_rel_error, directions != SKIP):
-                info.stop_reason = "target_reached"
+                info.stop_reason = StopReason.TARGET_REACHED
                 return True
             if elapsed >= sim.time_budget_s:
-                info.stop_reason = "time_budget"
+                info.stop_reason = StopReason.TIME_BUDGET
                 return True
         return False
 
     if not runs:  # every link exact or skipped (unreachable receivers): nothing to run, not an endless loop
-        if info.stop_reason != "exact":
-            info.stop_reason = "nothing_to_simulate"
+        if info.stop_reason is not StopReason.EXACT:
+            info.stop_reason = StopReason.NOTHING_TO_SIMULATE
         return accs
-    _merge(accs, executor, job, _items(runs, sim, settings, 0, n_paths), settings, on_batch)
+    _merge(accs, executor, job, _items(runs, sim, settings, MAIN_PHASE, n_paths), settings, on_batch)
     return accs

@@ -1,18 +1,21 @@
 """The in-process Python API: `owcsim.simulate(scene) -> Result`.
 
 `scene` is a scene document as a dict, a path to a JSON file, or a `SceneSpec`; the result is
-the same `Result` type the HTTP client returns (owcsim.clients.result), built from the
-engine's result document.
+the same `Result` type the HTTP client returns (owcsim.clients.result): the engine's typed
+result (schemas.results.SimulationResultPublic) with numpy arrays, tables, maps and plots.
 """
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 from owcsim.clients.result import Result
 from owcsim.schemas import SceneSpec
 
 from .docs import InputError, format_validation_error, load_scene
+
+if TYPE_CHECKING:
+    from owcsim.engine.simulate import Progress
 
 
 def load(scene: dict | str | Path | SceneSpec) -> tuple[SceneSpec, Path | None]:
@@ -33,15 +36,17 @@ def load(scene: dict | str | Path | SceneSpec) -> tuple[SceneSpec, Path | None]:
 
 
 def simulate(scene: dict | str | Path | SceneSpec, *, workers: int = 1, base_dir: str | Path | None = None,
-             progress: Callable[[float, dict], None] | None = None) -> Result:
+             progress: Callable[[Progress], None] | None = None) -> Result:
     """Simulate a scene in this process and return its Result (see the module docstring).
 
-    `workers` > 1 runs batches in that many processes (same result bits); `progress(fraction, info)` is
-    called after every batch; `base_dir` resolves relative mesh paths (default: the scene file's folder).
-    Raises InputError for an invalid scene and owcsim.engine.errors.EngineError for one the engine refuses.
+    `workers` > 1 runs batches in that many processes (same result bits); `progress(p)` is called
+    after batches with an `owcsim.engine.simulate.Progress` (p.fraction, p.paths, p.batches,
+    p.dc_gain_rel_stderr, p.elapsed_s); `base_dir` resolves relative mesh paths (default: the scene
+    file's folder). Raises InputError for an invalid scene and owcsim.engine.errors.EngineError for
+    one the engine refuses.
     """
     from owcsim.engine.simulate import simulate as run
 
     spec, folder = load(scene)
-    doc = run(spec, base_dir=base_dir if base_dir is not None else folder, workers=workers, progress=progress)
-    return Result.from_document(doc)
+    result = run(spec, base_dir=base_dir if base_dir is not None else folder, workers=workers, progress=progress)
+    return Result.of(result)

@@ -8,8 +8,13 @@ import sys
 import time
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .docs import InputError, load_scene
+
+if TYPE_CHECKING:
+    from owcsim.engine.simulate import Progress
+    from owcsim.schemas.results import SimulationResultPublic
 
 
 def _progress_bar(stream=None):
@@ -18,17 +23,17 @@ def _progress_bar(stream=None):
     state = {"last": 0.0}
     tty = stream.isatty()
 
-    def update(fraction: float, info: dict) -> None:
+    def update(p: Progress) -> None:
         now = time.monotonic()
-        if not tty or (now - state["last"] < 0.1 and fraction < 1.0):
+        if not tty or (now - state["last"] < 0.1 and p.fraction < 1.0):
             return
         state["last"] = now
         width = 30
-        full = int(round(width * min(max(fraction, 0.0), 1.0)))
-        err = info.get("dc_gain_rel_stderr")
+        full = int(round(width * min(max(p.fraction, 0.0), 1.0)))
+        err = p.dc_gain_rel_stderr
         err_txt = f"  rel.err(H0) {err:.2e}" if err is not None else ""
-        stream.write(f"\r[{'#' * full}{'.' * (width - full)}] {100 * fraction:5.1f}%  "
-                     f"{info['paths']:>12,d} paths{err_txt}  {info['elapsed_s']:6.1f} s")
+        stream.write(f"\r[{'#' * full}{'.' * (width - full)}] {100 * p.fraction:5.1f}%  "
+                     f"{p.paths:>12,d} paths{err_txt}  {p.elapsed_s:6.1f} s")
         stream.flush()
 
     def close() -> None:
@@ -56,32 +61,33 @@ def _cmd_validate(args) -> int:
 MAX_LINES = 20
 
 
-def _print_links(result: dict) -> None:
-    for note in result.get("warnings", []):
-        print(f"owcsim: warning: {note}", file=sys.stderr)
-    if result.get("maps") or len(result["links"]) > MAX_LINES:
-        from owcsim.schemas.maps import format_summary, maps_from_document
+def _print_links(result: SimulationResultPublic) -> None:
+    from owcsim.schemas.results import StopReason
 
-        maps, _ = maps_from_document(result)
+    for note in result.warnings:
+        print(f"owcsim: warning: {note}", file=sys.stderr)
+    if result.maps or len(result.links) > MAX_LINES:
+        from owcsim.schemas.maps import format_summary, maps_of_result
+
+        maps, _ = maps_of_result(result)
         if maps:
             print(format_summary(maps))
-        worst = result["run"]["max_dc_gain_rel_stderr"]
-        error = "exact (line of sight in closed form)" if result["run"]["stop_reason"] == "exact" else \
+        worst = result.run.max_dc_gain_rel_stderr
+        error = "exact (line of sight in closed form)" if result.run.stop_reason == StopReason.EXACT else \
             f"largest relative standard error of H0: {worst:.2e}" if worst is not None else "no error estimate"
-        print(f"{len(result['links']):,d} links" + (f", {len(result['channels']):,d} group channels"
-              if result.get("channels") else "") + f"; {error}; all in result.json, links.csv")
+        print(f"{len(result.links):,d} links" + (f", {len(result.channels):,d} group channels"
+              if result.channels else "") + f"; {error}; all in result.json, links.csv")
         return
-    for link in result["links"]:
-        err, rms, loss = link["dc_gain_stderr"], link["rms_delay_spread_s"], link["path_loss_db"]
-        nan = float("nan")  # a missing figure (None in the JSON), never a 0 taken for missing
-        print(f"{link['transmitter']} -> {link['receiver']} ({link['direction']}): "
-              f"H0 = {link['dc_gain']:.6e} ± {nan if err is None else err:.1e}, "
+    nan = float("nan")  # a missing figure (None in the JSON), never a 0 taken for missing
+    for link in result.links:
+        err, rms, loss = link.dc_gain_stderr, link.rms_delay_spread_s, link.path_loss_db
+        print(f"{link.transmitter} -> {link.receiver} ({link.direction}): "
+              f"H0 = {nan if link.dc_gain is None else link.dc_gain:.6e} ± {nan if err is None else err:.1e}, "
               f"path loss {nan if loss is None else loss:.2f} dB, "
               f"tau_rms = {(nan if rms is None else rms) * 1e9:.3f} ns")
-    for ch in result.get("channels", []):  # transmitter groups: their summed channel
-        err, rms, loss = ch["dc_gain_stderr"], ch["rms_delay_spread_s"], ch["path_loss_db"]
-        nan = float("nan")
-        print(f"group {ch['group']} -> {ch['receiver']}: H0 = {nan if ch['dc_gain'] is None else ch['dc_gain']:.6e} "
+    for ch in result.channels:  # transmitter groups: their summed channel
+        err, rms, loss = ch.dc_gain_stderr, ch.rms_delay_spread_s, ch.path_loss_db
+        print(f"group {ch.group} -> {ch.receiver}: H0 = {nan if ch.dc_gain is None else ch.dc_gain:.6e} "
               f"± {nan if err is None else err:.1e}, path loss {nan if loss is None else loss:.2f} dB, "
               f"tau_rms = {(nan if rms is None else rms) * 1e9:.3f} ns")
 
@@ -130,10 +136,10 @@ def _cmd_run(args) -> int:
             executor.close()
     paths = write_outputs(result, out)
     _print_links(result)
-    run = result["run"]
+    run = result.run
     wrote = ", ".join(str(p) for p in paths) if len(paths) <= 4 else \
         f"{len(paths)} files in {out} ({', '.join(p.name for p in paths[:3])}, ...)"
-    print(f"{run['paths_total']:,d} paths in {run['wall_time_s']:.2f} s ({run['stop_reason']}); wrote {wrote}")
+    print(f"{run.paths_total:,d} paths in {run.wall_time_s:.2f} s ({run.stop_reason}); wrote {wrote}")
     return 0
 
 
@@ -198,7 +204,7 @@ def _cmd_submit(args) -> int:
     except (ApiError, ConnectionFailed, JobFailed) as exc:
         print(f"owcsim: error: {exc}", file=sys.stderr)
         return 1
-    _print_links(result.raw)
+    _print_links(result)
     run = result.run
     wrote = f"; wrote {', '.join(str(p) for p in result.save(args.out))}" if args.out else ""
     print(f"{run.paths_total:,d} paths in {run.wall_time_s:.2f} s ({run.stop_reason}); job {job.id}{wrote}")

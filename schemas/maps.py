@@ -25,6 +25,7 @@ import numpy as np
 if TYPE_CHECKING:  # pragma: no cover
     import xarray
 
+    from .results import SimulationResultPublic
     from .scene import SceneSpec
 
 __all__ = ["GridMap", "MapDecor", "format_summary", "from_xarray", "heatmap_png", "masked_points", "summary",
@@ -629,32 +630,24 @@ def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | P
     return path
 
 
-def maps_from_document(result: dict) -> tuple[list[GridMap], MapDecor | None]:
-    """The maps of a result document (`maps`, `receivers`, `scene`) as GridMaps, with the scene's decor."""
-    from .scene import SceneSpec
-
+def maps_of_result(result: "SimulationResultPublic") -> tuple[list[GridMap], MapDecor | None]:
+    """The maps of a result (its `maps`, `receivers` and `scene`) as GridMaps, with the scene's decor."""
     reasons: dict[str, np.ndarray] = {}
-    for m in result.get("maps", []):
-        if m["grid"] not in reasons:
-            mask = np.full(tuple(m["shape"]), "", dtype=object)
-            for r in result.get("receivers", []):
-                if r.get("grid") == m["grid"] and r.get("masked"):
-                    mask[r["i"], r["j"]] = r["masked"]
-            reasons[m["grid"]] = mask.astype(str)
+    for m in result.maps:
+        if m.grid not in reasons:
+            mask = np.full(tuple(m.shape), "", dtype=object)
+            for r in result.receivers:
+                if r.grid == m.grid and r.masked and r.i is not None and r.j is not None:
+                    mask[r.i, r.j] = r.masked
+            reasons[m.grid] = mask.astype(str)
     maps = []
-    for m in result.get("maps", []):
-        nu, nv = m["shape"]
+    for m in result.maps:
+        nu, nv = m.shape
         maps.append(GridMap(
-            grid=m["grid"], channel=m["channel"], origin=np.asarray(m["origin"], float),
-            u=np.asarray(m["u"], float), v=np.asarray(m["v"], float),
-            x=m["spacing"] * np.arange(nu), y=m["spacing"] * np.arange(nv),
-            values={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m["values"].items()},
-            stderr={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m.get("stderr", {}).items()},
-            units=dict(m["units"]), mask_reason=reasons[m["grid"]]))
-    decor = None
-    if result.get("scene") is not None:
-        try:
-            decor = MapDecor.from_scene(SceneSpec.model_validate(result["scene"]))
-        except ValueError:  # a document from a newer server: draw the maps without the room
-            decor = None
-    return maps, decor
+            grid=m.grid, channel=m.channel, origin=np.asarray(m.origin, float),
+            u=np.asarray(m.u, float), v=np.asarray(m.v, float),
+            x=m.spacing * np.arange(nu), y=m.spacing * np.arange(nv),
+            values={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m.values.items()},
+            stderr={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m.stderr.items()},
+            units=dict(m.units), mask_reason=reasons[m.grid]))
+    return maps, MapDecor.from_scene(result.scene)

@@ -8,11 +8,23 @@ from fewer than two batch groups) are null.
 """
 from __future__ import annotations
 
-from typing import Literal
+from enum import StrEnum
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from .algorithms import Direction
 from .scene import SceneSpec
+
+
+class StopReason(StrEnum):
+    """Why a run ended."""
+
+    PATHS = "paths"  # the asked number of paths is traced
+    TARGET_REACHED = "target_reached"  # every link's relative standard error of H0 is at or below the target
+    TIME_BUDGET = "time_budget"  # an accuracy run spent its time_budget_s
+    CANCELLED = "cancelled"  # stopped from outside (should_stop)
+    NOTHING_TO_SIMULATE = "nothing_to_simulate"  # every link exact or skipped (unreachable receivers)
+    EXACT = "exact"  # line of sight only, computed in closed form
 
 
 class PublicModel(BaseModel):
@@ -53,7 +65,7 @@ class LinkPublic(LightingPublic):
     transmitter_index: int
     receiver_index: int
     receiver_position: tuple[float, float, float] = Field(description="position of the receiver [m]")
-    direction: Literal["forward", "backward", "both", "none"]
+    direction: Direction
     paths: int
     dc_gain: float | None
     dc_gain_stderr: float | None
@@ -137,7 +149,7 @@ class TimeBinsPublic(PublicModel):
 
 
 class RunPublic(PublicModel):
-    stop_reason: Literal["paths", "target_reached", "time_budget", "cancelled", "nothing_to_simulate", "exact"]
+    stop_reason: StopReason
     target_rel_error: float | None
     max_dc_gain_rel_stderr: float | None
     wall_time_s: float

@@ -80,16 +80,19 @@ class SceneSpec(SpecModel):
                                  f"the ids are {tx_ids[:10]}{' ...' if len(tx_ids) > 10 else ''}")
             if len(set(g.transmitters)) != len(g.transmitters):
                 raise ValueError(f"transmitter_groups[{gi}] ({g.name}): a transmitter is listed twice")
+        if self.simulation.is_resolved:  # the engine checks the budget once it has chosen K, S and the window
+            self.check_tally_budget()
+        return self
+
+    def check_tally_budget(self) -> None:
+        """ValueError when the outputs asked need more than MAX_TALLY_CELLS cells (resolved settings only)."""
         sim = self.simulation
-        if not sim.is_resolved:  # the engine checks the budget once it has chosen K, S and the window
-            return self
         cells = self.tally_cells(sim.max_reflections, sim.scattering_orders, sim.n_bins)
         if cells > MAX_TALLY_CELLS:
             raise ValueError(
                 f"the binned CIR and order split asked for need {cells} tally cells (links x orders x bins), more "
                 f"than the budget of {MAX_TALLY_CELLS}: widen `time_bin_s`, shorten the window, lower "
                 "`max_reflections` / `max_scattering`, or ask for them on fewer receivers (`outputs`)")
-        return self
 
     def tally_cells(self, max_reflections: int, max_scattering: int, n_bins: int) -> int:
         """Tally cells the asked outputs hold: CIR bins (per order when the split is asked) and order cells."""

@@ -6,6 +6,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
+from .algorithms import algorithm
 from .base import SpecModel
 
 #: Most time bins a job may ask for.
@@ -86,7 +87,7 @@ class SimulationSpec(SpecModel):
     @property
     def scattering_orders(self) -> int:
         """Highest scattering order S the algorithm tallies (resolved settings only)."""
-        return {1: 0, 2: 1, 3: 1, 4: 2}.get(self.algorithm, self.max_scattering)
+        return algorithm(self.algorithm).S(self.max_scattering)
 
     @property
     def tolerance(self) -> float:

@@ -1,4 +1,4 @@
-"""A result document in other forms: the CIR as CSV and as numpy arrays (.npz), h(t) as PNG.
+"""A result (schemas.results.SimulationResultPublic, typed) in other forms: the CIR as CSV and as numpy arrays (.npz), h(t) as PNG.
 
 The one place that turns a result document into files. The service renders the JSON, CSV
 and NPZ once, in the job's worker, when the job ends (`render_all`: compressed files the
@@ -19,9 +19,12 @@ import io
 import threading
 import zipfile
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from owcsim.schemas.results import SimulationResultPublic
 
 #: Rows of the CSV written per chunk.
 CSV_ROWS_PER_CHUNK = 4096
@@ -41,25 +44,26 @@ def csv_cell(text: str) -> str:
     return "'" + text if text[:1] in ("=", "+", "-", "@", "\t", "\r") else text
 
 
-def cir_csv_chunks(result: dict) -> Iterator[str]:
+def cir_csv_chunks(result: SimulationResultPublic) -> Iterator[str]:
     """Long format: one row per (link, bin); power per bin per watt, h = power / dt [1/s], per order k.
 
     Yields the text in chunks of CSV_ROWS_PER_CHUNK rows (bounded memory for any result)."""
-    tb = result["time_bins"]
-    dt, t0 = tb["time_bin_s"], tb["t_min_s"]
-    links = [lk for lk in result["links"] if lk.get("cir")]  # the links that asked for a binned CIR
-    k_max = max((len(lk["cir"].get("by_reflection_order") or []) for lk in links), default=0) - 1
+    tb = result.time_bins
+    dt, t0 = tb.time_bin_s, tb.t_min_s
+    links = [lk for lk in result.links if lk.cir is not None]  # the links that asked for a binned CIR
+    k_max = max((len(lk.cir.by_reflection_order or []) for lk in links if lk.cir), default=0) - 1
     out = io.StringIO(newline="")
     w = csv.writer(out)
     w.writerow(["transmitter", "receiver", "t_start_s", "t_end_s", "h_per_s", "power", "power_stderr"]
                + [f"power_k{k}" for k in range(k_max + 1)])
     rows = 0
     for lk in links:
-        cir = lk["cir"]
-        by_k = cir.get("by_reflection_order") or []
-        tx, rx = csv_cell(lk["transmitter"]), csv_cell(lk["receiver"])
-        for b, p in enumerate(cir["total"]):
-            se = cir["total_stderr"][b]
+        cir = lk.cir
+        assert cir is not None
+        by_k = cir.by_reflection_order or []
+        tx, rx = csv_cell(lk.transmitter), csv_cell(lk.receiver)
+        for b, p in enumerate(cir.total):
+            se = cir.total_stderr[b]
             w.writerow([tx, rx, f"{t0 + b * dt:.6e}", f"{t0 + (b + 1) * dt:.6e}",
                         f"{p / dt:.9e}", f"{p:.9e}", "" if se is None else f"{se:.3e}"]
                        + [f"{row[b]:.9e}" for row in by_k])
@@ -71,7 +75,7 @@ def cir_csv_chunks(result: dict) -> Iterator[str]:
     yield out.getvalue()
 
 
-def cir_csv(result: dict) -> str:
+def cir_csv(result: SimulationResultPublic) -> str:
     """The whole CSV as one string (small results; the service streams `cir_csv_chunks`)."""
     return "".join(cir_csv_chunks(result))
 
@@ -80,42 +84,41 @@ def _float(values) -> np.ndarray:
     return np.array([np.nan if v is None else v for v in values], float)
 
 
-def cir_arrays(result: dict) -> dict[str, np.ndarray]:
+def cir_arrays(result: SimulationResultPublic) -> dict[str, np.ndarray]:
     """Arrays of the result: t_edges_s (n_bins + 1); per link (axis 0, in `links` order) dc_gain,
     dc_gain_stderr, transmitter, receiver; per link with a binned CIR (axis 0, in `links` order; its
     index in `links` is cir_link) cir and cir_stderr (n, n_bins) [power per bin per watt; NaN = no error
     bar] and by_reflection_order (n, K + 1, n_bins; zeros when the order split was not asked)."""
-    tb = result["time_bins"]
-    links = result["links"]
-    n = tb["n_bins"]
-    cir_link = np.array([i for i, lk in enumerate(links) if lk.get("cir")], np.int64)
-    with_cir = [links[i] for i in cir_link]
-    orders = max((len(lk["cir"].get("by_reflection_order") or [[]]) for lk in with_cir), default=1)
-    by_k = np.zeros((len(with_cir), orders, n))
-    for i, lk in enumerate(with_cir):
-        rows = lk["cir"].get("by_reflection_order")
-        if rows:
-            by_k[i, :len(rows)] = rows
+    tb = result.time_bins
+    links = result.links
+    n = tb.n_bins
+    cir_link = np.array([i for i, lk in enumerate(links) if lk.cir is not None], np.int64)
+    cirs = [links[i].cir for i in cir_link]
+    orders = max((len(c.by_reflection_order or [[]]) for c in cirs if c), default=1)
+    by_k = np.zeros((len(cirs), orders, n))
+    for i, c in enumerate(cirs):
+        if c and c.by_reflection_order:
+            by_k[i, :len(c.by_reflection_order)] = c.by_reflection_order
     return {
-        "t_edges_s": tb["t_min_s"] + tb["time_bin_s"] * np.arange(n + 1),
+        "t_edges_s": tb.t_min_s + tb.time_bin_s * np.arange(n + 1),
         "cir_link": cir_link,
-        "cir": np.array([lk["cir"]["total"] for lk in with_cir], float).reshape(len(with_cir), n),
-        "cir_stderr": np.array([_float(lk["cir"]["total_stderr"]) for lk in with_cir]).reshape(len(with_cir), n),
+        "cir": np.array([c.total for c in cirs if c], float).reshape(len(cirs), n),
+        "cir_stderr": np.array([_float(c.total_stderr) for c in cirs if c]).reshape(len(cirs), n),
         "by_reflection_order": by_k,
-        "dc_gain": _float([lk["dc_gain"] for lk in links]),
-        "dc_gain_stderr": _float([lk["dc_gain_stderr"] for lk in links]),
-        "transmitter": np.array([lk["transmitter"] for lk in links], str),
-        "receiver": np.array([lk["receiver"] for lk in links], str),
+        "dc_gain": _float([lk.dc_gain for lk in links]),
+        "dc_gain_stderr": _float([lk.dc_gain_stderr for lk in links]),
+        "transmitter": np.array([lk.transmitter for lk in links], str),
+        "receiver": np.array([lk.receiver for lk in links], str),
     }
 
 
-def cir_npz(result: dict) -> bytes:
+def cir_npz(result: SimulationResultPublic) -> bytes:
     buf = io.BytesIO()
     np.savez_compressed(buf, **cir_arrays(result))
     return buf.getvalue()
 
 
-def render_all(result: dict, result_json: str, folder: Path) -> dict[str, Path]:
+def render_all(result: SimulationResultPublic, result_json: str, folder: Path) -> dict[str, Path]:
     """Write the job-end renders of a result into `folder` (AT_JOB_END); returns {name: path}.
 
     Memory: the CSV and JSON are compressed as they are written; the arrays are those of `cir_arrays`."""
@@ -178,30 +181,43 @@ def npz_png(npz_file, link: int | None = None) -> bytes:
         for name in ("dc_gain", "dc_gain_stderr", "transmitter", "receiver"):
             with archive.open(name + ".npy") as f:
                 per_link[name] = np.lib.format.read_array(f)[cir_link[first:first + count]]
-    links = [{"transmitter": str(per_link["transmitter"][i]), "receiver": str(per_link["receiver"][i]),
-              "dc_gain": float(per_link["dc_gain"][i]),
-              "dc_gain_stderr": None if np.isnan(per_link["dc_gain_stderr"][i]) else float(per_link["dc_gain_stderr"][i]),
-              "cir": {"total": rows["cir"][i].tolist(), "by_reflection_order": rows["by_reflection_order"][i].tolist()}}
-             for i in range(count)]
-    doc = {"time_bins": {"t_min_s": float(edges[0]), "time_bin_s": float(edges[1] - edges[0]), "n_bins": n_bins},
-           "links": links}
-    return cir_png(doc)
-
-
-def cir_png(result: dict, link: int | None = None) -> bytes:
-    """h(t) [1/s] per reflection order and total, one panel per link (up to 6, or the one asked)."""
+    se = per_link["dc_gain_stderr"]
+    panels = [_Panel(str(per_link["transmitter"][i]), str(per_link["receiver"][i]), float(per_link["dc_gain"][i]),
+                     None if np.isnan(se[i]) else float(se[i]), rows["cir"][i], rows["by_reflection_order"][i])
+              for i in range(count)]
     with _DRAWING:
-        return _cir_png(result, link)
+        return _cir_png(float(edges[0]), float(edges[1] - edges[0]), n_bins, panels)
 
 
-def _cir_png(result: dict, link: int | None) -> bytes:
+@dataclass(frozen=True)
+class _Panel:
+    """One link's panel: its ids, H0 with its error, power per bin (total and per reflection order)."""
+
+    transmitter: str
+    receiver: str
+    dc_gain: float | None
+    dc_gain_stderr: float | None
+    total: np.ndarray
+    by_reflection_order: np.ndarray
+
+
+def cir_png(result: SimulationResultPublic, link: int | None = None) -> bytes:
+    """h(t) [1/s] per reflection order and total, one panel per link (up to 6, or the one asked)."""
+    tb = result.time_bins
+    links = result.links if link is None else [result.links[link]]
+    panels = [_Panel(lk.transmitter, lk.receiver, lk.dc_gain, lk.dc_gain_stderr, np.asarray(lk.cir.total, float),
+                     np.asarray(lk.cir.by_reflection_order or [], float).reshape(-1, tb.n_bins))
+              for lk in links if lk.cir is not None][:PLOT_LINKS]
+    with _DRAWING:
+        return _cir_png(tb.t_min_s, tb.time_bin_s, tb.n_bins, panels)
+
+
+def _cir_png(t_min_s: float, time_bin_s: float, n_bins: int, panels: list[_Panel]) -> bytes:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    tb = result["time_bins"]
-    links = result["links"] if link is None else [result["links"][link]]
-    links = links[:6] or [None]
-    t_ns = 1e9 * (tb["t_min_s"] + tb["time_bin_s"] * (np.arange(tb["n_bins"]) + 0.5))
+    links: list[_Panel | None] = list(panels[:6]) or [None]
+    t_ns = 1e9 * (t_min_s + time_bin_s * (np.arange(n_bins) + 0.5))
     fig = Figure(figsize=(8, 3.2 * len(links)))
     FigureCanvasAgg(fig)
     for i, lk in enumerate(links):
@@ -212,19 +228,19 @@ def _cir_png(result: dict, link: int | None) -> bytes:
         if lk is None:
             ax.set_title("no links")
             continue
-        for k, row in enumerate(lk["cir"]["by_reflection_order"][:9]):
-            h = np.asarray(row) / tb["time_bin_s"]
+        for k, row in enumerate(lk.by_reflection_order[:9]):
+            h = np.asarray(row) / time_bin_s
             if h.any():
                 ax.plot(t_ns, h, lw=0.9, label=f"k = {k}")
-        total = np.asarray(lk["cir"]["total"]) / tb["time_bin_s"]
+        total = np.asarray(lk.total) / time_bin_s
         ax.plot(t_ns, total, "k", lw=1.2, label="total")
         nz = np.flatnonzero(total > 0)
         if len(nz):
             ax.set_xlim(t_ns[nz[0]] - 2, t_ns[min(nz[-1] + 1, len(t_ns) - 1)])
             ax.set_yscale("log")
             ax.set_ylim(max(total[nz].min(), total[nz].max() * 1e-6) * 0.5, total[nz].max() * 2)
-        err = lk["dc_gain_stderr"]
-        ax.set_title(f"{lk['transmitter']} -> {lk['receiver']}: H0 = {lk['dc_gain']:.4e}"
+        err = lk.dc_gain_stderr
+        ax.set_title(f"{lk.transmitter} -> {lk.receiver}: H0 = {lk.dc_gain:.4e}"
                      + (f" ± {err:.1e}" if err else ""), fontsize=10)
         ax.legend(fontsize=8, ncol=3)
     fig.tight_layout()

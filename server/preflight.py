@@ -12,9 +12,10 @@ thread, which saves the process start. The steps:
    structure (triangles of each geometry x the nodes instancing it) before anything is
    flattened: a small file that instances a large mesh thousands of times is refused
    against `max_triangles` in milliseconds;
-2. the scene is built (geometry on Embree: an unreadable base64 mesh fails here) and the
-   engine runs its own entry point on it with the smallest possible settings (one path,
-   line of sight only, one time bin, stopped after the first batch). Whatever the engine
+2. the scene is built, once (geometry on Embree: an unreadable base64 mesh fails here) and the
+   engine runs its own entry point on that scene with the smallest possible settings (one path,
+   line of sight only, one time bin, explicit orders so no pilot runs, stopped after the first
+   batch). Whatever the engine
    refuses (a SceneError: an input it cannot simulate) becomes a 422 problem
    with the engine's message, instead of a job that fails after waiting in the queue;
 3. the job's memory estimate (engine.budget) is made with the scene's triangles and extent.
@@ -77,7 +78,8 @@ def _run(spec: SceneSpec, max_triangles: int, workers: int) -> tuple:
         sim = spec.simulation
         tiny = sim.model_copy(update={
             "max_reflections": 0, "t_min_s": 0.0, "t_max_s": sim.time_bin_s, "paths": 1, "target_rel_error": None,
-            "batch_size": 64, "direction": "forward", "pilot_paths": 256})
+            "batch_size": 64, "direction": "forward", "pilot_paths": 256,
+            "max_scattering": sim.max_scattering or 1})  # every setting explicit but the algorithm: no pilot
         scene = build_scene(spec, None)
         simulate(spec.model_copy(update={"simulation": tiny}), scene=scene, should_stop=lambda: True)
     except EngineError as exc:

@@ -17,9 +17,7 @@ compressed) and stores the renders with the outcome: serving a result never re-r
 from __future__ import annotations
 
 import ctypes
-import json
 import logging
-import math
 import resource
 import signal
 import sys
@@ -28,8 +26,12 @@ import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .formats import render_all
+
+if TYPE_CHECKING:
+    from owcsim.engine.simulate import Progress
 
 log = logging.getLogger("owcsim.server.worker")
 
@@ -85,8 +87,8 @@ class _Watch:
         self.pending: tuple | None = None
         self.reason: str | None = None  # why the run stops early: cancelled, abandoned, time limit
 
-    def progress(self, fraction: float, info: dict) -> None:
-        self.pending = (fraction, info["paths"], info["batches"], info.get("dc_gain_rel_stderr"), info["elapsed_s"])
+    def progress(self, p: Progress) -> None:
+        self.pending = (p.fraction, p.paths, p.batches, p.dc_gain_rel_stderr, p.elapsed_s)
         now = time.monotonic()
         if now - self.last_write >= self.limits.progress_interval_s:
             self.flush()
@@ -158,13 +160,13 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
     if watch.reason == "time_limit":
         store.finish(job_id, token, "failed", warnings=notes,
                      error=f"stopped at the server's wall-time limit of {limits.max_wall_time_s:g} s after "
-                           f"{result['run']['paths_total']:,d} paths: ask for fewer paths or a larger "
+                           f"{result.run.paths_total:,d} paths: ask for fewer paths or a larger "
                            "target_rel_error")
         return
     watch.flush()
     status = "cancelled" if watch.reason == "cancelled" else "succeeded"
     try:
-        text = _to_json(result)
+        text = result.model_dump_json()  # JSON has no NaN/inf: the model writes them as null
         with tempfile.TemporaryDirectory(prefix=f"owcsim-{job_id[:8]}-", dir=Path(db_path).parent) as tmp:
             renders = render_all(result, text, Path(tmp))
             store.finish(job_id, token, status, result_json=text, warnings=notes, renders=renders)
@@ -173,19 +175,3 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
         store.finish(job_id, token, "failed", warnings=notes, error=out_of_memory_reason(memory_bytes)
                      + " (while storing the result)")
 
-
-def _to_json(result: dict) -> str:
-    try:
-        return json.dumps(result, allow_nan=False)
-    except ValueError:  # JSON has no NaN/inf: null them (the engine already does; this guards the store)
-        return json.dumps(_clean(result))
-
-
-def _clean(x):
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, dict):
-        return {k: _clean(v) for k, v in x.items()}
-    if isinstance(x, list):
-        return [_clean(v) for v in x]
-    return x

@@ -39,7 +39,6 @@ def _not_ready(job: JobRow) -> ProblemError:
 
 def _render_legacy(job: JobRow, store: JobStore) -> None:
     """Render a result stored by an older server (without renders), once, and keep the renders."""
-    import json
     import tempfile
     from pathlib import Path
 
@@ -47,7 +46,7 @@ def _render_legacy(job: JobRow, store: JobStore) -> None:
     if text is None:
         raise _not_ready(job)
     with tempfile.TemporaryDirectory(prefix="owcsim-render-", dir=store.path.parent) as tmp:
-        store.put_renders(job.id, render_all(json.loads(text), text.decode(), Path(tmp)))
+        store.put_renders(job.id, render_all(SimulationResultPublic.model_validate_json(text), text.decode(), Path(tmp)))
 
 
 async def _ensure_renders(request: Request, job: JobRow, store: JobStore) -> None:

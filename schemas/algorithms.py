@@ -1,0 +1,125 @@
+"""The five estimators (physics.md section 4), in one place: what each is, and the enums around them.
+
+`ALGORITHMS[n]` is the record of `simulation.algorithm = n`: its name, the path families it
+estimates and what it leaves out, the KernelSettings flags it sets (by name: this layer does not
+import the engine), the scattering order it fixes, the direction it runs in, whether it runs from
+both devices in a medium, the outputs it fills and the medium it needs. The engine's planner
+(engine/simulate.py), the automatic settings (engine/auto.py) and the result (engine/result.py)
+read these records; nothing else lists per-algorithm facts.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+from types import MappingProxyType
+from typing import Mapping
+
+
+class Direction(StrEnum):
+    """The side a link's paths start from. A `str` enum: `Direction.FORWARD == "forward"` holds, and it hashes
+    as its value, so code that compares or keys by the string keeps working.
+
+    Per-link arrays hold `Direction.code` (an int: vectorized masks), read back with `Direction.of_code`."""
+
+    FORWARD = "forward"  # from the transmitter
+    BACKWARD = "backward"  # from the receiver
+    BOTH = "both"  # from both devices (algorithm 4, and two-sided runs in a medium)
+    NONE = "none"  # not simulated: exact, unreachable or masked
+
+    @property
+    def code(self) -> int:
+        """Position in the definition order: 0 forward, 1 backward, 2 both, 3 none."""
+        return _CODES[self]
+
+    @classmethod
+    def of_code(cls, code: int) -> "Direction":
+        return _MEMBERS[int(code)]
+
+
+_MEMBERS = tuple(Direction)
+_CODES = {d: i for i, d in enumerate(_MEMBERS)}
+
+
+class TwoSided(StrEnum):
+    """When an algorithm runs every link from both devices in a medium (engine/medium_nee.py)."""
+
+    NEVER = "never"
+    ALWAYS = "always"
+    AUTO_DIRECTION = "when direction is auto"  # unless a direction is requested
+
+
+#: Outputs every algorithm fills.
+BASE_OUTPUTS = ("dc_gain", "delays", "cir", "dc_gain_by_reflection_order")
+
+
+@dataclass(frozen=True)
+class Algorithm:
+    """One estimator. `kernel` holds the KernelSettings flags it sets (field name -> value)."""
+
+    number: int  # the value of `simulation.algorithm`
+    name: str
+    families: str  # the path families it estimates, in the report's notation
+    left_out: tuple[str, ...]  # scattered families it does not estimate (in a scattering medium)
+    kernel: Mapping[str, object]
+    #: highest scattering order S it tallies; None: the scene's `max_scattering` (algorithm 5)
+    scattering_orders: int | None
+    #: the direction it always runs in; None: the planner chooses (requested, amortized, or by a pilot)
+    direction: Direction | None
+    direction_reason: str
+    two_sided: TwoSided
+    #: the medium it needs: does it estimate scattered light (sigma_s > 0)?
+    counts_scattering: bool
+    outputs: tuple[str, ...] = field(default=BASE_OUTPUTS)
+
+    def S(self, max_scattering: int | None) -> int:
+        """Highest scattering order tallied, given the scene's max_scattering."""
+        return self.scattering_orders if self.scattering_orders is not None else int(max_scattering or 0)
+
+
+_SCATTERED = BASE_OUTPUTS + ("dc_gain_by_scattering_order",)
+
+ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType({a.number: a for a in (
+    Algorithm(
+        1, "unscattered paths",
+        "paths without scattering (s = 0), reflection orders 0..K; extinction on every segment",
+        ("scattered light (s >= 1)",),
+        {"free_flight": False, "segment_scatter": False, "mis": False}, 0, None, "", TwoSided.NEVER, False),
+    Algorithm(
+        2, "in-scattering from the receiver side",
+        "s = 0 paths up to K reflections, plus single scattering lit directly by the transmitter: "
+        "Tx -> p -> (k <= K reflections) -> Rx",
+        ("single scattering reached after reflections from the transmitter (Tx -> k >= 1 -> p -> Rx)",
+         "scattering orders s >= 2"),
+        {"free_flight": False, "segment_scatter": True, "mis": False}, 1, Direction.BACKWARD,
+        "algorithm 2 samples in-scattering from the receiver side", TwoSided.ALWAYS, True, _SCATTERED),
+    Algorithm(
+        3, "out-scattering from the transmitter side",
+        "s = 0 paths up to K reflections, plus single scattering seen directly by the receiver: "
+        "Tx -> (k <= K reflections) -> p -> Rx",
+        ("single scattering lit after reflections (Tx -> p -> k >= 1 -> Rx)", "scattering orders s >= 2"),
+        {"free_flight": False, "segment_scatter": True, "mis": False}, 1, Direction.FORWARD,
+        "algorithm 3 samples out-scattering from the transmitter side", TwoSided.ALWAYS, True, _SCATTERED),
+    Algorithm(
+        4, "both single-scattering families and in-then-out double scattering",
+        "s = 0 paths up to K reflections, plus Tx -> p -> (k <= K) -> Rx and Tx -> (k <= K) -> p -> Rx, "
+        "the shared family Tx -> p -> Rx counted once, and the report's in-then-out double scattering "
+        "Tx -> p_in -> (k <= K) -> p_out -> Rx (s = 2)",
+        ("single scattering with reflections on both sides of p",
+         "double scattering with reflections before p_in or after p_out", "scattering orders s >= 3"),
+        {"free_flight": False, "segment_scatter": True, "mis": True}, 2, Direction.BOTH,
+        "algorithm 4 runs both sides and weights their shared family by MIS", TwoSided.ALWAYS, True, _SCATTERED),
+    Algorithm(
+        5, "free-flight paths with next-event estimation",
+        "all paths with at most K reflections and S scattering events, in any order",
+        (),
+        {"free_flight": True, "segment_scatter": False, "mis": False}, None, None, "", TwoSided.AUTO_DIRECTION,
+        True, _SCATTERED),
+)})
+
+
+def algorithm(number: int) -> Algorithm:
+    """The record of `simulation.algorithm = number` (a resolved setting, not "auto")."""
+    try:
+        return ALGORITHMS[int(number)]
+    except (KeyError, ValueError, TypeError):
+        raise ValueError(f"no algorithm {number!r}; the algorithms are {sorted(ALGORITHMS)}") from None
