@@ -13,7 +13,7 @@ from owcsim.clients import (AsyncClient, Client, Conflict, ConnectionFailed, Inv
 from owcsim.clients.http import retry_after
 from owcsim.clients.progress import ProgressBar
 from owcsim.clients.scene import scene_document
-from owcsim.engine.simulate import simulate
+from tests.results import simulate_document as simulate
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.jobs import JobPublic
 from owcsim.schemas.results import SimulationResultPublic

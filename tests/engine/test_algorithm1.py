@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from owcsim.engine.simulate import simulate
+from tests.results import simulate_document as simulate
 from tests import reference as ref
 from tests.scenes import room_doc, spec, within
 

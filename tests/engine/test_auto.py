@@ -5,7 +5,7 @@ import warnings
 import pytest
 
 from owcsim.engine.errors import SceneError
-from owcsim.engine.simulate import simulate
+from tests.results import simulate_document as simulate
 from tests.scenes import barry_doc, room_doc, spec
 
 SMOKE = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2, "phase": {"type": "hg", "g": 0.7}}

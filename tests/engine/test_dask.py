@@ -30,7 +30,8 @@ from owcsim.engine.execution_dask import (  # noqa: E402
     ClusterError, DaskExecutor, DaskUnavailableError, executor_from_scheduler, portable_spec, worker_cache_info)
 from owcsim.engine.kernel import WorkItem  # noqa: E402
 from owcsim.engine.scene import build_scene  # noqa: E402
-from owcsim.engine.simulate import kernel_settings, simulate  # noqa: E402
+from owcsim.engine.simulate import kernel_settings  # noqa: E402
+from tests.results import simulate_document as simulate  # noqa: E402
 from tests.scenes import room_doc, spec  # noqa: E402
 
 BATCH_PREFIX = "owcsim-batch-"
@@ -149,12 +150,12 @@ def test_cancel_reaches_the_cluster(client, dask):
     doc = room_doc(max_reflections=6, paths=None, target_rel_error=1e-5, time_budget_s=600, batch_size=4096,
                    direction="forward")
     seen, serial_seen = [], []
-    res = simulate(spec(doc), executor=dask, progress=lambda f, info: seen.append(info["paths"]),
+    res = simulate(spec(doc), executor=dask, progress=lambda p: seen.append(p.paths),
                    should_stop=lambda: len(seen) >= 6)
     assert res["run"]["stop_reason"] == "cancelled"
     # accuracy runs use batches of a quarter of batch_size, at least 2048 paths (simulate._items)
     assert seen == [2048 * (i + 1) for i in range(6)]  # progress flows back, batch by batch
-    serial = simulate(spec(doc), progress=lambda f, info: serial_seen.append(info["paths"]),
+    serial = simulate(spec(doc), progress=lambda p: serial_seen.append(p.paths),
                       should_stop=lambda: len(serial_seen) >= 6)
     assert _strip(res) == _strip(serial)
     assert _no_batch_tasks_left(client)
@@ -224,8 +225,8 @@ def test_worker_killed_mid_job_still_exact(client, dask):
     pids = client.run(os.getpid)
     killed = []
 
-    def kill_one_busy_worker(frac, info):
-        if info["batches"] == 4 and not killed:
+    def kill_one_busy_worker(p):
+        if p.batches == 4 and not killed:
             busy = [w for w, keys in client.processing().items() if any(str(k).startswith(BATCH_PREFIX)
                                                                          for k in keys)]
             victim = busy[0] if busy else next(iter(pids))

@@ -4,8 +4,8 @@ import math
 
 import pytest
 
-from owcsim.engine.medium_nee import simulate_two_sided
-from owcsim.engine.simulate import simulate
+from tests.results import simulate_two_sided_document as simulate_two_sided
+from tests.results import simulate_document as simulate
 from tests.reference_double import double_scattering
 from tests.reference_volume import single_scattering
 from tests.scenes import SMOKE, open_doc, room_doc, spec, within

@@ -1,7 +1,7 @@
 """Determinism: the same seed gives bit-identical results with 1 or 2 worker processes."""
 import json
 
-from owcsim.engine.simulate import simulate
+from tests.results import simulate_document as simulate
 from tests.scenes import room_doc, spec
 
 
@@ -46,13 +46,13 @@ def test_accuracy_mode_bit_identical_across_workers():
 def test_progress_is_reported_and_cancel_stops():
     seen = []
     doc = room_doc(paths=20_000, batch_size=1024, direction="forward")
-    res = simulate(spec(doc), progress=lambda f, info: seen.append((f, info["paths"])),
+    res = simulate(spec(doc), progress=lambda p: seen.append((p.fraction, p.paths)),
                    should_stop=lambda: len(seen) >= 5)
     assert res["run"]["stop_reason"] == "cancelled"
     assert [p for _, p in seen] == [1024 * (i + 1) for i in range(5)]
     assert res["links"][0]["paths"] == 5 * 1024
     full = []
-    simulate(spec(doc), progress=lambda f, info: full.append(f))
+    simulate(spec(doc), progress=lambda p: full.append(p.fraction))
     assert full[-1] == 1.0 and all(a < b for a, b in zip(full, full[1:]))
 
 

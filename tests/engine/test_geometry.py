@@ -10,7 +10,7 @@ import trimesh
 from owcsim.engine.errors import SceneError
 from owcsim.engine.geometry import build_geometry
 from owcsim.engine.scene import build_scene
-from owcsim.engine.simulate import simulate
+from tests.results import simulate_document as simulate
 from tests.scenes import room_doc, spec, within
 
 

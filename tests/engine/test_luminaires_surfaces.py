@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from owcsim.engine.errors import SceneError
-from owcsim.engine.simulate import simulate
+from tests.results import simulate_document as simulate
 from tests import reference as ref
 from tests.engine.test_photometry import (C_FULL, G180, as_written, bilinear, cos_power_table, ies_text, ldt_text,
                                           midpoint_masses, tilted_lobe)

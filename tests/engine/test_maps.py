@@ -10,7 +10,8 @@ import pytest
 
 from owcsim.engine import simulate as simulate_module
 from owcsim.engine.scene import build_scene
-from owcsim.engine.simulate import PATH_TARGET_BUDGET, batch_size, kernel_settings, simulate
+from owcsim.engine.simulate import PATH_TARGET_BUDGET, batch_size, kernel_settings
+from tests.results import simulate_document as simulate
 from owcsim.engine.tally import BatchBuilder
 from tests.scenes import EXAMPLES, room_doc, spec, within
 

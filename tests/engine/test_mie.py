@@ -30,7 +30,7 @@ from owcsim.engine.errors import SceneError
 from owcsim.engine.media import HomogeneousMedium, medium_from_spec
 from owcsim.engine.phase import MiePhase, Tabulated, phase_from_spec
 from owcsim.engine.scene import build_scene
-from owcsim.engine.simulate import simulate
+from tests.results import simulate_document as simulate
 from owcsim.schemas.medium import KOSCHMIEDER, ParticleMediumSpec, ParticlesSpec
 from tests.scenes import room_doc, spec
 

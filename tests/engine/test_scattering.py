@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from owcsim.engine.simulate import simulate
+from tests.results import simulate_document as simulate
 from tests import reference as ref
 from tests.reference_volume import single_scattering
 from tests.scenes import SMOKE, open_doc, room_doc, spec, within

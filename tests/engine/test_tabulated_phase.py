@@ -15,7 +15,7 @@ from pydantic import ValidationError
 from scipy import integrate, stats
 
 from owcsim.engine import phase as ph
-from owcsim.engine.simulate import simulate
+from tests.results import simulate_document as simulate
 from owcsim.schemas.medium import TabulatedPhaseSpec
 from tests.scenes import spec
 

@@ -4,7 +4,7 @@ import math
 import numpy as np
 
 from owcsim.engine.auto import _delay_shift, _tail_moments, tail_ratio
-from owcsim.engine.simulate import simulate
+from tests.results import simulate_document as simulate
 from tests.scenes import room_doc, spec
 
 WHITE_SMOKE = {"type": "homogeneous", "sigma_a": 0.0, "sigma_s": 0.2, "phase": {"type": "hg", "g": 0.9}}

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from owcsim.clients import Client, InvalidRequest, NotFound, Unauthorized
-from owcsim.engine.simulate import simulate
+from tests.results import simulate_document as simulate
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.results import SimulationResultPublic
 

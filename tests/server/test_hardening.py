@@ -409,7 +409,7 @@ def test_11_client_refuses_mesh_files_that_are_not_small_regular_files(tmp_path,
 
 
 def test_2_a_result_stored_without_renders_is_rendered_once_on_first_request(api):
-    from owcsim.engine.simulate import simulate
+    from tests.results import simulate_document as simulate
     from owcsim.schemas import SceneSpec
     from owcsim.server.formats import cir_csv
 
@@ -427,7 +427,7 @@ def test_2_a_result_stored_without_renders_is_rendered_once_on_first_request(api
 def test_plots_drawn_from_several_threads_at_once_are_all_correct():
     from concurrent.futures import ThreadPoolExecutor
 
-    from owcsim.engine.simulate import simulate
+    from tests.results import simulate_document as simulate
     from owcsim.schemas import SceneSpec
     from owcsim.server.formats import cir_png
 

@@ -10,7 +10,7 @@ import pytest
 
 from owcsim.clients.output import write_cir_csv
 from owcsim.clients.result import Result
-from owcsim.engine.simulate import simulate
+from tests.results import simulate_document as simulate
 from owcsim.schemas import SceneSpec
 
 from .helpers import app_client, long_doc, quick_doc, wait_for

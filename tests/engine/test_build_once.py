@@ -1,0 +1,88 @@
+"""Each scene and medium is built once per job: the automatic settings, their pilot and the run share it.
+
+Counters wrap the builders where the engine calls them (engine.simulate.build_scene, the medium
+builder engine.scene.medium_from_spec, and the pre-flight's engine.scene.build_scene). Before this
+change an automatic job on the smoky room built the scene 3 times and the medium 4 times (issue 10),
+so a counter that missed a build path would show it here as a count above 1.
+"""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from owcsim.engine import scene as scene_module
+from owcsim.engine import simulate as simulate_module
+from owcsim.schemas import SceneSpec
+from owcsim.schemas.algorithms import ALGORITHMS, Direction
+from owcsim.schemas.results import SimulationResultPublic, StopReason
+from tests.scenes import EXAMPLES
+
+
+def _count(monkeypatch, module, name: str) -> list[int]:
+    calls = [0]
+    real = getattr(module, name)
+
+    def counted(*args, **kwargs):
+        calls[0] += 1
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(module, name, counted)
+    return calls
+
+
+def _smoky(**simulation) -> SceneSpec:
+    doc = json.loads((EXAMPLES / "smoky_room.json").read_text())
+    doc["simulation"] = {"paths": 2048, "pilot_paths": 256, "seed": 1, **simulation}  # K, S, window automatic
+    return SceneSpec.model_validate(doc)
+
+
+def test_an_automatic_smoky_job_builds_its_scene_and_medium_once(monkeypatch):
+    scenes = _count(monkeypatch, simulate_module, "build_scene")
+    media = _count(monkeypatch, scene_module, "medium_from_spec")
+    res = simulate_module.simulate(_smoky())
+    assert isinstance(res, SimulationResultPublic)
+    assert res.algorithm == 5 and res.modeled["pilot"] is not None  # the truncation pilot ran
+    assert (scenes[0], media[0]) == (1, 1)
+
+
+def test_a_given_scene_is_not_built_again(monkeypatch):
+    spec = _smoky()
+    built = scene_module.build_scene(spec)
+    scenes = _count(monkeypatch, simulate_module, "build_scene")
+    media = _count(monkeypatch, scene_module, "medium_from_spec")
+    simulate_module.simulate(spec, scene=built)
+    assert (scenes[0], media[0]) == (0, 0)
+
+
+def test_the_server_preflight_builds_the_scene_once(monkeypatch):
+    from owcsim.server.preflight import preflight
+
+    scenes = _count(monkeypatch, scene_module, "build_scene")  # the pre-flight imports it from engine.scene
+    inner = _count(monkeypatch, simulate_module, "build_scene")
+    media = _count(monkeypatch, scene_module, "medium_from_spec")
+    assert preflight(_smoky()) == 12
+    assert (scenes[0], inner[0], media[0]) == (1, 0, 1)
+
+
+def test_typed_result_fields_and_enums():
+    res = simulate_module.simulate(_smoky(algorithm=2, max_reflections=1, t_max_s=1e-7))
+    assert res.run.stop_reason is StopReason.PATHS
+    assert res.links[0].direction is Direction.BOTH  # algorithms 2-4 in a medium: from both devices
+    assert res.families == ALGORITHMS[2].families
+    assert Direction.FORWARD == "forward" and {"forward": 1}[Direction.FORWARD] == 1  # str enum, hashes as str
+    assert [Direction.of_code(d.code) for d in Direction] == list(Direction)
+    doc = json.loads(res.model_dump_json())  # JSON only at the edge: plain strings there
+    assert doc["links"][0]["direction"] == "both" and doc["run"]["stop_reason"] == "paths"
+
+
+@pytest.mark.parametrize("number", sorted(ALGORITHMS))
+def test_the_registry_is_what_the_planner_runs(number):
+    """Each record's kernel flags and fixed S are the KernelSettings the planner builds for that algorithm."""
+    from owcsim.engine.scene import build_scene
+
+    spec = _smoky(algorithm=number, max_reflections=1, max_scattering=3, t_max_s=1e-7, direction="forward")
+    alg = ALGORITHMS[number]
+    settings = simulate_module.kernel_settings(spec, build_scene(spec), both_devices=False)
+    assert {k: getattr(settings, k) for k in alg.kernel} == dict(alg.kernel)
+    assert settings.max_scattering == (3 if alg.scattering_orders is None else alg.scattering_orders)
