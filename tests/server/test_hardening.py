@@ -20,6 +20,8 @@ import tracemalloc
 import numpy as np
 import pytest
 
+from owcsim.schemas.results import SimulationResultPublic
+
 from owcsim.server.settings import Settings
 from owcsim.server.store import JobStore, StoreError
 
@@ -112,7 +114,7 @@ def test_2_results_are_streamed_from_stored_renders_in_bounded_memory(tmp_path):
         # one link's plot is drawn from that link's rows of the stored .npz, as the full render draws it
         from owcsim.server.formats import cir_png
 
-        result = c.get(f"{job['url']}/result").json()
+        result = SimulationResultPublic.model_validate(c.get(f"{job['url']}/result").json())
         assert c.get(f"{job['url']}/plot.png?link=1450").content == cir_png(result, 1450)
         assert c.get(f"{job['url']}/plot.png").content == cir_png(result)  # drawn once, then stored
         assert "plot.png" in store.render_names(job["id"])
@@ -122,9 +124,12 @@ def test_2_results_are_streamed_from_stored_renders_in_bounded_memory(tmp_path):
 def test_2_csv_ids_that_look_like_formulas_are_escaped():
     from owcsim.server.formats import cir_csv
 
-    result = {"time_bins": {"t_min_s": 0.0, "time_bin_s": 1e-9, "n_bins": 1},
-              "links": [{"transmitter": "=HYPERLINK(\"http://x\")", "receiver": "@rx", "cir": {
-                  "total": [1.0], "total_stderr": [None], "by_reflection_order": [[1.0]]}}]}
+    from owcsim.schemas.results import CirPublic, LinkPublic, TimeBinsPublic
+
+    link = LinkPublic.model_construct(transmitter="=HYPERLINK(\"http://x\")", receiver="@rx", cir=CirPublic(
+        total=[1.0], total_stderr=[None], by_reflection_order=[[1.0]]))
+    result = SimulationResultPublic.model_construct(time_bins=TimeBinsPublic(t_min_s=0.0, time_bin_s=1e-9, n_bins=1),
+                                                    links=[link])
     row = cir_csv(result).splitlines()[1]
     assert row.startswith("\"'=HYPERLINK(\"\"http://x\"\")\",'@rx,")
 
@@ -419,7 +424,7 @@ def test_2_a_result_stored_without_renders_is_rendered_once_on_first_request(api
     _, token = store.claim_next()
     assert store.finish(job["id"], token, "succeeded", result_json=json.dumps(result))  # as an older server did
     assert store.render_names(job["id"]) == set()
-    assert api.get(f"{job['url']}/result.csv").text == cir_csv(result)
+    assert api.get(f"{job['url']}/result.csv").text == cir_csv(SimulationResultPublic.model_validate(result))
     assert len(store.render_names(job["id"])) == 3
     assert api.get(f"{job['url']}/result").json() == json.loads(json.dumps(result))
 
@@ -431,7 +436,7 @@ def test_plots_drawn_from_several_threads_at_once_are_all_correct():
     from owcsim.schemas import SceneSpec
     from owcsim.server.formats import cir_png
 
-    result = simulate(SceneSpec.model_validate(quick_doc()))
+    result = SimulationResultPublic.model_validate(simulate(SceneSpec.model_validate(quick_doc())))
     first = cir_png(result)
     with ThreadPoolExecutor(8) as pool:  # matplotlib's mathtext parser failed under concurrent drawing
         assert all(png == first for png in pool.map(lambda _: cir_png(result), range(24)))

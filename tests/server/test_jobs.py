@@ -33,7 +33,7 @@ def test_a_job_runs_and_serves_the_same_result_as_the_engine(live, tmp_path):
     # CSV: byte for byte the command line's cir.csv
     csv = live.get(f"{job['url']}/result.csv")
     assert csv.headers["content-type"].startswith("text/csv")
-    write_cir_csv(served, tmp_path / "cir.csv")
+    write_cir_csv(Result.from_document(served), tmp_path / "cir.csv")
     assert csv.content == (tmp_path / "cir.csv").read_bytes()
     # .npz: the client's arrays
     with np.load(io.BytesIO(live.get(f"{job['url']}/result.npz").content)) as z:
