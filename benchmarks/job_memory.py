@@ -35,11 +35,11 @@ def _child(doc: dict, conn) -> None:
 
     t0 = time.perf_counter()
     result = simulate(SceneSpec.model_validate(doc))
-    text = json.dumps(result)
+    text = result.model_dump_json()  # as the worker stores it
     with tempfile.TemporaryDirectory() as tmp:
         render_all(result, text, Path(tmp))
-    conn.send((_peak_rss(), time.perf_counter() - t0, result["time_bins"]["n_bins"],
-               result["scene"]["simulation"]["max_reflections"] or result["modeled"]["max_reflections"]))
+    conn.send((_peak_rss(), time.perf_counter() - t0, result.time_bins.n_bins,
+               result.scene.simulation.max_reflections or result.modeled["max_reflections"]))
     conn.close()
 
 

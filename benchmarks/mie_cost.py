@@ -91,8 +91,8 @@ def main() -> None:
         spec = SceneSpec.model_validate(doc)
         t, res = best_of(args.repeats, lambda spec=spec: simulate(spec))
         base = base or t
-        lk = res["links"][0]
-        print(f"   {name:40s} {t:7.2f} s  x{t / base:.2f}  H0 {lk['dc_gain']:.5g} +- {lk['dc_gain_stderr']:.2g}")
+        lk = res.links[0]
+        print(f"   {name:40s} {t:7.2f} s  x{t / base:.2f}  H0 {lk.dc_gain:.5g} +- {lk.dc_gain_stderr:.2g}")
 
 
 if __name__ == "__main__":

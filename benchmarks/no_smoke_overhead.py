@@ -47,8 +47,8 @@ def main() -> None:
         spec = SceneSpec.model_validate(doc)
         t, res = best_of(args.repeats, lambda: simulate(spec))
         base = base or t
-        print(f"{name:42s} {t:7.3f} s  x{t / base:5.2f}  algorithm {res['algorithm']}, "
-              f"medium evaluations {res['diagnostics']['medium_evaluations']:,d}")
+        print(f"{name:42s} {t:7.3f} s  x{t / base:5.2f}  algorithm {res.algorithm}, "
+              f"medium evaluations {res.diagnostics.medium_evaluations:,d}")
 
 
 if __name__ == "__main__":

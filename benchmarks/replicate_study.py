@@ -37,9 +37,18 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from owcsim.engine import reliability  # noqa: E402
-from owcsim.engine.medium_nee import simulate_two_sided  # noqa: E402
-from owcsim.engine.simulate import simulate  # noqa: E402
+from owcsim.engine import medium_nee  # noqa: E402
+from owcsim.engine import simulate as engine  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
+
+
+def simulate(*args, **kwargs) -> dict:
+    """The result document (as result.json holds it): this study edits and compares documents."""
+    return json.loads(engine.simulate(*args, **kwargs).model_dump_json())
+
+
+def simulate_two_sided(*args, **kwargs) -> dict:
+    return json.loads(medium_nee.simulate_two_sided(*args, **kwargs).model_dump_json())
 
 VARIANTS = [(2, "one"), (3, "one"), (5, "one"), (2, "two"), (3, "two"), (4, "two"), (5, "two")]
 

@@ -38,8 +38,9 @@ from tests.server.helpers import ServerProcess, quick_doc  # noqa: E402
 
 
 
-def _strip(result: dict) -> dict:
-    result = json.loads(json.dumps(result))
+def _strip(result) -> dict:
+    """The result document (a served dict or the engine's typed result) without its wall time."""
+    result = json.loads(json.dumps(result) if isinstance(result, dict) else result.model_dump_json())
     result["run"].pop("wall_time_s", None)
     return result
 

@@ -41,7 +41,7 @@ def run(algorithm: int, direction: str, paths: int, seed: int, max_scattering: i
     spec = SceneSpec.model_validate(doc)
     t = time.perf_counter()
     res = simulate(spec)
-    return time.perf_counter() - t, res["links"][0]
+    return time.perf_counter() - t, res.links[0]
 
 
 def main() -> None:
@@ -53,25 +53,25 @@ def main() -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t_ref, ref = run(5, "backward", args.ref_paths, seed=999, max_scattering=30)
-    h_ref = np.asarray(ref["cir"]["total"])
+    h_ref = np.asarray(ref.cir.total)
     print(f"reference: algorithm 5 backward, S = 30, {args.ref_paths:,d} paths, {t_ref:.1f} s: "
-          f"H0 = {ref['dc_gain']:.5e} ± {ref['dc_gain_stderr']:.1e} "
-          f"(by scattering order {[f'{v:.2e}' for v in ref['dc_gain_by_scattering_order'][:4]]})")
+          f"H0 = {ref.dc_gain:.5e} ± {ref.dc_gain_stderr:.1e} "
+          f"(by scattering order {[f'{v:.2e}' for v in ref.dc_gain_by_scattering_order[:4]]})")
     print(f"{'algorithm':14s} {'paths':>8s} {'time s':>7s} {'H0':>12s} {'stderr':>8s} {'H0 err':>8s} {'CIR err':>8s}")
     rows = []
     for algorithm, direction in CASES:
         for paths in map(int, args.budgets.split(",")):
             el, link = run(algorithm, direction, paths, seed=1, max_scattering=30 if algorithm == 5 else 3)
-            h = np.asarray(link["cir"]["total"])
-            h0_err = abs(link["dc_gain"] - ref["dc_gain"]) / ref["dc_gain"]
+            h = np.asarray(link.cir.total)
+            h0_err = abs(link.dc_gain - ref.dc_gain) / ref.dc_gain
             cir_err = float(np.linalg.norm(h - h_ref) / np.linalg.norm(h_ref))
             label = f"{algorithm} {direction}"
             rows.append({"algorithm": algorithm, "direction": direction, "paths": paths, "time_s": el,
-                         "dc_gain": link["dc_gain"], "dc_gain_stderr": link["dc_gain_stderr"],
+                         "dc_gain": link.dc_gain, "dc_gain_stderr": link.dc_gain_stderr,
                          "h0_rel_error": h0_err, "cir_rel_error": cir_err})
-            print(f"{label:14s} {paths:8d} {el:7.2f} {link['dc_gain']:12.5e} {link['dc_gain_stderr']:8.1e} "
+            print(f"{label:14s} {paths:8d} {el:7.2f} {link.dc_gain:12.5e} {link.dc_gain_stderr:8.1e} "
                   f"{h0_err:8.2%} {cir_err:8.2%}")
-    (out / "smoke_accuracy.json").write_text(json.dumps({"reference": {k: ref[k] for k in (
+    (out / "smoke_accuracy.json").write_text(json.dumps({"reference": {k: getattr(ref, k) for k in (
         "dc_gain", "dc_gain_stderr", "dc_gain_by_scattering_order")}, "rows": rows}, indent=1))
     import matplotlib
 

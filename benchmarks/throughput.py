@@ -92,7 +92,7 @@ def main() -> None:
             if cast_shadows:
                 scene.all_visible = False  # cast every shadow ray, as in a furnished room
             el, res = best_of(args.repeats, lambda: simulate(spec, scene=scene))
-            n_i, n_o = res["run"]["rays_intersect"], res["run"]["rays_occluded"]
+            n_i, n_o = res.run.rays_intersect, res.run.rays_occluded
             raw = min(raw_embree(scene, n_i, n_o, args.batch, rng) for _ in range(args.repeats))
             rays = n_i + n_o
             label = f"{direction}, shadow rays {'cast' if cast_shadows else 'skipped (convex room)'}"
@@ -108,7 +108,7 @@ def main() -> None:
         t2, r2 = best_of(args.repeats, lambda: simulate(spec, executor=pool))
     finally:
         pool.close()
-    assert r1["links"][0]["dc_gain"] == r2["links"][0]["dc_gain"]  # same seed, same bits
+    assert r1.links[0].dc_gain == r2.links[0].dc_gain  # same seed, same bits
     print(f"1 worker: {args.paths / t1:,.0f} paths/s; 2 workers (warm pool): {args.paths / t2:,.0f} paths/s; "
           f"speed-up {t1 / t2:.2f}x")
     print(f"hardware ceiling (two independent single-process jobs at once): "

@@ -56,10 +56,10 @@ def main() -> None:
                 text = scene_text(args.target, direction)
                 runs = [run_once(text, executor) for _ in range(args.repeats)]
                 el, res = min(runs, key=lambda r: r[0])
-                link = res["links"][0]
-                rel = link["dc_gain_stderr"] / link["dc_gain"]
-                print(f"{direction:10s} {label:>7s} {el:7.3f} {ANCHOR_S / el:8.2f}x {link['paths']:9d} "
-                      f"{rel:8.2e} {link['dc_gain']:.6e}  {res['run']['stop_reason']} ({link['direction']})")
+                link = res.links[0]
+                rel = link.dc_gain_stderr / link.dc_gain
+                print(f"{direction:10s} {label:>7s} {el:7.3f} {ANCHOR_S / el:8.2f}x {link.paths:9d} "
+                      f"{rel:8.2e} {link.dc_gain:.6e}  {res.run.stop_reason} ({link.direction})")
     finally:
         pool.close()
 

@@ -52,10 +52,10 @@ def run(doc: dict, paths: int) -> dict:
 
 def receiver_cir(result: dict) -> tuple[np.ndarray, np.ndarray, float]:
     """(bin start times [ns], h(t) [1/s] summed over the transmitters, total H0)."""
-    tb = result["time_bins"]
-    t = (tb["t_min_s"] + np.arange(tb["n_bins"]) * tb["time_bin_s"]) * 1e9
-    h = sum(np.asarray(link["cir"]["total"]) for link in result["links"]) / tb["time_bin_s"]
-    return t, h, sum(link["dc_gain"] for link in result["links"])
+    tb = result.time_bins
+    t = (tb.t_min_s + np.arange(tb.n_bins) * tb.time_bin_s) * 1e9
+    h = sum(np.asarray(link.cir.total) for link in result.links) / tb.time_bin_s
+    return t, h, sum(link.dc_gain for link in result.links)
 
 
 def plot(case: str, results: dict[str, dict], out: Path, title: str) -> None:
@@ -93,7 +93,7 @@ def main() -> None:
         results = {"photometric / glossy": run(doc, args.paths), "Lambertian": run(lambertian_twin(doc), args.paths)}
         for label, res in results.items():
             name = "lambertian" if label == "Lambertian" else "model"
-            (args.out / f"{case}.{name}.json").write_text(json.dumps(res, indent=1))
+            (args.out / f"{case}.{name}.json").write_text(res.model_dump_json(indent=1))
         plot(case, results, args.out, title)
         print(f"{case}: " + ", ".join(f"{k} H0 = {receiver_cir(v)[2]:.4e}" for k, v in results.items()))
 

@@ -57,13 +57,13 @@ def main() -> None:
             kw = dict(fixed, **{param: value})
             doc = scene(kw["sigma_s"], kw["g"], args.algorithm, args.paths)
             res = simulate(SceneSpec.model_validate(copy.deepcopy(doc)), workers=args.workers)
-            (out / f"{name}_{param}_{value:+.1f}.json").write_text(json.dumps(res))
-            link, tb = res["links"][0], res["time_bins"]
-            t = (tb["t_min_s"] + tb["time_bin_s"] * (np.arange(tb["n_bins"]) + 0.5)) * 1e9
-            h = np.asarray(link["cir"]["total"]) / tb["time_bin_s"]
-            ax.plot(t, h, colour, lw=0.9, label=f"{param} = {value:g}: H0 = {link['dc_gain']:.3e}")
-            print(f"{name}: {param} = {value:+.1f}  H0 = {link['dc_gain']:.4e} ± {link['dc_gain_stderr']:.1e}  "
-                  f"(scattered part {sum(link['dc_gain_by_scattering_order'][1:]):.3e})")
+            (out / f"{name}_{param}_{value:+.1f}.json").write_text(res.model_dump_json())
+            link, tb = res.links[0], res.time_bins
+            t = (tb.t_min_s + tb.time_bin_s * (np.arange(tb.n_bins) + 0.5)) * 1e9
+            h = np.asarray(link.cir.total) / tb.time_bin_s
+            ax.plot(t, h, colour, lw=0.9, label=f"{param} = {value:g}: H0 = {link.dc_gain:.3e}")
+            print(f"{name}: {param} = {value:+.1f}  H0 = {link.dc_gain:.4e} ± {link.dc_gain_stderr:.1e}  "
+                  f"(scattered part {sum(link.dc_gain_by_scattering_order[1:]):.3e})")
         ax.set_yscale("log")
         ax.set_xlim(10, 60)
         ax.set_ylim(1e-2, None)

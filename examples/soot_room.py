@@ -56,7 +56,7 @@ def run(doc: dict, medium: dict, paths: int) -> dict:
     d["medium"] = medium
     d["simulation"].update(algorithm=5, direction="auto", max_reflections=6, max_scattering=20, paths=paths,
                            time_bin_s=5e-10, t_max_s=6e-8)
-    return simulate(SceneSpec.model_validate(d))["links"][0]
+    return simulate(SceneSpec.model_validate(d)).links[0]
 
 
 def main() -> None:
@@ -90,11 +90,11 @@ def main() -> None:
         }
         for label, medium in cases.items():
             link = run(doc, medium, args.paths)
-            scattered = sum(link["dc_gain_by_scattering_order"][1:])
-            print(f"  {label:16s} H0 = {link['dc_gain']:.5g} +- {link['dc_gain_stderr']:.2g}  "
-                  f"(LOS {link['los_gain']:.4g}, scattered {scattered:.4g}), "
-                  f"tau_rms = {link['rms_delay_spread_s'] * 1e9:.3f} ns")
-            cir = np.asarray(link["cir"]["total"], float)
+            scattered = sum(link.dc_gain_by_scattering_order[1:])
+            print(f"  {label:16s} H0 = {link.dc_gain:.5g} +- {link.dc_gain_stderr:.2g}  "
+                  f"(LOS {link.los_gain:.4g}, scattered {scattered:.4g}), "
+                  f"tau_rms = {link.rms_delay_spread_s * 1e9:.3f} ns")
+            cir = np.asarray(link.cir.total, float)
             t = (np.arange(len(cir)) + 0.5) * 5e-10
             ax.semilogy(t * 1e9, np.where(cir > 0, cir, np.nan), label=label, lw=1)
         ax.set_title(f"soot {name}: V = {info['visibility_m']:.3g} m")
