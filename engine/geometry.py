@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import trimesh
+from .lazy import trimesh  # imported on first use: it pulls in scipy (issue 10)
 from embreex import rtcore_scene
 
 from owcsim.schemas import ROOM_FACES, SceneSpec

@@ -1,6 +1,6 @@
 """Photometry and link budget: illuminance, received power, SNR and BER of OOK-NRZ (docs/link-budget.md).
 
-Pure numpy (scipy for erfc and the CODATA constants), vectorized over links / receivers; no
+Pure numpy (scipy for erfc, imported when a BER is computed), vectorized over links / receivers; no
 floating-point warnings and no inf: where a figure does not exist (no power, 0 dBm of nothing)
 the arrays hold NaN, which callers map to JSON null. SI units throughout.
 
@@ -14,16 +14,15 @@ from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
-from scipy.constants import Boltzmann, elementary_charge
-from scipy.special import erfc
 
 __all__ = ["IsiSplit", "LinkBudget", "ber_ook", "illuminance_los", "isi_split", "link_budget_from_spec",
            "luminous_flux_from_intensity", "luminous_intensity_center", "max_bit_rate", "noise_variances",
            "power_dbm", "received_power", "snr", "to_db"]
 
-#: Elementary charge q [C] and Boltzmann constant k [J/K] (exact SI values).
-Q_E = elementary_charge
-K_B = Boltzmann
+#: Elementary charge q [C] and Boltzmann constant k [J/K]: exact by definition of the SI (BIPM 2019), the
+#: values scipy.constants gives (not imported for them: scipy costs a command's start-up, issue 10).
+Q_E = 1.602176634e-19
+K_B = 1.380649e-23
 
 
 class IsiSplit(str, Enum):
@@ -172,6 +171,8 @@ def ber_ook(snr_linear):
 
     SNR linear [-]; 0.5 at SNR = 0; NaN stays NaN.
     """
+    from scipy.special import erfc  # on first use (scipy's import time)
+
     return 0.5 * erfc(np.sqrt(np.maximum(np.asarray(snr_linear, float), 0.0) / 2.0))
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-import trimesh
+from .lazy import trimesh  # imported on first use: it pulls in scipy (issue 10)
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 

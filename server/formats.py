@@ -19,11 +19,11 @@ import io
 import threading
 import zipfile
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from owcsim.schemas.plots import MAX_PANELS, CirPanel, cir_figure, panels_of
 from owcsim.schemas.results import SimulationResultPublic
 
 #: Rows of the CSV written per chunk.
@@ -34,7 +34,7 @@ RENDERS = {"result.json.gz": ("application/json", True), "result.csv.gz": ("text
 #: Renders made when the job ends (the plot is drawn at its first request).
 AT_JOB_END = ("result.json.gz", "result.csv.gz", "result.npz")
 #: Links drawn in the default plot.
-PLOT_LINKS = 6
+PLOT_LINKS = MAX_PANELS
 #: One plot drawn at a time in a process (see the module's docstring).
 _DRAWING = threading.Lock()
 
@@ -182,68 +182,21 @@ def npz_png(npz_file, link: int | None = None) -> bytes:
             with archive.open(name + ".npy") as f:
                 per_link[name] = np.lib.format.read_array(f)[cir_link[first:first + count]]
     se = per_link["dc_gain_stderr"]
-    panels = [_Panel(str(per_link["transmitter"][i]), str(per_link["receiver"][i]), float(per_link["dc_gain"][i]),
-                     None if np.isnan(se[i]) else float(se[i]), rows["cir"][i], rows["by_reflection_order"][i])
+    panels = [CirPanel(str(per_link["transmitter"][i]), str(per_link["receiver"][i]), float(per_link["dc_gain"][i]),
+                       None if np.isnan(se[i]) else float(se[i]), rows["cir"][i], rows["by_reflection_order"][i])
               for i in range(count)]
-    with _DRAWING:
-        return _cir_png(float(edges[0]), float(edges[1] - edges[0]), n_bins, panels)
-
-
-@dataclass(frozen=True)
-class _Panel:
-    """One link's panel: its ids, H0 with its error, power per bin (total and per reflection order)."""
-
-    transmitter: str
-    receiver: str
-    dc_gain: float | None
-    dc_gain_stderr: float | None
-    total: np.ndarray
-    by_reflection_order: np.ndarray
+    return _png(float(edges[0]), float(edges[1] - edges[0]), n_bins, panels)
 
 
 def cir_png(result: SimulationResultPublic, link: int | None = None) -> bytes:
     """h(t) [1/s] per reflection order and total, one panel per link (up to 6, or the one asked)."""
     tb = result.time_bins
-    links = result.links if link is None else [result.links[link]]
-    panels = [_Panel(lk.transmitter, lk.receiver, lk.dc_gain, lk.dc_gain_stderr, np.asarray(lk.cir.total, float),
-                     np.asarray(lk.cir.by_reflection_order or [], float).reshape(-1, tb.n_bins))
-              for lk in links if lk.cir is not None][:PLOT_LINKS]
+    return _png(tb.t_min_s, tb.time_bin_s, tb.n_bins, panels_of(result, link))
+
+
+def _png(t_min_s: float, time_bin_s: float, n_bins: int, panels: list[CirPanel]) -> bytes:
     with _DRAWING:
-        return _cir_png(tb.t_min_s, tb.time_bin_s, tb.n_bins, panels)
-
-
-def _cir_png(t_min_s: float, time_bin_s: float, n_bins: int, panels: list[_Panel]) -> bytes:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    links: list[_Panel | None] = list(panels[:6]) or [None]
-    t_ns = 1e9 * (t_min_s + time_bin_s * (np.arange(n_bins) + 0.5))
-    fig = Figure(figsize=(8, 3.2 * len(links)))
-    FigureCanvasAgg(fig)
-    for i, lk in enumerate(links):
-        ax = fig.add_subplot(len(links), 1, i + 1)
-        ax.set_xlabel("delay t [ns]")
-        ax.set_ylabel("h(t) [1/s]")
-        ax.grid(alpha=0.3)
-        if lk is None:
-            ax.set_title("no links")
-            continue
-        for k, row in enumerate(lk.by_reflection_order[:9]):
-            h = np.asarray(row) / time_bin_s
-            if h.any():
-                ax.plot(t_ns, h, lw=0.9, label=f"k = {k}")
-        total = np.asarray(lk.total) / time_bin_s
-        ax.plot(t_ns, total, "k", lw=1.2, label="total")
-        nz = np.flatnonzero(total > 0)
-        if len(nz):
-            ax.set_xlim(t_ns[nz[0]] - 2, t_ns[min(nz[-1] + 1, len(t_ns) - 1)])
-            ax.set_yscale("log")
-            ax.set_ylim(max(total[nz].min(), total[nz].max() * 1e-6) * 0.5, total[nz].max() * 2)
-        err = lk.dc_gain_stderr
-        ax.set_title(f"{lk.transmitter} -> {lk.receiver}: H0 = {lk.dc_gain:.4e}"
-                     + (f" ± {err:.1e}" if err else ""), fontsize=10)
-        ax.legend(fontsize=8, ncol=3)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
-    return buf.getvalue()
+        fig = cir_figure(t_min_s, time_bin_s, n_bins, panels)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=100)
+        return buf.getvalue()
