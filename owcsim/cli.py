@@ -211,11 +211,22 @@ def _cmd_submit(args) -> int:
     return 0
 
 
+def _algorithm(text: str) -> int | str:
+    """The --algorithm value: a number or auto (the scene document's check names a number out of range)."""
+    if text == "auto":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number or auto") from None
+
+
 def _add_simulation_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--paths", type=int, help="paths per source device (replaces target_rel_error)")
     p.add_argument("--seed", type=int)
     p.add_argument("--max-reflections", type=int)
-    p.add_argument("--algorithm", type=int)
+    p.add_argument("--algorithm", type=_algorithm, metavar="{1,2,3,4,5,auto}",
+                   help="estimator (schemas/algorithms.py); auto: chosen from the scene")
     p.add_argument("--direction", choices=("auto", "forward", "backward"))
     p.add_argument("--target-rel-error", type=float, help="stop when stderr(H0)/H0 reaches this, every link")
     p.add_argument("--set", action="append", metavar="PATH=VALUE",

@@ -65,7 +65,7 @@ class SimulationSpec(SpecModel):
     seed: int = Field(0, ge=0, lt=2**63)
     batch_size: int = Field(16384, ge=64, le=1_048_576, description="paths per batch (memory bound)")
     russian_roulette: bool = True
-    rr_start_depth: int = Field(3, ge=1, le=1000, description="first reflection order subject to roulette")
+    rr_start_depth: int = Field(3, ge=1, le=1000, description="first event count k + s (reflections plus scattering events) at which roulette may end a path")
     pilot_paths: int = Field(4096, ge=256, le=1_000_000, description="paths per direction of the auto pilot")
 
     @model_validator(mode="after")

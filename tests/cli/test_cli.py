@@ -119,3 +119,11 @@ def test_version_flag(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["--version"])
     assert exc.value.code == 0 and capsys.readouterr().out.startswith("owcsim ")
+
+
+def test_algorithm_flag_takes_auto(tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main(["run", BARRY, "--out", str(out), "--paths", "2000", "--max-reflections", "1",
+                 "--algorithm", "auto"]) == 0
+    res = json.loads((out / "result.json").read_text())
+    assert res["scene"]["simulation"]["algorithm"] == "auto" and res["algorithm"] == 1  # no medium: vacuum paths
