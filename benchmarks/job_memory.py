@@ -10,7 +10,6 @@ budget needs; the address-space cap adds worker_memory_headroom_bytes on top).
 """
 from __future__ import annotations
 
-import json
 import multiprocessing as mp
 import sys
 import tempfile

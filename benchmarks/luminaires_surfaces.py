@@ -88,7 +88,8 @@ def main() -> None:
                 wall, cpu = min(wall, time.perf_counter() - t0), min(cpu, time.process_time() - c0)
             base = base or cpu
             link = res.links[0]
-            print(f"{room:9s} {direction:8s} {name:32s} wall {wall:6.3f} s  cpu {cpu:6.3f} s  {cpu / args.paths * 1e6:5.2f} us/path"
+            print(f"{room:9s} {direction:8s} {name:32s} wall {wall:6.3f} s  cpu {cpu:6.3f} s  "
+                  f"{cpu / args.paths * 1e6:5.2f} us/path"
                   f"  x{cpu / base:5.2f}  H0 = {link.dc_gain:.4e} +- {link.dc_gain_stderr:.1e}")
 
 

@@ -31,7 +31,8 @@ def main() -> None:
     cases = {
         "no medium": None,
         "medium with sigma_t = 0": {"type": "homogeneous", "sigma_a": 0.0, "sigma_s": 0.0},
-        "smoke box outside the room (auto)": dict(SMOKE, region={"type": "box", "min": [10, 10, 0], "max": [12, 12, 3]}),
+        "smoke box outside the room (auto)": dict(SMOKE, region={"type": "box", "min": [10, 10, 0],
+                                                                 "max": [12, 12, 3]}),
         "smoke box outside the room (algorithm 1)": dict(SMOKE, region={"type": "box", "min": [10, 10, 0],
                                                                         "max": [12, 12, 3]}),
         "room full of smoke (algorithm 1)": SMOKE,
@@ -45,7 +46,7 @@ def main() -> None:
         if name.endswith("(algorithm 1)"):
             doc["simulation"]["algorithm"] = 1
         spec = SceneSpec.model_validate(doc)
-        t, res = best_of(args.repeats, lambda: simulate(spec))
+        t, res = best_of(args.repeats, lambda spec=spec: simulate(spec))
         base = base or t
         print(f"{name:42s} {t:7.3f} s  x{t / base:5.2f}  algorithm {res.algorithm}, "
               f"medium evaluations {res.diagnostics.medium_evaluations:,d}")

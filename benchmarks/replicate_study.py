@@ -36,8 +36,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from owcsim.engine import reliability  # noqa: E402
-from owcsim.engine import medium_nee  # noqa: E402
+from owcsim.engine import (
+    medium_nee,  # noqa: E402
+    reliability,  # noqa: E402
+)
 from owcsim.engine import simulate as engine  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 
@@ -255,7 +257,8 @@ def main() -> None:
                 for algorithm, sides in VARIANTS:
                     vals, errs, flags = [], [], 0
                     for seed in range(args.seeds):
-                        case_seed = zlib.crc32(repr((geometry, g, D, algorithm, sides)).encode()) % 100_000  # not shared
+                        # not shared between cases
+                        case_seed = zlib.crc32(repr((geometry, g, D, algorithm, sides)).encode()) % 100_000
                         res = run(scene(geometry, g, D, algorithm, args.paths, 1000 * seed + case_seed), sides)
                         link = res["links"][0]
                         vals.append(link["dc_gain"])

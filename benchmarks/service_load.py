@@ -28,8 +28,8 @@ sys.path.insert(0, str(ROOT))
 
 import httpx  # noqa: E402
 
-from owcsim.clients import Client, RetryPolicy  # noqa: E402
 from benchmarks._common import rss_mb  # noqa: E402
+from owcsim.clients import Client, RetryPolicy  # noqa: E402
 from tests.server.helpers import ServerProcess, quick_doc  # noqa: E402
 
 
@@ -65,8 +65,8 @@ def run(args, root: Path, python: str, label: str) -> int:
         with lock:
             statuses[response.status_code] = statuses.get(response.status_code, 0) + 1
 
-    with ServerProcess(tmp / "jobs.sqlite", root=root, python=python, max_concurrent_jobs=2, max_queued_jobs=50, retry_after_s=1,
-                       max_queued_per_key=50, max_connections=500) as srv:
+    with ServerProcess(tmp / "jobs.sqlite", root=root, python=python, max_concurrent_jobs=2, max_queued_jobs=50,
+                       retry_after_s=1, max_queued_per_key=50, max_connections=500) as srv:
         big = quick_doc(paths=1024, direction="forward", t_max_s=2e-7)
         big["receivers"] = []
         big["receiver_grids"] = [{"id_prefix": "g", "origin": [0.5, 0.5, 0.0], "size": [4.0, 4.0],

@@ -31,11 +31,9 @@ sys.path.insert(0, str(ROOT))
 
 import httpx  # noqa: E402
 
-from owcsim.clients import Client, RetryPolicy  # noqa: E402
 from benchmarks._common import rss_mb  # noqa: E402
+from owcsim.clients import Client, RetryPolicy  # noqa: E402
 from tests.server.helpers import ServerProcess, quick_doc  # noqa: E402
-
-
 
 
 def _strip(result) -> dict:
@@ -110,7 +108,8 @@ def main() -> int:
     srv = ServerProcess(db, port=port, log=tmp / "server.log", **settings).start()
     stop = threading.Event()
     todo = [i for i in range(args.jobs) if not ids[i]]
-    threads = [threading.Thread(target=client, args=(todo[k::args.clients], srv.url, stop)) for k in range(args.clients)]
+    threads = [threading.Thread(target=client, args=(todo[k::args.clients], srv.url, stop))
+               for k in range(args.clients)]
     for t in threads:
         t.start()
     for t in threads:
@@ -139,7 +138,8 @@ def main() -> int:
     attempts = [listed[j]["attempts"] for j in all_ids if j in listed]
     mismatched = []
     for i, r in results.items():
-        if r.status_code != 200 or _strip(r.json())["links"] != _strip(simulate(SceneSpec.model_validate(docs[i])))["links"]:
+        mine = _strip(simulate(SceneSpec.model_validate(docs[i])))["links"]
+        if r.status_code != 200 or _strip(r.json())["links"] != mine:
             mismatched.append(i)
     print(f"\n{args.rounds} rounds, {kills['server']} server kills (whole group), {kills['worker']} worker kills, "
           f"{time.monotonic() - t_start:.0f} s")

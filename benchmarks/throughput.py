@@ -91,7 +91,7 @@ def main() -> None:
             scene = build_scene(spec)
             if cast_shadows:
                 scene.all_visible = False  # cast every shadow ray, as in a furnished room
-            el, res = best_of(args.repeats, lambda: simulate(spec, scene=scene))
+            el, res = best_of(args.repeats, lambda spec=spec, scene=scene: simulate(spec, scene=scene))
             n_i, n_o = res.run.rays_intersect, res.run.rays_occluded
             raw = min(raw_embree(scene, n_i, n_o, args.batch, rng) for _ in range(args.repeats))
             rays = n_i + n_o

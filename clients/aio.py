@@ -11,8 +11,8 @@ import asyncio
 import io
 import time
 import uuid
+from collections.abc import AsyncIterator
 from pathlib import Path
-from typing import AsyncIterator
 
 import httpx
 
@@ -21,8 +21,17 @@ from owcsim.schemas.jobs import TERMINAL_STATUSES, HealthPublic, JobListPublic, 
 
 from .client import POLL, job_path
 from .errors import ConnectionFailed, JobFailed
-from .http import (API, LAST_POLL_S, RetryPolicy, attempt_timeout, check, headers, retry_delay, submission_lost,
-                   unreachable)
+from .http import (
+    API,
+    LAST_POLL_S,
+    RetryPolicy,
+    attempt_timeout,
+    check,
+    headers,
+    retry_delay,
+    submission_lost,
+    unreachable,
+)
 from .progress import ProgressBar
 from .result import Result
 from .scene import scene_document
@@ -66,7 +75,8 @@ class AsyncJob:
                 left = None if deadline is None else deadline - time.monotonic()
                 if left is not None and left <= 0:
                     raise TimeoutError(f"job {self.info.id} is still {self.info.status} after {timeout} s")
-                await asyncio.sleep(interval if left is None else min(interval, left))  # the last poll is at the deadline
+                # the last poll is at the deadline
+                await asyncio.sleep(interval if left is None else min(interval, left))
                 interval = min(interval * POLL[1], POLL[2])
         finally:
             if bar:

@@ -16,8 +16,8 @@ from __future__ import annotations
 import io
 import time
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import httpx
 
@@ -25,8 +25,17 @@ from owcsim.schemas import SceneSpec
 from owcsim.schemas.jobs import TERMINAL_STATUSES, HealthPublic, JobListPublic, JobPublic, VersionPublic
 
 from .errors import ConnectionFailed, JobFailed
-from .http import (API, LAST_POLL_S, RetryPolicy, attempt_timeout, check, headers, retry_delay, submission_lost,
-                   unreachable)
+from .http import (
+    API,
+    LAST_POLL_S,
+    RetryPolicy,
+    attempt_timeout,
+    check,
+    headers,
+    retry_delay,
+    submission_lost,
+    unreachable,
+)
 from .progress import ProgressBar
 from .result import Result
 from .scene import scene_document

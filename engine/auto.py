@@ -31,8 +31,8 @@ from pydantic import ValidationError
 
 from owcsim.schemas import OutputsSpec, SceneSpec
 from owcsim.schemas.algorithms import algorithm
-from owcsim.schemas.results import LinkPublic, SimulationResultPublic
 from owcsim.schemas.errors import located
+from owcsim.schemas.results import LinkPublic, SimulationResultPublic
 from owcsim.schemas.simulation import check_bin_budget
 
 from .constants import SPEED_OF_LIGHT
@@ -340,7 +340,8 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
             max_reflections=cap_k, max_scattering=cap_s, t_max_s=t_long, time_bin_s=(t_long - sim.t_min_s) / PILOT_BINS,
             paths=sim.pilot_paths, target_rel_error=None, seed=sim.seed + 1, batch_size=min(sim.batch_size, 4096)))})
     if not (scene.masked[pick] == "").all():  # every grid point masked: the document check says why
-        pilot_spec = validated(pilot_spec.model_dump(mode="python"), "the pilot run that chooses the automatic settings")
+        pilot_spec = validated(pilot_spec.model_dump(mode="python"),
+                               "the pilot run that chooses the automatic settings")
     pilot = PilotRun(pilot_spec, with_receivers(job_scene, pilot_spec), pick, cap_k, cap_s, t_long)
     return Resolution(spec, resolved, job_scene, modeled, pilot, update, doc_update)
 

@@ -76,7 +76,8 @@ class MemoryEstimate:
 
 def _triangles(spec: SceneSpec) -> int:
     """Triangles of the room, furniture and inline meshes (file/base64 meshes: pass `triangles`)."""
-    return (12 if spec.room is not None else 0) + 12 * len(spec.furniture) + sum(len(m.faces or ()) for m in spec.meshes)
+    inline = sum(len(m.faces or ()) for m in spec.meshes)
+    return (12 if spec.room is not None else 0) + 12 * len(spec.furniture) + inline
 
 
 def _extent(spec: SceneSpec) -> float:

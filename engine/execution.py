@@ -19,9 +19,10 @@ import os
 import pickle
 import tempfile
 from collections import OrderedDict, deque
+from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
-from typing import Iterable, Iterator, Protocol
+from typing import Protocol
 
 from owcsim.schemas import SceneSpec
 

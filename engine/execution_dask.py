@@ -51,8 +51,8 @@ import uuid
 import warnings
 import weakref
 from collections import OrderedDict, deque
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Iterable, Iterator
 
 import numpy as np
 

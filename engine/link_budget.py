@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from enum import Enum
 
 import numpy as np
+
+from owcsim.schemas.link_budget import IsiSplit  # one enum: the document's
 
 __all__ = ["IsiSplit", "LinkBudget", "ber_ook", "illuminance_los", "isi_split", "link_budget_from_spec",
            "luminous_flux_from_intensity", "luminous_intensity_center", "max_bit_rate", "noise_variances",
@@ -23,16 +24,6 @@ __all__ = ["IsiSplit", "LinkBudget", "ber_ook", "illuminance_los", "isi_split", 
 #: values scipy.constants gives (not imported for them: scipy costs a command's start-up, issue 10).
 Q_E = 1.602176634e-19
 K_B = 1.380649e-23
-
-
-class IsiSplit(str, Enum):
-    """How a binned CIR splits into signal and ISI power; times counted from the first arrival t0."""
-
-    #: Komine & Nakagawa 2004: h convolved with the NRZ pulse rect(0..T), integrated over [t0, t0+T]
-    #: (signal) and after t0+T (ISI), over T: a path at t0 + tau gives (1 - tau/T)_+ to the signal.
-    NRZ = "nrz"
-    #: Power arriving within one bit period T of the first arrival is signal, the rest ISI.
-    WINDOW = "window"
 
 
 @dataclass(frozen=True)
@@ -71,7 +62,7 @@ def link_budget_from_spec(spec) -> LinkBudget:
         background_current=spec.background_current, temperature=spec.temperature,
         open_loop_gain=spec.open_loop_gain, capacitance_per_area=spec.capacitance_per_area,
         channel_noise_factor=spec.channel_noise_factor, transconductance=spec.transconductance,
-        i2=spec.noise_bandwidth_factor_i2, i3=spec.noise_bandwidth_factor_i3, isi_split=IsiSplit(spec.isi_split.value))
+        i2=spec.noise_bandwidth_factor_i2, i3=spec.noise_bandwidth_factor_i3, isi_split=spec.isi_split)
 
 
 # --- photometry -------------------------------------------------------------------------------

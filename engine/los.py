@@ -1,8 +1,8 @@
 """Line-of-sight term, computed exactly for every link (physics.md section 6, LOS closed form).
 
 H_los = R(phi) * A cos(psi) T_s g rect(psi <= FOV) / d^2 * exp(-sigma_t d_in) * V,
-R(phi) = (m+1)/(2 pi) cos^m(phi) (or a luminaire's tabulated I(gamma, C) / Phi), arriving at t = d / c. It has no variance, so the
-Monte Carlo kernel never samples it; it is added to every estimate as a constant.
+R(phi) = (m+1)/(2 pi) cos^m(phi) (or a luminaire's tabulated I(gamma, C) / Phi), arriving at t = d / c.
+It has no variance, so the Monte Carlo kernel never samples it; it is added to every estimate as a constant.
 Shadow rays are cast only where the scene has occluders (furniture, meshes) and only for
 pairs that face each other: an empty box room is convex.
 """

@@ -10,7 +10,7 @@ keeps S1 = sum_i (a, b, c) and S2 = sum_i outer((a, b, c), (a, b, c)).
 """
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -13,12 +13,12 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from .lazy import trimesh  # imported on first use: it pulls in scipy (issue 10)
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from .constants import RAY_OFFSET_FACTOR
 from .errors import SceneError
+from .lazy import trimesh  # imported on first use: it pulls in scipy (issue 10)
 
 Chunk = tuple[np.ndarray, np.ndarray, np.ndarray]  # (ray index, a, b) [m]
 

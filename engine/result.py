@@ -24,6 +24,7 @@ from .estimates import channel_moments, link_moments, link_reliability, los_mome
 from .lighting import Lighting
 from .result_parts import cir_block, column, document_rows, grid_maps, order_block
 
+
 def _num(x) -> float | None:
     x = float(x)
     return x if math.isfinite(x) else None
@@ -256,7 +257,8 @@ def _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=
     flat = {k: np.where(nan, np.nan, v).ravel() for k, v in d.items()}
     cols = {
         "group": [spec.transmitter_groups[g].name for g in g_idx], "receiver": [scene.receivers.ids[j] for j in r_idx],
-        "receiver_index": r_idx.tolist(), "dc_gain": column(h0.ravel()), "dc_gain_stderr": column(flat["dc_gain_stderr"]),
+        "receiver_index": r_idx.tolist(), "dc_gain": column(h0.ravel()),
+        "dc_gain_stderr": column(flat["dc_gain_stderr"]),
         "path_loss_db": column(metrics.path_loss_db(h0.ravel())),
         "received_power_w": column((h0 * group_power[:, None]).ravel()),
         "mean_delay_s": column(flat["mean_delay_s"]), "mean_delay_s_stderr": column(flat["mean_delay_s_stderr"]),

@@ -185,7 +185,7 @@ def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[d
         for c, name in enumerate(names):
             sl = slice(c * n_rx + first, c * n_rx + first + nu * nv)
 
-            def part(key):
+            def part(key, sl=sl, nu=nu, nv=nv):
                 return np.array(columns[key][sl], dtype=float).reshape(nu, nv)  # None becomes NaN
 
             values, stderr, units = {}, {}, {}

@@ -15,11 +15,10 @@ from __future__ import annotations
 import itertools
 import time
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -28,14 +27,14 @@ from owcsim.schemas.algorithms import Direction, TwoSided, algorithm
 from owcsim.schemas.results import SimulationResultPublic, StopReason
 
 from . import auto
-from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
 from .constants import SPEED_OF_LIGHT
+from .estimates import may_stop, reported_rel_stderr
+from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
 from .kernel import KernelSettings, WorkItem
 from .los import line_of_sight, los_geometry
 from .medium_nee import two_sided_settings
 from .result import build_result
 from .scene import Scene, build_scene
-from .estimates import may_stop, reported_rel_stderr
 from .tally import Accumulator, TallyPlan, TimeBins
 
 #: Heuristic of the auto direction: with this many times more receivers than

@@ -14,9 +14,20 @@ import math
 
 import numpy as np
 
-from owcsim.engine.link_budget import (LinkBudget, IsiSplit, ber_ook, illuminance_los, isi_split,
-                                       luminous_flux_from_intensity, max_bit_rate, noise_variances, power_dbm,
-                                       received_power, snr, to_db)
+from owcsim.engine.link_budget import (
+    IsiSplit,
+    LinkBudget,
+    ber_ook,
+    illuminance_los,
+    isi_split,
+    luminous_flux_from_intensity,
+    max_bit_rate,
+    noise_variances,
+    power_dbm,
+    received_power,
+    snr,
+    to_db,
+)
 
 LEDS = np.array([[1.25, 1.25, 3.0], [1.25, 3.75, 3.0], [3.75, 1.25, 3.0], [3.75, 3.75, 3.0]])
 PLANE_Z = 0.85

@@ -11,7 +11,8 @@ The installed package holds the layers as subpackages: `owcsim.schemas` (wire mo
 """
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version as _version
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _version
 
 try:
     __version__ = _version("owcsim")

@@ -6,8 +6,9 @@ result (schemas.results.SimulationResultPublic) with numpy arrays, tables, maps 
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 from owcsim.clients.result import Result
 from owcsim.schemas import SceneSpec

@@ -117,8 +117,8 @@ def _output_folder(path: str) -> Path:
 def _cmd_run(args) -> int:
     assignments = args.set or []
     spec, _ = load_scene(args.scene, _scene_overrides(args), assignments)
-    from owcsim.engine.simulate import simulate
     from owcsim.clients.output import write_outputs
+    from owcsim.engine.simulate import simulate
 
     out = _output_folder(args.out)
     executor = None

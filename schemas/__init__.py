@@ -4,23 +4,38 @@ Depends on nothing else in owcsim; `engine`, `server` and `clients` import it.
 """
 from .devices import ReceiverGridSpec, ReceiverSpec, TransmitterSpec
 from .geometry import ROOM_FACES, BoxSpec, MeshSpec, RoomReflectance, RoomSpec
-from .medium import (ComplexIndexSpec, MiePhaseSpec, ParticleMediumSpec, ParticlesSpec, TabulatedPhaseSpec,
-                     BoxRegionSpec, GridMediumSpec, HenyeyGreensteinPhaseSpec, HomogeneousMediumSpec,
-                     IsotropicPhaseSpec, MediumSpec, MeshRegionSpec, MixturePhaseSpec, PhaseSpec, RayleighPhaseSpec,
-                     SceneRegionSpec, SchlickPhaseSpec)
 from .link_budget import LinkBudgetSpec, LuminousOutputSpec
-from .photometry import PhotometrySpec
+from .medium import (
+                     BoxRegionSpec,
+                     ComplexIndexSpec,
+                     GridMediumSpec,
+                     HenyeyGreensteinPhaseSpec,
+                     HomogeneousMediumSpec,
+                     IsotropicPhaseSpec,
+                     MediumSpec,
+                     MeshRegionSpec,
+                     MiePhaseSpec,
+                     MixturePhaseSpec,
+                     ParticleMediumSpec,
+                     ParticlesSpec,
+                     PhaseSpec,
+                     RayleighPhaseSpec,
+                     SceneRegionSpec,
+                     SchlickPhaseSpec,
+                     TabulatedPhaseSpec,
+)
 from .outputs import OutputsSpec
+from .photometry import PhotometrySpec
 from .scene import SceneSpec, TransmitterGroupSpec
 from .simulation import SimulationSpec
 
 __all__ = [
-    "BoxRegionSpec", "BoxSpec", "GridMediumSpec", "MeshRegionSpec", "HenyeyGreensteinPhaseSpec", "HomogeneousMediumSpec", "IsotropicPhaseSpec",
-    "MediumSpec", "MeshSpec", "MixturePhaseSpec", "PhaseSpec", "RayleighPhaseSpec", "ReceiverGridSpec",
-    "ReceiverSpec", "ROOM_FACES", "RoomReflectance", "RoomSpec", "SceneRegionSpec", "SceneSpec",
-    "SchlickPhaseSpec", "SimulationSpec", "TransmitterSpec", "LinkBudgetSpec", "LuminousOutputSpec", "PhotometrySpec", "OutputsSpec",
-    "TransmitterGroupSpec", "ComplexIndexSpec", "MiePhaseSpec", "ParticleMediumSpec", "ParticlesSpec",
-    "TabulatedPhaseSpec",
+    "BoxRegionSpec", "BoxSpec", "GridMediumSpec", "MeshRegionSpec", "HenyeyGreensteinPhaseSpec",
+    "HomogeneousMediumSpec", "IsotropicPhaseSpec", "MediumSpec", "MeshSpec", "MixturePhaseSpec", "PhaseSpec",
+    "RayleighPhaseSpec", "ReceiverGridSpec", "ReceiverSpec", "ROOM_FACES", "RoomReflectance", "RoomSpec",
+    "SceneRegionSpec", "SceneSpec", "SchlickPhaseSpec", "SimulationSpec", "TransmitterSpec", "LinkBudgetSpec",
+    "LuminousOutputSpec", "PhotometrySpec", "OutputsSpec", "TransmitterGroupSpec", "ComplexIndexSpec", "MiePhaseSpec",
+    "ParticleMediumSpec", "ParticlesSpec", "TabulatedPhaseSpec",
 ]
 
 # The HTTP service: jobs and problem details.

@@ -9,10 +9,10 @@ read these records; nothing else lists per-algorithm facts.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 from types import MappingProxyType
-from typing import Mapping
 
 
 class Direction(StrEnum):

@@ -14,7 +14,8 @@ from pydantic import AfterValidator, BaseModel, ConfigDict
 class SpecModel(BaseModel):
     """Input model: unknown fields are errors, numbers are finite, values are immutable once parsed."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # JSON has no inf: "Infinity" is an error
+    # JSON has no inf: "Infinity" is an error
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 def _finite_vec(v: tuple[float, float, float]) -> tuple[float, float, float]:

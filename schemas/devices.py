@@ -10,8 +10,8 @@ from .base import Direction, Point, SpecModel
 from .link_budget import LuminousOutputSpec
 from .photometry import PhotometrySpec
 
-Fov = Annotated[float, Field(ge=1e-6, le=90.0, description="field of view, half-angle [deg], in (0, 90] "
-                                                          "(at least 1e-6 deg: below it a concentrator's gain overflows)")]
+Fov = Annotated[float, Field(ge=1e-6, le=90.0, description=(
+    "field of view, half-angle [deg], in (0, 90] (at least 1e-6 deg: below it a concentrator's gain overflows)"))]
 
 
 class TransmitterSpec(SpecModel):

@@ -22,7 +22,7 @@ equivalent noise bandwidth); here B = `bandwidth` when given, else `bit_rate`.
 from __future__ import annotations
 
 import math
-from enum import Enum
+from enum import StrEnum
 
 from pydantic import Field, model_validator
 
@@ -68,7 +68,7 @@ class LuminousOutputSpec(SpecModel):
         return 2.0 * math.pi * self.center_luminous_intensity / (m + 1.0)
 
 
-class IsiSplit(str, Enum):
+class IsiSplit(StrEnum):
     """How a CIR splits into the bit's own power (signal) and its spill into later bits (ISI).
 
     Times are counted from the first arrival t0; T = 1 / bit_rate.

@@ -416,8 +416,8 @@ def write_map_files(maps: Sequence[GridMap], folder: str | Path, *, decor: MapDe
 
     In maps.mat each grid is a struct `map_<grid>` with grid, channels (cell), origin, u, v, normal,
     x, y, position (nu, nv, 3), values.<q> and stderr.<q> (channel, nu, nv), units.<q>, mask_code
-    (channel, nu, nv): 0 for a simulated point, k for the reason mask_reasons{k} (cell). `heatmaps`: True for every quantity, False for none, or the quantity
-    names to draw. Returns the paths written.
+    (channel, nu, nv): 0 for a simulated point, k for the reason mask_reasons{k} (cell). `heatmaps`: True
+    for every quantity, False for none, or the quantity names to draw. Returns the paths written.
     """
     savemat = _need("scipy.io", "the .mat file").savemat
     folder = Path(folder)
@@ -427,7 +427,7 @@ def write_map_files(maps: Sequence[GridMap], folder: str | Path, *, decor: MapDe
     written: list[Path] = []
     mat: dict[str, Any] = {}
     mat_names = _unique_names(names, lambda n: ("map_" + re.sub(r"\W", "_", n))[:63])
-    for (grid, ms), name, mat_name in zip(groups.items(), names, mat_names):
+    for ms, name, mat_name in zip(groups.values(), names, mat_names):
         written.append(to_netcdf(ms, folder / f"map_{name}.nc"))
         mat[mat_name] = _mat_struct(ms)
     savemat(folder / "maps.mat", mat, do_compression=True, oned_as="column")
@@ -435,7 +435,7 @@ def write_map_files(maps: Sequence[GridMap], folder: str | Path, *, decor: MapDe
     if heatmaps is False:
         return written
     wanted = None if heatmaps is True else set(heatmaps)
-    for (grid, ms), name in zip(groups.items(), names):
+    for ms, name in zip(groups.values(), names):
         for m, ch in zip(ms, _unique_names((m.channel for m in ms), _safe_name)):
             for q in m.values:
                 if wanted is None or q in wanted:
@@ -621,7 +621,8 @@ def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | P
         axis.set_major_locator(ticker.MaxNLocator(nbins=bins, steps=[1, 2, 2.5, 5, 10]))
     ax.set_xlabel(f"u [m]     (u = {_vec_text(m.u)}, v = {_vec_text(m.v)})")
     ax.set_ylabel("v [m]")
-    stats = "no simulated point with a value" if not s["count"] else "  ".join(f"{k} {_fmt(None if s[k] is None else s[k] * factor, shown_unit)}" for k in ("min", "mean", "max"))
+    stats = "no simulated point with a value" if not s["count"] else "  ".join(
+        f"{k} {_fmt(None if s[k] is None else s[k] * factor, shown_unit)}" for k in ("min", "mean", "max"))
     stats += "" if shown_unit == "1" or not s["count"] else f" {shown_unit}"
     u0 = "" if s["uniformity"] is None else f",  U0 = min/mean = {s['uniformity']:.3f}"
     fig.suptitle(f"{m.grid}: {quantity} from {m.channel}\n{stats}{u0}", fontsize=10)

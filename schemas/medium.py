@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
@@ -55,8 +55,8 @@ class RayleighPhaseSpec(SpecModel):
 
 class MixtureComponent(SpecModel):
     weight: float = Field(gt=0.0)
-    phase: Annotated[Union[IsotropicPhaseSpec, HenyeyGreensteinPhaseSpec, SchlickPhaseSpec,
-                           RayleighPhaseSpec], Field(discriminator="type")]
+    phase: Annotated[IsotropicPhaseSpec | HenyeyGreensteinPhaseSpec | SchlickPhaseSpec | RayleighPhaseSpec,
+                     Field(discriminator="type")]
 
 
 class MixturePhaseSpec(SpecModel):
@@ -172,8 +172,8 @@ class MiePhaseSpec(SpecModel):
 
 
 PhaseSpec = Annotated[
-    Union[IsotropicPhaseSpec, HenyeyGreensteinPhaseSpec, SchlickPhaseSpec, RayleighPhaseSpec,
-          MixturePhaseSpec, TabulatedPhaseSpec, MiePhaseSpec],
+    IsotropicPhaseSpec | HenyeyGreensteinPhaseSpec | SchlickPhaseSpec | RayleighPhaseSpec | MixturePhaseSpec
+    | TabulatedPhaseSpec | MiePhaseSpec,
     Field(discriminator="type"),
 ]
 
@@ -230,7 +230,7 @@ class MeshRegionSpec(SpecModel):
         return self
 
 
-RegionSpec = Annotated[Union[SceneRegionSpec, BoxRegionSpec, MeshRegionSpec], Field(discriminator="type")]
+RegionSpec = Annotated[SceneRegionSpec | BoxRegionSpec | MeshRegionSpec, Field(discriminator="type")]
 
 
 class HomogeneousMediumSpec(SpecModel):
@@ -365,4 +365,4 @@ class ParticleMediumSpec(SpecModel):
         return MiePhaseSpec(particles=self.particles)
 
 
-MediumSpec = Annotated[Union[HomogeneousMediumSpec, GridMediumSpec, ParticleMediumSpec], Field(discriminator="type")]
+MediumSpec = Annotated[HomogeneousMediumSpec | GridMediumSpec | ParticleMediumSpec, Field(discriminator="type")]

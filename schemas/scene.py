@@ -57,7 +57,8 @@ class SceneSpec(SpecModel):
             raise ValueError("the scene has no receiver: give `receivers` or `receiver_grids`")
         rx_ids = [r.id for r in self.receivers if r.id is not None] + [
             i for g in self.receiver_grids for i in g.ids()]
-        for kind, ids in (("transmitters", [d.id for d in self.transmitters if d.id is not None]), ("receivers", rx_ids)):
+        tx_given = [d.id for d in self.transmitters if d.id is not None]
+        for kind, ids in (("transmitters", tx_given), ("receivers", rx_ids)):
             dup = sorted(i for i, n in Counter(ids).items() if n > 1)  # linear: grids hold 1e5 receivers
             if dup:
                 raise ValueError(f"{kind}: duplicate ids {dup[:20]}")

@@ -44,7 +44,8 @@ class SimulationSpec(SpecModel):
     max_scattering: int | None = Field(None, ge=1, le=1000, description="highest scattering order S of algorithm 5 "
                                        "(algorithms 2-3: 1, 4: 2, 1: 0; default: from the accuracy asked)")
     segment_time_step_s: float | None = Field(
-        None, ge=1e-15, description="time strata of the points along segments, algorithms 2-4 [s] (default: time_bin_s)")
+        None, ge=1e-15,
+        description="time strata of the points along segments, algorithms 2-4 [s] (default: time_bin_s)")
     max_strata: int = Field(64, ge=1, le=4096, description="most time strata per segment and target, algorithms 2-4")
     equiangular_points: int = Field(
         2, ge=0, le=256, description="equiangular points per segment and target (algorithms 2-5), combined with "
@@ -65,7 +66,8 @@ class SimulationSpec(SpecModel):
     seed: int = Field(0, ge=0, lt=2**63)
     batch_size: int = Field(16384, ge=64, le=1_048_576, description="paths per batch (memory bound)")
     russian_roulette: bool = True
-    rr_start_depth: int = Field(3, ge=1, le=1000, description="first event count k + s (reflections plus scattering events) at which roulette may end a path")
+    rr_start_depth: int = Field(3, ge=1, le=1000, description="first event count k + s (reflections plus "
+                                "scattering events) at which roulette may end a path")
     pilot_paths: int = Field(4096, ge=256, le=1_000_000, description="paths per direction of the auto pilot")
 
     @model_validator(mode="after")

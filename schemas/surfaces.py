@@ -15,7 +15,7 @@ one of these materials. Each states its split of the total reflectance rho:
 """
 from __future__ import annotations
 
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, Discriminator, Field, Tag, WrapValidator
 
@@ -49,7 +49,7 @@ class MirrorSurfaceSpec(SpecModel):
     diffuse_fraction: DiffuseFraction = 0.0
 
 
-SurfaceSpec = Annotated[Union[LambertianSurfaceSpec, PhongSurfaceSpec, MirrorSurfaceSpec], Field(discriminator="type")]
+SurfaceSpec = Annotated[LambertianSurfaceSpec | PhongSurfaceSpec | MirrorSurfaceSpec, Field(discriminator="type")]
 
 _SURFACE_HELP = "a reflectance is a number in [0, 1] or a material with `type` lambertian, phong or mirror"
 
@@ -71,8 +71,8 @@ def _number_first(value, handler):
 
 #: A Lambertian reflectance (a number) or a material: what a surface's `reflectance` takes.
 Surface = Annotated[
-    Union[Annotated[Rho, Tag("number")], Annotated[LambertianSurfaceSpec, Tag("lambertian")],
-          Annotated[PhongSurfaceSpec, Tag("phong")], Annotated[MirrorSurfaceSpec, Tag("mirror")]],
+    Annotated[Rho, Tag("number")] | Annotated[LambertianSurfaceSpec, Tag("lambertian")]
+    | Annotated[PhongSurfaceSpec, Tag("phong")] | Annotated[MirrorSurfaceSpec, Tag("mirror")],
     Discriminator(_surface_kind, custom_error_type="invalid_surface", custom_error_message=_SURFACE_HELP),
     WrapValidator(_number_first)]
 

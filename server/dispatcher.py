@@ -44,7 +44,7 @@ class _Run:
     token: int
     started: float
     lifeline: object  # write end of a pipe the worker watches: closed (or the server gone) = stop
-    memory_bytes: int  # the job's memory estimate [B]  # write end of a pipe the worker watches: closed (or the server gone) = stop
+    memory_bytes: int  # the job's memory estimate [B]
     stop_seen: float | None = None  # when the dispatcher first saw that this run should end
     kill_reason: str | None = None
     progress: float = -1.0  # the last progress (elapsed_s) seen, and when it changed

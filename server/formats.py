@@ -1,4 +1,5 @@
-"""A result (schemas.results.SimulationResultPublic, typed) in other forms: the CIR as CSV and as numpy arrays (.npz), h(t) as PNG.
+"""A result (schemas.results.SimulationResultPublic) in other forms: the CIR as CSV and as numpy arrays
+(.npz), h(t) as PNG.
 
 The one place that turns a result document into files. The service renders the JSON, CSV
 and NPZ once, in the job's worker, when the job ends (`render_all`: compressed files the

@@ -64,7 +64,7 @@ class RequestLimits:
             left = deadline - loop.time()
             try:
                 message = await asyncio.wait_for(receive(), max(left, 0.0))
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 raise BodyTimeout() from None
             if message["type"] != "http.request" or not message.get("more_body", False):
                 body_done = True

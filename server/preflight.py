@@ -31,7 +31,6 @@ from owcsim.schemas.errors import ProblemField
 
 from .problems import ProblemError
 
-
 #: A scene with at most this many receivers (grids expanded), no file-content meshes and at most
 #: SMALL_TRIANGLES inline triangles is pre-flighted in the server's thread, not in a process.
 SMALL_RECEIVERS = 1000

@@ -524,7 +524,8 @@ class JobStore:
         packed = _pack(result_json) if result_json is not None else None
         with self._tx() as con:
             cur = con.execute(
-                "UPDATE jobs SET status = ?, finished_at = ?, error = COALESCE(?, error), warnings = ?, has_result = ?, "
+                "UPDATE jobs SET status = ?, finished_at = ?, error = COALESCE(?, error), warnings = ?, "
+                "has_result = ?, "
                 "fraction = CASE WHEN ? = 'succeeded' THEN 1.0 ELSE fraction END "
                 "WHERE id = ? AND run_token = ? AND status = 'running'",
                 (status, time.time(), error, json.dumps(list(warnings)), packed is not None, status, job_id, token))

@@ -1,7 +1,7 @@
 """How a stored job looks on the wire (schemas.jobs.JobPublic), and its URLs."""
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 from owcsim.schemas.jobs import JobProgress, JobPublic, JobUrls
 
@@ -15,7 +15,7 @@ def job_url(job_id: str) -> str:
 
 
 def _time(t: float | None) -> datetime | None:
-    return datetime.fromtimestamp(t, timezone.utc) if t is not None else None
+    return datetime.fromtimestamp(t, UTC) if t is not None else None
 
 
 def job_public(row: JobRow) -> JobPublic:

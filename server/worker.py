@@ -3,8 +3,8 @@
 The worker talks to the job store with its own connection. After every batch it
 writes progress (at most every `progress_interval_s`) and learns whether to stop:
 the job was cancelled, its run was taken back (server restart), the server process
-is gone (its end of the worker's lifeline pipe closed), or the wall-time limit is reached. A cancelled run stores its partial
-result. An engine error fails the job with the engine's message.
+is gone (its end of the worker's lifeline pipe closed), or the wall-time limit is reached. A
+cancelled run stores its partial result. An engine error fails the job with the engine's message.
 
 Memory: before anything else the worker caps its own address space (RLIMIT_AS) at what it
 has mapped already + the job's memory estimate (engine.budget, made at submission) + a

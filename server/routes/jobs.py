@@ -28,7 +28,8 @@ IdempotencyKey = Annotated[str | None, Header(
                 "document) returns the first job instead of queueing a duplicate")]
 
 
-@router.post("", status_code=202, operation_id="submit_job", response_model=JobPublic, summary="Submit a scene document as a job",
+@router.post("", status_code=202, operation_id="submit_job", response_model=JobPublic,
+             summary="Submit a scene document as a job",
              responses={**problems(400, 401, 408, 413, 415, 422, 429, 503, 507),
                         202: {"description": "queued (or, with a known Idempotency-Key, the first job)",
                               "headers": {"Location": {"description": "the job's URL",
@@ -76,7 +77,8 @@ def _submit(body: bytes, owner, key, store: JobStore, settings: Settings, prefli
                            job_id=exc.job_id) from None
 
 
-@router.get("", operation_id="list_jobs", response_model=JobListPublic, summary="List jobs, newest first", responses=problems(401, 422))
+@router.get("", operation_id="list_jobs", response_model=JobListPublic, summary="List jobs, newest first",
+            responses=problems(401, 422))
 def list_jobs(status: Annotated[list[JobStatus] | None, Query(description="only jobs in these states")] = None,
               limit: Annotated[int, Query(ge=1, le=500, description="jobs per page")] = 50,
               cursor: Annotated[str | None, Query(pattern=r"^[0-9a-f]{32}$",
@@ -86,8 +88,9 @@ def list_jobs(status: Annotated[list[JobStatus] | None, Query(description="only 
     try:
         rows, after = store.list(owner, status, limit, cursor)
     except KeyError:
+        cursor = ProblemField(loc="query.cursor", msg="unknown cursor", type="value_error")
         raise ProblemError(422, "invalid-parameter", "query.cursor: not a cursor of this API key's listing",
-                           errors=[ProblemField(loc="query.cursor", msg="unknown cursor", type="value_error")]) from None
+                           errors=[cursor]) from None
     nxt = None
     if after is not None:
         query = "".join(f"&status={s}" for s in status or ())
@@ -95,7 +98,8 @@ def list_jobs(status: Annotated[list[JobStatus] | None, Query(description="only 
     return JobListPublic(items=[job_public(r) for r in rows], next_cursor=after, next=nxt)
 
 
-@router.get("/{job_id}", operation_id="get_job", response_model=JobPublic, summary="Get a job: state, progress, timestamps",
+@router.get("/{job_id}", operation_id="get_job", response_model=JobPublic,
+            summary="Get a job: state, progress, timestamps",
             responses=problems(401, 404))
 def get_job(job: JobRow = Depends(owned_job)) -> JobPublic:
     return job_public(job)

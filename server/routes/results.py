@@ -46,7 +46,8 @@ def _render_legacy(job: JobRow, store: JobStore) -> None:
     if text is None:
         raise _not_ready(job)
     with tempfile.TemporaryDirectory(prefix="owcsim-render-", dir=store.path.parent) as tmp:
-        store.put_renders(job.id, render_all(SimulationResultPublic.model_validate_json(text), text.decode(), Path(tmp)))
+        result = SimulationResultPublic.model_validate_json(text)
+        store.put_renders(job.id, render_all(result, text.decode(), Path(tmp)))
 
 
 async def _ensure_renders(request: Request, job: JobRow, store: JobStore) -> None:
@@ -97,7 +98,8 @@ async def get_result(request: Request, job: JobRow = Depends(owned_job),
     return await _send(request, job, store, "result.json.gz")
 
 
-@router.get("/result.csv", operation_id="get_result_csv", summary="Binned CIR of every link, long format (the columns of cir.csv)",
+@router.get("/result.csv", operation_id="get_result_csv",
+            summary="Binned CIR of every link, long format (the columns of cir.csv)",
             response_class=Response, responses={200: {"content": {"text/csv": {"schema": {"type": "string"}}},
                                                        "description": "CSV"}, **problems(401, 404, 409)})
 async def get_result_csv(request: Request, job: JobRow = Depends(owned_job),
@@ -105,7 +107,8 @@ async def get_result_csv(request: Request, job: JobRow = Depends(owned_job),
     return await _send(request, job, store, "result.csv.gz", _download(f"{job.id}-cir.csv"))
 
 
-@router.get("/result.npz", operation_id="get_result_npz", summary="numpy arrays: t_edges_s, cir, cir_stderr, by_reflection_order, dc_gain, ...",
+@router.get("/result.npz", operation_id="get_result_npz",
+            summary="numpy arrays: t_edges_s, cir, cir_stderr, by_reflection_order, dc_gain, ...",
             response_class=Response,
             responses={200: {"content": {"application/octet-stream": {"schema": {"type": "string",
                                                                                  "format": "binary"}}},
@@ -133,7 +136,8 @@ def _plot(store: JobStore, job_id: str, link: int | None) -> bytes:
     return png
 
 
-@router.get("/plot.png", operation_id="get_plot", summary="h(t) per reflection order and total (up to 6 links, or the one asked)",
+@router.get("/plot.png", operation_id="get_plot",
+            summary="h(t) per reflection order and total (up to 6 links, or the one asked)",
             response_class=Response,
             responses={200: {"content": {"image/png": {"schema": {"type": "string", "format": "binary"}}},
                              "description": "PNG"}, **problems(401, 404, 409, 422)})

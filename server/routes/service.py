@@ -20,7 +20,8 @@ router = APIRouter(tags=["service"])
 STALE_S = 15.0
 
 
-@router.get("/health", operation_id="health", response_model=HealthPublic, summary="Health: the store answers, the dispatcher runs",
+@router.get("/health", operation_id="health", response_model=HealthPublic,
+            summary="Health: the store answers, the dispatcher runs",
             responses={503: {"model": HealthPublic, "description": "the service cannot run jobs now"}})
 async def health(store: JobStore = Depends(get_store), dispatcher: Dispatcher = Depends(get_dispatcher),
                  settings: Settings = Depends(get_settings)):
@@ -54,6 +55,7 @@ def owcsim_version() -> str:
         return "0+unknown"
 
 
-@router.get("/version", operation_id="version", response_model=VersionPublic, summary="Version of owcsim and of the API")
+@router.get("/version", operation_id="version", response_model=VersionPublic,
+            summary="Version of owcsim and of the API")
 def get_version() -> VersionPublic:
     return VersionPublic(owcsim_version=owcsim_version())
