@@ -397,6 +397,7 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
             cand = (n, tail, d0, d_rms, how.format(what=what), lk.rms_delay_spread_s or 0.0)
             if best is None or (cand[0], cand[1]) > (best[0], best[1]):
                 best = cand
+        assert best is not None  # the pilot has at least one link
         n, tail, d0, d_rms, how, tau_rms = best
         name = {"reflection": "reflection order", "scattering": "scattering order"}[key]
         if math.isfinite(tail) and tail <= allowed / 2 and d0 <= rel * tau_rms and d_rms <= rel * tau_rms:

@@ -59,10 +59,16 @@ class Devices:
         """Indices of the devices with a tabulated pattern."""
         return [i for i, p in enumerate(self.patterns) if p is not None]
 
+    def pattern(self, i: int) -> tuple[Photometry, np.ndarray]:
+        """(tabulated pattern, frame (3, 3): rows e_C0, e_C90, aim) of device i, which has one."""
+        p = self.patterns[i]
+        assert p is not None and self.frames is not None, f"device {i} has no tabulated pattern"
+        return p, self.frames[i]
+
     @property
     def front_only(self) -> bool:
         """True when no device responds behind its normal (cos <= 0 gives 0 for all)."""
-        return all(self.patterns[i].max_gamma <= np.pi / 2 + 1e-12 for i in self.tabulated)
+        return all(self.pattern(i)[0].max_gamma <= np.pi / 2 + 1e-12 for i in self.tabulated)
 
     def response(self, idx: np.ndarray, cos: np.ndarray, directions: np.ndarray | None = None) -> np.ndarray:
         """Angular response of devices `idx` at cosine `cos` to their normal [1/sr or m^2].
@@ -76,7 +82,8 @@ class Devices:
             if len(tabulated) == len(self.ids) == 1:  # one luminaire (the usual backward target): no masks
                 if directions is None:
                     raise ValueError("a tabulated transmitter's response needs the directions")
-                return self.patterns[0].eval_local(np.asarray(directions, float) @ self.frames[0].T)
+                pattern, frame = self.pattern(0)
+                return pattern.eval_local(np.asarray(directions, float) @ frame.T)
             m = self.order.take(idx)
             safe = np.where(cos > 0, cos, 1.0)
             out = np.where(cos > 0, (m + 1) / (2 * np.pi) * np.exp(m * np.log(safe)), 0.0)
@@ -85,8 +92,8 @@ class Devices:
                 if len(sel):
                     if directions is None:
                         raise ValueError("a tabulated transmitter's response needs the directions")
-                    local = np.asarray(directions, float)[sel] @ self.frames[j].T
-                    out[sel] = self.patterns[j].eval_local(local)
+                    pattern, frame = self.pattern(j)
+                    out[sel] = pattern.eval_local(np.asarray(directions, float)[sel] @ frame.T)
             return out
         return np.where((cos > 0) & (cos >= self.cos_fov.take(idx)), self.gain.take(idx) * cos, 0.0)
 
@@ -100,7 +107,8 @@ class Devices:
         """Directions leaving device i with pdf response / total_response (exact inversion)."""
         if self.kind == "transmitter":
             if self.patterns and self.patterns[i] is not None:
-                return self.patterns[i].sample_local(u1, u2) @ self.frames[i]
+                pattern, frame = self.pattern(i)
+                return pattern.sample_local(u1, u2) @ frame
             local = sample_generalized_lambertian(self.order[i], u1, u2)
         else:
             local = sample_cosine_cone(self.cos_fov[i], u1, u2)

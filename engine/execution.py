@@ -120,7 +120,7 @@ class ProcessExecutor:
         self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
 
     def map(self, job: JobRef, items, settings: KernelSettings):
-        window = deque()
+        window: deque = deque()
         try:
             for item in items:
                 window.append(self._pool.submit(_run_item, job.key, job.spec_path, job.base_dir, item, settings))

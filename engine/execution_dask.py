@@ -201,7 +201,7 @@ _LOCK = threading.Lock()
 #: so every batch-sized temporary is mapped and faulted in afresh (batches of 32768 paths ran 2x slower).
 MALLOC_MMAP_THRESHOLD = 32 << 20
 MALLOC_TRIM_THRESHOLD = 64 << 20
-_TUNED = []
+_TUNED: list[bool] = []
 
 
 def _tune_malloc() -> None:

@@ -80,13 +80,13 @@ class GridMedium(Medium):
         n = len(L)
         tau, t_out, scattered = np.zeros(n), L.copy(), np.zeros(n, bool)
         t0, t1 = clip_box(o, d, L, self.lo, self.hi)
-        ids = np.flatnonzero(t1 > t0)
+        ids: np.ndarray = np.flatnonzero(t1 > t0)
         n_cross = len(ids)
         oo, dd, tc, te = o[ids], d[ids], t0[ids], t1[ids]
-        acc = np.zeros(len(ids))
+        acc: np.ndarray = np.zeros(len(ids))
         want = need[ids] if need is not None else None
         cell, _ = self.cells(oo + tc[:, None] * dd)
-        step = np.sign(dd).astype(np.int64)
+        step: np.ndarray = np.sign(dd).astype(np.int64)
         with np.errstate(divide="ignore"):
             inv = np.where(step != 0, 1.0 / np.where(step != 0, dd, 1.0), np.inf)
         upper = np.asarray(self.shape)

@@ -12,6 +12,7 @@ def read_input(file: str | None, data_base64: str | None, base_dir: Path | None,
     """(bytes, path or None) of an input given as `file` (relative paths from `base_dir`, the scene file's
     folder) or inline as `data_base64`; SceneError "`what` ... not found" for a missing file."""
     if file is None:
+        assert data_base64 is not None, f"{what}: neither a file nor inline data (the schema requires one)"
         return base64.b64decode(data_base64, validate=True), None
     path = Path(file)
     if not path.is_absolute() and base_dir is not None:

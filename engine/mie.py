@@ -195,13 +195,13 @@ def size_window(dg: float, sigma_g: float, wavelength: float, medium_index: floa
     y = np.linspace(mu - 8 * s, mu + 8 * s + 6 * s * s, 20001)
     x = np.pi * np.exp(y) * medium_index / wavelength
     gauss = np.exp(-0.5 * ((y - mu) / s) ** 2)
-    lo, hi = y[-1], y[0]
+    lo, hi = float(y[-1]), float(y[0])
     for bound in (np.minimum(1.0, x), np.minimum(1.0, x) ** 4):
         f = gauss * np.exp(2 * y - 2 * mu) * bound
         cdf = np.cumsum(f) / f.sum()
-        lo = min(lo, y[np.searchsorted(cdf, _TAIL)])
-        hi = max(hi, y[min(np.searchsorted(cdf, 1.0 - _TAIL), len(y) - 1)])
-    return float(lo), float(hi)
+        lo = min(lo, float(y[int(np.searchsorted(cdf, _TAIL))]))
+        hi = max(hi, float(y[min(int(np.searchsorted(cdf, 1.0 - _TAIL)), len(y) - 1)]))
+    return lo, hi
 
 
 @dataclass(frozen=True)

@@ -214,12 +214,12 @@ class MeshRegion:
 
     def intervals(self, origins, directions, lengths) -> list[Chunk]:
         t_enter, t_exit = clip_box(origins, directions, lengths, self.lo, self.hi)
-        ids = np.flatnonzero(t_exit > t_enter)  # segments that never meet the bounding box cost nothing
+        ids: np.ndarray = np.flatnonzero(t_exit > t_enter)  # segments that never meet the bounding box cost nothing
         o, d, L = origins[ids], directions[ids], lengths[ids]
-        t_start = np.zeros(len(ids))  # start of the current interval
+        t_start: np.ndarray = np.zeros(len(ids))  # start of the current interval
         # Whether it may be inside: at an entry, or at an origin inside the bounding box (one outside it is outside).
-        opened = np.all((o >= self.lo) & (o <= self.hi), axis=1)
-        t_query = np.zeros(len(ids))  # the next query begins here
+        opened: np.ndarray = np.all((o >= self.lo) & (o <= self.hi), axis=1)
+        t_query: np.ndarray = np.zeros(len(ids))  # the next query begins here
         chunks = []
         for _ in range(MAX_CROSSINGS):
             if len(ids) == 0:

@@ -103,8 +103,11 @@ def group_means(accs) -> tuple[np.ndarray, np.ndarray]:
     if not served:
         n_links = accs[0].n_links if accs else 0
         return np.zeros((1, n_links)), np.zeros((1, n_links))
-    means = sum(np.where(a.h0_group_paths > 0, a.group_h0 / np.maximum(a.h0_group_paths, 1), 0.0) for a in served)
-    counts = sum(np.where((a.n_paths > 0)[None, :], a.h0_group_paths.astype(float), 0.0) for a in served)
+    means = np.zeros(served[0].group_h0.shape)
+    counts = np.zeros(served[0].group_h0.shape)
+    for a in served:  # a loop over the (at most two) directions
+        means = means + np.where(a.h0_group_paths > 0, a.group_h0 / np.maximum(a.h0_group_paths, 1), 0.0)
+        counts = counts + np.where((a.n_paths > 0)[None, :], a.h0_group_paths.astype(float), 0.0)
     filled = np.all([(a.h0_group_paths > 0) | (a.n_paths == 0)[None, :] for a in served], axis=0)
     return means, np.where(filled, counts / len(served), 0.0)
 

@@ -7,6 +7,9 @@ links that asked for a CIR (a handful of explicit receivers by default) get per-
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
+from functools import reduce
+from operator import add
 
 import numpy as np
 
@@ -31,9 +34,20 @@ def document_rows(cols: dict[str, list], n: int) -> list[dict]:
     return [dict(zip(keys, row)) for row in zip(*(cols[k] for k in keys))] if n else []
 
 
+def _total(parts: Iterable[np.ndarray]) -> np.ndarray:
+    """The sum of the arrays (sum() of arrays, typed: its start 0 is not an array)."""
+    return reduce(add, parts)
+
+
 def _per_path(acc: Accumulator, links: np.ndarray, x: np.ndarray) -> np.ndarray:
     n = acc.n_paths.take(links).astype(float).reshape((-1,) + (1,) * (x.ndim - 1))
     return np.where(n > 0, x / np.maximum(n, 1.0), 0.0)
+
+
+def _split(x: np.ndarray | None) -> np.ndarray:
+    """An order-split tally (present when the plan splits the CIR by order)."""
+    assert x is not None
+    return x
 
 
 def _group_estimates(accs, link: int, slot: int):
@@ -61,13 +75,14 @@ def cir_block(accs: dict[str, Accumulator], plan: TallyPlan, cir_links: np.ndarr
     rel_edges = bins.dt * np.arange(bins.n + 1)  # metrics on times from t_min: even edges when t_min >> dt
     slots = plan.cir_slots(cir_links)
     pool = list(accs.values())
-    total = sum(_per_path(a, cir_links, a.cir[slots]) for a in pool)
-    early = sum(_per_path(a, cir_links, a.early[slots]) for a in pool)
-    late = sum(_per_path(a, cir_links, a.late[slots]) for a in pool)
-    by_k = by_s = None
+    total = _total(_per_path(a, cir_links, a.cir[slots]) for a in pool)
+    early = _total(_per_path(a, cir_links, a.early[slots]) for a in pool)
+    late = _total(_per_path(a, cir_links, a.late[slots]) for a in pool)
+    by_k: np.ndarray | None = None
+    by_s: np.ndarray | None = None
     if plan.by_order_cir:
-        by_k = sum(_per_path(a, cir_links, a.cir_k[slots]) for a in pool)
-        by_s = sum(_per_path(a, cir_links, a.cir_s[slots]) for a in pool)
+        by_k = _total(_per_path(a, cir_links, _split(a.cir_k)[slots]) for a in pool)
+        by_s = _total(_per_path(a, cir_links, _split(a.cir_s)[slots]) for a in pool)
     with np.errstate(over="ignore"):  # a delay far outside the window may overflow the bin index: no bin, then
         pos = (los_delay[cir_links] - bins.t_min) / bins.dt
     inside = (pos >= 0) & (pos < bins.n)
@@ -79,7 +94,7 @@ def cir_block(accs: dict[str, Accumulator], plan: TallyPlan, cir_links: np.ndarr
     total = total + los_vec
     early = early + np.where(~inside & (los_delay[cir_links] < bins.t_min), g, 0.0)
     late = late + np.where(~inside & (los_delay[cir_links] >= bins.t_min), g, 0.0)
-    if by_k is not None:
+    if by_k is not None and by_s is not None:
         by_k[:, 0] += los_vec
         by_s[:, 0] += los_vec
     for r, link in enumerate(cir_links.tolist()):  # the few links with a CIR: per-link jackknife
@@ -120,11 +135,9 @@ def order_block(accs: dict[str, Accumulator], plan: TallyPlan, order_links: np.n
     """Fill the order-split columns (H0 per reflection and scattering order) and the truncation estimate."""
     if not len(order_links):
         return
-    mean = var = 0.0
-    for acc in accs.values():  # rows are in slot order, which is the order of the sorted links
-        m, v = acc.order_moments(order_links)
-        mean = mean + m
-        var = var + v
+    moments = [acc.order_moments(order_links) for acc in accs.values()]  # rows in slot order: the sorted links
+    mean = _total(m for m, _ in moments)
+    var = _total(v for _, v in moments)
     by_k = mean.sum(axis=2)
     by_k[:, 0] += los_gain[order_links]
     by_s = mean.sum(axis=1)

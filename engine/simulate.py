@@ -349,11 +349,11 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
     if n_paths is not None and runs:
         first = next(_items(runs, sim, settings, MAIN_PHASE, n_paths))
         total_batches = len(runs) * -(-n_paths // first.n_paths)
-    state = {"done": 0, "worst": float("inf"), "rel_at": -PROGRESS_INTERVAL_S}
+    state: dict[str, float] = {"done": 0, "worst": float("inf"), "rel_at": -PROGRESS_INTERVAL_S}
 
     def on_batch(item: WorkItem) -> bool:
         state["done"] += 1
-        info.batches = state["done"]
+        info.batches = int(state["done"])
         end_of_round = state["done"] % max(len(runs), 1) == 0
         elapsed = time.perf_counter() - t_start
         last = total_batches is not None and state["done"] == total_batches
@@ -373,13 +373,13 @@ def _run(scene, spec, settings, executor, job, directions, los_gain, info, progr
                                 0.0 if not np.isfinite(worst) else (target / worst) ** 2 if worst > 0 else 1.0))
         if progress is not None:
             progress(Progress(fraction=frac, paths=int(max(a.n_paths.max() for a in accs.values())),
-                              batches=state["done"], dc_gain_rel_stderr=worst if np.isfinite(worst) else None,
+                              batches=int(state["done"]), dc_gain_rel_stderr=worst if np.isfinite(worst) else None,
                               elapsed_s=elapsed))
         if should_stop is not None and should_stop():
             info.stop_reason = StopReason.CANCELLED
             return True
         if total_batches is None and end_of_round:
-            served = sum(a.n_paths for a in accs.values())[directions != SKIP]
+            served = np.sum([a.n_paths for a in accs.values()], axis=0)[directions != SKIP]
             if (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP \
                     and worst <= sim.target_rel_error \
                     and may_stop(accs, los_gain, scene, settings.tally, sim.target_rel_error, directions != SKIP):

@@ -117,7 +117,7 @@ ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType({a.number: a for a in (
 )})
 
 
-def algorithm(number: int) -> Algorithm:
+def algorithm(number: int | str) -> Algorithm:
     """The record of `simulation.algorithm = number` (a resolved setting, not "auto")."""
     try:
         return ALGORITHMS[int(number)]

@@ -56,6 +56,7 @@ class TransmitterSpec(SpecModel):
             return 0.0
         if self.lambertian_order is not None:
             return self.lambertian_order
+        assert self.half_power_semi_angle_deg is not None  # the validator asks for one form
         return -math.log(2.0) / math.log(math.cos(math.radians(self.half_power_semi_angle_deg)))
 
 

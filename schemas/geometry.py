@@ -41,7 +41,7 @@ class RoomReflectance(SpecModel):
 
     def by_face(self) -> dict:
         """Reflectance (or material) of each face, keyed by the names of ROOM_FACES."""
-        out = {"floor": self.floor, "ceiling": self.ceiling}
+        out: dict = {"floor": self.floor, "ceiling": self.ceiling}
         for w in ROOM_FACES[2:]:
             v = getattr(self, w)
             out[w] = self.walls if v is None else v

@@ -59,12 +59,14 @@ class LuminousOutputSpec(SpecModel):
         """I_v(0) [cd] for Lambertian order m."""
         if self.center_luminous_intensity is not None:
             return self.center_luminous_intensity
+        assert self.luminous_flux is not None  # the validator asks for exactly one
         return (m + 1.0) * self.luminous_flux / (2.0 * math.pi)
 
     def flux(self, m: float) -> float:
         """Phi_v [lm] for Lambertian order m."""
         if self.luminous_flux is not None:
             return self.luminous_flux
+        assert self.center_luminous_intensity is not None
         return 2.0 * math.pi * self.center_luminous_intensity / (m + 1.0)
 
 

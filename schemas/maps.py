@@ -18,7 +18,7 @@ import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -165,9 +165,15 @@ class GridMap:
         return np.cross(self.u, self.v)
 
     @property
+    def reasons(self) -> np.ndarray:
+        """(nu, nv) str: `mask_reason` as set on construction ("" where simulated)."""
+        assert self.mask_reason is not None  # __post_init__ fills it
+        return self.mask_reason
+
+    @property
     def masked(self) -> np.ndarray:
         """(nu, nv) bool: True where the point is masked (has a reason)."""
-        return self.mask_reason != ""
+        return self.reasons != ""
 
     @property
     def positions(self) -> np.ndarray:
@@ -187,7 +193,7 @@ class GridMap:
 def masked_points(m: GridMap) -> dict[str, np.ndarray]:
     """Masked points by reason: reason -> (k, 2) int array of (i, j)."""
     idx = np.argwhere(m.masked)
-    reasons = m.mask_reason[idx[:, 0], idx[:, 1]]
+    reasons = m.reasons[idx[:, 0], idx[:, 1]]
     return {str(r): idx[reasons == r] for r in np.unique(reasons)}
 
 
@@ -329,7 +335,7 @@ def to_xarray(maps: Sequence[GridMap]) -> xarray.Dataset:
         data[q] = (dims, a, {"units": units[q]})
         if q in stderr:
             data[f"{q}_stderr"] = (dims, stderr[q], {"units": units[q], "long_name": f"standard error of {q}"})
-    reasons = np.stack([m.mask_reason for m in maps]).astype(str)
+    reasons = np.stack([m.reasons for m in maps]).astype(str)
     same = bool(np.all(reasons == reasons[:1]))
     data["mask_reason"] = (dims[1:] if same else dims, reasons[0] if same else reasons,
                            {"long_name": "why the point is masked; empty for a simulated point"})
@@ -359,7 +365,8 @@ def from_xarray(ds: xarray.Dataset) -> list[GridMap]:
     return out
 
 
-def to_netcdf(maps: Sequence[GridMap], path: str | Path, *, engine: str = "scipy") -> Path:
+def to_netcdf(maps: Sequence[GridMap], path: str | Path, *,
+              engine: Literal["netcdf4", "scipy", "h5netcdf"] = "scipy") -> Path:
     """Write the maps of one grid as a netCDF file (netCDF3 through scipy by default); returns the path."""
     path = Path(path)
     to_xarray(maps).to_netcdf(path, engine=engine)
@@ -396,7 +403,7 @@ def _mat_struct(maps: list[GridMap]) -> dict[str, Any]:
     cell = np.empty(len(maps), dtype=object)
     cell[:] = [m.channel for m in maps]
     # reasons as codes into a list (1-based, as MATLAB indexes it; 0 = simulated): a cell per point is slow and big
-    names, code = np.unique(np.stack([m.mask_reason for m in maps]), return_inverse=True)
+    names, code = np.unique(np.stack([m.reasons for m in maps]), return_inverse=True)
     code = code.reshape(len(maps), *first.shape)
     if names[0] == "":
         names = names[1:]
@@ -455,7 +462,7 @@ def to_dataframe(maps: GridMap | Sequence[GridMap]):
         cols: dict[str, Any] = {"grid": m.grid, "channel": m.channel, "i": ii.ravel(), "j": jj.ravel(),
                                 "x": m.x[ii.ravel()], "y": m.y[jj.ravel()], "position_x": pos[:, 0],
                                 "position_y": pos[:, 1], "position_z": pos[:, 2],
-                                "mask_reason": m.mask_reason.ravel()}
+                                "mask_reason": m.reasons.ravel()}
         for q, a in m.values.items():
             cols[q] = a.ravel()
             if q in m.stderr:
@@ -591,8 +598,8 @@ def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | P
     if room is not None:
         ax.add_patch(Polygon(room, closed=True, fill=False, edgecolor="0.3", linestyle="--", linewidth=1.0))
     if decor is not None:
-        for name, lo, hi in decor.furniture:
-            poly = _hull(_project(m, _box_corners(lo, hi)))
+        for name, box_lo, box_hi in decor.furniture:
+            poly = _hull(_project(m, _box_corners(box_lo, box_hi)))
             if len(poly) and _overlaps(poly, grid_box):
                 ax.add_patch(Polygon(poly, closed=len(poly) > 2, fill=False, edgecolor="black", linewidth=1.4))
                 # name at the centre of the visible part of the footprint's bounding box

@@ -95,8 +95,9 @@ class TabulatedPhaseSpec(SpecModel):
     def _table(self) -> "TabulatedPhaseSpec":
         if (self.cos_theta is None) == (self.angle_deg is None):
             raise ValueError("give exactly one of `cos_theta` and `angle_deg`")
+        grid: list[float]
         name, grid, ends = (("cos_theta", self.cos_theta, (-1.0, 1.0)) if self.cos_theta is not None
-                            else ("angle_deg", self.angle_deg, (0.0, 180.0)))
+                            else ("angle_deg", self.angle_deg or [], (0.0, 180.0)))
         if len(grid) != len(self.values):
             raise ValueError(f"`{name}` has {len(grid)} points but `values` has {len(self.values)}: "
                              "give one value per point")
@@ -266,14 +267,17 @@ class HomogeneousMediumSpec(SpecModel):
         """Extinction coefficient [1/m]."""
         if self.visibility_m is not None:
             return KOSCHMIEDER / self.visibility_m
+        assert self.sigma_a is not None and self.sigma_s is not None  # the validator asks for one form
         return self.sigma_a + self.sigma_s
 
     @property
     def coefficients(self) -> tuple[float, float]:
         """(sigma_a, sigma_s) [1/m] from either input form."""
         if self.visibility_m is not None:
+            assert self.albedo is not None  # the validator asks for it with visibility_m
             st = self.sigma_t
             return (1.0 - self.albedo) * st, self.albedo * st
+        assert self.sigma_a is not None and self.sigma_s is not None
         return self.sigma_a, self.sigma_s
 
 

@@ -63,11 +63,13 @@ class SceneSpec(SpecModel):
             if dup:
                 raise ValueError(f"{kind}: duplicate ids {dup[:20]}")
         # Explicit devices must be placed sensibly; grid points that are not are masked by the engine.
-        for kind, devs in (("transmitters", self.transmitters), ("receivers", self.receivers)):
-            for i, d in enumerate(devs):
-                problem = placement_problem(self, d.position, d.normal)
-                if problem:
-                    raise ValueError(f"{kind}[{i}]" + (f" ({d.id})" if d.id else "") + f": {problem}")
+        devices: list[tuple[str, int, TransmitterSpec | ReceiverSpec]] = [
+            ("transmitters", i, d) for i, d in enumerate(self.transmitters)]
+        devices += [("receivers", i, d) for i, d in enumerate(self.receivers)]
+        for kind, i, d in devices:
+            problem = placement_problem(self, d.position, d.normal)
+            if problem:
+                raise ValueError(f"{kind}[{i}]" + (f" ({d.id})" if d.id else "") + f": {problem}")
         tx_ids = self.transmitter_ids()
         known = set(tx_ids)
         names = [g.name for g in self.transmitter_groups]
@@ -88,6 +90,7 @@ class SceneSpec(SpecModel):
     def check_tally_budget(self) -> None:
         """ValueError when the outputs asked need more than MAX_TALLY_CELLS cells (resolved settings only)."""
         sim = self.simulation
+        assert sim.max_reflections is not None, "the budget is checked once K is chosen"
         cells = self.tally_cells(sim.max_reflections, sim.scattering_orders, sim.n_bins)
         if cells > MAX_TALLY_CELLS:
             raise ValueError(

@@ -100,6 +100,8 @@ class SimulationSpec(SpecModel):
 
     @property
     def n_bins(self) -> int:
+        """Time bins of the window (resolved settings only: t_max_s given or chosen)."""
+        assert self.t_max_s is not None, "the time window is chosen when the job runs"
         return max(1, math.ceil((self.t_max_s - self.t_min_s) / self.time_bin_s - 1e-9))
 
     @property
