@@ -69,17 +69,20 @@ def result_json(result: SimulationResultPublic, raw: dict | None = None) -> str:
     return result.model_dump_json(indent=indent)
 
 
-def write_outputs(result: SimulationResultPublic, out: Path, raw: dict | None = None) -> list[Path]:
+def write_outputs(result: SimulationResultPublic, out: Path, raw: dict | None = None, plot: bool = True) -> list[Path]:
+    """Write the files of a result into the folder `out` (module docstring); `raw`: the document as a server
+    sent it (kept in result.json); `plot`: draw cir.png (matplotlib's import and drawing: ~0.3-0.5 s)."""
     out = Path(out)
     paths = [out / "result.json", out / "links.csv"]
     paths[0].write_text(result_json(result, raw))
     write_links_csv(result, paths[1])
     if write_cir_csv(result, out / "cir.csv"):
-        from .plot import plot_cir  # matplotlib: only when a PNG is written
-
         paths.append(out / "cir.csv")
-        plot_cir(result, out / "cir.png")
-        paths.append(out / "cir.png")
+        if plot:
+            from .plot import plot_cir  # matplotlib: only when a PNG is written
+
+            plot_cir(result, out / "cir.png")
+            paths.append(out / "cir.png")
     if result.maps:
         paths += write_map_outputs(result, out)
     return paths

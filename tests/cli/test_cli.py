@@ -127,3 +127,14 @@ def test_algorithm_flag_takes_auto(tmp_path, capsys):
                  "--algorithm", "auto"]) == 0
     res = json.loads((out / "result.json").read_text())
     assert res["scene"]["simulation"]["algorithm"] == "auto" and res["algorithm"] == 1  # no medium: vacuum paths
+
+
+def test_no_plot_skips_the_png_and_matplotlib(tmp_path):
+    """--no-plot writes every file but cir.png, and the command never imports matplotlib (nor trimesh, scipy)."""
+    out = tmp_path / "o"
+    code = ("import sys; from owcsim.cli import main; "
+            f"assert main(['run', {BARRY!r}, '--out', {str(out)!r}, '--paths', '2000', '--no-plot']) == 0; "
+            "print(sorted(m for m in ('matplotlib', 'trimesh', 'scipy') if m in sys.modules))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=tmp_path)
+    assert proc.stdout.strip().splitlines()[-1] == "[]"
+    assert sorted(p.name for p in out.iterdir()) == ["cir.csv", "links.csv", "result.json"]
