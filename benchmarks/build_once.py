@@ -22,6 +22,7 @@ Run: .venv/bin/python benchmarks/build_once.py [--subdivisions 8] [--paths 2048]
      [--before-python /path/to/other/.venv/bin/python]
 Timings are noisy on a shared machine: compare ratios measured in the same run.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,8 +35,11 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 #: What issue 10 measured before the job runner built each scene once (1.3 M-triangle mesh).
-ISSUE_BEFORE = {"automatic": {"geometry": 3, "medium": 4, "command_s": 8.2},
-                "explicit": {"command_s": 2.2}, "preflight": {"geometry": 4}}
+ISSUE_BEFORE = {
+    "automatic": {"geometry": 3, "medium": 4, "command_s": 8.2},
+    "explicit": {"command_s": 2.2},
+    "preflight": {"geometry": 4},
+}
 
 
 def scene_files(folder: Path, subdivisions: int, paths: int) -> dict[str, Path]:
@@ -92,8 +96,13 @@ print(json.dumps(out))
 
 
 def counts(python: str, files: dict[str, Path]) -> dict:
-    proc = subprocess.run([python, "-c", CHILD, str(files["explicit"]), str(files["automatic"])],
-                          capture_output=True, text=True, check=True, cwd=files["explicit"].parent)  # not a source tree
+    proc = subprocess.run(
+        [python, "-c", CHILD, str(files["explicit"]), str(files["automatic"])],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=files["explicit"].parent,
+    )  # not a source tree
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
@@ -103,8 +112,12 @@ def command_time(python: str, scene: Path, repeats: int) -> float:
     for _ in range(repeats):
         with tempfile.TemporaryDirectory() as out:
             t = time.perf_counter()
-            subprocess.run([python, "-m", "owcsim", "run", str(scene), "--out", out], check=True,
-                           capture_output=True, cwd=scene.parent)  # not a source tree: the install's own code
+            subprocess.run(
+                [python, "-m", "owcsim", "run", str(scene), "--out", out],
+                check=True,
+                capture_output=True,
+                cwd=scene.parent,
+            )  # not a source tree: the install's own code
             best = min(best, time.perf_counter() - t)
     return best
 
@@ -118,7 +131,7 @@ def main() -> None:
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="owcsim-build-once-") as tmp:
         files = scene_files(Path(tmp), args.subdivisions, args.paths)
-        print(f"smoky room + icosphere of {20 * 4 ** args.subdivisions:,d} triangles, {args.paths:,d} paths")
+        print(f"smoky room + icosphere of {20 * 4**args.subdivisions:,d} triangles, {args.paths:,d} paths")
         versions = {"this code": sys.executable}
         if args.before_python:
             versions["before (--before-python)"] = args.before_python
@@ -130,9 +143,13 @@ def main() -> None:
         if not args.before_python:
             b = ISSUE_BEFORE
             rows["before (issue 10, 1.3 M triangles)"] = (
-                {"explicit": {"geometry": None, "medium": None}, "automatic": b["automatic"],
-                 "preflight": {"geometry": b["preflight"]["geometry"], "medium": None}},
-                {"explicit": b["explicit"]["command_s"], "automatic": b["automatic"]["command_s"]})
+                {
+                    "explicit": {"geometry": None, "medium": None},
+                    "automatic": b["automatic"],
+                    "preflight": {"geometry": b["preflight"]["geometry"], "medium": None},
+                },
+                {"explicit": b["explicit"]["command_s"], "automatic": b["automatic"]["command_s"]},
+            )
         print(f"{'version':38s} {'job':10s} {'scene builds':>12s} {'medium builds':>13s} {'command [s]':>11s}")
         for label, (c, t) in rows.items():
             for job in ("explicit", "automatic", "preflight"):

@@ -14,6 +14,7 @@ matplotlib: 0.5 s). Timings are noisy on a shared machine: compare figures of th
 Run: .venv/bin/python benchmarks/cli_overhead.py [--repeats 7] [--python PATH ...] [--no-plot]
 (`--no-plot` also times the last install's `owcsim run --no-plot`: the command without matplotlib)
 """
+
 from __future__ import annotations
 
 import argparse
@@ -37,8 +38,9 @@ def command(python: str, out: str, *extra: str) -> list[str]:
 def import_times(python: str) -> dict[str, float]:
     """Import time [s] of each of PACKAGES in one run: the self times of all its modules (0: not imported)."""
     with tempfile.TemporaryDirectory() as out:
-        proc = subprocess.run([python, "-X", "importtime", *command(python, out)[1:]], capture_output=True,
-                              text=True, check=True, cwd=out)
+        proc = subprocess.run(
+            [python, "-X", "importtime", *command(python, out)[1:]], capture_output=True, text=True, check=True, cwd=out
+        )
     found = dict.fromkeys(PACKAGES, 0.0)
     for line in proc.stderr.splitlines():
         m = re.match(r"import time:\s+(\d+) \|\s+\d+ \|\s*(\S+)", line)
@@ -46,8 +48,10 @@ def import_times(python: str) -> dict[str, float]:
             top = m.group(2).split(".")[0]
             if top in found:
                 found[top] += int(m.group(1)) / 1e6
-    found["total"] = sum(int(m.group(1)) for line in proc.stderr.splitlines()
-                         if (m := re.match(r"import time:\s+(\d+) \|", line))) / 1e6
+    found["total"] = (
+        sum(int(m.group(1)) for line in proc.stderr.splitlines() if (m := re.match(r"import time:\s+(\d+) \|", line)))
+        / 1e6
+    )
     return found
 
 
@@ -65,15 +69,17 @@ def main() -> None:
         for _ in range(args.repeats):
             for case in cases:  # interleaved: a load change hits every install alike
                 t = time.perf_counter()
-                proc = subprocess.run(command(case[0], out, *case[1]), capture_output=True, text=True, check=True,
-                                      cwd=out)
+                proc = subprocess.run(
+                    command(case[0], out, *case[1]), capture_output=True, text=True, check=True, cwd=out
+                )
                 times[case].append(time.perf_counter() - t)
                 sim_s[case] = proc.stdout.strip().splitlines()[-1].split(";")[0]
     print(f"owcsim run {SCENE.name} --paths 20000 (whole command, {args.repeats} runs each)")
     for case in cases:
         label = case[0] + "".join(f" {a}" for a in case[1])
-        print(f"  {label}: best {min(times[case]):.2f} s, median {statistics.median(times[case]):.2f} s  "
-              f"({sim_s[case]})")
+        print(
+            f"  {label}: best {min(times[case]):.2f} s, median {statistics.median(times[case]):.2f} s  ({sim_s[case]})"
+        )
     base = statistics.median(times[cases[0]])
     for case in cases[1:]:
         label = case[0] + "".join(f" {a}" for a in case[1])

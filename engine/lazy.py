@@ -4,6 +4,7 @@
 mesh files and mesh regions: `from .lazy import trimesh` gives a stand-in whose first attribute
 access imports the real module.
 """
+
 from __future__ import annotations
 
 import importlib

@@ -7,6 +7,7 @@ both devices in a medium, the outputs it fills and the medium it needs. The engi
 (engine/simulate.py), the automatic settings (engine/auto.py) and the result (engine/result.py)
 read these records; nothing else lists per-algorithm facts.
 """
+
 from __future__ import annotations
 
 from collections.abc import Mapping
@@ -78,43 +79,88 @@ class Algorithm:
 
 _SCATTERED = BASE_OUTPUTS + ("dc_gain_by_scattering_order",)
 
-ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType({a.number: a for a in (
-    Algorithm(
-        1, "unscattered paths",
-        "paths without scattering (s = 0), reflection orders 0..K; extinction on every segment",
-        ("scattered light (s >= 1)",),
-        {"free_flight": False, "segment_scatter": False, "mis": False}, 0, None, "", TwoSided.NEVER, False),
-    Algorithm(
-        2, "in-scattering from the receiver side",
-        "s = 0 paths up to K reflections, plus single scattering lit directly by the transmitter: "
-        "Tx -> p -> (k <= K reflections) -> Rx",
-        ("single scattering reached after reflections from the transmitter (Tx -> k >= 1 -> p -> Rx)",
-         "scattering orders s >= 2"),
-        {"free_flight": False, "segment_scatter": True, "mis": False}, 1, Direction.BACKWARD,
-        "algorithm 2 samples in-scattering from the receiver side", TwoSided.ALWAYS, True, _SCATTERED),
-    Algorithm(
-        3, "out-scattering from the transmitter side",
-        "s = 0 paths up to K reflections, plus single scattering seen directly by the receiver: "
-        "Tx -> (k <= K reflections) -> p -> Rx",
-        ("single scattering lit after reflections (Tx -> p -> k >= 1 -> Rx)", "scattering orders s >= 2"),
-        {"free_flight": False, "segment_scatter": True, "mis": False}, 1, Direction.FORWARD,
-        "algorithm 3 samples out-scattering from the transmitter side", TwoSided.ALWAYS, True, _SCATTERED),
-    Algorithm(
-        4, "both single-scattering families and in-then-out double scattering",
-        "s = 0 paths up to K reflections, plus Tx -> p -> (k <= K) -> Rx and Tx -> (k <= K) -> p -> Rx, "
-        "the shared family Tx -> p -> Rx counted once, and the report's in-then-out double scattering "
-        "Tx -> p_in -> (k <= K) -> p_out -> Rx (s = 2)",
-        ("single scattering with reflections on both sides of p",
-         "double scattering with reflections before p_in or after p_out", "scattering orders s >= 3"),
-        {"free_flight": False, "segment_scatter": True, "mis": True}, 2, Direction.BOTH,
-        "algorithm 4 runs both sides and weights their shared family by MIS", TwoSided.ALWAYS, True, _SCATTERED),
-    Algorithm(
-        5, "free-flight paths with next-event estimation",
-        "all paths with at most K reflections and S scattering events, in any order",
-        (),
-        {"free_flight": True, "segment_scatter": False, "mis": False}, None, None, "", TwoSided.AUTO_DIRECTION,
-        True, _SCATTERED),
-)})
+ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
+    {
+        a.number: a
+        for a in (
+            Algorithm(
+                1,
+                "unscattered paths",
+                "paths without scattering (s = 0), reflection orders 0..K; extinction on every segment",
+                ("scattered light (s >= 1)",),
+                {"free_flight": False, "segment_scatter": False, "mis": False},
+                0,
+                None,
+                "",
+                TwoSided.NEVER,
+                False,
+            ),
+            Algorithm(
+                2,
+                "in-scattering from the receiver side",
+                "s = 0 paths up to K reflections, plus single scattering lit directly by the transmitter: "
+                "Tx -> p -> (k <= K reflections) -> Rx",
+                (
+                    "single scattering reached after reflections from the transmitter (Tx -> k >= 1 -> p -> Rx)",
+                    "scattering orders s >= 2",
+                ),
+                {"free_flight": False, "segment_scatter": True, "mis": False},
+                1,
+                Direction.BACKWARD,
+                "algorithm 2 samples in-scattering from the receiver side",
+                TwoSided.ALWAYS,
+                True,
+                _SCATTERED,
+            ),
+            Algorithm(
+                3,
+                "out-scattering from the transmitter side",
+                "s = 0 paths up to K reflections, plus single scattering seen directly by the receiver: "
+                "Tx -> (k <= K reflections) -> p -> Rx",
+                ("single scattering lit after reflections (Tx -> p -> k >= 1 -> Rx)", "scattering orders s >= 2"),
+                {"free_flight": False, "segment_scatter": True, "mis": False},
+                1,
+                Direction.FORWARD,
+                "algorithm 3 samples out-scattering from the transmitter side",
+                TwoSided.ALWAYS,
+                True,
+                _SCATTERED,
+            ),
+            Algorithm(
+                4,
+                "both single-scattering families and in-then-out double scattering",
+                "s = 0 paths up to K reflections, plus Tx -> p -> (k <= K) -> Rx and Tx -> (k <= K) -> p -> Rx, "
+                "the shared family Tx -> p -> Rx counted once, and the report's in-then-out double scattering "
+                "Tx -> p_in -> (k <= K) -> p_out -> Rx (s = 2)",
+                (
+                    "single scattering with reflections on both sides of p",
+                    "double scattering with reflections before p_in or after p_out",
+                    "scattering orders s >= 3",
+                ),
+                {"free_flight": False, "segment_scatter": True, "mis": True},
+                2,
+                Direction.BOTH,
+                "algorithm 4 runs both sides and weights their shared family by MIS",
+                TwoSided.ALWAYS,
+                True,
+                _SCATTERED,
+            ),
+            Algorithm(
+                5,
+                "free-flight paths with next-event estimation",
+                "all paths with at most K reflections and S scattering events, in any order",
+                (),
+                {"free_flight": True, "segment_scatter": False, "mis": False},
+                None,
+                None,
+                "",
+                TwoSided.AUTO_DIRECTION,
+                True,
+                _SCATTERED,
+            ),
+        )
+    }
+)
 
 
 def algorithm(number: int | str) -> Algorithm:

@@ -6,6 +6,7 @@ plot.png (server/formats.py draws it from the rows of a stored .npz). matplotlib
 threads, under a lock), and pyplot's import is not paid. matplotlib is imported inside
 `cir_figure`, so importing this module stays light.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -40,9 +41,18 @@ def panels_of(result: SimulationResultPublic, link: int | None = None) -> list[C
     """The panels of the links with a binned CIR (the first MAX_PANELS, or link `link`)."""
     n = result.time_bins.n_bins
     links = result.links if link is None else [result.links[link]]
-    return [CirPanel(lk.transmitter, lk.receiver, lk.dc_gain, lk.dc_gain_stderr, np.asarray(lk.cir.total, float),
-                     np.asarray(lk.cir.by_reflection_order or [], float).reshape(-1, n))
-            for lk in links if lk.cir is not None][:MAX_PANELS]
+    return [
+        CirPanel(
+            lk.transmitter,
+            lk.receiver,
+            lk.dc_gain,
+            lk.dc_gain_stderr,
+            np.asarray(lk.cir.total, float),
+            np.asarray(lk.cir.by_reflection_order or [], float).reshape(-1, n),
+        )
+        for lk in links
+        if lk.cir is not None
+    ][:MAX_PANELS]
 
 
 def cir_figure(t_min_s: float, time_bin_s: float, n_bins: int, panels: list[CirPanel]) -> Figure:
@@ -63,7 +73,7 @@ def cir_figure(t_min_s: float, time_bin_s: float, n_bins: int, panels: list[CirP
         if p is None:
             ax.set_title("no links")
             continue
-        for k, row in enumerate(p.by_reflection_order[:MAX_ORDER + 1]):
+        for k, row in enumerate(p.by_reflection_order[: MAX_ORDER + 1]):
             h = np.asarray(row) / time_bin_s
             if h.any():
                 ax.plot(t_ns, h, lw=0.9, label=f"k = {k}")
@@ -75,8 +85,11 @@ def cir_figure(t_min_s: float, time_bin_s: float, n_bins: int, panels: list[CirP
             ax.set_yscale("log")
             ax.set_ylim(max(total[nz].min(), total[nz].max() * 1e-6) * 0.5, total[nz].max() * 2)
         gain = "n/a" if p.dc_gain is None else f"{p.dc_gain:.4e}"
-        ax.set_title(f"{p.transmitter} -> {p.receiver}: H0 = {gain}"
-                     + (f" ± {p.dc_gain_stderr:.1e}" if p.dc_gain_stderr else ""), fontsize=10)
+        ax.set_title(
+            f"{p.transmitter} -> {p.receiver}: H0 = {gain}"
+            + (f" ± {p.dc_gain_stderr:.1e}" if p.dc_gain_stderr else ""),
+            fontsize=10,
+        )
         ax.legend(fontsize=8, ncol=3)
     fig.tight_layout()
     return fig

@@ -4,6 +4,7 @@
 dump it the way result.json and the service write it (NaN and inf as null), so a test reads
 `doc["links"][0]["dc_gain"]` as a user of the files would.
 """
+
 from __future__ import annotations
 
 import json

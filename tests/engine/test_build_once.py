@@ -5,6 +5,7 @@ builder engine.scene.medium_from_spec, and the pre-flight's engine.scene.build_s
 change an automatic job on the smoky room built the scene 3 times and the medium 4 times (issue 10),
 so a counter that missed a build path would show it here as a count above 1.
 """
+
 from __future__ import annotations
 
 import json
