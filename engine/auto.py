@@ -276,8 +276,11 @@ def _apply(spec: SceneSpec, scene: Scene, update: dict, doc_update: dict) -> tup
     """The scene document with the chosen settings, and its scene (the built one, its medium dropped when the
     algorithm runs without it); the budgets that need K, S and the window are checked here."""
     resolved = spec.model_copy(update={**doc_update, "simulation": spec.simulation.model_copy(update=update)})
-    if resolved.simulation.is_resolved:
-        try:
+    sim = resolved.simulation
+    if sim.is_resolved:  # what validating the document would check of the chosen settings (not re-validated:
+        try:             # a large inline mesh would be parsed again)
+            if sim.t_max_s is not None and "t_max_s" in update:
+                check_bin_budget(sim.t_min_s, sim.t_max_s, sim.time_bin_s, automatic=True)
             resolved.check_tally_budget()
         except ValueError as exc:
             raise SceneError(f"the scene with its automatic settings: {exc}") from None

@@ -87,3 +87,13 @@ def test_the_registry_is_what_the_planner_runs(number):
     settings = simulate_module.kernel_settings(spec, build_scene(spec), both_devices=False)
     assert {k: getattr(settings, k) for k in alg.kernel} == dict(alg.kernel)
     assert settings.max_scattering == (3 if alg.scattering_orders is None else alg.scattering_orders)
+
+
+def test_an_automatic_window_over_the_bin_budget_is_a_located_error():
+    """The line-of-sight window is chosen without a pilot; the budget is still checked (not by re-validation)."""
+    from owcsim.engine.errors import SceneError
+
+    doc = json.loads((EXAMPLES / "barry_config_a.json").read_text())
+    doc["simulation"] = {"algorithm": 1, "max_reflections": 0, "time_bin_s": 1e-15, "paths": 64}
+    with pytest.raises(SceneError, match=r"automatic time window 0\.\.[0-9.e-]+ s at 1e-15 s per bin"):
+        simulate_module.simulate(SceneSpec.model_validate(doc))
