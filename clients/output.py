@@ -9,6 +9,7 @@ import csv
 import json
 from pathlib import Path
 
+from owcsim.schemas.result_tables import cir_csv_chunks, csv_cell
 from owcsim.schemas.results import SimulationResultPublic
 
 #: Scalar columns of links.csv (and of the command line's summaries).
@@ -19,35 +20,14 @@ LINK_COLUMNS = ("transmitter", "receiver", "direction", "paths", "dc_gain", "dc_
 COMPACT_JSON_LINKS = 200
 
 
-def safe_cell(value):
-    """A CSV cell that a spreadsheet will not run as a formula (ids starting with = + - @ are quoted)."""
-    if isinstance(value, str) and value[:1] in ("=", "+", "-", "@", "\t", "\r"):
-        return "'" + value
-    return "" if value is None else value
-
-
 def write_cir_csv(result: SimulationResultPublic, path: Path) -> bool:
-    """Long format: one row per (link with a CIR, bin); power per bin per watt, h = power / dt [1/s], per order k.
-    Returns False (and writes nothing) when no link has a CIR."""
-    links = [lk for lk in result.links if lk.cir is not None]
-    if not links:
+    """cir.csv (schemas.result_tables.cir_csv_chunks: one row per link with a CIR and bin). Returns False
+    (and writes nothing) when no link has a CIR."""
+    if not any(lk.cir is not None for lk in result.links):
         return False
-    tb = result.time_bins
-    dt, t0 = tb.time_bin_s, tb.t_min_s
-    k_max = max(len(lk.cir.by_reflection_order or []) for lk in links if lk.cir) - 1
     with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["transmitter", "receiver", "t_start_s", "t_end_s", "h_per_s", "power", "power_stderr"]
-                   + [f"power_k{k}" for k in range(k_max + 1)])
-        for lk in links:
-            cir = lk.cir
-            assert cir is not None
-            by_k = cir.by_reflection_order or []
-            for b, p in enumerate(cir.total):
-                se = cir.total_stderr[b]
-                w.writerow([safe_cell(lk.transmitter), safe_cell(lk.receiver), f"{t0 + b * dt:.6e}",
-                            f"{t0 + (b + 1) * dt:.6e}", f"{p / dt:.9e}", f"{p:.9e}", "" if se is None else f"{se:.3e}"]
-                           + [f"{row[b]:.9e}" for row in by_k])
+        for chunk in cir_csv_chunks(result):
+            fh.write(chunk)
     return True
 
 
@@ -57,7 +37,7 @@ def write_links_csv(result: SimulationResultPublic, path: Path) -> None:
         w = csv.writer(fh)
         w.writerow(LINK_COLUMNS + ("receiver_x_m", "receiver_y_m", "receiver_z_m"))
         for lk in result.links:
-            w.writerow([safe_cell(getattr(lk, c)) for c in LINK_COLUMNS] + list(lk.receiver_position))
+            w.writerow([csv_cell(getattr(lk, c)) for c in LINK_COLUMNS] + list(lk.receiver_position))
 
 
 def result_json(result: SimulationResultPublic, raw: dict | None = None) -> str:

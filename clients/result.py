@@ -74,27 +74,9 @@ class Result(SimulationResultPublic):
         order) dc_gain, dc_gain_stderr, transmitter, receiver; per link with a binned CIR (its index in
         `links` is cir_link) cir and cir_stderr (n, n_bins) [power per bin per watt; NaN = no error bar] and
         by_reflection_order (n, K + 1, n_bins)."""
-        tb = self.time_bins
-        cir_link = np.array([i for i, lk in enumerate(self.links) if lk.cir is not None], np.int64)
-        links = [self.links[i] for i in cir_link]
-        n = tb.n_bins
-        orders = max((len(lk.cir.by_reflection_order or [[]]) for lk in links), default=1)
-        by_k = np.zeros((len(links), orders, n))
-        for i, lk in enumerate(links):
-            if lk.cir.by_reflection_order:
-                by_k[i, :len(lk.cir.by_reflection_order)] = lk.cir.by_reflection_order
-        nan = lambda xs: np.array([np.nan if x is None else x for x in xs], float)  # noqa: E731
-        return {
-            "t_edges_s": tb.t_min_s + tb.time_bin_s * np.arange(n + 1),
-            "cir_link": cir_link,
-            "cir": np.array([lk.cir.total for lk in links], float).reshape(len(links), n),
-            "cir_stderr": np.array([nan(lk.cir.total_stderr) for lk in links]).reshape(len(links), n),
-            "by_reflection_order": by_k,
-            "dc_gain": nan([lk.dc_gain for lk in self.links]),
-            "dc_gain_stderr": nan([lk.dc_gain_stderr for lk in self.links]),
-            "transmitter": np.array([lk.transmitter for lk in self.links], str),
-            "receiver": np.array([lk.receiver for lk in self.links], str),
-        }
+        from owcsim.schemas.result_tables import cir_arrays
+
+        return cir_arrays(self)
 
     def plot(self, path: str | Path | None = None, link: int | None = None):
         """h(t) per reflection order and total (clients.plot.plot_cir); saved to `path` if given."""

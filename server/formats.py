@@ -6,29 +6,29 @@ and NPZ once, in the job's worker, when the job ends (`render_all`: compressed f
 store keeps and the routes send as they are). Plots are drawn from the stored .npz
 (`npz_png`: the rows of the links drawn, read without loading the others) when first
 asked for, so that no job pays matplotlib's time; the default plot is then stored too.
-The CSV has the columns of the command line's cir.csv (a test holds the two equal);
-ids that a spreadsheet would take for a formula are escaped.
+The CSV and the arrays are schemas/result_tables.py's, which the command line and the client
+write too (the same bytes).
 Plots use matplotlib's object API, never pyplot, and are drawn one at a time (`_DRAWING`):
 matplotlib's mathtext parser (log-axis tick labels) is not thread-safe, and concurrent
 drawing failed under load.
 """
 from __future__ import annotations
 
-import csv
 import gzip
 import io
 import threading
 import zipfile
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
 from owcsim.schemas.plots import MAX_PANELS, CirPanel, cir_figure, panels_of
+from owcsim.schemas.result_tables import CSV_ROWS_PER_CHUNK, cir_arrays, cir_csv_chunks, csv_cell
+
+__all__ = ["CSV_ROWS_PER_CHUNK", "cir_arrays", "cir_csv", "cir_csv_chunks", "cir_npz", "cir_png", "csv_cell",
+           "npz_png", "render_all"]
 from owcsim.schemas.results import SimulationResultPublic
 
-#: Rows of the CSV written per chunk.
-CSV_ROWS_PER_CHUNK = 4096
 #: Renders the worker stores: name -> (media type, gzip-compressed as stored?).
 RENDERS = {"result.json.gz": ("application/json", True), "result.csv.gz": ("text/csv; charset=utf-8", True),
            "result.npz": ("application/octet-stream", False), "plot.png": ("image/png", False)}
@@ -40,77 +40,9 @@ PLOT_LINKS = MAX_PANELS
 _DRAWING = threading.Lock()
 
 
-def csv_cell(text: str) -> str:
-    """A text cell a spreadsheet will not evaluate: a leading =, +, -, @, tab or CR gets a quote (OWASP)."""
-    return "'" + text if text[:1] in ("=", "+", "-", "@", "\t", "\r") else text
-
-
-def cir_csv_chunks(result: SimulationResultPublic) -> Iterator[str]:
-    """Long format: one row per (link, bin); power per bin per watt, h = power / dt [1/s], per order k.
-
-    Yields the text in chunks of CSV_ROWS_PER_CHUNK rows (bounded memory for any result)."""
-    tb = result.time_bins
-    dt, t0 = tb.time_bin_s, tb.t_min_s
-    links = [lk for lk in result.links if lk.cir is not None]  # the links that asked for a binned CIR
-    k_max = max((len(lk.cir.by_reflection_order or []) for lk in links if lk.cir), default=0) - 1
-    out = io.StringIO(newline="")
-    w = csv.writer(out)
-    w.writerow(["transmitter", "receiver", "t_start_s", "t_end_s", "h_per_s", "power", "power_stderr"]
-               + [f"power_k{k}" for k in range(k_max + 1)])
-    rows = 0
-    for lk in links:
-        cir = lk.cir
-        assert cir is not None
-        by_k = cir.by_reflection_order or []
-        tx, rx = csv_cell(lk.transmitter), csv_cell(lk.receiver)
-        for b, p in enumerate(cir.total):
-            se = cir.total_stderr[b]
-            w.writerow([tx, rx, f"{t0 + b * dt:.6e}", f"{t0 + (b + 1) * dt:.6e}",
-                        f"{p / dt:.9e}", f"{p:.9e}", "" if se is None else f"{se:.3e}"]
-                       + [f"{row[b]:.9e}" for row in by_k])
-            rows += 1
-            if rows % CSV_ROWS_PER_CHUNK == 0:
-                yield out.getvalue()
-                out.seek(0)
-                out.truncate()
-    yield out.getvalue()
-
-
 def cir_csv(result: SimulationResultPublic) -> str:
     """The whole CSV as one string (small results; the service streams `cir_csv_chunks`)."""
     return "".join(cir_csv_chunks(result))
-
-
-def _float(values) -> np.ndarray:
-    return np.array([np.nan if v is None else v for v in values], float)
-
-
-def cir_arrays(result: SimulationResultPublic) -> dict[str, np.ndarray]:
-    """Arrays of the result: t_edges_s (n_bins + 1); per link (axis 0, in `links` order) dc_gain,
-    dc_gain_stderr, transmitter, receiver; per link with a binned CIR (axis 0, in `links` order; its
-    index in `links` is cir_link) cir and cir_stderr (n, n_bins) [power per bin per watt; NaN = no error
-    bar] and by_reflection_order (n, K + 1, n_bins; zeros when the order split was not asked)."""
-    tb = result.time_bins
-    links = result.links
-    n = tb.n_bins
-    cir_link = np.array([i for i, lk in enumerate(links) if lk.cir is not None], np.int64)
-    cirs = [links[i].cir for i in cir_link]
-    orders = max((len(c.by_reflection_order or [[]]) for c in cirs if c), default=1)
-    by_k = np.zeros((len(cirs), orders, n))
-    for i, c in enumerate(cirs):
-        if c and c.by_reflection_order:
-            by_k[i, :len(c.by_reflection_order)] = c.by_reflection_order
-    return {
-        "t_edges_s": tb.t_min_s + tb.time_bin_s * np.arange(n + 1),
-        "cir_link": cir_link,
-        "cir": np.array([c.total for c in cirs if c], float).reshape(len(cirs), n),
-        "cir_stderr": np.array([_float(c.total_stderr) for c in cirs if c]).reshape(len(cirs), n),
-        "by_reflection_order": by_k,
-        "dc_gain": _float([lk.dc_gain for lk in links]),
-        "dc_gain_stderr": _float([lk.dc_gain_stderr for lk in links]),
-        "transmitter": np.array([lk.transmitter for lk in links], str),
-        "receiver": np.array([lk.receiver for lk in links], str),
-    }
 
 
 def cir_npz(result: SimulationResultPublic) -> bytes:
