@@ -11,10 +11,10 @@ estimators of the same quantity, so means and variances add.
 from __future__ import annotations
 
 import math
-from importlib.metadata import PackageNotFoundError, version
 
 import numpy as np
 
+from owcsim import __version__  # the package's one version lookup (owcsim/__init__.py)
 from owcsim.schemas.algorithms import Direction, algorithm
 from owcsim.schemas.results import SimulationResultPublic
 
@@ -28,13 +28,6 @@ from .result_parts import cir_block, column, document_rows, grid_maps, order_blo
 def _num(x) -> float | None:
     x = float(x)
     return x if math.isfinite(x) else None
-
-
-def _owcsim_version() -> str:
-    try:
-        return version("owcsim")
-    except PackageNotFoundError:  # running from a source tree without installing
-        return "0+unknown"
 
 
 #: Mean cosine above which a phase function is flagged as too peaked for next-event estimation.
@@ -204,7 +197,7 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
     }
     receivers = _receivers(spec, scene)
     doc = {
-        "owcsim_version": _owcsim_version(), "algorithm": spec.simulation.algorithm,
+        "owcsim_version": __version__, "algorithm": spec.simulation.algorithm,
         "warnings": _warnings(spec, scene) + _window_warnings(cols) + _mask_warnings(scene)
         + reliability.warnings(link_reliability(accs, los_gain), [f"{t}-{r}" for t, r in zip(cols["transmitter"],
                                                                                           cols["receiver"])]),

@@ -66,7 +66,7 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
                 await run_in_threadpool(dispatcher.stop)
             store.close()  # checkpoint: the store is one self-contained file again
 
-    app = FastAPI(title="owcsim", version=owcsim_version(), description=DESCRIPTION, lifespan=lifespan,
+    app = FastAPI(title="owcsim", version=owcsim_version, description=DESCRIPTION, lifespan=lifespan,
                   docs_url=None, redoc_url=None, openapi_url=f"{API_PREFIX}/openapi.json")  # docs: routes/docs.py
     app.state.settings, app.state.store, app.state.dispatcher, app.state.owners = settings, store, dispatcher, owners
     app.state.preflighter = preflighter

@@ -1,12 +1,11 @@
 """The service itself: health (can it take and run jobs?) and version. Open without an API key."""
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version
-
 from fastapi import APIRouter, Depends
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
+from owcsim import __version__ as owcsim_version  # the package's one version lookup
 from owcsim.schemas.jobs import HealthPublic, VersionPublic
 
 from ..deps import get_dispatcher, get_settings, get_store
@@ -48,14 +47,7 @@ async def health(store: JobStore = Depends(get_store), dispatcher: Dispatcher = 
     return JSONResponse({**body.model_dump(), "reason": reason}, status_code=503, headers={"Retry-After": "5"})
 
 
-def owcsim_version() -> str:
-    try:
-        return version("owcsim")
-    except PackageNotFoundError:
-        return "0+unknown"
-
-
 @router.get("/version", operation_id="version", response_model=VersionPublic,
             summary="Version of owcsim and of the API")
 def get_version() -> VersionPublic:
-    return VersionPublic(owcsim_version=owcsim_version())
+    return VersionPublic(owcsim_version=owcsim_version)
