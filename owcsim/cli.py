@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -18,29 +17,19 @@ if TYPE_CHECKING:
 
 
 def _progress_bar(stream=None):
-    """A one-line progress bar on a terminal; silent when not a terminal."""
+    """(update, close) of a one-line progress bar of the run (clients.progress.ProgressBar) on a terminal;
+    silent when stderr is not one."""
     stream = stream if stream is not None else sys.stderr  # the stream of now, not of import time
-    state = {"last": 0.0}
-    tty = stream.isatty()
+    if not stream.isatty():
+        return (lambda p: None), (lambda: None)
+    from owcsim.clients.progress import ProgressBar
+
+    bar = ProgressBar(stream)
 
     def update(p: Progress) -> None:
-        now = time.monotonic()
-        if not tty or (now - state["last"] < 0.1 and p.fraction < 1.0):
-            return
-        state["last"] = now
-        width = 30
-        full = int(round(width * min(max(p.fraction, 0.0), 1.0)))
-        err = p.dc_gain_rel_stderr
-        err_txt = f"  rel.err(H0) {err:.2e}" if err is not None else ""
-        stream.write(f"\r[{'#' * full}{'.' * (width - full)}] {100 * p.fraction:5.1f}%  "
-                     f"{p.paths:>12,d} paths{err_txt}  {p.elapsed_s:6.1f} s")
-        stream.flush()
+        bar.show(p.fraction, p.paths, p.dc_gain_rel_stderr, f"{p.elapsed_s:6.1f} s")
 
-    def close() -> None:
-        if tty and state["last"]:
-            stream.write("\n")
-
-    return update, close
+    return update, bar.close
 
 
 def _cmd_validate(args) -> int:

@@ -138,3 +138,22 @@ def test_no_plot_skips_the_png_and_matplotlib(tmp_path):
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=tmp_path)
     assert proc.stdout.strip().splitlines()[-1] == "[]"
     assert sorted(p.name for p in out.iterdir()) == ["cir.csv", "links.csv", "result.json"]
+
+
+def test_progress_bar_draws_the_engines_progress_on_a_terminal_only():
+    import io
+
+    from owcsim.cli import _progress_bar
+    from owcsim.engine.simulate import Progress
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    for stream, drawn in ((Terminal(), True), (io.StringIO(), False)):
+        update, close = _progress_bar(stream)
+        update(Progress(fraction=1.0, paths=2048, batches=2, dc_gain_rel_stderr=0.01, elapsed_s=0.5))
+        close()
+        text = stream.getvalue()
+        assert (text.startswith("\r[") and "100.0%" in text and "2,048 paths" in text
+                and "rel.err(H0) 1.00e-02" in text and text.endswith("0.5 s\n")) if drawn else text == ""
