@@ -3,7 +3,9 @@
 `SerialExecutor` traces in the calling process. `ProcessExecutor` keeps a pool of
 worker processes that outlives jobs: each worker builds a job's Embree scene the
 first time it sees the job (from the scene document written once to a file) and
-caches it, so a warm pool pays no start-up per job. The document travels pickled, not as
+caches it, so a warm pool pays no start-up per job; a job whose surfaces, transmitters and
+medium a cached scene has already (an automatic job's truncation pilot and its run) only gets
+its receivers set on that scene. The document travels pickled, not as
 JSON: validating JSON again would re-normalise direction vectors and could change their
 last bit, and with it the result. Work items are independent
 (their random streams are fixed by the job), so the merged result does not depend
@@ -90,20 +92,42 @@ class SerialExecutor:
 
 
 _SCENES: OrderedDict[str, Scene] = OrderedDict()
+#: The fields of a scene document that decide what build_scene builds besides the receivers (surfaces, the
+#: transmitters, the medium): documents that agree on them, as a job and its truncation pilot do, share one
+#: built geometry in a worker (the receivers are set on it: auto.with_receivers).
+BUILT_FIELDS = {"room", "furniture", "meshes", "transmitters", "medium"}
+
+
+def built_key(spec: SceneSpec, base_dir: str | None) -> str:
+    """Key of what build_scene(spec, base_dir) builds besides the receivers."""
+    text = spec.model_dump_json(include=BUILT_FIELDS) + "\0" + str(base_dir)
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
 def _worker_scene(key: str, spec_path: str, base_dir: str | None) -> Scene:
+    """The job's scene in this worker: cached; built once per geometry (a job's pilot and its run share it)."""
     scene = _SCENES.get(key)
     if scene is None:
         with open(spec_path, "rb") as fh:
             spec = pickle.load(fh)
         assert isinstance(spec, SceneSpec), spec_path
-        scene = build_scene(spec, base_dir)
-        _SCENES[key] = scene
+        shared = built_key(spec, base_dir)
+        same = next((_SCENES[k] for k, b in reversed(_BUILT.items()) if b == shared and k in _SCENES), None)
+        if same is not None:
+            from .auto import with_receivers
+
+            scene = with_receivers(same, spec)
+        else:
+            scene = build_scene(spec, base_dir)
+        _SCENES[key], _BUILT[key] = scene, shared
         while len(_SCENES) > SCENE_CACHE_SIZE:
-            _SCENES.popitem(last=False)
+            _BUILT.pop(_SCENES.popitem(last=False)[0], None)
     _SCENES.move_to_end(key)
     return scene
+
+
+#: built_key of each cached scene (by its job key)
+_BUILT: dict[str, str] = {}
 
 
 def _run_item(key: str, spec_path: str, base_dir: str | None, item: WorkItem, settings: KernelSettings):

@@ -97,3 +97,24 @@ def test_an_automatic_window_over_the_bin_budget_is_a_located_error():
     doc["simulation"] = {"algorithm": 1, "max_reflections": 0, "time_bin_s": 1e-15, "paths": 64}
     with pytest.raises(SceneError, match=r"automatic time window 0\.\.[0-9.e-]+ s at 1e-15 s per bin"):
         simulate_module.simulate(SceneSpec.model_validate(doc))
+
+
+def test_a_worker_builds_a_job_and_its_pilot_once(monkeypatch, tmp_path):
+    """A process worker's scene cache: the pilot's document (other receivers and settings, same surfaces,
+    transmitters and medium) reuses the geometry built for the job; another geometry is built."""
+    from owcsim.engine import execution
+
+    monkeypatch.setattr(execution, "_SCENES", type(execution._SCENES)())
+    monkeypatch.setattr(execution, "_BUILT", {})
+    builds = _count(monkeypatch, execution, "build_scene")
+    job = _smoky(algorithm=5, max_reflections=2, max_scattering=2, t_max_s=1e-7)
+    pilot = job.model_copy(update={"receivers": [job.receivers[0].model_copy(update={"position": (1.0, 2.0, 0.0)})],
+                                   "simulation": job.simulation.model_copy(update={"max_reflections": 9})})
+    other = job.model_copy(update={"medium": None})
+    refs = [execution.job_ref(scene_module.build_scene(s), None, str(tmp_path)) for s in (job, pilot, other)]
+    scenes = [execution._worker_scene(r.key, r.spec_path, None) for r in refs]
+    assert builds[0] == 2  # the job's and the medium-free one's; the pilot's is derived
+    assert scenes[1].geometry is scenes[0].geometry and scenes[1].spec is not scenes[0].spec
+    fresh = scene_module.build_scene(pilot)
+    assert (scenes[1].receivers.positions == fresh.receivers.positions).all()
+    assert scenes[1].medium_far_distance == fresh.medium_far_distance and scenes[2].medium is None
