@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 
 from pydantic import ValidationError
@@ -60,8 +61,8 @@ def format_validation_error(err: ValidationError) -> str:
     return "\n".join(lines)
 
 
-def load_scene(path: str | Path, overrides: list[tuple[str, object]] = (),
-               assignments: list[str] = ()) -> tuple[SceneSpec, dict]:
+def load_scene(path: str | Path, overrides: Sequence[tuple[str, object]] = (),
+               assignments: Sequence[str] = ()) -> tuple[SceneSpec, dict]:
     """Read, override and validate a scene document; returns (spec, raw document).
 
     `overrides` are (dotted path, value) pairs applied first, then the `--set`
