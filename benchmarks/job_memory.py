@@ -38,7 +38,7 @@ def _child(doc: dict, conn) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         render_all(result, text, Path(tmp))
     conn.send((_peak_rss(), time.perf_counter() - t0, result.time_bins.n_bins,
-               result.scene.simulation.max_reflections or result.modeled["max_reflections"]))
+               result.scene.simulation.max_reflections or result.modeled.max_reflections))
     conn.close()
 
 

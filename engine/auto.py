@@ -32,7 +32,7 @@ from pydantic import ValidationError
 from owcsim.schemas import OutputsSpec, SceneSpec
 from owcsim.schemas.algorithms import algorithm
 from owcsim.schemas.errors import located
-from owcsim.schemas.results import LinkPublic, SimulationResultPublic
+from owcsim.schemas.results import LinkPublic, ModeledPublic, PilotPublic, SimulationResultPublic
 from owcsim.schemas.simulation import check_bin_budget
 
 from .constants import SPEED_OF_LIGHT
@@ -266,7 +266,7 @@ class Resolution:
     original: SceneSpec
     spec: SceneSpec
     scene: Scene
-    modeled: dict
+    modeled: ModeledPublic
     pilot: PilotRun | None = None
     update: dict = field(default_factory=dict)
     doc_update: dict = field(default_factory=dict)
@@ -294,19 +294,19 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
     """First step of the resolution: the algorithm, and the settings known without a pilot; the pilot to run if
     K, S or the window are automatic (`finish` reads its result)."""
     sim = spec.simulation
-    modeled: dict = {"rules": "engine/auto.py", "left_out": []}
+    modeled = ModeledPublic(rules="engine/auto.py")
     update: dict = {}
     doc_update: dict = {}
     if sim.algorithm == "auto":
         room_bounds = (np.asarray(spec.room.lo), np.asarray(spec.room.hi)) if spec.room is not None else None
         number, why, drop_medium = choose_algorithm(spec, scene.medium, room_bounds)
         update["algorithm"] = number
-        modeled["algorithm_reason"] = why
+        modeled.algorithm_reason = why
         if drop_medium and spec.medium is not None:
             doc_update["medium"] = None
     else:
         number = sim.algorithm
-        modeled["algorithm_reason"] = f"algorithm {number} requested"
+        modeled.algorithm_reason = f"algorithm {number} requested"
     alg = algorithm(number)
     if alg.scattering_orders is not None:  # S is fixed by the algorithm (schemas/algorithms.py); the document's
         update["max_scattering"] = max(alg.scattering_orders, 1)  # field is >= 1 (algorithm 1 tallies S = 0)
@@ -318,11 +318,10 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
         longest = max(math.dist(t.position, r.position) for t in spec.transmitters for r in _extreme_receivers(spec))
         n_bins = max(1, math.ceil((longest / SPEED_OF_LIGHT - sim.t_min_s) / sim.time_bin_s + 1e-9) + 1)
         update["t_max_s"] = sim.t_min_s + n_bins * sim.time_bin_s
-        modeled["time_window_reason"] = "line of sight only: the window ends after the longest direct path"
+        modeled.time_window_reason = "line of sight only: the window ends after the longest direct path"
         need_t = False
     resolved, job_scene = _apply(spec, scene, update, doc_update)
     if not (need_k or need_s or need_t):
-        modeled["pilot"] = None
         return Resolution(spec, resolved, job_scene, modeled)
     # --- the truncation pilot: the job's scene with up to PILOT_RECEIVERS of its receivers -------------------
     extent = float(np.ptp(np.concatenate([scene.geometry.vertices, scene.transmitters.positions,
@@ -366,7 +365,7 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
     spec, scene, run = step.original, step.scene, step.pilot
     assert run is not None
     sim = spec.simulation
-    modeled, update = dict(step.modeled), dict(step.update)
+    modeled, update = step.modeled.model_copy(), dict(step.update)
     alg = algorithm(update.get("algorithm", sim.algorithm))
     need_k = sim.max_reflections is None
     need_s = alg.scattering_orders is None and sim.max_scattering is None
@@ -419,10 +418,10 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
         return n, tail, reason
 
     if need_k:
-        K, k_tail, modeled["max_reflections_reason"] = choose("rho_max", "reflection", rho_max, run.cap_k)
+        K, k_tail, modeled.max_reflections_reason = choose("rho_max", "reflection", rho_max, run.cap_k)
         update["max_reflections"] = K
     if need_s:
-        S, s_tail, modeled["max_scattering_reason"] = choose("albedo_max", "scattering", _max_albedo(step.spec),
+        S, s_tail, modeled.max_scattering_reason = choose("albedo_max", "scattering", _max_albedo(step.spec),
                                                              run.cap_s, extra=1)
         update["max_scattering"] = S
     if need_t:
@@ -436,16 +435,16 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
             raise SceneError(f"simulation: {exc}") from None
         n_bins = max(1, math.ceil((t_end - sim.t_min_s) / dt - 1e-9))
         update["t_max_s"] = sim.t_min_s + n_bins * dt
-        modeled["time_window_reason"] = (
+        modeled.time_window_reason = (
             f"window ends at {update['t_max_s'] * 1e9:.1f} ns: the power arriving later, extrapolated from the "
             f"pilot's exponential decay, is < {allowed / 2:.2e} per watt (late power is counted in late_gain, "
             "not dropped)")
-    modeled["pilot"] = {"paths": sim.pilot_paths, "receivers": [scene.receivers.ids[i] for i in run.receivers],
-                        "max_reflections": run.cap_k, "max_scattering": run.cap_s, "t_max_s": run.t_long,
-                        "allowed_truncation_per_watt": float(allowed), "rho_max": rho_max}
+    modeled.pilot = PilotPublic(paths=sim.pilot_paths, receivers=[scene.receivers.ids[i] for i in run.receivers],
+                                max_reflections=run.cap_k, max_scattering=run.cap_s, t_max_s=run.t_long,
+                                allowed_truncation_per_watt=float(allowed), rho_max=rho_max)
     total_tail = float(k_tail + s_tail)
-    modeled["truncation_estimate_per_watt"] = total_tail if math.isfinite(total_tail) else None
-    modeled["truncation_note"] = ("estimated from the pilot: the orders it measured plus a geometric tail past its "
+    modeled.truncation_estimate_per_watt = total_tail if math.isfinite(total_tail) else None
+    modeled.truncation_note = ("estimated from the pilot: the orders it measured plus a geometric tail past its "
                                   "last order (" + "; ".join(notes) + "), plus two of its standard errors"
                                   if notes else "no order was chosen automatically")
     resolved, job_scene = _apply(spec, scene, update, step.doc_update)

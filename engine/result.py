@@ -16,7 +16,7 @@ import numpy as np
 
 from owcsim import __version__  # the package's one version lookup (owcsim/__init__.py)
 from owcsim.schemas.algorithms import Direction, algorithm
-from owcsim.schemas.results import SimulationResultPublic
+from owcsim.schemas.results import ModeledPublic, SimulationResultPublic, UnreachablePublic
 
 from . import metrics, mie, reliability
 from .auto import _max_albedo, _scatters
@@ -92,27 +92,25 @@ def _geometric_tail(gain: float, ratio: float) -> float:
     return gain * ratio / (1.0 - ratio) if ratio < 1.0 else math.inf
 
 
-def _modeled(spec, scene, modeled, unreachable, settings) -> dict:
+def _modeled(spec, scene, modeled: ModeledPublic | None, unreachable, settings) -> ModeledPublic:
+    """The result's `modeled` section: what the automatic settings said (`modeled`), and what ran."""
     sim = spec.simulation
     alg = algorithm(sim.algorithm)
-    out = dict(modeled or {"algorithm_reason": f"algorithm {sim.algorithm} requested", "pilot": None})
+    chosen = modeled if modeled is not None else ModeledPublic(algorithm_reason=f"algorithm {sim.algorithm} requested")
     left = list(alg.left_out) if spec.medium is not None and _scatters(spec.medium) else []
     left.append(f"reflection orders above K = {sim.max_reflections}")
     if alg.scattering_orders is None and scene.medium is not None:  # S chosen, not fixed by the algorithm
         left.append(f"scattering orders above S = {sim.max_scattering}")
     left.append(f"arrivals after t_max_s = {settings.bins.edges[-1]:.4g} s in the binned CIR (counted in late_gain)")
-    out["algorithm"] = sim.algorithm
-    out["families"] = alg.families if scene.medium is not None else "vacuum paths, reflection orders 0..K"
-    out["left_out"] = left
-    out["medium"] = mie.medium_report(spec.medium, scene.phase)  # derived coefficients, g, visibility
-    out["max_reflections"] = sim.max_reflections
-    out["max_scattering"] = sim.scattering_orders if scene.medium is not None else 0
-    out["time_window_s"] = [settings.bins.t_min, float(settings.bins.edges[-1])]
-    out["unreachable_receivers"] = [
-        {"receiver": scene.receivers.ids[j], "reason": "it faces into a solid or lies flush against a surface "
-                                                       "(no transmitter in view): no light reaches it; not simulated"}
-        for j in unreachable]
-    return out
+    why = "it faces into a solid or lies flush against a surface (no transmitter in view): no light reaches it; " \
+          "not simulated"
+    return chosen.model_copy(update=dict(
+        algorithm=sim.algorithm,
+        families=alg.families if scene.medium is not None else "vacuum paths, reflection orders 0..K",
+        left_out=left, medium=mie.medium_report(spec.medium, scene.phase),  # derived coefficients, g, visibility
+        max_reflections=sim.max_reflections, max_scattering=sim.scattering_orders if scene.medium is not None else 0,
+        time_window_s=(settings.bins.t_min, float(settings.bins.edges[-1])),
+        unreachable_receivers=[UnreachablePublic(receiver=scene.receivers.ids[j], reason=why) for j in unreachable]))
 
 
 def _paths_traced(accs, n_tx: int, n_rx: int) -> int:

@@ -24,7 +24,7 @@ import numpy as np
 
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.algorithms import Direction, TwoSided, algorithm
-from owcsim.schemas.results import SimulationResultPublic, StopReason
+from owcsim.schemas.results import ModeledPublic, SimulationResultPublic, StopReason
 
 from . import auto
 from .constants import SPEED_OF_LIGHT
@@ -162,7 +162,8 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
                         modeled=modeled)
 
 
-def _resolve(spec: SceneSpec, scene: Scene, executor: Executor, base_dir) -> tuple[SceneSpec, Scene, dict | None]:
+def _resolve(spec: SceneSpec, scene: Scene, executor: Executor, base_dir
+             ) -> tuple[SceneSpec, Scene, ModeledPublic | None]:
     """Explicit settings for the "auto" ones (engine/auto.py), on the built scene: (spec, scene, modeled)."""
     if spec.simulation.is_resolved:
         return spec, scene, None
@@ -174,7 +175,7 @@ def _resolve(spec: SceneSpec, scene: Scene, executor: Executor, base_dir) -> tup
 
 
 def _run_job(spec: SceneSpec, scene: Scene, executor: Executor, base_dir, progress, should_stop, t_start: float,
-             original: SceneSpec | None = None, modeled: dict | None = None) -> SimulationResultPublic:
+             original: SceneSpec | None = None, modeled: ModeledPublic | None = None) -> SimulationResultPublic:
     """Run a resolved job on its built scene."""
     settings = kernel_settings(spec, scene)
     geometry = los_geometry(scene)

@@ -169,6 +169,53 @@ class DiagnosticsPublic(PublicModel):
     medium_evaluations: int
 
 
+class PilotPublic(PublicModel):
+    """The truncation pilot that chose K, S or the time window (docs/modeled.md)."""
+
+    paths: int = Field(description="paths per source device of the pilot")
+    receivers: list[str] = Field(description="the receivers it traced (up to 8, evenly chosen)")
+    max_reflections: int = Field(description="highest reflection order it measured")
+    max_scattering: int | None = Field(None, description="highest scattering order it measured")
+    t_max_s: float = Field(description="end of its time window [s]")
+    allowed_truncation_per_watt: float = Field(description="power per watt the chosen settings may leave out")
+    rho_max: float = Field(description="largest reflectance of the scene's surfaces")
+
+
+class UnreachablePublic(PublicModel):
+    """A receiver no light can reach, not simulated."""
+
+    receiver: str = Field(description="receiver id")
+    reason: str = Field(description="why no light reaches it")
+
+
+class ModeledPublic(PublicModel):
+    """What was simulated, what was left out, and why (engine/auto.py; docs/modeled.md). Keys a newer engine
+    adds are kept."""
+
+    model_config = ConfigDict(extra="allow")
+
+    rules: str | None = Field(None, description="where the rules of the automatic settings are")
+    algorithm: int | None = Field(None, description="the algorithm that ran")
+    algorithm_reason: str | None = Field(None, description="why this algorithm (requested, or the rule that chose it)")
+    families: str | None = Field(None, description="the path families estimated")
+    left_out: list[str] = Field(default_factory=list, description="what the estimate leaves out")
+    medium: dict | None = Field(None, description="the medium's derived figures: coefficients, phase function, "
+                                "visibility (particle smoke: its Mie optics)")
+    max_reflections: int | None = Field(None, description="K, the highest reflection order")
+    max_reflections_reason: str | None = Field(None, description="why K (when chosen automatically)")
+    max_scattering: int | None = Field(None, description="S, the highest scattering order (0 without a medium)")
+    max_scattering_reason: str | None = Field(None, description="why S (when chosen automatically)")
+    time_window_s: tuple[float, float] | None = Field(None, description="the binned CIR's window [s]")
+    time_window_reason: str | None = Field(None, description="why the window ends there (when chosen "
+                                           "automatically)")
+    pilot: PilotPublic | None = Field(None, description="the truncation pilot, when one ran")
+    truncation_estimate_per_watt: float | None = Field(None, description="estimated power per watt of the orders "
+                                                       "left out (from the pilot)")
+    truncation_note: str | None = Field(None, description="how the truncation estimate was made")
+    unreachable_receivers: list[UnreachablePublic] = Field(default_factory=list,
+                                                           description="receivers no light can reach, not simulated")
+
+
 class SimulationResultPublic(PublicModel):
     owcsim_version: str
     algorithm: int
@@ -181,5 +228,6 @@ class SimulationResultPublic(PublicModel):
     run: RunPublic
     diagnostics: DiagnosticsPublic
     warnings: list[str] = Field(default_factory=list, description="what a careful reader of these numbers should know")
-    modeled: dict = Field(default_factory=dict, description="what was simulated, what was left out, and why")
+    modeled: ModeledPublic = Field(default_factory=ModeledPublic,
+                                   description="what was simulated, what was left out, and why")
     scene: SceneSpec

@@ -43,7 +43,7 @@ def test_an_automatic_smoky_job_builds_its_scene_and_medium_once(monkeypatch):
     media = _count(monkeypatch, scene_module, "medium_from_spec")
     res = simulate_module.simulate(_smoky())
     assert isinstance(res, SimulationResultPublic)
-    assert res.algorithm == 5 and res.modeled["pilot"] is not None  # the truncation pilot ran
+    assert res.algorithm == 5 and res.modeled.pilot is not None  # the truncation pilot ran
     assert (scenes[0], media[0]) == (1, 1)
 
 
