@@ -41,9 +41,8 @@ def _warnings(spec, scene) -> list[str]:
         out.append(f"phase function mean cosine {scene.phase.mean_cosine:.4g}: connections from scattering "
                    "points to point-like devices are heavy-tailed, so the scattered part converges slowly and its "
                    "error bars may be too small; compare runs with different seeds")
-    if not alg.counts_scattering and _scatters(spec.medium):
-        out.append("algorithm 1 counts only unscattered light: with sigma_s > 0 it underestimates "
-                   "(use algorithm 4 or 5 for scattered light)")
+    if alg.warning_in_scattering_medium and _scatters(spec.medium):
+        out.append(alg.warning_in_scattering_medium)
     out += _size_warnings(scene)
     return out
 

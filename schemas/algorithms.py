@@ -3,7 +3,7 @@
 `ALGORITHMS[n]` is the record of `simulation.algorithm = n`: its name, the path families it
 estimates and what it leaves out, the KernelSettings flags it sets (by name: this layer does not
 import the engine), the scattering order it fixes, the direction it runs in, whether it runs from
-both devices in a medium, the outputs it fills and the medium it needs. The engine's planner
+both devices in a medium, the outputs it fills, the medium it needs and its warning. The engine's planner
 (engine/simulate.py), the automatic settings (engine/auto.py) and the result (engine/result.py)
 read these records; nothing else lists per-algorithm facts.
 """
@@ -71,6 +71,8 @@ class Algorithm:
     #: the medium it needs: does it estimate scattered light (sigma_s > 0)?
     counts_scattering: bool
     outputs: tuple[str, ...] = field(default=BASE_OUTPUTS)
+    #: the result's warning when the scene's medium scatters ("" for none)
+    warning_in_scattering_medium: str = ""
 
     def S(self, max_scattering: int | None) -> int:
         """Highest scattering order tallied, given the scene's max_scattering."""
@@ -78,85 +80,95 @@ class Algorithm:
 
 
 _SCATTERED = BASE_OUTPUTS + ("dc_gain_by_scattering_order",)
+_ONE_SIDED = {"free_flight": False, "segment_scatter": False, "mis": False}
 
 ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
     {
         a.number: a
         for a in (
             Algorithm(
-                1,
-                "unscattered paths",
-                "paths without scattering (s = 0), reflection orders 0..K; extinction on every segment",
-                ("scattered light (s >= 1)",),
-                {"free_flight": False, "segment_scatter": False, "mis": False},
-                0,
-                None,
-                "",
-                TwoSided.NEVER,
-                False,
+                number=1,
+                name="unscattered paths",
+                families="paths without scattering (s = 0), reflection orders 0..K; extinction on every segment",
+                left_out=("scattered light (s >= 1)",),
+                kernel=_ONE_SIDED,
+                scattering_orders=0,
+                direction=None,
+                direction_reason="",
+                two_sided=TwoSided.NEVER,
+                counts_scattering=False,
+                warning_in_scattering_medium=(
+                    "algorithm 1 counts only unscattered light: with sigma_s > 0 it underestimates "
+                    "(use algorithm 4 or 5 for scattered light)"
+                ),
             ),
             Algorithm(
-                2,
-                "in-scattering from the receiver side",
-                "s = 0 paths up to K reflections, plus single scattering lit directly by the transmitter: "
+                number=2,
+                name="in-scattering from the receiver side",
+                families="s = 0 paths up to K reflections, plus single scattering lit directly by the transmitter: "
                 "Tx -> p -> (k <= K reflections) -> Rx",
-                (
+                left_out=(
                     "single scattering reached after reflections from the transmitter (Tx -> k >= 1 -> p -> Rx)",
                     "scattering orders s >= 2",
                 ),
-                {"free_flight": False, "segment_scatter": True, "mis": False},
-                1,
-                Direction.BACKWARD,
-                "algorithm 2 samples in-scattering from the receiver side",
-                TwoSided.ALWAYS,
-                True,
-                _SCATTERED,
+                kernel={**_ONE_SIDED, "segment_scatter": True},
+                scattering_orders=1,
+                direction=Direction.BACKWARD,
+                direction_reason="algorithm 2 samples in-scattering from the receiver side",
+                two_sided=TwoSided.ALWAYS,
+                counts_scattering=True,
+                outputs=_SCATTERED,
             ),
             Algorithm(
-                3,
-                "out-scattering from the transmitter side",
-                "s = 0 paths up to K reflections, plus single scattering seen directly by the receiver: "
+                number=3,
+                name="out-scattering from the transmitter side",
+                families="s = 0 paths up to K reflections, plus single scattering seen directly by the receiver: "
                 "Tx -> (k <= K reflections) -> p -> Rx",
-                ("single scattering lit after reflections (Tx -> p -> k >= 1 -> Rx)", "scattering orders s >= 2"),
-                {"free_flight": False, "segment_scatter": True, "mis": False},
-                1,
-                Direction.FORWARD,
-                "algorithm 3 samples out-scattering from the transmitter side",
-                TwoSided.ALWAYS,
-                True,
-                _SCATTERED,
+                left_out=(
+                    "single scattering lit after reflections (Tx -> p -> k >= 1 -> Rx)",
+                    "scattering orders s >= 2",
+                ),
+                kernel={**_ONE_SIDED, "segment_scatter": True},
+                scattering_orders=1,
+                direction=Direction.FORWARD,
+                direction_reason="algorithm 3 samples out-scattering from the transmitter side",
+                two_sided=TwoSided.ALWAYS,
+                counts_scattering=True,
+                outputs=_SCATTERED,
             ),
             Algorithm(
-                4,
-                "both single-scattering families and in-then-out double scattering",
-                "s = 0 paths up to K reflections, plus Tx -> p -> (k <= K) -> Rx and Tx -> (k <= K) -> p -> Rx, "
-                "the shared family Tx -> p -> Rx counted once, and the report's in-then-out double scattering "
-                "Tx -> p_in -> (k <= K) -> p_out -> Rx (s = 2)",
-                (
+                number=4,
+                name="both single-scattering families and in-then-out double scattering",
+                families=(
+                    "s = 0 paths up to K reflections, plus Tx -> p -> (k <= K) -> Rx and Tx -> (k <= K) -> p -> Rx, "
+                    "the shared family Tx -> p -> Rx counted once, and the report's in-then-out double scattering "
+                    "Tx -> p_in -> (k <= K) -> p_out -> Rx (s = 2)"
+                ),
+                left_out=(
                     "single scattering with reflections on both sides of p",
                     "double scattering with reflections before p_in or after p_out",
                     "scattering orders s >= 3",
                 ),
-                {"free_flight": False, "segment_scatter": True, "mis": True},
-                2,
-                Direction.BOTH,
-                "algorithm 4 runs both sides and weights their shared family by MIS",
-                TwoSided.ALWAYS,
-                True,
-                _SCATTERED,
+                kernel={**_ONE_SIDED, "segment_scatter": True, "mis": True},
+                scattering_orders=2,
+                direction=Direction.BOTH,
+                direction_reason="algorithm 4 runs both sides and weights their shared family by MIS",
+                two_sided=TwoSided.ALWAYS,
+                counts_scattering=True,
+                outputs=_SCATTERED,
             ),
             Algorithm(
-                5,
-                "free-flight paths with next-event estimation",
-                "all paths with at most K reflections and S scattering events, in any order",
-                (),
-                {"free_flight": True, "segment_scatter": False, "mis": False},
-                None,
-                None,
-                "",
-                TwoSided.AUTO_DIRECTION,
-                True,
-                _SCATTERED,
+                number=5,
+                name="free-flight paths with next-event estimation",
+                families="all paths with at most K reflections and S scattering events, in any order",
+                left_out=(),
+                kernel={**_ONE_SIDED, "free_flight": True},
+                scattering_orders=None,
+                direction=None,
+                direction_reason="",
+                two_sided=TwoSided.AUTO_DIRECTION,
+                counts_scattering=True,
+                outputs=_SCATTERED,
             ),
         )
     }
