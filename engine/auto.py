@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pydantic import ValidationError
@@ -37,7 +38,9 @@ from owcsim.schemas.simulation import check_bin_budget
 
 from .constants import SPEED_OF_LIGHT
 from .errors import SceneError
-from .scene import Scene
+
+if TYPE_CHECKING:
+    from .scene import Scene
 
 #: Highest orders the truncation pilot measures.
 PILOT_CAP = 40

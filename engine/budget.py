@@ -33,6 +33,7 @@ import math
 from dataclasses import asdict, dataclass
 
 from owcsim.schemas import SceneSpec
+from owcsim.schemas.algorithms import ALGORITHMS
 
 from .auto import PILOT_CAP
 from .constants import SPEED_OF_LIGHT
@@ -98,12 +99,13 @@ def memory_estimate(spec: SceneSpec, *, triangles: int | None = None, extent_m: 
     n_rx = sum(1 for _ in spec.receivers) + sum(g.count for g in spec.receiver_grids)
     n_links = n_tx * n_rx
     k = sim.max_reflections if sim.max_reflections is not None else PILOT_CAP
-    if sim.algorithm == 5:
-        s = sim.max_scattering if sim.max_scattering is not None else PILOT_CAP
-    elif sim.algorithm == "auto":
+    alg = ALGORITHMS.get(sim.algorithm) if sim.algorithm != "auto" else None  # (schemas/algorithms.py)
+    if alg is None:  # auto: the pilot's S cap in a medium
         s = PILOT_CAP if spec.medium is not None else 1
+    elif alg.scattering_orders is None:  # S chosen (algorithm 5)
+        s = sim.max_scattering if sim.max_scattering is not None else PILOT_CAP
     else:
-        s = sim.scattering_orders
+        s = alg.scattering_orders
     if sim.t_max_s is not None:
         n_bins = sim.n_bins
     else:  # the pilot's window (auto.resolve): the automatic window ends inside it
@@ -120,8 +122,8 @@ def memory_estimate(spec: SceneSpec, *, triangles: int | None = None, extent_m: 
     per_cir_link = n_bins * (1 + N_GROUPS) + 2 + n_split / max(n_cir, 1) * n_bins * ((k + 1) + (s + 1))
     accumulators = 2 * 8 * (n_links * 45 + int(n_cir * per_cir_link) + n_ord * 2 * cells + n_groups * n_rx * 13)
     # Paths per batch as simulate.batch_size caps them (targets x paths and estimates per step bounded).
-    per_segment = 1 + (sim.max_strata + sim.equiangular_points if sim.algorithm in (2, 3, 4, "auto") and
-                       spec.medium is not None else 0)
+    segment_points = alg is None or bool(alg.kernel["segment_scatter"])  # auto: as if (the largest)
+    per_segment = 1 + (sim.max_strata + sim.equiangular_points if segment_points and spec.medium is not None else 0)
     batch_paths = max(1, min(sim.batch_size, PATH_TARGET_BUDGET // max(targets, 1),
                              ESTIMATE_BUDGET // max(targets * per_segment, 1)))
     pairs = batch_paths * targets
