@@ -316,7 +316,7 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
     need_k = sim.max_reflections is None
     need_s = alg.scattering_orders is None and sim.max_scattering is None
     need_t = sim.t_max_s is None
-    if need_t and not need_k and number == 1 and sim.max_reflections == 0:
+    if need_t and not need_k and not alg.counts_scattering and sim.max_reflections == 0:
         # Line of sight only: every arrival is a direct path, known without a pilot.
         longest = max(math.dist(t.position, r.position) for t in spec.transmitters for r in _extreme_receivers(spec))
         n_bins = max(1, math.ceil((longest / SPEED_OF_LIGHT - sim.t_min_s) / sim.time_bin_s + 1e-9) + 1)

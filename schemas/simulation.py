@@ -83,8 +83,9 @@ class SimulationSpec(SpecModel):
     @property
     def is_resolved(self) -> bool:
         """True when the algorithm, K, S (algorithm 5) and the window are all explicit."""
-        return (self.algorithm != "auto" and self.max_reflections is not None and self.t_max_s is not None
-                and (self.algorithm != 5 or self.max_scattering is not None))
+        if self.algorithm == "auto" or self.max_reflections is None or self.t_max_s is None:
+            return False
+        return algorithm(self.algorithm).scattering_orders is not None or self.max_scattering is not None
 
     @property
     def scattering_orders(self) -> int:
