@@ -54,7 +54,7 @@ def child(case: dict) -> dict:
     res = simulate(spec)
     elapsed = time.perf_counter() - t
     out = {"time_s": elapsed, "peak_mb": _peak_mb(), "paths": res.run.paths_total,
-           "stop": str(res.run.stop_reason), "rule": res.run.direction_choice.get("rule", ""),
+           "stop": str(res.run.stop_reason), "rule": res.run.direction_choice.rule,
            "K": res.modeled.max_reflections}
     rows = res.channels or res.links
     rel = sorted(r.dc_gain_stderr / r.dc_gain for r in rows if r.dc_gain and r.dc_gain_stderr is not None)

@@ -24,7 +24,7 @@ import numpy as np
 
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.algorithms import Direction, TwoSided, algorithm
-from owcsim.schemas.results import ModeledPublic, SimulationResultPublic, StopReason
+from owcsim.schemas.results import DirectionChoicePublic, ModeledPublic, SimulationResultPublic, StopReason
 
 from . import auto
 from .constants import SPEED_OF_LIGHT
@@ -75,8 +75,8 @@ class RunInfo:
     wall_time_s: float = 0.0
     workers: int = 1
     batches: int = 0
-    #: how the directions were chosen (the result's run.direction_choice)
-    pilot: dict = field(default_factory=dict)
+    #: how the directions were chosen (the result's run.direction_choice; a dict is validated into it)
+    pilot: DirectionChoicePublic | dict = field(default_factory=lambda: DirectionChoicePublic(rule=""))
 
 
 def tally_plan(spec: SceneSpec, scene: Scene) -> TallyPlan:
@@ -192,7 +192,8 @@ def _run_job(spec: SceneSpec, scene: Scene, executor: Executor, base_dir, progre
     if exact_los_only(scene, settings):
         directions[:] = SKIP
         info.stop_reason = StopReason.EXACT
-        info.pilot = {"rule": "max_reflections = 0 without scattering: line of sight only, in closed form"}
+        info.pilot = DirectionChoicePublic(
+            rule="max_reflections = 0 without scattering: line of sight only, in closed form")
     accs = _run(scene, spec, settings, executor, job, directions, los_gain, info, progress, should_stop, t_start)
     info.wall_time_s = time.perf_counter() - t_start
     return build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info,
@@ -284,28 +285,29 @@ def _choose_directions(scene, spec, settings, executor, job, los_gain, info) -> 
     alg = algorithm(sim.algorithm)
     n_tx, n_rx = len(scene.transmitters), len(scene.receivers)
     if two_sided(spec, scene):
-        info.pilot = {"rule": f"algorithm {sim.algorithm} in a medium: every link from both devices, each path "
-                              "weighted by its share (medium_nee.py: bounded weights near point devices)"}
+        info.pilot = DirectionChoicePublic(rule=f"algorithm {sim.algorithm} in a medium: every link from both devices, "
+                                           "each path weighted by its share (medium_nee.py: bounded weights near "
+                                           "point devices)")
         return np.full(scene.n_links, BOTH)
     if alg.direction is not None:
-        info.pilot = {"rule": alg.direction_reason}
+        info.pilot = DirectionChoicePublic(rule=alg.direction_reason)
         return np.full(scene.n_links, alg.direction.code)
     if sim.direction != "auto":
-        info.pilot = {"rule": f"requested: {sim.direction}"}
+        info.pilot = DirectionChoicePublic(rule=f"requested: {sim.direction}")
         return np.full(scene.n_links, Direction(sim.direction).code)
     if sim.max_reflections == 0:
-        info.pilot = {"rule": "max_reflections = 0: line of sight only, computed exactly"}
+        info.pilot = DirectionChoicePublic(rule="max_reflections = 0: line of sight only, computed exactly")
         return np.full(scene.n_links, FORWARD)
     if n_rx >= AMORTIZATION_RATIO * n_tx:
         # A map: forward paths serve every receiver at once, but their next-event estimates from wall points
         # a few cm from a receiver are heavy-tailed, so the map's worst points converge slowly; paths from each
         # receiver to the few luminaires do not (benchmarks/map_scale.py measures both).
-        info.pilot = {"rule": f"{n_tx} transmitters x {n_rx} receivers (a map): paths from each receiver to the "
-                              "few transmitters; no pilot"}
+        info.pilot = DirectionChoicePublic(rule=f"{n_tx} transmitters x {n_rx} receivers (a map): paths from each "
+                                           "receiver to the few transmitters; no pilot")
         return np.full(scene.n_links, BACKWARD)
     if n_tx >= AMORTIZATION_RATIO * n_rx:
-        info.pilot = {"rule": f"{n_tx} transmitters x {n_rx} receivers: the receiver side amortizes its paths "
-                              "over the transmitters, no pilot"}
+        info.pilot = DirectionChoicePublic(rule=f"{n_tx} transmitters x {n_rx} receivers: the receiver side "
+                                           "amortizes its paths over the transmitters, no pilot")
         return np.full(scene.n_links, BACKWARD)
     # Pilot: a short run each way; efficiency = 1 / (relative variance per path x rays per path),
     # rays shared by the links a source serves. Ray counts (not times) keep the choice deterministic.
@@ -327,13 +329,10 @@ def _choose_directions(scene, spec, settings, executor, job, los_gain, info) -> 
             rel_var = np.where(h0 > 0, var / h0**2, np.inf)
             cost_eff.append((rel_var * rays_per_path / links_per_source, np.sqrt(rel_var), rays_per_path))
     choice = np.where(cost_eff[1][0] < cost_eff[0][0], BACKWARD, FORWARD)
-    info.pilot = {
-        "rule": "pilot: lower relative variance x rays per path, per link",
-        "paths_per_direction": sim.pilot_paths,
-        "rel_std_per_path_forward": _finite_list(cost_eff[0][1]),
-        "rel_std_per_path_backward": _finite_list(cost_eff[1][1]),
-        "rays_per_path_forward": float(cost_eff[0][2]), "rays_per_path_backward": float(cost_eff[1][2]),
-    }
+    info.pilot = DirectionChoicePublic(
+        rule="pilot: lower relative variance x rays per path, per link", paths_per_direction=sim.pilot_paths,
+        rel_std_per_path_forward=_finite_list(cost_eff[0][1]), rel_std_per_path_backward=_finite_list(cost_eff[1][1]),
+        rays_per_path_forward=float(cost_eff[0][2]), rays_per_path_backward=float(cost_eff[1][2]))
     return choice
 
 

@@ -148,6 +148,22 @@ class TimeBinsPublic(PublicModel):
     n_bins: int
 
 
+class DirectionChoicePublic(PublicModel):
+    """How the links' directions were chosen: the rule, and the direction pilot's measurements when one ran.
+    Keys a newer engine adds are kept."""
+
+    model_config = ConfigDict(extra="allow")
+
+    rule: str = Field(description="the rule that chose the directions")
+    paths_per_direction: int | None = Field(None, description="paths per source of the direction pilot, each way")
+    rel_std_per_path_forward: list[float | None] | None = Field(
+        None, description="per link: relative standard deviation of H0 per forward path (pilot)")
+    rel_std_per_path_backward: list[float | None] | None = Field(
+        None, description="per link: relative standard deviation of H0 per backward path (pilot)")
+    rays_per_path_forward: float | None = Field(None, description="rays cast per forward path (pilot)")
+    rays_per_path_backward: float | None = Field(None, description="rays cast per backward path (pilot)")
+
+
 class RunPublic(PublicModel):
     stop_reason: StopReason
     target_rel_error: float | None
@@ -158,7 +174,7 @@ class RunPublic(PublicModel):
     paths_total: int
     rays_intersect: int
     rays_occluded: int
-    direction_choice: dict
+    direction_choice: DirectionChoicePublic
 
 
 class DiagnosticsPublic(PublicModel):
