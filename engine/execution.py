@@ -21,7 +21,7 @@ import os
 import pickle
 import tempfile
 from collections import OrderedDict, deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Generator, Iterable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Protocol
@@ -30,6 +30,7 @@ from owcsim.schemas import SceneSpec
 
 from .kernel import KernelSettings, WorkItem, trace_batch
 from .scene import Scene, build_scene
+from .tally import BatchTally
 
 #: Scenes a worker keeps built (least recently used are dropped).
 SCENE_CACHE_SIZE = 4
@@ -73,7 +74,7 @@ def _private_folder() -> str:
 class Executor(Protocol):
     workers: int
 
-    def map(self, job: "JobRef", items: Iterable[WorkItem], settings: KernelSettings) -> Iterator: ...
+    def map(self, job: JobRef, items: Iterable[WorkItem], settings: KernelSettings) -> Generator[BatchTally]: ...
 
     def close(self) -> None: ...
 

@@ -51,7 +51,7 @@ import uuid
 import warnings
 import weakref
 from collections import OrderedDict, deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Generator, Iterable
 from pathlib import Path
 
 import numpy as np
@@ -352,7 +352,7 @@ class DaskExecutor:
 
     # -- the executor interface
 
-    def map(self, job: JobRef, items: Iterable[WorkItem], settings: KernelSettings) -> Iterator[BatchTally]:
+    def map(self, job: JobRef, items: Iterable[WorkItem], settings: KernelSettings) -> Generator[BatchTally]:
         """Tallies of `items`, in item order; at most `window` tasks in flight; closing cancels the rest."""
         key, fingerprint, spec_future = self._ship(job)
         token = uuid.uuid4().hex[:12]

@@ -11,6 +11,8 @@ estimators of the same quantity, so means and variances add.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,6 +25,15 @@ from .auto import _max_albedo, _scatters
 from .estimates import channel_moments, link_moments, link_reliability, los_moments, reported_rel_stderr
 from .lighting import Lighting
 from .result_parts import cir_block, column, document_rows, grid_maps, order_block
+
+if TYPE_CHECKING:
+    from owcsim.schemas import SceneSpec
+
+    from .kernel import KernelSettings
+    from .los import LosGeometry
+    from .scene import Scene
+    from .simulate import RunInfo
+    from .tally import Accumulator
 
 
 def _num(x) -> float | None:
@@ -120,8 +131,10 @@ def _paths_traced(accs, n_tx: int, n_rx: int) -> int:
     return int(fwd.max(axis=1).sum() + bwd.max(axis=0).sum())
 
 
-def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info, original=None, modeled=None,
-                 unreachable=(), geometry=None) -> SimulationResultPublic:
+def build_result(spec: SceneSpec, scene: Scene, accs: dict[str, Accumulator], settings: KernelSettings,
+                 los_gain: np.ndarray, los_delay: np.ndarray, directions: np.ndarray, info: RunInfo,
+                 original: SceneSpec | None = None, modeled: ModeledPublic | None = None,
+                 unreachable: Sequence[int] = (), geometry: LosGeometry | None = None) -> SimulationResultPublic:
     """The typed result; every per-link figure is computed for all links at once as arrays."""
     plan = settings.tally
     bins = plan.bins
@@ -133,7 +146,7 @@ def build_result(spec, scene, accs, settings, los_gain, los_delay, directions, i
     los_abc = los_moments(los_gain, los_delay)
     mean, cov = link_moments(accs, los_abc)
     delay = metrics.delay_metrics_from_moments(mean, cov)
-    n_paths = sum(a.n_paths for a in accs.values())
+    n_paths = np.sum([a.n_paths for a in accs.values()], axis=0)
     link_tx, link_rx = np.divmod(np.arange(scene.n_links), n_rx)
     h0 = np.where(link_masked, np.nan, delay["dc_gain"])
     nan_masked = {k: np.where(link_masked, np.nan, v) for k, v in delay.items()}

@@ -15,14 +15,14 @@ from __future__ import annotations
 import itertools
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from owcsim.schemas import SceneSpec
+from owcsim.schemas import SceneSpec, SimulationSpec
 from owcsim.schemas.algorithms import Direction, TwoSided, algorithm
 from owcsim.schemas.results import DirectionChoicePublic, ModeledPublic, SimulationResultPublic, StopReason
 
@@ -85,7 +85,7 @@ def tally_plan(spec: SceneSpec, scene: Scene) -> TallyPlan:
     cir, orders = spec.outputs.per_receiver(len(spec.receivers), spec.grid_receiver_count())
     cir, orders = np.asarray(cir, bool), np.asarray(orders, bool)
 
-    def rank(flags):
+    def rank(flags: np.ndarray) -> np.ndarray:
         return np.where(flags, np.cumsum(flags) - 1, -1).astype(np.int64)
 
     return TallyPlan(bins=TimeBins(sim.t_min_s, sim.time_bin_s, sim.n_bins), n_orders=sim.max_reflections + 1,
@@ -162,7 +162,7 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
                         modeled=modeled)
 
 
-def _resolve(spec: SceneSpec, scene: Scene, executor: Executor, base_dir
+def _resolve(spec: SceneSpec, scene: Scene, executor: Executor, base_dir: str | Path | None
              ) -> tuple[SceneSpec, Scene, ModeledPublic | None]:
     """Explicit settings for the "auto" ones (engine/auto.py), on the built scene: (spec, scene, modeled)."""
     if spec.simulation.is_resolved:
@@ -174,7 +174,8 @@ def _resolve(spec: SceneSpec, scene: Scene, executor: Executor, base_dir
     return step.spec, step.scene, step.modeled
 
 
-def _run_job(spec: SceneSpec, scene: Scene, executor: Executor, base_dir, progress, should_stop, t_start: float,
+def _run_job(spec: SceneSpec, scene: Scene, executor: Executor, base_dir: str | Path | None,
+             progress: ProgressFn | None, should_stop: Callable[[], bool] | None, t_start: float,
              original: SceneSpec | None = None, modeled: ModeledPublic | None = None) -> SimulationResultPublic:
     """Run a resolved job on its built scene."""
     settings = kernel_settings(spec, scene)
@@ -206,7 +207,7 @@ def exact_los_only(scene: Scene, settings: KernelSettings) -> bool:
     return settings.max_reflections == 0 and not scatters
 
 
-def batch_size(sim, settings: KernelSettings, n_targets: int) -> int:
+def batch_size(sim: SimulationSpec, settings: KernelSettings, n_targets: int) -> int:
     """Paths per batch: the job's batch_size, capped so that paths x targets stay under PATH_TARGET_BUDGET
     (the dense per-path tallies) and paths x targets x estimates per segment under ESTIMATE_BUDGET (one
     step's next-event estimates, ~60 B each)."""
@@ -220,7 +221,11 @@ def batch_size(sim, settings: KernelSettings, n_targets: int) -> int:
                       ESTIMATE_BUDGET // (n_targets * per_segment)))
 
 
-def _sources(scene: Scene, directions: np.ndarray) -> list[tuple[Direction, int, tuple[int, ...]]]:
+#: A run of batches: (direction, source device, target devices).
+Run = tuple[Direction, int, tuple[int, ...]]
+
+
+def _sources(scene: Scene, directions: np.ndarray) -> list[Run]:
     """(direction, source, targets) runs that cover every link in its chosen direction(s)."""
     n_rx = len(scene.receivers)
     codes = directions.reshape(len(scene.transmitters), n_rx)
@@ -236,7 +241,8 @@ def _sources(scene: Scene, directions: np.ndarray) -> list[tuple[Direction, int,
 MAIN_PHASE, PILOT_PHASE = 0, 1
 
 
-def _items(runs, sim, settings, phase: int, n_paths: int | None):
+def _items(runs: list[Run], sim: SimulationSpec, settings: KernelSettings, phase: int,
+           n_paths: int | None) -> Iterator[WorkItem]:
     """Batches in rounds (one per run per round); endless when n_paths is None.
 
     Every run of a direction has the same batch size (capped by its largest target count), so the
@@ -254,16 +260,17 @@ def _items(runs, sim, settings, phase: int, n_paths: int | None):
             yield WorkItem(direction, source, targets, b, size, sim.seed, phase)
 
 
-def _new_accumulators(scene, settings) -> dict[Direction, Accumulator]:
+def _new_accumulators(scene: Scene, settings: KernelSettings) -> dict[Direction, Accumulator]:
     return {d: Accumulator(scene.n_links, settings.tally, backward=d is Direction.BACKWARD)
             for d in (Direction.FORWARD, Direction.BACKWARD)}
 
 
-def _merge(accs: dict[Direction, Accumulator], executor, job: JobRef, items, settings, on_batch=None) -> None:
+def _merge(accs: dict[Direction, Accumulator], executor: Executor, job: JobRef, items: Iterable[WorkItem],
+           settings: KernelSettings, on_batch: Callable[[WorkItem], bool] | None = None) -> None:
     """Feed items to the executor and merge their tallies in order; `on_batch` may stop the run."""
     pulled: deque[WorkItem] = deque()
 
-    def recording():
+    def recording() -> Iterator[WorkItem]:
         for it in items:
             pulled.append(it)
             yield it
@@ -279,7 +286,8 @@ def _merge(accs: dict[Direction, Accumulator], executor, job: JobRef, items, set
         results.close()
 
 
-def _choose_directions(scene, spec, settings, executor, job, los_gain, info) -> np.ndarray:
+def _choose_directions(scene: Scene, spec: SceneSpec, settings: KernelSettings, executor: Executor, job: JobRef,
+                       los_gain: np.ndarray, info: RunInfo) -> np.ndarray:
     """Per link: the Direction.code its paths run in (SKIP is set later for links not simulated)."""
     sim = spec.simulation
     alg = algorithm(sim.algorithm)
@@ -336,11 +344,14 @@ def _choose_directions(scene, spec, settings, executor, job, los_gain, info) -> 
     return choice
 
 
-def _finite_list(x):
+def _finite_list(x: np.ndarray) -> list[float | None]:
     return [float(v) if np.isfinite(v) else None for v in x]
 
 
-def _run(scene, spec, settings, executor, job, directions, los_gain, info, progress, should_stop, t_start):
+def _run(scene: Scene, spec: SceneSpec, settings: KernelSettings, executor: Executor, job: JobRef,
+         directions: np.ndarray, los_gain: np.ndarray, info: RunInfo, progress: ProgressFn | None,
+         should_stop: Callable[[], bool] | None, t_start: float) -> dict[Direction, Accumulator]:
+    """Run the batches of every link in its direction(s), merging as they come; stop by the job's rule."""
     sim = spec.simulation
     runs = _sources(scene, directions)
     accs = _new_accumulators(scene, settings)
