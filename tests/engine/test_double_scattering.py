@@ -4,10 +4,10 @@ import math
 
 import pytest
 
-from tests.results import simulate_two_sided_document as simulate_two_sided
-from tests.results import simulate_document as simulate
 from tests.reference_double import double_scattering
 from tests.reference_volume import single_scattering
+from tests.results import simulate_document as simulate
+from tests.results import simulate_two_sided_document as simulate_two_sided
 from tests.scenes import SMOKE, open_doc, room_doc, spec, within
 
 # coarse strata: the s = 2 points need not resolve the 1 ns bins for the DC gain (faster per path)

@@ -11,8 +11,8 @@ import pytest
 from owcsim.engine import simulate as simulate_module
 from owcsim.engine.scene import build_scene
 from owcsim.engine.simulate import PATH_TARGET_BUDGET, batch_size, kernel_settings
-from tests.results import simulate_document as simulate
 from owcsim.engine.tally import BatchBuilder
+from tests.results import simulate_document as simulate
 from tests.scenes import EXAMPLES, room_doc, spec, within
 
 LEDS = [(1.25, 1.25), (1.25, 3.75), (3.75, 1.25), (3.75, 3.75)]

@@ -30,8 +30,8 @@ from owcsim.engine.errors import SceneError
 from owcsim.engine.media import HomogeneousMedium, medium_from_spec
 from owcsim.engine.phase import MiePhase, Tabulated, phase_from_spec
 from owcsim.engine.scene import build_scene
-from tests.results import simulate_document as simulate
 from owcsim.schemas.medium import KOSCHMIEDER, ParticleMediumSpec, ParticlesSpec
+from tests.results import simulate_document as simulate
 from tests.scenes import room_doc, spec
 
 # (m = n + ik, x, Qext, Qsca, g Qsca): Wiscombe (1979) test cases; the x = 10, m = 1.5 + 0.1i

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from owcsim.engine import reliability as R
-from tests.results import simulate_two_sided_document as simulate_two_sided
 from tests.results import simulate_document as simulate
+from tests.results import simulate_two_sided_document as simulate_two_sided
 from tests.scenes import room_doc, spec
 
 

@@ -15,8 +15,8 @@ from pydantic import ValidationError
 from scipy import integrate, stats
 
 from owcsim.engine import phase as ph
-from tests.results import simulate_document as simulate
 from owcsim.schemas.medium import TabulatedPhaseSpec
+from tests.results import simulate_document as simulate
 from tests.scenes import spec
 
 SEED = 2024

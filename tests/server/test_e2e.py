@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from owcsim.clients import Client, InvalidRequest, NotFound, Unauthorized
-from tests.results import simulate_document as simulate
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.results import SimulationResultPublic
+from tests.results import simulate_document as simulate
 
 from .helpers import ServerProcess, long_doc, quick_doc
 
@@ -148,8 +148,8 @@ def test_restart_while_a_job_runs_loses_nothing(tmp_path, sig):
 
 
 def test_cli_serve_and_submit(server, tmp_path, capsys, monkeypatch):
-    from owcsim.clients.http import RetryPolicy
     from owcsim.cli import main
+    from owcsim.clients.http import RetryPolicy
     from tests.scenes import EXAMPLES
 
     out = tmp_path / "out"

@@ -17,15 +17,13 @@ import threading
 import time
 import tracemalloc
 
+import httpx
 import numpy as np
 import pytest
 
 from owcsim.schemas.results import SimulationResultPublic
-
 from owcsim.server.settings import Settings
 from owcsim.server.store import JobStore, StoreError
-
-import httpx
 
 from .helpers import ServerProcess, app_client, quick_doc, wait_for
 
@@ -122,9 +120,8 @@ def test_2_results_are_streamed_from_stored_renders_in_bounded_memory(tmp_path):
 
 
 def test_2_csv_ids_that_look_like_formulas_are_escaped():
-    from owcsim.server.formats import cir_csv
-
     from owcsim.schemas.results import CirPublic, LinkPublic, TimeBinsPublic
+    from owcsim.server.formats import cir_csv
 
     link = LinkPublic.model_construct(transmitter="=HYPERLINK(\"http://x\")", receiver="@rx", cir=CirPublic(
         total=[1.0], total_stderr=[None], by_reflection_order=[[1.0]]))
@@ -414,9 +411,9 @@ def test_11_client_refuses_mesh_files_that_are_not_small_regular_files(tmp_path,
 
 
 def test_2_a_result_stored_without_renders_is_rendered_once_on_first_request(api):
-    from tests.results import simulate_document as simulate
     from owcsim.schemas import SceneSpec
     from owcsim.server.formats import cir_csv
+    from tests.results import simulate_document as simulate
 
     result = simulate(SceneSpec.model_validate(quick_doc()))
     job = api.post("/v1/jobs", json=quick_doc()).json()
@@ -432,9 +429,9 @@ def test_2_a_result_stored_without_renders_is_rendered_once_on_first_request(api
 def test_plots_drawn_from_several_threads_at_once_are_all_correct():
     from concurrent.futures import ThreadPoolExecutor
 
-    from tests.results import simulate_document as simulate
     from owcsim.schemas import SceneSpec
     from owcsim.server.formats import cir_png
+    from tests.results import simulate_document as simulate
 
     result = SimulationResultPublic.model_validate(simulate(SceneSpec.model_validate(quick_doc())))
     first = cir_png(result)

@@ -10,8 +10,8 @@ import pytest
 
 from owcsim.clients.output import write_cir_csv
 from owcsim.clients.result import Result
-from tests.results import simulate_document as simulate
 from owcsim.schemas import SceneSpec
+from tests.results import simulate_document as simulate
 
 from .helpers import app_client, long_doc, quick_doc, wait_for
 
