@@ -51,7 +51,7 @@ from .sampling import cosine_about_soa
 from .segments import equiangular, equiangular_density, time_density, time_strata
 from .scene import Scene
 from .tally import BatchBuilder, BatchTally, TallyPlan, TimeBins
-from .mirrors import connect_mirrors, connect_source_mirrors
+from .mirrors import connect_mirrors, connect_segment_mirrors, connect_source_mirrors
 from .medium_nee import (connection_weight, connect_from_target, first_medium_factor, first_segment_branch,
                          first_vertex_factor, side_weight, target_factor)
 
@@ -195,8 +195,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         origins=np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1),
         weights=np.full(n, w0), lengths=np.zeros(n), path=np.arange(n),
         k=np.zeros(n, np.int64), s=np.zeros(n, np.int64), first=np.zeros(n), first_rho=np.full(n, 1.0 / np.pi))
-    if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each in algorithm 4
-        connect_source_mirrors(ctx, sources, i, w0 * (0.5 if settings.mis else 1.0), n)
+    if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each from both devices
+        connect_source_mirrors(ctx, sources, i, w0 * (0.5 if settings.mis or settings.both_sides else 1.0), n)
     surface_power = escaped_power = 0.0
     # Segments that leave the scene run to where the medium has absorbed everything.
     far = scene.medium_far_distance
@@ -279,6 +279,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
                                         mid_g=mid_g)
                 else:
                     ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions, mid_g=mid_g)
+                if ctx.mirrors:  # ... -> x -> mirror -> target: only the collision reaches it (mirrors.py)
+                    connect_mirrors(ctx, points, points, mp.weights, mp, in_dirs=mp.directions)
                 if settings.both_sides and S >= 2 and forward:  # third strategy for Tx -> x_1 -> x_2 -> Rx
                     connect_from_target(ctx, mp, points, rng)
                 u = rng.random((2, len(mp)))
@@ -502,6 +504,8 @@ def segment_points(ctx: _Context, seg_paths: _Paths, t_seg, rng, order: int, dir
                                 settings.max_strata)
                    + equiangular_density(pp.origins, pp.directions, y_p, np.zeros(len(s)), end, s, n_eq))
         w = pp.weights * medium.transmittance(pp.origins.T, pp.directions.T, s) * sigma_s / density
+        if direction_mis and ctx.mirrors:  # source -> p -> mirror -> target, through the image (mirrors.py)
+            connect_segment_mirrors(ctx, j, points, w, pp, s, order)
         if direction_mis:
             w = w * _direction_mis(ctx, int(ctx.tgt[j]), pp, points, s, density)
         if weight_fn is not None:

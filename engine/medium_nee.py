@@ -330,10 +330,10 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
       side_weight(A(p), B(p_out)); the other run samples the family from its side.
     """
     from .kernel import segment_points
-    from .sampling import cosine_about_soa
+    from .mirrors import branch_surface
 
     scene, settings = ctx.scene, ctx.settings
-    medium, isect, geo = scene.medium, scene.intersector, scene.geometry
+    medium, isect = scene.medium, scene.intersector
     br = _scatter_on_first_segment(ctx, paths, t_seg, rng)
     K, far = settings.max_reflections, scene.medium_far_distance
 
@@ -356,20 +356,13 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
         ts = t.take(nxt)
         br.weights = br.weights * medium.transmittance(br.origins.T, br.directions.T, ts)
         points = br.origins + ts * br.directions
-        prims = prim.take(nxt)
-        normals = isect.normals_soa.take(prims, axis=1)
+        normals = isect.normals_soa.take(prim.take(nxt), axis=1)
         normals *= np.where(_dot(normals, br.directions) > 0, -1.0, 1.0)
-        rho = geo.reflectance.take(prims)
         spawn = points + isect.offset * normals
         br.lengths = br.lengths + ts
         br.k = br.k + 1
-        if chain:
-            for j in range(len(ctx.tgt)):
-                w = br.weights * rho / np.pi * side_weight(br.first, _surface_target_factor(ctx, j, points, normals))
-                _connect_surface(ctx, j, points, spawn, w, br, normals)
-        br.weights = br.weights * rho
-        u = rng.random((2, len(br)))
-        br.directions = cosine_about_soa(normals, u[0], u[1])
+        # NEE (chain; materials and mirror images included), then reflection from the materials (mirrors.py)
+        br.directions, br.weights = branch_surface(ctx, br, points, spawn, normals, prim.take(nxt), rng, chain)
         br.origins = spawn
         br = br.keep_where(br.weights > 0)
 

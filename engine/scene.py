@@ -62,7 +62,7 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
                      "the surfaces and devices")
     medium = medium_from_spec(spec.medium)
     intersector = Intersector(geometry)
-    planes = _mirror_planes(geometry, intersector, medium)
+    planes = _mirror_planes(geometry, intersector)
     return Scene(
         spec=spec,
         geometry=geometry,
@@ -152,13 +152,10 @@ def mask_reasons(spec: SceneSpec, receivers: Devices, n_explicit: int) -> np.nda
 MAX_MIRROR_PLANES = 32
 
 
-def _mirror_planes(geometry: Geometry, intersector: Intersector, medium) -> list:
+def _mirror_planes(geometry: Geometry, intersector: Intersector) -> list:
     """The planes of the perfect-mirror faces; SceneError where the image method does not apply."""
     if geometry.material is None or not geometry.material.rho_m.any():
         return []
-    if medium is not None:
-        raise SceneError("perfect-mirror surfaces cannot be combined with a medium yet: use a Phong material "
-                         "with a large exponent for the specular part")
     planes = mirror_planes(geometry.vertices, geometry.faces, geometry.material.rho_m, tol=intersector.offset)
     if len(planes) > MAX_MIRROR_PLANES:
         raise SceneError(f"the mirror surfaces lie in {len(planes)} distinct planes, more than {MAX_MIRROR_PLANES}: "

@@ -313,12 +313,6 @@ def test_forward_backward_agree_per_order_with_a_mirror_floor_and_a_luminaire():
     _assert_directions_agree(out["forward"], out["backward"])
 
 
-def test_mirror_with_smoke_is_refused():
-    doc = glossy_doc(mirror(0.9), medium={"type": "homogeneous", "sigma_a": 0.1, "sigma_s": 0.1}, paths=64)
-    with pytest.raises(SceneError, match="perfect-mirror surfaces cannot be combined with a medium"):
-        _link(doc)
-
-
 # ----------------------------------------------------------------------------- files at the edges
 def test_photometry_files_are_inlined_for_clusters_and_clients_and_refused_by_the_server(tmp_path):
     from owcsim.clients.scene import scene_document
