@@ -280,3 +280,22 @@ def test_algorithm_5_forward_backward_and_both_agree_per_order_with_a_mirror_in_
                 err = math.hypot(ea, eb)
                 assert err < 0.04 * a, (key, o)
                 assert within(a, b, err), (key, o, a, b, err)
+
+
+@pytest.mark.parametrize("algorithm,side,paths", [
+    pytest.param(2, "backward", 1_000_000, marks=pytest.mark.slow),  # the one-sided tail near the Tx: 7 s
+    (3, "forward", 200_000)])
+def test_both_devices_agree_with_the_natural_side_with_a_mirror_and_phong_surfaces(algorithm, side, paths):
+    """K = 2, mirror + diffuse floor, Phong ceiling: algorithms 2 and 3 from both devices (the other side's
+    scattering branch follows the materials and connects through mirror images, e.g. Tx -> p -> x -> mirror
+    -> Rx) against the one-sided estimator of the same family (whose traced path needs no image), per order."""
+    base = dict(algorithm=algorithm, max_reflections=2, max_scattering=1, batch_size=16_384, **COARSE)
+    one = simulate_two_sided(spec(_room_with_mirror(paths=paths, seed=90 + algorithm, **base)),
+                             direction=side)["links"][0]
+    two = _link(_room_with_mirror(paths=60_000, seed=95 + algorithm, **base))
+    assert two["direction"] == "both" and one["direction"] == side
+    for k in (1, 2):
+        (a, ea), (b, eb) = _k(two, k), _k(one, k)
+        err = math.hypot(ea, eb)
+        assert err < 0.02 * a, k  # power: an 8 % error in an order would fail
+        assert within(a, b, err), (k, a, b, err, (a - b) / err)
