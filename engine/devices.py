@@ -83,7 +83,8 @@ class Devices:
                 if directions is None:
                     raise ValueError("a tabulated transmitter's response needs the directions")
                 pattern, frame = self.pattern(0)
-                return pattern.eval_local(np.asarray(directions, float) @ frame.T)
+                local = frame @ np.asarray(directions, float).T  # (3, n) rows (callers pass (3, n).T)
+                return pattern.eval_rows(local[0], local[1], local[2])
             m = self.order.take(idx)
             safe = np.where(cos > 0, cos, 1.0)
             out = np.where(cos > 0, (m + 1) / (2 * np.pi) * np.exp(m * np.log(safe)), 0.0)
@@ -93,7 +94,8 @@ class Devices:
                     if directions is None:
                         raise ValueError("a tabulated transmitter's response needs the directions")
                     pattern, frame = self.pattern(j)
-                    out[sel] = pattern.eval_local(np.asarray(directions, float)[sel] @ frame.T)
+                    local = frame @ np.asarray(directions, float)[sel].T
+                    out[sel] = pattern.eval_rows(local[0], local[1], local[2])
             return out
         return np.where((cos > 0) & (cos >= self.cos_fov.take(idx)), self.gain.take(idx) * cos, 0.0)
 
@@ -108,7 +110,7 @@ class Devices:
         if self.kind == "transmitter":
             if self.patterns and self.patterns[i] is not None:
                 pattern, frame = self.pattern(i)
-                return pattern.sample_local(u1, u2) @ frame
+                return (frame.T @ pattern.sample_rows(u1, u2)).T  # a view of (3, n) rows
             local = sample_generalized_lambertian(self.order[i], u1, u2)
         else:
             local = sample_cosine_cone(self.cos_fov[i], u1, u2)

@@ -86,56 +86,94 @@ class Photometry:
         lit = np.flatnonzero(self.intensity.max(axis=0) > 0)
         return float(self.gamma[min(lit[-1] + 1, len(self.gamma) - 1)]) if len(lit) else 0.0
 
+    @functools.cached_property
+    def _flat(self) -> np.ndarray:
+        """The table flattened (C-major): corner (j, i) is at j * n_g + i (one `take` per corner)."""
+        return np.ascontiguousarray(self.intensity).ravel()
+
+    @functools.cached_property
+    def _guide(self):
+        """O(1) cell lookup by the cumulative masses (phase._Guide: the same cell as a binary search)."""
+        from .phase import _Guide
+
+        return _Guide(self._cdf, 0.0, 1.0)
+
+    @functools.cached_property
+    def _inv_steps(self) -> tuple[np.ndarray, np.ndarray]:
+        """1 / (grid step) per gamma cell and per C cell."""
+        return 1.0 / np.diff(self.gamma), 1.0 / np.diff(self.c)
+
+    def _corners(self, j, i):
+        """The table at the four corners of cells (j, i): (j, i), (j, i+1), (j+1, i), (j+1, i+1)."""
+        n_g, flat = len(self.gamma), self._flat
+        k = j * n_g + i
+        return flat.take(k), flat.take(k + 1), flat.take(k + n_g), flat.take(k + n_g + 1)
+
     def eval_angles(self, gamma, c) -> np.ndarray:
         """R(gamma, C) [1/sr]: bilinear interpolation of the table; 0 outside its gamma range."""
         gamma, c = np.asarray(gamma, float), np.mod(np.asarray(c, float), 2 * np.pi)
-        g, cc, tab = self.gamma, self.c, self.intensity
-        inside = (gamma >= g[0]) & (gamma <= g[-1])
+        g, cc = self.gamma, self.c
+        inv_g, inv_c = self._inv_steps
         i = np.clip(_cell_index(g, gamma), 0, len(g) - 2)
         j = np.clip(_cell_index(cc, c), 0, len(cc) - 2)
-        s = np.clip((gamma - g[i]) / (g[i + 1] - g[i]), 0.0, 1.0)
-        t = np.clip((c - cc[j]) / (cc[j + 1] - cc[j]), 0.0, 1.0)
-        val = ((1 - s) * ((1 - t) * tab[j, i] + t * tab[j + 1, i])
-               + s * ((1 - t) * tab[j, i + 1] + t * tab[j + 1, i + 1]))
-        return np.where(inside, val, 0.0)
+        s = np.clip((gamma - g.take(i)) * inv_g.take(i), 0.0, 1.0)
+        t = np.clip((c - cc.take(j)) * inv_c.take(j), 0.0, 1.0)
+        t00, t01, t10, t11 = self._corners(j, i)
+        lo = t00 + s * (t01 - t00)
+        val = lo + t * (t10 + s * (t11 - t10) - lo)
+        if g[0] > 0 or g[-1] < np.pi:  # gamma = arccos(.) lies in [0, pi]: outside the file's range, 0
+            val = np.where((gamma >= g[0]) & (gamma <= g[-1]), val, 0.0)
+        return val
 
     def eval_local(self, local) -> np.ndarray:
         """R at local directions (..., 3) (z along the aiming axis, x along C = 0, y along C = 90)."""
         local = np.asarray(local, float)
-        gamma = np.arccos(np.clip(local[..., 2], -1.0, 1.0))
-        c = np.arctan2(local[..., 1], local[..., 0])
-        return self.eval_angles(gamma, c)
+        return self.eval_rows(local[..., 0], local[..., 1], local[..., 2])
 
-    def sample_angles(self, u1, u2) -> tuple[np.ndarray, np.ndarray]:
-        """(gamma, C) [rad] with density R(gamma, C) sin(gamma) (exact inversion, module docstring)."""
+    def eval_rows(self, x, y, z) -> np.ndarray:
+        """R at local directions given as component arrays x, y, z."""
+        return self.eval_angles(np.arccos(np.clip(z, -1.0, 1.0)), np.arctan2(y, x))
+
+    def sample_angles(self, u1, u2, with_trig: bool = False):
+        """(gamma, C) [rad] with density R(gamma, C) sin(gamma) (exact inversion, module docstring);
+        `with_trig`: also (cos gamma, sin gamma), which the inversion computes anyway."""
         u1, u2 = np.asarray(u1, float), np.asarray(u2, float)
         n_g = len(self.gamma) - 1
-        cell = np.clip(np.searchsorted(self._cdf, u1, side="right") - 1, 0, len(self._cdf) - 2)
-        lo, hi = self._cdf[cell], self._cdf[cell + 1]
-        # cells of zero mass are never chosen: searchsorted(side="right") skips them
+        # cells of zero mass are never chosen: the lookup (searchsorted(side="right") - 1) skips them
+        cell = self._guide.find(u1)
+        lo, hi = self._cdf.take(cell), self._cdf.take(cell + 1)
         v = np.clip((u1 - lo) / np.where(hi > lo, hi - lo, 1.0), 0.0, 1.0)
         j, i = np.divmod(cell, n_g)
-        g0, g1 = self.gamma[i], self.gamma[i + 1]
-        tab = self.intensity
+        g0, g1 = self.gamma.take(i), self.gamma.take(i + 1)
+        t00, t01, t10, t11 = self._corners(j, i)
         dg = g1 - g0
-        a = tab[j, i] + tab[j + 1, i]  # the common factor dC / 2 cancels
-        b = (tab[j, i + 1] + tab[j + 1, i + 1] - a) / dg
-        trig = _trig(self.gamma)
-        gamma = _invert_gamma_cdf(a, b, g0, g1, v, trig=tuple(t.take(i + k) for t, k in zip(trig, (0, 0, 1, 1))))
+        a = t00 + t10  # the common factor dC / 2 cancels
+        b = (t01 + t11 - a) / dg
+        cos_g, sin_g = _trig(self.gamma)[:2]
+        trig = (cos_g.take(i), sin_g.take(i), cos_g.take(i + 1), sin_g.take(i + 1))
+        gamma, cx, sx = _invert_gamma_cdf(a, b, g0, g1, v, trig=trig, with_trig=True)
         s = np.clip((gamma - g0) / dg, 0.0, 1.0)
-        ca = (1 - s) * tab[j, i] + s * tab[j, i + 1]  # density along C: (1 - t) ca + t cb
-        cb = (1 - s) * tab[j + 1, i] + s * tab[j + 1, i + 1]
+        ca = t00 + s * (t01 - t00)  # density along C: (1 - t) ca + t cb
+        cb = t10 + s * (t11 - t10)
         root = np.sqrt(np.maximum(ca * ca + u2 * (cb * cb - ca * ca), 0.0))
         den = ca + root
         t = np.where(den > 0, u2 * (ca + cb) / np.where(den > 0, den, 1.0), u2)
-        c = self.c[j] + np.clip(t, 0.0, 1.0) * (self.c[j + 1] - self.c[j])
-        return gamma, c
+        c0 = self.c.take(j)
+        c = c0 + np.clip(t, 0.0, 1.0) * (self.c.take(j + 1) - c0)
+        return (gamma, c, cx, sx) if with_trig else (gamma, c)
+
+    def sample_rows(self, u1, u2) -> np.ndarray:
+        """Local directions (3, n) (component rows) with pdf R (solid angle)."""
+        _, c, cg, sg = self.sample_angles(u1, u2, with_trig=True)
+        out = np.empty((3, len(cg)))
+        np.multiply(sg, np.cos(c), out=out[0])
+        np.multiply(sg, np.sin(c), out=out[1])
+        out[2] = cg
+        return out
 
     def sample_local(self, u1, u2) -> np.ndarray:
         """Local directions (n, 3) with pdf R (solid angle)."""
-        gamma, c = self.sample_angles(u1, u2)
-        sg = np.sin(gamma)
-        return np.stack((sg * np.cos(c), sg * np.sin(c), np.cos(gamma)), axis=-1)
+        return self.sample_rows(u1, u2).T
 
 
 @functools.lru_cache(maxsize=64)
@@ -182,16 +220,18 @@ def _trig(grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndar
     return c, s, c, s
 
 
-def _invert_gamma_cdf(a, b, g0, g1, v, iterations: int = 60, trig=None):
+def _invert_gamma_cdf(a, b, g0, g1, v, iterations: int = 60, trig=None, with_trig: bool = False):
     """Solve F(g) = v F(g1) on [g0, g1], F(g) = int_g0^g (a + b (x - g0)) sin x dx.
 
     Start: the exact inverse for the intensity taken linear in cos(gamma) over the cell
     (relative error ~1e-3 of the cell); then two Newton steps on every sample (kept inside
     the cell; quadratic convergence: ~1e-11 rad); the rare samples whose residual is still
     above 1e-10 F(g1) continue with Newton steps safeguarded by bisection on a bracket
-    (at most `iterations`, to 1e-12 rad).
+    (at most `iterations`, to 1e-12 rad). `with_trig`: returns (x, cos x, sin x).
     """
-    a, b, g0, g1, v = (np.asarray(np.broadcast_to(x, np.shape(v)), float) for x in (a, b, g0, g1, v))
+    shape = np.shape(v)
+    a, b, g0, g1, v = (x if np.shape(x) == shape else np.broadcast_to(x, shape)
+                       for x in (np.asarray(y, float) for y in (a, b, g0, g1, v)))
     # cos, sin of the cell's ends (`trig`: precomputed and gathered by the caller)
     cos0, sin0, cos1, sin1 = trig if trig is not None else (np.cos(g0), np.sin(g0), np.cos(g1), np.sin(g1))
     total = a * (cos0 - cos1) + b * (sin1 - sin0 - (g1 - g0) * cos1)
@@ -202,18 +242,19 @@ def _invert_gamma_cdf(a, b, g0, g1, v, iterations: int = 60, trig=None):
     t = np.where(den > 0, v * (ia + ib) / np.where(den > 0, den, 1.0), v)
     x = np.clip(np.arccos(np.clip(cos0 - t * (cos0 - cos1), -1.0, 1.0)), g0, g1)
 
-    def residual(x, cos0, sin0, a, b, g0, target):
+    def residual(x, cos0, sin0, a, b, g0, target, trig=False):
         cx, sx = np.cos(x), np.sin(x)
-        return a * (cos0 - cx) + b * (sx - sin0 - (x - g0) * cx) - target, (a + b * (x - g0)) * sx
+        f = a * (cos0 - cx) + b * (sx - sin0 - (x - g0) * cx) - target
+        return (f, cx, sx) if trig else (f, (a + b * (x - g0)) * sx)
 
     with np.errstate(divide="ignore", invalid="ignore"):
         for _ in range(2):
             f, dens = residual(x, cos0, sin0, a, b, g0, target)
             x = np.clip(np.where(dens > 0, x - f / dens, x), g0, g1)
-    f, _ = residual(x, cos0, sin0, a, b, g0, target)
+    f, cx, sx = residual(x, cos0, sin0, a, b, g0, target, trig=True)
     act = np.flatnonzero(~(np.abs(f) <= 1e-10 * total))
     if len(act) == 0:
-        return x
+        return (x, cx, sx) if with_trig else x
     # safeguarded Newton (bisection when a step leaves the bracket) for the few left
     x = x.copy()
     xa, ga, g1a, aa, ba, c0, s0, ta = x[act], g0[act], g1[act], a[act], b[act], cos0[act], sin0[act], target[act]
@@ -231,6 +272,9 @@ def _invert_gamma_cdf(a, b, g0, g1, v, iterations: int = 60, trig=None):
         if done:
             break
     x[act] = xa
+    if with_trig:
+        cx[act], sx[act] = np.cos(xa), np.sin(xa)
+        return x, cx, sx
     return x
 
 
