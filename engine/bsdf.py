@@ -86,15 +86,17 @@ class Materials:
 
     # ------------------------------------------------------------------ evaluation
     def eval(self, d_in: np.ndarray, normals: np.ndarray, w_o: np.ndarray) -> np.ndarray:
-        """Non-delta BRDF f(w_i = -d_in, w_o) [1/sr] (0 when w_o is below the surface)."""
+        """Non-delta BRDF f(w_i = -d_in, w_o) [1/sr] (0 when w_o is below the surface).
+
+        cos alpha = r . w_o = d_in . w_o + 2 cos th_i cos th_o (r = d_in - 2 (d_in . n) n), so the
+        mirror direction itself is never formed.
+        """
         cos_i = -_dot(d_in, normals)
         cos_o = _dot(w_o, normals)
-        out = self.rho_d / np.pi
-        glossy = self.rho_s > 0
-        if glossy.any():
-            cos_a = _dot(mirror_direction(d_in, normals), w_o)
-            lobe = _phong_lobe(self.exponent, cos_a) / np.maximum(np.maximum(cos_i, cos_o), 1e-300)
-            out = out + np.where(glossy, self.rho_s * lobe, 0.0)
+        out = self.rho_d * (1.0 / np.pi)
+        if self.rho_s.any():  # rho_s = 0 rows add 0 (their lobe is finite)
+            cos_a = _dot(d_in, w_o) + 2.0 * cos_i * cos_o
+            out = out + self.rho_s * _phong_lobe(self.exponent, cos_a) / np.maximum(np.maximum(cos_i, cos_o), 1e-300)
         return np.where((cos_o > 0) & (cos_i > 0), out, 0.0)
 
     def pdf(self, d_in: np.ndarray, normals: np.ndarray, w_o: np.ndarray) -> np.ndarray:
@@ -103,7 +105,7 @@ class Materials:
         safe = np.where(rho > 0, rho, 1.0)
         cos_o = _dot(w_o, normals)
         p = self.rho_d / safe * np.maximum(cos_o, 0.0) / np.pi
-        cos_a = _dot(mirror_direction(d_in, normals), w_o)
+        cos_a = _dot(d_in, w_o) - 2.0 * _dot(d_in, normals) * cos_o
         p = p + self.rho_s / safe * _phong_lobe(self.exponent, cos_a)
         return np.where(rho > 0, p, 0.0)
 
@@ -113,36 +115,39 @@ class Materials:
 
         The weight factor is f cos th_o / (p_lobe pdf_lobe) for the chosen lobe's f:
         rho for the diffuse and mirror lobes, rho cos th_o / max(cos th_i, cos th_o) for
-        the glossy lobe (0 below the surface); always <= rho.
+        the glossy lobe (0 below the surface); always <= rho. The cosine sampler runs on every
+        vertex (cheaper than gathering the diffuse ones and scattering back); the glossy and
+        mirror vertices then overwrite their directions.
         """
         rho = self.total
         safe = np.where(rho > 0, rho, 1.0)
         p_d = self.rho_d / safe
-        p_s = self.rho_s / safe
         u1 = np.asarray(u1, float)
         diffuse = u1 < p_d
-        glossy = ~diffuse & (u1 < p_d + p_s)
-        mirror = ~diffuse & ~glossy
-        w_o = np.empty_like(normals)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            v = np.where(diffuse, u1 / p_d, 0.5)
+        w_o = cosine_about_soa(normals, v, u2)  # every vertex; glossy and mirror ones are replaced below
         weight = rho.copy()
-        idx = np.flatnonzero(diffuse)
-        if len(idx) == len(u1):  # every vertex diffuse (a Lambertian scene): no gathers, same numbers
-            return cosine_about_soa(normals, u1 / np.where(p_d > 0, p_d, 1.0), u2), weight
-        if len(idx):
-            w_o[:, idx] = cosine_about_soa(normals.take(idx, axis=1), u1.take(idx) / p_d.take(idx), u2.take(idx))
+        if diffuse.all():  # every vertex diffuse (a Lambertian scene)
+            return w_o, weight
+        p_s = self.rho_s / safe
+        glossy = ~diffuse & (u1 < p_d + p_s)
         idx = np.flatnonzero(glossy)
         if len(idx):
             v = np.clip((u1.take(idx) - p_d.take(idx)) / p_s.take(idx), 0.0, 1.0)
             n_i, d_i = normals.take(idx, axis=1), d_in.take(idx, axis=1)
-            r = mirror_direction(d_i, n_i)
-            w = _lobe_about_soa(r, self.exponent.take(idx), v, u2.take(idx))
-            w_o[:, idx] = w
+            w = _lobe_about_soa(mirror_direction(d_i, n_i), self.exponent.take(idx), v, u2.take(idx))
+            for k in range(3):
+                w_o[k].put(idx, w[k])
             cos_o = _dot(w, n_i)
             cos_i = -_dot(d_i, n_i)
-            weight[idx] = np.where(cos_o > 0, rho.take(idx) * cos_o / np.maximum(np.maximum(cos_i, cos_o), 1e-300), 0.0)
-        idx = np.flatnonzero(mirror)
+            weight.put(idx, np.where(cos_o > 0, rho.take(idx) * cos_o / np.maximum(np.maximum(cos_i, cos_o), 1e-300),
+                                     0.0))
+        idx = np.flatnonzero(~diffuse & ~glossy)
         if len(idx):
-            w_o[:, idx] = mirror_direction(d_in.take(idx, axis=1), normals.take(idx, axis=1))
+            r = mirror_direction(d_in.take(idx, axis=1), normals.take(idx, axis=1))
+            for k in range(3):
+                w_o[k].put(idx, r[k])
         return w_o, weight
 
 
