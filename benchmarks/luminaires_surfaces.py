@@ -10,7 +10,9 @@ most real scenes) show the overhead where the Lambertian baseline is not the bar
 Both estimator directions are timed (forward: the luminaire is sampled at every path start;
 backward: it is evaluated at every next-event connection). Prints best-of-N wall and CPU
 times (process time: less disturbed by other programs on a shared machine), CPU time per
-path and the CPU-time ratio against case 1 of the same direction.
+path and the CPU-time ratio against case 1 of the same direction. The cases of one room and
+direction are timed round robin (repeat 1 of every case, then repeat 2, ...), so that a slow
+spell of a shared machine hits all of them.
 Run: .venv/bin/python benchmarks/luminaires_surfaces.py [--paths 400000] [--repeats 5]
 """
 from __future__ import annotations
@@ -72,25 +74,31 @@ def main() -> None:
     print(f"Barry configuration A, K = 3, algorithm 1, {args.paths:,d} paths, best of {args.repeats}")
     for room, direction in (("empty", "forward"), ("empty", "backward"), ("furnished", "forward"),
                             ("furnished", "backward")):
-        base = None
+        specs = {}
         for name, edits in CASES.items():
             doc = barry_doc(paths=args.paths, max_reflections=3, direction=direction, algorithm=1)
             if room == "furnished":
                 doc["furniture"] = FURNITURE
             for edit in edits:
                 doc = edit(copy.deepcopy(doc))
-            spec = SceneSpec.model_validate(doc)
-            simulate(spec)  # warm-up (imports, Embree build)
-            wall, cpu, res = float("inf"), float("inf"), None
-            for _ in range(args.repeats):
+            specs[name] = SceneSpec.model_validate(doc)
+            simulate(specs[name])  # warm-up (imports, Embree build)
+        # round robin over the cases: a slow spell of the machine hits every case, not one
+        wall = dict.fromkeys(specs, float("inf"))
+        cpu = dict.fromkeys(specs, float("inf"))
+        links = {}
+        for _ in range(args.repeats):
+            for name, spec in specs.items():
                 t0, c0 = time.perf_counter(), time.process_time()
-                res = simulate(spec)
-                wall, cpu = min(wall, time.perf_counter() - t0), min(cpu, time.process_time() - c0)
-            base = base or cpu
-            link = res.links[0]
-            print(f"{room:9s} {direction:8s} {name:32s} wall {wall:6.3f} s  cpu {cpu:6.3f} s  "
-                  f"{cpu / args.paths * 1e6:5.2f} us/path"
-                  f"  x{cpu / base:5.2f}  H0 = {link.dc_gain:.4e} +- {link.dc_gain_stderr:.1e}")
+                links[name] = simulate(spec).links[0]
+                wall[name] = min(wall[name], time.perf_counter() - t0)
+                cpu[name] = min(cpu[name], time.process_time() - c0)
+        base = cpu[next(iter(specs))]
+        for name in specs:
+            link = links[name]
+            print(f"{room:9s} {direction:8s} {name:32s} wall {wall[name]:6.3f} s  cpu {cpu[name]:6.3f} s  "
+                  f"{cpu[name] / args.paths * 1e6:5.2f} us/path  x{cpu[name] / base:5.2f}  "
+                  f"H0 = {link.dc_gain:.4e} +- {link.dc_gain_stderr:.1e}")
 
 
 if __name__ == "__main__":

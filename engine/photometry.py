@@ -109,15 +109,17 @@ class Photometry:
         k = j * n_g + i
         return flat.take(k), flat.take(k + 1), flat.take(k + n_g), flat.take(k + n_g + 1)
 
+    @functools.cached_property
+    def _even_steps(self) -> tuple[float | None, float | None]:
+        """The gamma and C grid steps when evenly spaced (the usual 2.5, 5 or 15 deg), else None."""
+        return _even_step(self.gamma.tobytes()), _even_step(self.c.tobytes())
+
     def eval_angles(self, gamma, c) -> np.ndarray:
         """R(gamma, C) [1/sr]: bilinear interpolation of the table; 0 outside its gamma range."""
         gamma, c = np.asarray(gamma, float), np.mod(np.asarray(c, float), 2 * np.pi)
         g, cc = self.gamma, self.c
-        inv_g, inv_c = self._inv_steps
-        i = np.clip(_cell_index(g, gamma), 0, len(g) - 2)
-        j = np.clip(_cell_index(cc, c), 0, len(cc) - 2)
-        s = np.clip((gamma - g.take(i)) * inv_g.take(i), 0.0, 1.0)
-        t = np.clip((c - cc.take(j)) * inv_c.take(j), 0.0, 1.0)
+        i, s = _cell_and_fraction(g, gamma, self._even_steps[0], self._inv_steps[0])
+        j, t = _cell_and_fraction(cc, c, self._even_steps[1], self._inv_steps[1])
         t00, t01, t10, t11 = self._corners(j, i)
         lo = t00 + s * (t01 - t00)
         val = lo + t * (t10 + s * (t11 - t10) - lo)
@@ -163,11 +165,19 @@ class Photometry:
         return (gamma, c, cx, sx) if with_trig else (gamma, c)
 
     def sample_rows(self, u1, u2) -> np.ndarray:
-        """Local directions (3, n) (component rows) with pdf R (solid angle)."""
+        """Local directions (3, n) (component rows) with pdf R (solid angle).
+
+        The azimuth's cosine and sine are evaluated in float32 and renormalised in float64
+        (as sampling.cosine_about_soa: numpy vectorizes float32 trigonometry), so the
+        azimuth is off by a few 1e-7 rad at most, far below Embree's float32 ray precision.
+        """
         _, c, cg, sg = self.sample_angles(u1, u2, with_trig=True)
+        c32 = c.astype(np.float32)
+        cc, sc = np.cos(c32).astype(float), np.sin(c32).astype(float)
+        scale = sg / np.sqrt(cc * cc + sc * sc)
         out = np.empty((3, len(cg)))
-        np.multiply(sg, np.cos(c), out=out[0])
-        np.multiply(sg, np.sin(c), out=out[1])
+        np.multiply(scale, cc, out=out[0])
+        np.multiply(scale, sc, out=out[1])
         out[2] = cg
         return out
 
@@ -193,6 +203,21 @@ def _cell_index(grid: np.ndarray, x: np.ndarray) -> np.ndarray:
         i -= (i > 0) & (i < len(grid)) & (x < grid[np.clip(i, 0, len(grid) - 1)])
         return i
     return np.searchsorted(grid, x, side="right") - 1
+
+
+def _cell_and_fraction(grid: np.ndarray, x: np.ndarray, step: float | None, inv_steps: np.ndarray):
+    """(cell i, fraction s in [0, 1]) of x on the grid, for bilinear interpolation (clipped to the grid).
+
+    Even grid: i = floor((x - grid[0]) / step), s its fractional part; a value on a grid line
+    may land at s = 1 of one cell or s = 0 of the next, the same interpolated value (to rounding).
+    """
+    last = len(grid) - 2
+    if step is not None:
+        y = (x - grid[0]) * (1.0 / step)
+        i = np.clip(y.astype(np.int64), 0, last)  # truncation: y < 0 (outside, zeroed by the caller) -> 0
+        return i, np.clip(y - i, 0.0, 1.0)
+    i = np.clip(_cell_index(grid, x), 0, last)
+    return i, np.clip((x - grid.take(i)) * inv_steps.take(i), 0.0, 1.0)
 
 
 def _cell_masses(g: np.ndarray, c: np.ndarray, table: np.ndarray) -> np.ndarray:
@@ -225,8 +250,9 @@ def _invert_gamma_cdf(a, b, g0, g1, v, iterations: int = 60, trig=None, with_tri
 
     Start: the exact inverse for the intensity taken linear in cos(gamma) over the cell
     (relative error ~1e-3 of the cell); then two Newton steps on every sample (kept inside
-    the cell; quadratic convergence: ~1e-11 rad); the rare samples whose residual is still
-    above 1e-10 F(g1) continue with Newton steps safeguarded by bisection on a bracket
+    the cell; quadratic convergence: ~1e-11 rad), taken in mu = cos(gamma), where a step
+    needs arccos and a square root (vectorized by numpy) instead of cos and sin; the rare
+    samples whose residual is still above 1e-10 F(g1) continue with Newton steps safeguarded by bisection on a bracket
     (at most `iterations`, to 1e-12 rad). `with_trig`: returns (x, cos x, sin x).
     """
     shape = np.shape(v)
@@ -240,18 +266,24 @@ def _invert_gamma_cdf(a, b, g0, g1, v, iterations: int = 60, trig=None, with_tri
     root = np.sqrt(np.maximum(ia * ia + v * (ib * ib - ia * ia), 0.0))
     den = ia + root
     t = np.where(den > 0, v * (ia + ib) / np.where(den > 0, den, 1.0), v)
-    x = np.clip(np.arccos(np.clip(cos0 - t * (cos0 - cos1), -1.0, 1.0)), g0, g1)
+    mu = np.clip(cos0 - t * (cos0 - cos1), cos1, cos0)  # the start, in mu = cos(gamma)
 
-    def residual(x, cos0, sin0, a, b, g0, target, trig=False):
+    def residual(x, cos0, sin0, a, b, g0, target):
         cx, sx = np.cos(x), np.sin(x)
-        f = a * (cos0 - cx) + b * (sx - sin0 - (x - g0) * cx) - target
-        return (f, cx, sx) if trig else (f, (a + b * (x - g0)) * sx)
+        return a * (cos0 - cx) + b * (sx - sin0 - (x - g0) * cx) - target, (a + b * (x - g0)) * sx
 
+    # Newton in mu: F(mu) = a (cos0 - mu) + b (sin x - sin0 - (x - g0) mu), x = arccos(mu), dF/dmu = -(a + b (x - g0)):
+    # arccos and sqrt (vectorized by numpy) instead of cos and sin (not vectorized) at every step
     with np.errstate(divide="ignore", invalid="ignore"):
         for _ in range(2):
-            f, dens = residual(x, cos0, sin0, a, b, g0, target)
-            x = np.clip(np.where(dens > 0, x - f / dens, x), g0, g1)
-    f, cx, sx = residual(x, cos0, sin0, a, b, g0, target, trig=True)
+            x = np.arccos(mu)
+            sx = np.sqrt((1.0 - mu) * (1.0 + mu))
+            f = a * (cos0 - mu) + b * (sx - sin0 - (x - g0) * mu) - target
+            dens = a + b * (x - g0)
+            mu = np.clip(np.where(dens > 0, mu + f / dens, mu), cos1, cos0)
+    x = np.clip(np.arccos(mu), g0, g1)
+    cx, sx = mu, np.sqrt((1.0 - mu) * (1.0 + mu))
+    f = a * (cos0 - cx) + b * (sx - sin0 - (x - g0) * cx) - target
     act = np.flatnonzero(~(np.abs(f) <= 1e-10 * total))
     if len(act) == 0:
         return (x, cx, sx) if with_trig else x
