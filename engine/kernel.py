@@ -51,7 +51,7 @@ from .sampling import cosine_about_soa
 from .segments import equiangular, equiangular_density, time_density, time_strata
 from .scene import Scene
 from .tally import BatchBuilder, BatchTally, TallyPlan, TimeBins
-from .mirrors import connect_mirrors, connect_segment_mirrors, connect_source_mirrors
+from .mirrors import connect_mirrors, connect_segment_mirrors, connect_source_mirrors, specular_first_share
 from .medium_nee import (connection_weight, connect_from_target, first_medium_factor, first_segment_branch,
                          first_vertex_factor, side_weight, target_factor)
 
@@ -474,8 +474,9 @@ def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool, prim
         return
     partition = None
     if settings.mis and not first:
-        def partition(j, pp, points):
-            return side_weight(pp.first, target_factor(ctx, j, points))
+        def partition(j, pp, points, s, density):  # after a specular first vertex: mirrors.py
+            return specular_first_share(ctx, j, pp, points, s, density,
+                                        side_weight(pp.first, target_factor(ctx, j, points)))
     segment_points(ctx, paths.keep(alive), t_seg.take(alive), rng, order=1, direction_mis=settings.mis and first,
                    weight_fn=partition)
 
@@ -485,7 +486,7 @@ def segment_points(ctx: _Context, seg_paths: _Paths, t_seg, rng, order: int, dir
     """Points on the segments [0, t_seg) of `seg_paths` (time strata + equiangular, balance heuristic),
     each connected to every target as a scattering event of order `order`.
 
-    `weight_fn(j, pp, points)`, if given, multiplies each point's weight (e.g. a partition of unity).
+    `weight_fn(j, pp, points, s, density)`, if given, multiplies each point's weight (e.g. a partition of unity).
     """
     settings, medium = ctx.settings, ctx.scene.medium
     zeros = np.zeros(len(seg_paths))
@@ -505,11 +506,11 @@ def segment_points(ctx: _Context, seg_paths: _Paths, t_seg, rng, order: int, dir
                    + equiangular_density(pp.origins, pp.directions, y_p, np.zeros(len(s)), end, s, n_eq))
         w = pp.weights * medium.transmittance(pp.origins.T, pp.directions.T, s) * sigma_s / density
         if direction_mis and ctx.mirrors:  # source -> p -> mirror -> target, through the image (mirrors.py)
-            connect_segment_mirrors(ctx, j, points, w, pp, s, order)
+            connect_segment_mirrors(ctx, j, points, w, pp, s, order, density)
         if direction_mis:
             w = w * _direction_mis(ctx, int(ctx.tgt[j]), pp, points, s, density)
         if weight_fn is not None:
-            w = w * weight_fn(j, pp, points)
+            w = w * weight_fn(j, pp, points, s, density)
         ctx.connect_one(j, points, w, pp, in_dirs=pp.directions, scatter_order=np.full(len(pp), order, np.int64),
                         extra_length=s)
 

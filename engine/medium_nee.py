@@ -337,7 +337,7 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
     br = _scatter_on_first_segment(ctx, paths, t_seg, rng)
     K, far = settings.max_reflections, scene.medium_far_distance
 
-    def partition(j, pp, points):
+    def partition(j, pp, points, *_):
         return side_weight(pp.first, target_factor(ctx, j, points))
 
     for _bounce in range(K + 1):

@@ -45,6 +45,18 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
+class _Image(NamedTuple):
+    """An image connection x -> y -> target being recorded: plane, target index j, mirror points y (3, m),
+    their faces, total lengths d = |x - target'| and distances t_y = |x - y| [m]."""
+
+    plane: object
+    j: int
+    y: np.ndarray
+    prim: np.ndarray
+    d: np.ndarray
+    t_y: np.ndarray
+
+
 class _Vertex(NamedTuple):
     """What a mirror connection records of its vertices (a stand-in for kernel._Paths)."""
 
@@ -55,7 +67,7 @@ class _Vertex(NamedTuple):
 
 
 def connect_mirrors(ctx, points, shadow_origins, weights, paths, normals=None, brdf=None, in_dirs=None,
-                    only=None, first_factor=None):
+                    only=None, first_factor=None, share=None):
     """NEE from vertices (3, n) to the targets through one perfect-mirror reflection (image method).
 
     For a mirror plane, the target t seen through it is its image t' (normal and
@@ -67,7 +79,7 @@ def connect_mirrors(ctx, points, shadow_origins, weights, paths, normals=None, b
     medium vertices: `in_dirs`, factor phase(cos)). `only`: the item's target index to
     connect to (default all). Runs from both devices (module docstring): algorithm 5
     (`settings.both_sides`) weights by its partition from `paths.first`; algorithms 2-4
-    pass the path's source factor A per vertex as `first_factor`.
+    pass the path's source factor A per vertex as `first_factor`, or a `share` of their own.
     Paths with two or more consecutive mirror reflections next to the target are not
     estimated (second-order images).
     """
@@ -78,8 +90,9 @@ def connect_mirrors(ctx, points, shadow_origins, weights, paths, normals=None, b
     if len(live) == 0:
         return
     mat_rho_m = geo.material.rho_m
-    share = None
-    if first_factor is not None:
+    if share is not None:
+        pass
+    elif first_factor is not None:
         share = _partition_share(first_factor)
     elif ctx.settings.both_sides:
         share = _both_sides_share(ctx, paths, in_dirs)
@@ -124,7 +137,7 @@ def _partition_share(first_factor):
     """Algorithms 2-4 from both devices: A / (A + B(y)), B without transmittance (medium_nee.side_weight)."""
     from .medium_nee import side_weight
 
-    def share(ok, wdir, last, t_rest):
+    def share(ok, wdir, last, t_rest, image):
         return side_weight(first_factor.take(ok), last)
     return share
 
@@ -135,7 +148,7 @@ def _both_sides_share(ctx, paths, in_dirs):
 
     scene = ctx.scene
 
-    def share(ok, wdir, last, t_rest):
+    def share(ok, wdir, last, t_rest, image):
         at_first = (paths.k.take(ok) + paths.s.take(ok)) == 1  # the connecting vertex is x_1 itself
         rho_f = paths.first_rho.take(ok)
         if in_dirs is not None and at_first.any():  # leaving a first medium vertex toward y: its phase density
@@ -146,25 +159,144 @@ def _both_sides_share(ctx, paths, in_dirs):
     return share
 
 
-def connect_segment_mirrors(ctx, j: int, points, weights, pp, s, order: int) -> None:
+def connect_segment_mirrors(ctx, j: int, points, weights, pp, s, order: int, density) -> None:
     """Algorithms 2-4 from both devices: points p on the source's first segment -> mirror -> j-th target.
 
-    `weights` as `kernel.segment_points` forms them before its direction weight (point
-    density included); the family source -> p -> mirror -> target belongs to the other
-    side's family (algorithm 2's forward, algorithm 3's backward), so the connection is
-    made only where that family is estimated (`segment_family`) and shared with the other
-    run by A(p) / (A(p) + B(y)) (module docstring).
+    `weights` as `kernel.segment_points` forms them before its direction weight, `density`
+    the points' density along the segment (time strata + equiangular). The family
+    source -> p -> mirror -> target belongs to the other side's family (algorithm 2's
+    forward, algorithm 3's backward), so the connection is made only where that family is
+    estimated (`segment_family`). The other run samples the same path as a point on the
+    second segment of its ray that reflects specularly at y; the two share it by the
+    balance heuristic of their point densities (`image_family_weight`), the image
+    counterpart of kernel._direction_mis for source -> p -> target.
     """
-    from .medium_nee import source_factor
-
     settings = ctx.settings
     forward = ctx.item.direction == "forward"
     fam = settings.segment_family
     if not (fam == 4 or (fam == 2) == forward):
         return
     vertex = _Vertex(lengths=pp.lengths + s, path=pp.path, k=pp.k, s=np.full(len(pp), order, np.int64))
-    connect_mirrors(ctx, points, points, weights, vertex, in_dirs=pp.directions, only=j,
-                    first_factor=source_factor(ctx, points))
+    from .kernel import device_sets
+
+    src_set, _ = device_sets(ctx.scene, ctx.item.direction)
+    i = ctx.item.source
+    cos_src = _dot(pp.directions, src_set.normals[i][:, None])
+    q_self = src_set.response(np.full(len(s), i), cos_src, pp.directions.T) / src_set.total_response(i) \
+        / (s * s) * density
+
+    def share(ok, wdir, last, t_rest, image):
+        q_s = q_self.take(ok)
+        q_o = _specular_second_density(ctx, ctx.targets, int(ctx.tgt[image.j]), image, points.take(ok, axis=1),
+                                       src_set.positions[i])
+        total = q_s + q_o
+        return np.where(total > 0, q_s / np.where(total > 0, total, 1.0), 1.0)
+
+    connect_mirrors(ctx, points, points, weights, vertex, in_dirs=pp.directions, only=j, share=share)
+
+
+def _device_origin(ctx, devices, i):
+    """Where device i's rays start: its position moved off along its normal by the ray offset."""
+    return devices.positions[i] + ctx.scene.intersector.offset * devices.normals[i]
+
+
+def _segment_point_density(ctx, origins, dirs, l0, other, s_p):
+    """(n_T + n_E)(s_p): density of the points `kernel.segment_points` puts on the segments that leave
+    `origins` (3, m) along `dirs` (path length l0 so far) and run to their first hit, toward `other` (3,)."""
+    scene, settings = ctx.scene, ctx.settings
+    from .segments import equiangular_density, time_density
+
+    _, t_hit = scene.intersector.intersect(origins.T, dirs.T)
+    end = np.where(np.isfinite(t_hit), t_hit, scene.medium_far_distance)
+    tgt = np.repeat(np.asarray(other, float)[:, None], len(s_p), axis=1)
+    zeros = np.zeros(len(s_p))
+    return (time_density(l0, origins, dirs, tgt, zeros, end, s_p, settings.strata_length, settings.max_strata)
+            + equiangular_density(origins, dirs, tgt, zeros, end, s_p, settings.equiangular_points))
+
+
+def _specular_second_density(ctx, devices, i, image, points, other, density=None):
+    """Volume density with which device i's run puts a segment point at `points` (3, m) as the path
+    i -> y (mirror lobe) -> p -> other: R_i / W_i / |p - i'|^2 (the direction toward y, in the unfolded
+    geometry) x P(mirror lobe at y) x (n_T + n_E) on the reflected segment from y (`density` if the
+    caller drew the points itself, else recomputed as that run computes it)."""
+    plane, y = image.plane, image.y
+    mat = ctx.scene.geometry.material
+    o = _device_origin(ctx, devices, i)
+    to_y = y - o[:, None]
+    l0 = np.sqrt(_dot(to_y, to_y))
+    w_in = to_y / l0
+    cos_i = _dot(w_in, devices.normals[i][:, None])
+    resp = devices.response(np.full(len(l0), i), cos_i, w_in.T) / devices.total_response(i)
+    p_m = mat.rho_m.take(image.prim) / np.maximum(mat.total.take(image.prim), 1e-300)
+    side = np.sign(_dot(o[:, None] - plane.point[:, None], plane.normal[:, None]))
+    y_off = y + ctx.scene.intersector.offset * side * plane.normal[:, None]
+    v = points - y_off
+    s_p = np.sqrt(_dot(v, v))
+    unfolded = l0 + s_p
+    if density is None:
+        density = _segment_point_density(ctx, y_off, plane.reflect_vectors(w_in), l0, other, s_p)
+    return resp * p_m / (unfolded * unfolded) * density
+
+
+def _first_segment_density(ctx, devices, i, points, other):
+    """Volume density with which device i's run puts a point of its first segment at `points` (3, m)
+    (toward `other`): R_i / W_i / r^2 x (n_T + n_E), as kernel._direction_mis computes the other side's."""
+    o = _device_origin(ctx, devices, i)
+    v = points - o[:, None]
+    r = np.sqrt(_dot(v, v))
+    w = v / r
+    resp = devices.response(np.full(len(r), i), _dot(w, devices.normals[i][:, None]), w.T) / devices.total_response(i)
+    live = np.flatnonzero(resp > 0)
+    out = np.zeros(len(r))
+    if len(live):
+        origins = np.repeat(o[:, None], len(live), axis=1)
+        rl = r.take(live)
+        dens = _segment_point_density(ctx, origins, w.take(live, axis=1), np.zeros(len(live)), other, rl)
+        out[live] = resp.take(live) / (rl * rl) * dens
+    return out
+
+
+def specular_first_share(ctx, j: int, pp, points, s, density, default):
+    """Algorithms 2-4 from both devices, points p on segments after the path's first vertex: the share of
+    those whose first vertex y was a specular mirror reflection (source -> y -> p -> target, the family
+    the other run reaches from its first segment through the image of this run's source) is the balance
+    heuristic q_self / (q_self + q_other) of `connect_segment_mirrors`; other points keep `default`.
+    A first vertex is specular when it lies on a mirror plane and the segment leaves it in the mirror
+    direction of the ray from the source (to 1e-12: a diffuse sample does so with probability ~1e-12)."""
+    if not ctx.mirrors:
+        return default
+    from .kernel import device_sets
+
+    src_set, _ = device_sets(ctx.scene, ctx.item.direction)
+    i = ctx.item.source
+    o = _device_origin(ctx, src_set, i)
+    cand = np.flatnonzero((pp.k == 1) & (pp.s == 0))
+    if len(cand) == 0:
+        return default
+    out = np.array(default, float, copy=True)
+    isect = ctx.scene.intersector
+    for plane in ctx.mirrors:
+        org = pp.origins.take(cand, axis=1)
+        dist = _dot(org - plane.point[:, None], plane.normal[:, None])
+        w_in = org - dist * plane.normal[:, None] - o[:, None]
+        w_in = w_in / np.sqrt(_dot(w_in, w_in))
+        spec = (np.abs(dist) < 8.0 * isect.offset) & \
+            (_dot(plane.reflect_vectors(w_in), pp.directions.take(cand, axis=1)) > 1.0 - 1e-12)
+        sel = cand[spec]
+        if len(sel) == 0:
+            continue
+        cand = cand[~spec]
+        y = org[:, spec] - dist[spec] * plane.normal[:, None]
+        prim, _ = isect.intersect(np.repeat(o[:, None], len(sel), axis=1).T, w_in[:, spec].T)  # y's face
+        pts = points.take(sel, axis=1)
+        image = _Image(plane, j, y, np.maximum(prim, 0), None, None)
+        q_self = _specular_second_density(ctx, src_set, i, image, pts, ctx.t_pos[:, j], density=density.take(sel))
+        q_other = _first_segment_density(ctx, ctx.targets, int(ctx.tgt[j]), pts, src_set.positions[i])
+        total = q_self + q_other
+        out[sel] = np.where(total > 0, q_self / np.where(total > 0, total, 1.0), 1.0)
+        if len(cand) == 0:
+            break
+    return out
 
 
 def branch_surface(ctx, br, points, spawn, normals, prims, rng, chain: bool):
@@ -275,16 +407,16 @@ def _record_mirror(ctx, plane, j, points, shadow_origins, ok, f, d, wdir, paths,
     sel = np.flatnonzero(vis & (f > 0))
     if len(sel) == 0:
         return
-    ok, f, d, wdir, t_y, out_dir, y, rest, cos_p = ok.take(sel), f.take(sel), d.take(sel), \
+    ok, f, d, wdir, t_y, out_dir, y, rest, cos_p, prim = ok.take(sel), f.take(sel), d.take(sel), \
         wdir.take(sel, axis=1), t_y.take(sel), out_dir.take(sel, axis=1), y.take(sel, axis=1), rest.take(sel), \
-        cos_p.take(sel)
+        cos_p.take(sel), prim.take(sel)
     t_rest = 1.0
     if medium is not None:
         t_rest = medium.transmittance(y.T, out_dir.T, rest)
         f = f * medium.transmittance(points.take(ok, axis=1).T, wdir.T, t_y) * t_rest
     if share is not None:
         last = resp.take(sel) / ctx.t_total[j] * cos_p / (rest * rest)
-        f = f * share(ok, wdir, last, t_rest)
+        f = f * share(ok, wdir, last, t_rest, _Image(plane, j, y, prim, d, t_y))
     ctx.out["target"].append(np.full(len(ok), j, np.int64))
     ctx.out["k"].append(paths.k.take(ok) + 1)
     ctx.out["s"].append(paths.s.take(ok))
