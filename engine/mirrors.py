@@ -21,13 +21,15 @@ stores when its first vertex is y. Hence
 - algorithm 5 (`both_sides`): share = F rho_1 / (F rho_1 + B(y) / pi) (the n >= 2 case of
   `medium_nee.connection_weight`; 1/pi is the direction density leaving a surface vertex
   there, rho_1 the phase or 1/pi leaving x_1, F = `_Paths.first`);
-- algorithms 2-4 (`mis`): share = A / (A + B(y)) with A the source factor of the path's
-  first scattering point (no transmittances: `medium_nee.side_weight`). Image connections
-  are made (i) from points on the source's first segment when the other side's family is
-  estimated from here (Tx -> p -> mirror -> Rx is algorithm 2's family, reached forward only
-  through the image) and (ii) from the surface vertices of the scattering branch
-  (`branch_surface`), which also follows the materials (Phong lobes, specular reflection
-  off mirrors).
+- algorithms 2-4 (`mis`): image connections are made (i) from points on the source's first
+  segment when the other side's family is estimated from here (Tx -> p -> mirror -> Rx is
+  algorithm 2's family, reached forward only through the image), shared with the other
+  run's points on the segment after its specular reflection by the balance heuristic of
+  the two point densities (`connect_segment_mirrors`, `specular_first_share`: the image
+  counterpart of kernel._direction_mis), and (ii) from the surface vertices of the
+  scattering branch (`branch_surface`, which also follows the materials: Phong lobes,
+  specular reflection off mirrors), shared by A / (A + B(y)) with A the source factor of
+  the branch's scattering point (no transmittances: `medium_nee.side_weight`).
 The source's own mirror paths (source -> mirror -> target, no random choice) are computed
 identically by both runs, which count half each.
 """
