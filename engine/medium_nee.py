@@ -356,13 +356,14 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
         ts = t.take(nxt)
         br.weights = br.weights * medium.transmittance(br.origins.T, br.directions.T, ts)
         points = br.origins + ts * br.directions
-        normals = isect.normals_soa.take(prim.take(nxt), axis=1)
+        prims = prim.take(nxt)
+        normals = isect.normals_soa.take(prims, axis=1)
         normals *= np.where(_dot(normals, br.directions) > 0, -1.0, 1.0)
         spawn = points + isect.offset * normals
         br.lengths = br.lengths + ts
         br.k = br.k + 1
         # NEE (chain; materials and mirror images included), then reflection from the materials (mirrors.py)
-        br.directions, br.weights = branch_surface(ctx, br, points, spawn, normals, prim.take(nxt), rng, chain)
+        br.directions, br.weights = branch_surface(ctx, br, points, spawn, normals, prims, rng, chain)
         br.origins = spawn
         br = br.keep_where(br.weights > 0)
 
