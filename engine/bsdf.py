@@ -123,10 +123,9 @@ class Materials:
         safe = np.where(rho > 0, rho, 1.0)
         p_d = self.rho_d / safe
         u1 = np.asarray(u1, float)
-        diffuse = u1 < p_d
-        with np.errstate(divide="ignore", invalid="ignore"):
-            v = np.where(diffuse, u1 / p_d, 0.5)
-        w_o = cosine_about_soa(normals, v, u2)  # every vertex; glossy and mirror ones are replaced below
+        diffuse = u1 < p_d  # (so p_d > 0 there)
+        w_o = cosine_about_soa(normals, u1 / np.where(diffuse, p_d, 1.0), u2)  # every vertex; glossy and mirror
+        # ones are replaced below
         weight = rho.copy()
         if diffuse.all():  # every vertex diffuse (a Lambertian scene)
             return w_o, weight
