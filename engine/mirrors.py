@@ -48,15 +48,13 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 class _Image(NamedTuple):
-    """An image connection x -> y -> target being recorded: plane, target index j, mirror points y (3, m),
-    their faces, total lengths d = |x - target'| and distances t_y = |x - y| [m]."""
+    """An image connection x -> y -> target being recorded: plane, target index j, mirror points y (3, m)
+    and their faces."""
 
     plane: object
     j: int
     y: np.ndarray
     prim: np.ndarray
-    d: np.ndarray
-    t_y: np.ndarray
 
 
 class _Vertex(NamedTuple):
@@ -92,11 +90,9 @@ def connect_mirrors(ctx, points, shadow_origins, weights, paths, normals=None, b
     if len(live) == 0:
         return
     mat_rho_m = geo.material.rho_m
-    if share is not None:
-        pass
-    elif first_factor is not None:
+    if share is None and first_factor is not None:
         share = _partition_share(first_factor)
-    elif ctx.settings.both_sides:
+    elif share is None and ctx.settings.both_sides:
         share = _both_sides_share(ctx, paths, in_dirs)
     for plane in ctx.mirrors:
         side_x = _dot(points.take(live, axis=1) - plane.point[:, None], plane.normal[:, None])
@@ -152,11 +148,9 @@ def _both_sides_share(ctx, paths, in_dirs):
 
     def share(ok, wdir, last, t_rest, image):
         at_first = (paths.k.take(ok) + paths.s.take(ok)) == 1  # the connecting vertex is x_1 itself
-        rho_f = paths.first_rho.take(ok)
+        rho_f = paths.first_rho.take(ok)  # 1/pi at a surface; set at a medium x_1 once the path leaves it
         if in_dirs is not None and at_first.any():  # leaving a first medium vertex toward y: its phase density
             rho_f = np.where(at_first, scene.phase.eval(_dot(in_dirs.take(ok, axis=1), wdir)), rho_f)
-        elif in_dirs is None:
-            rho_f = np.where(at_first, 1.0 / np.pi, rho_f)
         return side_weight(paths.first.take(ok) * rho_f, last * t_rest / np.pi)
     return share
 
@@ -170,7 +164,7 @@ def connect_segment_mirrors(ctx, j: int, points, weights, pp, s, order: int, den
     forward, algorithm 3's backward), so the connection is made only where that family is
     estimated (`segment_family`). The other run samples the same path as a point on the
     second segment of its ray that reflects specularly at y; the two share it by the
-    balance heuristic of their point densities (`image_family_weight`), the image
+    balance heuristic of their point densities (`specular_first_share` there), the image
     counterpart of kernel._direction_mis for source -> p -> target.
     """
     settings = ctx.settings
@@ -291,7 +285,7 @@ def specular_first_share(ctx, j: int, pp, points, s, density, default):
         y = org[:, spec] - dist[spec] * plane.normal[:, None]
         prim, _ = isect.intersect(np.repeat(o[:, None], len(sel), axis=1).T, w_in[:, spec].T)  # y's face
         pts = points.take(sel, axis=1)
-        image = _Image(plane, j, y, np.maximum(prim, 0), None, None)
+        image = _Image(plane, j, y, np.maximum(prim, 0))
         q_self = _specular_second_density(ctx, src_set, i, image, pts, ctx.t_pos[:, j], density=density.take(sel))
         q_other = _first_segment_density(ctx, ctx.targets, int(ctx.tgt[j]), pts, src_set.positions[i])
         total = q_self + q_other
@@ -418,7 +412,7 @@ def _record_mirror(ctx, plane, j, points, shadow_origins, ok, f, d, wdir, paths,
         f = f * medium.transmittance(points.take(ok, axis=1).T, wdir.T, t_y) * t_rest
     if share is not None:
         last = resp.take(sel) / ctx.t_total[j] * cos_p / (rest * rest)
-        f = f * share(ok, wdir, last, t_rest, _Image(plane, j, y, prim, d, t_y))
+        f = f * share(ok, wdir, last, t_rest, _Image(plane, j, y, prim))
     ctx.out["target"].append(np.full(len(ok), j, np.int64))
     ctx.out["k"].append(paths.k.take(ok) + 1)
     ctx.out["s"].append(paths.s.take(ok))
