@@ -371,7 +371,7 @@ def connect_source_mirrors(ctx, sources, i, w0, n_paths):
 def _record_mirror(ctx, plane, j, points, shadow_origins, ok, f, d, wdir, paths, rho_m, share=None, resp=None):
     """Visibility x -> y (first hit on the plane's mirror faces) and y -> target, rho_m(y), transmittance of
     both legs, the runs' share (`share(ok, wdir, B(y), T(y -> t))`, with B(y) from `resp`); then record."""
-    scene, isect, medium = ctx.scene, ctx.scene.intersector, ctx.scene.medium
+    isect, medium = ctx.scene.intersector, ctx.scene.medium
     sel = np.flatnonzero(f > 0)
     if len(sel) == 0:
         return

@@ -16,8 +16,8 @@ import math
 import numpy as np
 import pytest
 
-from owcsim.engine.medium_nee import simulate_two_sided
-from owcsim.engine.simulate import simulate
+from tests.results import simulate_document as simulate
+from tests.results import simulate_two_sided_document as simulate_two_sided
 from tests.scenes import room_doc, spec, within
 
 SIZE = np.array([5.0, 5.0, 3.0])
