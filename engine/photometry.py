@@ -62,7 +62,8 @@ class Photometry:
     declared_flux: float | None = None  # what the file states [lm], None for absolute photometry
     source: str = ""  # "IES LM-63-2002", "EULUMDAT", ...
     symmetry: str = "none"
-    _cdf: np.ndarray = field(default=None, repr=False)  # cumulative cell masses, (n_c-1)*(n_g-1)+1
+    #: cumulative cell masses, (n_c-1)*(n_g-1)+1 (`from_table` computes them)
+    _cdf: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
     @classmethod
     def from_table(cls, gamma_deg, c_deg, candela, *, declared_flux=None, source="", symmetry="none",

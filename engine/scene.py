@@ -12,7 +12,7 @@ from .bsdf import mirror_planes
 from .devices import Devices, concentrator_gain, transmitters_from_specs
 from .errors import SceneError
 from .geometry import Geometry, Intersector, build_geometry, check_extent
-from .media import HomogeneousMedium, medium_from_spec
+from .media import Medium, medium_from_spec
 from .phase import phase_from_spec
 
 
@@ -23,7 +23,7 @@ class Scene:
     intersector: Intersector
     transmitters: Devices
     receivers: Devices
-    medium: HomogeneousMedium | None
+    medium: Medium | None
 
     #: True when every pair of points in the scene sees each other (an empty box room is
     #: convex), so shadow rays are skipped; benchmarks may turn it off to cast them anyway.
