@@ -1,0 +1,342 @@
+"""Per-path cost toward the ray-casting limit (issue 13), before against after in one run.
+
+Scenes. The clear room: 5 x 5 x 3 m, walls and ceiling 0.8, floor 0.3, Tx (2.5, 2.5, 3) down
+m = 1, Rx (1, 1, 0) up, FOV 90 deg, 1 cm^2. The smoky room: the same with a homogeneous
+medium sigma_s 0.2, sigma_a 0 /m, Henyey-Greenstein g 0.5. Everything runs on one core
+(SerialExecutor), imports and warm-up excluded.
+
+Figures (each for the code under test and, with `--baseline REV`, for that commit, measured
+alternately in the same run, best of `--repeats`):
+- rays: Barry configuration A, K = 3, backward, batches of 16 384: pipeline rays/s (intersection +
+  shadow) over raw Embree rays/s for the same ray counts in batches of the same size (random rays in
+  the room, only `EmbreeScene.run` timed), with every shadow ray cast and with shadow rays skipped
+  (the plain empty room, convex);
+- cost per path [us]: the clear room (algorithm 1, K = 200 with roulette, backward) and the smoky
+  room (algorithm 5, K = 200, S = 35, run from both devices as the automatic settings choose);
+  paths counted over both devices;
+- time to accuracy: the full automatic job (pilots included) to 0.03 % on the clear room and 0.3 % on
+  the smoky room: wall time, paths, H0;
+- `--profile`: the split Embree / numpy / interpreter of the cost-per-path runs, from py-spy
+  (`py-spy record --native`, samples classified by their innermost frames: Embree's library,
+  numpy's or another native library, else the interpreter); without py-spy, cProfile with the
+  time inside `Intersector.intersect`/`occluded` as Embree (says which).
+
+The baseline runs from a `git worktree` of REV under /tmp, imported through a symlink farm that maps
+`owcsim.engine` etc. to its folders (the same venv, the same numpy and Embree).
+Run: .venv/bin/python benchmarks/path_cost.py [--baseline d42d4e1] [--repeats 3] [--profile] [--markdown]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+if "OWCSIM_TREE" in os.environ:  # a baseline tree: its symlink farm (PYTHONPATH), not this editable install
+    sys.meta_path[:] = [f for f in sys.meta_path if "editable" not in getattr(f, "__module__", "")
+                        and "editable" not in type(f).__module__ and "editable" not in repr(f)]
+#: The commit this work started from (issue 13's "today").
+DEFAULT_BASELINE = "d42d4e1"
+SMOKE = {"type": "homogeneous", "sigma_a": 0.0, "sigma_s": 0.2, "phase": {"type": "hg", "g": 0.5}}
+
+
+# --- scenes -------------------------------------------------------------------------------------
+def room_doc(smoke: bool, **simulation) -> dict:
+    doc = json.loads((ROOT / "examples" / "barry_config_a.json").read_text())
+    doc["receivers"][0].update(position=[1.0, 1.0, 0.0], fov_deg=90.0)
+    doc["simulation"] = {"time_bin_s": 1e-9, "t_max_s": 4e-7, "batch_size": 16384, "seed": 1, **simulation}
+    if smoke:
+        doc["medium"] = SMOKE
+    return doc
+
+
+def _simulate(doc: dict, scene=None):
+    from owcsim.engine.simulate import simulate
+    from owcsim.schemas import SceneSpec
+
+    spec = SceneSpec.model_validate(doc)
+    t = time.perf_counter()
+    res = simulate(spec, scene=scene)
+    return time.perf_counter() - t, res
+
+
+COST_CASES = {
+    "clear": lambda paths: room_doc(False, algorithm=1, max_reflections=200, direction="backward", paths=paths),
+    "smoky": lambda paths: room_doc(True, algorithm=5, max_reflections=200, max_scattering=35, direction="auto",
+                                    paths=paths),
+}
+COST_PATHS = {"clear": 262144, "smoky": 32768}
+ACCURACY_CASES = {
+    "clear": lambda: room_doc(False, algorithm="auto", max_reflections=200, direction="auto",
+                              target_rel_error=3e-4),
+    "smoky": lambda: room_doc(True, algorithm="auto", max_reflections=200, direction="auto",
+                              target_rel_error=3e-3),
+}
+
+
+# --- measurements (run inside the tree under test) ------------------------------------------------
+def raw_embree(scene, n_intersect: int, n_occluded: int, batch: int, rng) -> float:
+    """Seconds Embree alone takes for the given ray counts, in batches of `batch` rays."""
+    emb = scene.intersector._scene
+    lo = scene.geometry.vertices.min(axis=0) - scene.intersector.center
+    hi = scene.geometry.vertices.max(axis=0) - scene.intersector.center
+    total = 0.0
+    for count, query in ((n_intersect, "INTERSECT"), (n_occluded, "OCCLUDED")):
+        done = 0
+        while done < count:
+            n = min(batch, count - done)
+            o = (lo + rng.random((n, 3)) * (hi - lo)).astype(np.float32)
+            d = rng.normal(size=(n, 3))
+            d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+            dist = np.full(n, 1.0 if query == "OCCLUDED" else 1e30, np.float32)
+            t = time.perf_counter()
+            if query == "INTERSECT":
+                emb.run(o, d, dists=dist, output=1)
+            else:
+                emb.run(o, d, dists=dist, query="OCCLUDED")
+            total += time.perf_counter() - t
+            done += n
+    return total
+
+
+def measure_rays(paths: int = 200_000) -> dict:
+    from benchmarks._common import barry_doc
+    from owcsim.engine.scene import build_scene
+    from owcsim.schemas import SceneSpec
+
+    out = {}
+    rng = np.random.default_rng(0)
+    for cast in (True, False):
+        doc = barry_doc(paths=paths, batch_size=16384, direction="backward", max_reflections=3)
+        scene = build_scene(SceneSpec.model_validate(doc))
+        scene.all_visible = not cast
+        el, res = _simulate(doc, scene)
+        n_i, n_o = res["run"]["rays_intersect"], res["run"]["rays_occluded"]
+        raw = raw_embree(scene, n_i, n_o, 16384, rng)
+        out["shadows cast" if cast else "empty room"] = {
+            "time_s": el, "rays": n_i + n_o, "pipeline_Mrays_s": (n_i + n_o) / el / 1e6,
+            "embree_Mrays_s": (n_i + n_o) / raw / 1e6, "ratio": raw / el, "paths_s": paths / el}
+    return out
+
+
+def measure_cost(case: str, paths: int | None = None) -> dict:
+    el, res = _simulate(COST_CASES[case](paths or COST_PATHS[case]))
+    link = res["links"][0]
+    traced = res["run"]["paths_total"]
+    return {"time_s": el, "paths": traced, "us_per_path": el / traced * 1e6, "dc_gain": link["dc_gain"],
+            "dc_gain_stderr": link["dc_gain_stderr"],
+            "rel_std_per_path": link["dc_gain_stderr"] / link["dc_gain"] * np.sqrt(traced),
+            "rays_per_path": (res["run"]["rays_intersect"] + res["run"]["rays_occluded"]) / traced}
+
+
+def measure_accuracy(case: str) -> dict:
+    el, res = _simulate(ACCURACY_CASES[case]())
+    link = res["links"][0]
+    return {"time_s": el, "paths": res["run"]["paths_total"], "dc_gain": link["dc_gain"],
+            "rel_stderr": link["dc_gain_stderr"] / link["dc_gain"], "stop": res["run"]["stop_reason"]}
+
+
+def measure(what: list[str]) -> dict:
+    _simulate(COST_CASES["smoky"](2048))  # warm imports and caches
+    from owcsim.engine import kernel
+
+    out = {"tree": os.environ.get("OWCSIM_TREE", "this tree"), "kernel": kernel.__file__}
+    if "rays" in what:
+        out["rays"] = measure_rays()
+    for case in ("clear", "smoky"):
+        if "cost" in what:
+            out[f"cost {case}"] = measure_cost(case)
+        if "accuracy" in what:
+            out[f"accuracy {case}"] = measure_accuracy(case)
+    return out
+
+
+def _profile_target(case: str) -> None:
+    """One cost-per-path run (the process py-spy records)."""
+    _simulate(COST_CASES[case](2048))
+    measure_cost(case, 4 * COST_PATHS[case])
+
+
+# --- the profile split --------------------------------------------------------------------------
+def _classify(stack: list[str]) -> str:
+    """'embree', 'numpy' or 'interpreter' for a py-spy stack (outermost frame first).
+
+    Any Embree frame counts as Embree. Otherwise the innermost frame outside libc (allocation,
+    memcpy) and unnamed addresses decides: a numpy (or other native extension) library is numpy,
+    the Python library or a Python frame is the interpreter.
+    """
+    if any("embree" in f.lower() for f in stack):
+        return "embree"
+    for frame in reversed(stack):
+        if "libc.so" in frame or "ld-linux" in frame or frame.endswith("(?)"):
+            continue
+        if "libpython" in frame or ".py:" in frame or "(<" in frame:
+            return "interpreter"
+        return "numpy"
+    return "numpy"
+
+
+def profile_split(python: str, env: dict, case: str) -> dict:
+    """Fractions of samples in Embree / numpy (and other native libraries) / the interpreter."""
+    spy = shutil.which("py-spy") or str(Path(sys.executable).parent / "py-spy")
+    if Path(spy).exists():
+        with tempfile.NamedTemporaryFile(suffix=".txt", delete=False) as f:
+            raw = f.name
+        cmd = [spy, "record", "--native", "-r", "500", "-f", "raw", "-o", raw, "--", python, __file__,
+               "--profile-target", case]
+        subprocess.run(cmd, env=env, check=True, capture_output=True)
+        counts = {"embree": 0, "numpy": 0, "interpreter": 0}
+        for line in Path(raw).read_text().splitlines():
+            stack, _, n = line.rpartition(" ")
+            frames = stack.split(";")
+            if not any("measure_cost" in fr for fr in frames):  # imports, start-up and warm-up
+                continue
+            counts[_classify(frames)] += int(n)
+        os.unlink(raw)
+        total = max(sum(counts.values()), 1)
+        return {"tool": "py-spy --native", **{k: v / total for k, v in counts.items()}}
+    code = ("import cProfile, pstats, sys; sys.argv = ['x', '--profile-target', %r]; "
+            "sys.path.insert(0, %r); import benchmarks.path_cost as b; from owcsim.engine import geometry as g; "
+            "p = cProfile.Profile(); p.enable(); b._profile_target(%r); p.disable(); s = pstats.Stats(p); "
+            "tot = s.total_tt; emb = sum(v[3] for k, v in s.stats.items() if k[2] in ('intersect', 'occluded') "
+            "and k[0].endswith('geometry.py')); print(emb / tot)") % (case, str(ROOT), case)
+    emb = float(subprocess.run([python, "-c", code], env=env, check=True, capture_output=True,
+                               text=True).stdout.split()[-1])
+    return {"tool": "cProfile (Embree = time in Intersector.intersect/occluded)", "embree": emb,
+            "numpy": float("nan"), "interpreter": float("nan")}
+
+
+# --- the baseline tree --------------------------------------------------------------------------
+def baseline_env(rev: str) -> dict:
+    """Environment whose `owcsim` package is commit `rev` (a git worktree under /tmp + a symlink farm)."""
+    sha = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", rev], check=True, capture_output=True,
+                         text=True).stdout.strip()
+    tree = Path(tempfile.gettempdir()) / f"owcsim-baseline-{sha}"
+    if not tree.exists():
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), sha], check=True,
+                       capture_output=True)
+    farm = Path(tempfile.gettempdir()) / f"owcsim-baseline-{sha}-pkg"
+    if not farm.exists():
+        pkg = farm / "owcsim"
+        pkg.mkdir(parents=True)
+        for item in (tree / "owcsim").iterdir():
+            (pkg / item.name).symlink_to(item)
+        for sub in ("engine", "schemas", "server", "clients"):
+            (pkg / sub).symlink_to(tree / sub)
+        (farm / "benchmarks").symlink_to(ROOT / "benchmarks")  # this script and _common, not the old ones
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(farm)
+    env["OWCSIM_TREE"] = f"baseline {sha}"
+    return env
+
+
+def run_tree(env: dict, what: list[str]) -> dict:
+    cmd = [sys.executable, __file__, "--measure", ",".join(what)]
+    out = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True)
+    return json.loads(out.stdout.splitlines()[-1])
+
+
+def _best(runs: list[dict]) -> dict:
+    """Per figure, the run with the least time (the others are slowed by host load)."""
+    best = {}
+    for key in runs[0]:
+        if key in ("tree", "kernel"):
+            best[key] = runs[0][key]
+        elif key == "rays":
+            best[key] = {sub: min((r[key][sub] for r in runs), key=lambda v: v["time_s"]) for sub in runs[0][key]}
+        else:
+            best[key] = min((r[key] for r in runs), key=lambda v: v["time_s"])
+    return best
+
+
+def report(results: dict[str, dict], profiles: dict[str, dict], markdown: bool) -> str:
+    names = list(results)
+    lines = []
+    head = "| figure | " + " | ".join(names) + (" | after / before |" if len(names) == 2 else " |")
+    lines += [head, "|---" * (len(names) + 1 + (len(names) == 2)) + "|"]
+
+    def row(label, values, fmt, ratio=True):
+        cells = [fmt.format(v) for v in values]
+        extra = ""
+        if len(values) == 2:
+            extra = f" {values[1] / values[0]:.2f} |" if ratio and values[0] else " |"
+        lines.append(f"| {label} | " + " | ".join(cells) + " |" + extra)
+
+    first = results[names[0]]
+    lines.append("| kernel | " + " | ".join(results[n]["kernel"].replace(str(ROOT), ".") for n in names) + " |"
+                 + (" |" if len(names) == 2 else ""))
+    if "rays" in first:
+        for sub in first["rays"]:
+            row(f"rays, {sub}: pipeline / raw Embree rays/s", [results[n]["rays"][sub]["ratio"] for n in names],
+                "{:.2f}")
+            row(f"rays, {sub}: pipeline Mrays/s", [results[n]["rays"][sub]["pipeline_Mrays_s"] for n in names],
+                "{:.2f}")
+    for case in ("clear", "smoky"):
+        key = f"cost {case}"
+        if key in first:
+            row(f"cost per path, {case} room [us]", [results[n][key]["us_per_path"] for n in names], "{:.2f}")
+            row(f"rel. std per path, {case} room", [results[n][key]["rel_std_per_path"] for n in names], "{:.3f}")
+            row(f"H0, {case} room (fixed paths)", [results[n][key]["dc_gain"] for n in names], "{:.5e}", False)
+            if len(names) == 2:
+                a, b = (results[n][key] for n in names)
+                z = (b["dc_gain"] - a["dc_gain"]) / np.hypot(a["dc_gain_stderr"], b["dc_gain_stderr"])
+                lines.append(f"| z of H0 after - before, {case} | {z:+.2f} | | |")
+    for case, target in (("clear", "0.03 %"), ("smoky", "0.3 %")):
+        key = f"accuracy {case}"
+        if key in first:
+            row(f"time to {target}, {case} room [s]", [results[n][key]["time_s"] for n in names], "{:.2f}")
+            row(f"paths to {target}, {case} room", [results[n][key]["paths"] for n in names], "{:,d}")
+    for case in profiles.get(names[0], {}):
+        for part in ("embree", "numpy", "interpreter"):
+            row(f"profile {case} room: {part}", [profiles[n][case][part] for n in names], "{:.0%}", False)
+    if profiles:
+        lines.append(f"\nProfile: {next(iter(profiles[names[0]].values()))['tool']}.")
+    text = "\n".join(lines)
+    return text if markdown else text.replace("| ", "").replace(" |", "  ")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--baseline", default=DEFAULT_BASELINE, help="git revision to compare against ('' for none)")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--what", default="rays,cost,accuracy")
+    ap.add_argument("--profile", action="store_true")
+    ap.add_argument("--markdown", action="store_true")
+    ap.add_argument("--measure", help=argparse.SUPPRESS)
+    ap.add_argument("--profile-target", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if "OWCSIM_TREE" not in os.environ:  # the baseline's farm holds `benchmarks` (and its own `owcsim`)
+        sys.path.insert(0, str(ROOT))
+    if args.measure:
+        print(json.dumps(measure(args.measure.split(","))))
+        return
+    if args.profile_target:
+        return _profile_target(args.profile_target)
+    trees = {}
+    if args.baseline:
+        trees[f"before ({args.baseline})"] = baseline_env(args.baseline)
+    trees["after (this tree)"] = {k: v for k, v in os.environ.items() if k != "OWCSIM_TREE"}
+    what = args.what.split(",")
+    runs = {name: [] for name in trees}
+    for _ in range(args.repeats):  # alternate the trees so that host load hits both alike
+        for name, e in trees.items():
+            runs[name].append(run_tree(e, what))
+    results = {name: _best(r) for name, r in runs.items()}
+    profiles = {}
+    if args.profile:
+        profiles = {name: {case: profile_split(sys.executable, e, case) for case in ("clear", "smoky")}
+                    for name, e in trees.items()}
+    print(f"one core, best of {args.repeats}; host load average {os.getloadavg()[0]:.1f} (2 cores)")
+    print(report(results, profiles, args.markdown))
+
+
+if __name__ == "__main__":
+    main()
