@@ -144,6 +144,26 @@ def measure_accuracy(case: str) -> dict:
             "rel_stderr": link["dc_gain_stderr"] / link["dc_gain"], "stop": res["run"]["stop_reason"]}
 
 
+#: Algorithms 1-5 on both rooms, fixed paths per side (K = 6, S = 3 for algorithm 5): the results must stay
+#: within their error bars of the baseline's (`--what algorithms` prints the z-scores).
+ALGORITHM_PATHS = {1: 65536, 2: 8192, 3: 8192, 4: 4096, 5: 16384}
+
+
+def measure_algorithms() -> dict:
+    out = {}
+    for smoke in (False, True):
+        for a, paths in ALGORITHM_PATHS.items():
+            sim = {"algorithm": a, "max_reflections": 6, "paths": paths, "seed": 7}
+            if a == 5:
+                sim["max_scattering"] = 3
+            el, res = _simulate(room_doc(smoke, **sim))
+            link = res["links"][0]
+            out[f"{'smoky' if smoke else 'clear'} {a}"] = {
+                "time_s": el, "dc_gain": link["dc_gain"], "dc_gain_stderr": link["dc_gain_stderr"],
+                "mean_delay_s": link.get("mean_delay_s"), "paths": res["run"]["paths_total"]}
+    return out
+
+
 def measure(what: list[str]) -> dict:
     _simulate(COST_CASES["smoky"](2048))  # warm imports and caches
     from owcsim.engine import kernel
@@ -156,6 +176,8 @@ def measure(what: list[str]) -> dict:
             out[f"cost {case}"] = measure_cost(case)
         if "accuracy" in what:
             out[f"accuracy {case}"] = measure_accuracy(case)
+    if "algorithms" in what:
+        out["algorithms"] = measure_algorithms()
     return out
 
 
@@ -248,7 +270,7 @@ def _best(runs: list[dict]) -> dict:
     """Per figure, the run with the least time (the others are slowed by host load)."""
     best = {}
     for key in runs[0]:
-        if key in ("tree", "kernel"):
+        if key in ("tree", "kernel", "algorithms"):
             best[key] = runs[0][key]
         elif key == "rays":
             best[key] = {sub: min((r[key][sub] for r in runs), key=lambda v: v["time_s"]) for sub in runs[0][key]}
@@ -294,6 +316,13 @@ def report(results: dict[str, dict], profiles: dict[str, dict], markdown: bool) 
         if key in first:
             row(f"time to {target}, {case} room [s]", [results[n][key]["time_s"] for n in names], "{:.2f}")
             row(f"paths to {target}, {case} room", [results[n][key]["paths"] for n in names], "{:,d}")
+    if "algorithms" in first and len(names) == 2:
+        a, b = (results[n]["algorithms"] for n in names)
+        for key in a:
+            z = (b[key]["dc_gain"] - a[key]["dc_gain"]) / np.hypot(a[key]["dc_gain_stderr"], b[key]["dc_gain_stderr"])
+            lines.append(f"| {key.split()[0]} room, algorithm {key.split()[1]}: H0 | {a[key]['dc_gain']:.5e} "
+                         f"+- {a[key]['dc_gain_stderr']:.1e} | {b[key]['dc_gain']:.5e} +- {b[key]['dc_gain_stderr']:.1e}"
+                         f" | z {z:+.2f}, time x{b[key]['time_s'] / a[key]['time_s']:.2f} |")
     for case in profiles.get(names[0], {}):
         for part in ("embree", "numpy", "interpreter"):
             row(f"profile {case} room: {part}", [profiles[n][case][part] for n in names], "{:.0%}", False)
