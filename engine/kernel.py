@@ -48,10 +48,10 @@ import numpy as np
 from .constants import SPEED_OF_LIGHT
 from .devices import Devices
 from .sampling import cosine_about_soa
-from .segments import equiangular, equiangular_density, time_density, time_strata
+from .segments import EquiangularFrame, equiangular, equiangular_density, time_density, time_strata
 from .scene import Scene
 from .tally import BatchBuilder, BatchTally, TallyPlan, TimeBins
-from .mirrors import connect_mirrors, connect_segment_mirrors, connect_source_mirrors, specular_first_share
+from .mirrors import connect_mirrors, connect_source_mirrors
 from .medium_nee import (connection_weight, connect_from_target, first_medium_factor, first_segment_branch,
                          first_vertex_factor, side_weight, target_factor)
 
@@ -138,8 +138,13 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 class _Paths:
-    """Path state as (3, n) component arrays and (n,) arrays; `keep(idx)` compacts with `take`."""
+    """Path state as a structure of arrays: (3, n) component arrays and (n,) arrays, one row per path.
 
+    A new per-path quantity is one more name in FIELDS (and one more keyword where the batch starts);
+    `gather(idx)` compacts every field with one index array (`take`, several times faster than a mask).
+    """
+
+    #: `weights`: the path throughput (power per watt carried so far, divided by the sampling densities);
     #: `first`: the source-side density factor of the path's first vertex (medium_nee.first_vertex_factor);
     #: `first_rho`: the direction density of leaving it (phase, or 1/pi at a surface; medium_nee.side_weight)
     FIELDS = ("origins", "directions", "weights", "lengths", "path", "k", "s", "first", "first_rho")
@@ -151,14 +156,17 @@ class _Paths:
     def __len__(self) -> int:
         return len(self.weights)
 
-    def keep(self, idx) -> "_Paths":
+    def gather(self, idx) -> "_Paths":
+        """The paths at rows `idx` (any order, repeats allowed), every field gathered once."""
         return _Paths(**{f: getattr(self, f).take(idx, axis=-1) for f in self.FIELDS})
+
+    keep = gather
 
     def keep_where(self, mask) -> "_Paths":
         """The paths where `mask` holds; free when it holds everywhere."""
         if mask.all():
             return _Paths(**{f: getattr(self, f) for f in self.FIELDS})
-        return self.keep(np.flatnonzero(mask))
+        return self.gather(np.flatnonzero(mask))
 
     @staticmethod
     def concat(parts) -> "_Paths":
@@ -170,24 +178,25 @@ class _Paths:
 def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> BatchTally:
     """Trace one batch of paths and return its tally.
 
-    Path state is kept as (3, n) component arrays (contiguous rows: the dot products
-    and gathers run at memory speed); compaction uses index arrays and `take`, which
-    numpy runs several times faster than boolean masks.
+    Each step of the loop is one segment of every live path, handled event by event
+    (the sections below): intersect, segment points (algorithms 2-4), free flight and its
+    equiangular partner (algorithm 5), surface vertex, medium collision, roulette. Every
+    next-event estimate goes through `_Context.connect` (the measurement equation).
     """
     rng = item.rng()
     sources, targets = device_sets(scene, item.direction)
-    isect, geo, medium = scene.intersector, scene.geometry, scene.medium
+    isect, medium = scene.intersector, scene.medium
     rays0 = (isect.n_intersect, isect.n_occluded)
     med0 = medium.evaluations if medium is not None else 0
-    tgt = np.asarray(item.targets, np.int64)
     n, i = item.n_paths, item.source
     forward = item.direction == "forward"
     K, S = settings.max_reflections, settings.max_scattering
     free_flight = settings.free_flight and medium is not None
     segment_scatter = settings.segment_scatter and medium is not None
-    ctx = _Context(scene, targets, tgt, settings, item)
+    ctx = _Context(scene, targets, np.asarray(item.targets, np.int64), settings, item)
     ctx.start_tally(item)
 
+    # --- emission: directions with pdf R_source / W_source, throughput W_source ----------------------------
     w0 = sources.total_response(i)
     u = rng.random((2, n))
     paths = _Paths(
@@ -195,118 +204,48 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         origins=np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1),
         weights=np.full(n, w0), lengths=np.zeros(n), path=np.arange(n),
         k=np.zeros(n, np.int64), s=np.zeros(n, np.int64), first=np.zeros(n), first_rho=np.full(n, 1.0 / np.pi))
-    if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each from both devices
-        connect_source_mirrors(ctx, sources, i, w0 * (0.5 if settings.mis or settings.both_sides else 1.0), n)
+    if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each in algorithm 4
+        connect_source_mirrors(ctx, sources, i, w0 * (0.5 if settings.mis else 1.0), n)
     surface_power = escaped_power = 0.0
-    # Segments that leave the scene run to where the medium has absorbed everything.
-    far = scene.medium_far_distance
+    far = scene.medium_far_distance  # segments that leave the scene run to where the medium has absorbed all
 
-    for _step in range(K + S + 2):
-        # --- intersect -------------------------------------------------------------
+    for step in range(K + S + 2):
+        # ====== intersect ==================================================================================
         prim, t = isect.intersect(paths.origins.T, paths.directions.T)
         hit = prim >= 0
         t_seg = np.where(hit, t, far)
-        if segment_scatter:  # algorithms 2-4: single scattering along the segment
-            _segment_scatter(ctx, paths, t_seg, rng, first=_step == 0, prim=prim)
+        # ====== segment points (algorithms 2-4): single scattering at points along the segment ============
+        if segment_scatter:
+            _segment_scatter(ctx, paths, t_seg, rng, first=step == 0, prim=prim)
+        # ====== free flight (algorithm 5): collision distance, and equiangular points on the segment =======
         collided = np.zeros(len(paths), bool)
-        if free_flight:  # algorithm 5: sample the collision distance
+        if free_flight:
             t_col, collided = medium.sample_distance(paths.origins.T, paths.directions.T, t_seg, rng.random(len(paths)))
-            if settings.both_sides and _step == 0:
+            if settings.both_sides and step == 0:
                 paths.first = first_vertex_factor(ctx, paths, prim, t, t_col, collided)
-            if settings.equiangular_points:
-                _equiangular_in_scatter(ctx, paths, t_seg, rng)
-        elif medium is not None:
+            frames = _EquiangularFrames(ctx, paths, t_seg) if settings.equiangular_points else None
+            if frames is not None:
+                _equiangular_in_scatter(ctx, paths, frames, rng)
+        elif medium is not None:  # algorithm 1 (and 2-4): the segment's extinction
             paths.weights = paths.weights * medium.transmittance(paths.origins.T, paths.directions.T, t_seg)
         escaped_power += paths.weights[~hit & ~collided].sum()
-        parts = []
-        # --- surface vertices ---------------------------------------------------------
-        at_surface = hit & ~collided & (paths.k < K)
-        sp = paths.keep_where(at_surface)
-        if len(sp):
-            si = np.flatnonzero(at_surface)
-            ts = t.take(si)
-            points = sp.origins + ts * sp.directions
-            sp.lengths = sp.lengths + ts
-            prims = prim.take(si)
-            normals = isect.normals_soa.take(prims, axis=1)
-            normals *= np.where(_dot(normals, sp.directions) > 0, -1.0, 1.0)  # two-sided: face the arriving ray
+        survivors = []
+        # ====== surface vertex =============================================================================
+        surface_rows = np.flatnonzero(hit & ~collided & (paths.k < K))
+        if len(surface_rows):
+            sp = paths.gather(surface_rows) if len(surface_rows) < len(paths) else paths
             surface_power += sp.weights.sum()
-            spawn = points + isect.offset * normals
-            sp.k = sp.k + 1
-            # Algorithm 4 estimates the unscattered family from both sides: each counts half.
-            share = 0.5 if settings.mis else 1.0
-            if geo.material is None:  # every surface Lambertian: BRDF rho / pi
-                rho = geo.reflectance.take(prims)
-                ctx.connect(points, spawn, sp.weights * rho * (share / np.pi), sp, normals=normals)
-                sp.weights = sp.weights * rho
-                u = rng.random((2, len(sp)))
-                sp.directions = cosine_about_soa(normals, u[0], u[1])
-            else:  # materials (bsdf.py): NEE evaluates f(incoming, toward target); lobe sampled by albedo
-                mat = geo.material.take(prims)
-                ctx.connect(points, spawn, sp.weights * share, sp, normals=normals, brdf=(mat, sp.directions))
-                if ctx.mirrors:  # ... -> x -> mirror -> target, through the target's mirror images
-                    connect_mirrors(ctx, points, spawn, sp.weights * share, sp, normals=normals,
-                                        brdf=(mat, sp.directions))
-                u = rng.random((2, len(sp)))
-                sp.directions, factor = mat.sample(sp.directions, normals, u[0], u[1])
-                sp.weights = sp.weights * factor
-            sp.origins = spawn
-            # after reflection K a path still matters if it can scatter (5) or host segment points (2-4)
-            alive = (sp.k < K) | (free_flight & (sp.s < S)) | (segment_scatter & (sp.k <= K))
-            parts.append(sp.keep_where(alive & (sp.weights > 0)))
-        # --- medium vertices (algorithm 5) ----------------------------------------------
+            survivors.append(_surface_vertex(ctx, sp, prim.take(surface_rows), t.take(surface_rows), rng))
+        # ====== medium collision (algorithm 5) ==============================================================
         if free_flight:
-            mi = np.flatnonzero(collided & (paths.s < S))
-            mp = paths.keep(mi)
-            if len(mp):
-                tm = t_col.take(mi)
-                points = mp.origins + tm * mp.directions
-                mp.lengths = mp.lengths + tm
-                mp.weights = mp.weights * medium.albedo_at(points.T)
-                mp.s = mp.s + 1
-                origins = mp.origins
-                seg_T = medium.transmittance(origins.T, mp.directions.T, tm) \
-                    if settings.equiangular_points or settings.both_sides else None
-                mid_g = seg_T / (tm * tm) if settings.both_sides else None  # edge factor x_1 -> x_2 (medium_nee)
-                if settings.equiangular_points:  # balance heuristic with the equiangular points
-                    p_ff = medium.sigma_t_at(points.T) * seg_T
-                    end = t_seg.take(mi)
-                    for j in range(len(ctx.tgt)):
-                        y = np.repeat(ctx.t_pos[:, j:j + 1], len(mp), axis=1)
-                        n_e = equiangular_density(origins, mp.directions, y, np.zeros(len(mp)), end, tm,
-                                                  settings.equiangular_points)
-                        ctx.connect_one(j, points, mp.weights * p_ff / (p_ff + n_e), mp, in_dirs=mp.directions,
-                                        mid_g=mid_g)
-                else:
-                    ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions, mid_g=mid_g)
-                if ctx.mirrors:  # ... -> x -> mirror -> target: only the collision reaches it (mirrors.py)
-                    connect_mirrors(ctx, points, points, mp.weights, mp, in_dirs=mp.directions)
-                if settings.both_sides and S >= 2 and forward:  # third strategy for Tx -> x_1 -> x_2 -> Rx
-                    connect_from_target(ctx, mp, points, rng)
-                u = rng.random((2, len(mp)))
-                arriving = mp.directions
-                mp.directions = scene.phase.sample(mp.directions, u[0], u[1])
-                if settings.both_sides:  # leaving the path's first vertex: its phase density (medium_nee)
-                    at_first = mp.k + mp.s == 1
-                    if at_first.any():
-                        mp.first_rho = np.where(at_first, scene.phase.eval(_dot(arriving, mp.directions)), mp.first_rho)
-                mp.origins = points
-                alive = ((mp.k < K) | (mp.s < S)) & (mp.weights > 0)
-                parts.append(mp.keep_where(alive))
-        paths = _Paths.concat(parts) if parts else paths.keep(np.zeros(0, np.int64))
+            medium_rows = np.flatnonzero(collided & (paths.s < S))
+            if len(medium_rows):
+                survivors.append(_medium_collision(ctx, paths, medium_rows, t_col.take(medium_rows), frames, rng))
+        paths = _Paths.concat(survivors) if survivors else paths.gather(np.zeros(0, np.int64))
         ctx.flush()  # every estimate of this step went to cells of depth k + s = step + 1
-        # --- Russian roulette ------------------------------------------------------------
+        # ====== Russian roulette ==========================================================================
         if settings.russian_roulette and len(paths):
-            at = np.flatnonzero(paths.k + paths.s >= settings.rr_start_depth)
-            if len(at):
-                q = np.minimum(1.0, paths.weights.take(at) * (1.0 / (settings.rr_threshold * w0)))
-                survive = rng.random(len(at)) < q
-                paths.weights[at] = paths.weights.take(at) / np.where(survive, q, 1.0)
-                dead = at[~survive]
-                if len(dead):
-                    keep = np.ones(len(paths), bool)
-                    keep[dead] = False
-                    paths = paths.keep(np.flatnonzero(keep))
+            paths = _roulette(paths, settings, w0, rng)
         if len(paths) == 0:
             break
 
@@ -319,8 +258,175 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     return tally
 
 
+def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
+    """Paths `sp` arriving at surfaces (faces `prims`, distances `ts`): NEE to the targets, then reflection.
+
+    NEE: `connect` evaluates the BRDF (rho / pi, or the material's f(incoming, toward target)) with
+    the path throughput; algorithm 4 (`mis`) estimates the unscattered family from both devices, each
+    with MIS weight 1/2. Reflection: cosine sampling (throughput x rho), or a material lobe chosen by
+    albedo (bsdf.py). Returns the paths that go on.
+    """
+    settings, scene = ctx.settings, ctx.scene
+    isect, geo = scene.intersector, scene.geometry
+    points = sp.origins + ts * sp.directions
+    normals = isect.normals_soa.take(prims, axis=1)
+    normals *= np.where(_dot(normals, sp.directions) > 0, -1.0, 1.0)  # two-sided: face the arriving ray
+    spawn = points + isect.offset * normals
+    arriving = sp.directions
+    sp = _Paths(origins=spawn, directions=arriving, weights=sp.weights, lengths=sp.lengths + ts, path=sp.path,
+                k=sp.k + 1, s=sp.s, first=sp.first, first_rho=sp.first_rho)
+    share = 0.5 if settings.mis else None
+    if geo.material is None:  # every surface Lambertian
+        rho = geo.reflectance.take(prims)
+        ctx.connect(points, spawn, sp.weights, sp, normals=normals, reflectance=rho, mis=share)
+        sp.weights = sp.weights * rho
+        u = rng.random((2, len(sp)))
+        sp.directions = cosine_about_soa(normals, u[0], u[1])
+    else:
+        materials = geo.material.take(prims)
+        ctx.connect(points, spawn, sp.weights, sp, normals=normals, materials=(materials, arriving), mis=share)
+        if ctx.mirrors:  # ... -> x -> mirror -> target, through the target's mirror images (mirrors.py)
+            connect_mirrors(ctx, points, spawn, sp.weights * (share or 1.0), sp, normals=normals,
+                            brdf=(materials, arriving))
+        u = rng.random((2, len(sp)))
+        sp.directions, factor = materials.sample(arriving, normals, u[0], u[1])
+        sp.weights = sp.weights * factor
+    # after reflection K a path still matters if it can scatter (5) or host segment points (2-4)
+    K, S = settings.max_reflections, settings.max_scattering
+    alive = (sp.k < K) | ((settings.free_flight and scene.medium is not None) & (sp.s < S)) | \
+        ((settings.segment_scatter and scene.medium is not None) & (sp.k <= K))
+    return sp.keep_where(alive & (sp.weights > 0))
+
+
+def _free_flight_equiangular_balance(p_ff, n_e):
+    """Algorithm 5's balance heuristic (Veach 1997, ch. 9): (w_ff, w_E) = (p_ff, n_E) / (p_ff + n_E).
+
+    Two techniques place a scattering point at distance s on a segment: the free-flight collision,
+    density p_ff(s) = sigma_t(s) T(o -> s), and `equiangular_points` equiangular points per target,
+    density n_E(s) (segments.EquiangularFrame.density). The collision's next-event estimate gets w_ff,
+    each equiangular point's w_E; both estimate the light scattered once more on this segment.
+    """
+    total = p_ff + n_e
+    safe = np.where(total > 0, total, 1.0)
+    return np.where(total > 0, p_ff / safe, 0.0), np.where(total > 0, n_e / safe, 0.0)
+
+
+class _EquiangularFrames:
+    """Algorithm 5, one step: the segments that may scatter once more (s < S, finite) and, per target,
+    their equiangular frame, computed once and shared by the equiangular points and the collision's
+    balance heuristic."""
+
+    def __init__(self, ctx: "_Context", paths: _Paths, t_seg):
+        self.rows = np.flatnonzero((paths.s < ctx.settings.max_scattering) & np.isfinite(t_seg))
+        self.row_of = np.full(len(paths), -1, np.int64)
+        self.row_of[self.rows] = np.arange(len(self.rows))
+        self.end = t_seg.take(self.rows)
+        o, w = paths.origins.take(self.rows, axis=1), paths.directions.take(self.rows, axis=1)
+        self.frames = [EquiangularFrame(o, w, ctx.t_pos[:, j:j + 1], 0.0, self.end) for j in range(len(ctx.tgt))]
+
+
+def _equiangular_in_scatter(ctx: "_Context", paths: _Paths, eq: _EquiangularFrames, rng) -> None:
+    """Algorithm 5: next-event estimates of in-scattering at equiangular points of each segment.
+
+    A point at s on the segment o + s w estimates with throughput w T(o -> s) sigma_s(s) / n_E(s)
+    and MIS weight w_E of `_free_flight_equiangular_balance`; the path continues from the collision only.
+    """
+    settings, medium = ctx.settings, ctx.scene.medium
+    n_eq = settings.equiangular_points
+    if len(eq.rows) == 0:
+        return
+    ok = np.flatnonzero(eq.end > 0)
+    seg = np.repeat(ok, n_eq)
+    if len(seg) == 0:
+        return
+    xi = (np.tile(np.arange(n_eq), len(ok)) + 0.0) / n_eq  # stratum starts; jitter added per target
+    for j, frame in enumerate(eq.frames):
+        s = np.clip(frame.sample(seg, xi + rng.random(len(seg)) / n_eq), 0.0, eq.end.take(seg))
+        pp = paths.gather(eq.rows.take(seg))
+        points = pp.origins + s * pp.directions
+        sigma_t, sigma_s = medium.coefficients_at(points.T)
+        inside = np.flatnonzero(sigma_s > 0)
+        if len(inside) < len(s):
+            if len(inside) == 0:
+                continue
+            pp, points, s, sigma_t, sigma_s = (pp.gather(inside), points.take(inside, axis=1), s.take(inside),
+                                               sigma_t.take(inside), sigma_s.take(inside))
+            n_e = frame.density(s, n_eq, seg.take(inside))
+        else:
+            n_e = frame.density(s, n_eq, seg)
+        transmittance = medium.transmittance(pp.origins.T, pp.directions.T, s)
+        _, w_eq = _free_flight_equiangular_balance(sigma_t * transmittance, n_e)
+        mid_g = None
+        if settings.both_sides:  # a point on the first segment is the path's first vertex (medium_nee)
+            pp.first = np.where(pp.k + pp.s == 0, first_medium_factor(ctx, points, transmittance), pp.first)
+            mid_g = transmittance / (s * s)
+        pp.s = pp.s + 1
+        ctx.connect(points, points, pp.weights * transmittance * sigma_s / n_e, pp, in_dirs=pp.directions,
+                    mis=w_eq, target=j, extra_length=s, mid_g=mid_g)
+
+
+def _medium_collision(ctx: "_Context", paths: _Paths, rows, t_col, eq: _EquiangularFrames | None, rng) -> _Paths:
+    """Algorithm 5: paths `rows` collide at t_col: throughput x albedo, NEE with the phase function
+    (MIS weight w_ff against the equiangular points; from both devices, medium_nee's weights), and a
+    new direction from the phase function. Returns the paths that go on."""
+    settings, scene = ctx.settings, ctx.scene
+    medium, phase = scene.medium, scene.phase
+    K, S = settings.max_reflections, settings.max_scattering
+    mp = paths.gather(rows)
+    points = mp.origins + t_col * mp.directions
+    sigma_t, sigma_s = medium.coefficients_at(points.T)
+    mp.lengths = mp.lengths + t_col
+    mp.weights = mp.weights * np.where(sigma_t > 0, sigma_s / np.where(sigma_t > 0, sigma_t, 1.0), 0.0)
+    mp.s = mp.s + 1
+    seg_T = medium.transmittance(mp.origins.T, mp.directions.T, t_col) \
+        if eq is not None or settings.both_sides else None
+    mid_g = seg_T / (t_col * t_col) if settings.both_sides else None  # edge factor x_1 -> x_2 (medium_nee)
+    if eq is not None:
+        frame_rows = eq.row_of.take(rows)
+        for j, frame in enumerate(eq.frames):
+            w_ff, _ = _free_flight_equiangular_balance(sigma_t * seg_T,
+                                                       frame.density(t_col, settings.equiangular_points, frame_rows))
+            ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions, mis=w_ff, target=j, mid_g=mid_g)
+    else:
+        ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions, mid_g=mid_g)
+    if settings.both_sides and S >= 2 and ctx.item.direction == "forward":  # third strategy, Tx -> x1 -> x2 -> Rx
+        connect_from_target(ctx, mp, points, rng)
+    u = rng.random((2, len(mp)))
+    arriving = mp.directions
+    mp.directions = phase.sample(arriving, u[0], u[1])
+    if settings.both_sides:  # leaving the path's first vertex: its phase density (medium_nee)
+        at_first = mp.k + mp.s == 1
+        if at_first.any():
+            mp.first_rho = np.where(at_first, phase.eval(_dot(arriving, mp.directions)), mp.first_rho)
+    mp.origins = points
+    return mp.keep_where(((mp.k < K) | (mp.s < S)) & (mp.weights > 0))
+
+
+def _roulette(paths: _Paths, settings: KernelSettings, w0: float, rng) -> _Paths:
+    """Russian roulette from depth k + s >= rr_start_depth: survival q = min(1, w / (theta w0)), w /= q."""
+    at = np.flatnonzero(paths.k + paths.s >= settings.rr_start_depth)
+    if len(at) == 0:
+        return paths
+    q = np.minimum(1.0, paths.weights.take(at) * (1.0 / (settings.rr_threshold * w0)))
+    survive = rng.random(len(at)) < q
+    paths.weights[at] = paths.weights.take(at) / np.where(survive, q, 1.0)
+    dead = at[~survive]
+    if len(dead) == 0:
+        return paths
+    keep = np.ones(len(paths), bool)
+    keep[dead] = False
+    return paths.gather(np.flatnonzero(keep))
+
+
+def _rows(a, idx):
+    """a[..., idx], or `a` itself when idx is None (every row)."""
+    return a if idx is None else a.take(idx, axis=-1)
+
+
 class _Context:
     """Per-batch connection machinery and contribution lists (tallied by `reduce`)."""
+
+    KEYS = ("target", "k", "s", "delay", "power", "path")
 
     def __init__(self, scene, targets, tgt, settings, item):
         self.scene, self.targets, self.tgt, self.settings, self.item = scene, targets, tgt, settings, item
@@ -329,7 +435,7 @@ class _Context:
         self.t_total = np.array([targets.total_response(int(t)) for t in tgt], float)
         self.out = {k: [] for k in self.KEYS}
         self.mirrors = scene.mirror_planes
-        self.builder: BatchBuilder | None = None  # the batch's tally (trace_batch); sub-contexts only connect
+        self.builder: BatchBuilder | None = None  # the batch's tally (trace_batch)
 
     def start_tally(self, item: WorkItem) -> None:
         settings = self.settings
@@ -340,90 +446,85 @@ class _Context:
         self.builder = BatchBuilder(settings.tally, item_links(self.scene, item), item.n_paths, several,
                                     across_steps=across)
 
-    KEYS = ("target", "k", "s", "delay", "power", "path")
+    def connect(self, points, shadow_origins, throughput, paths, *, normals=None, reflectance=None, materials=None,
+                in_dirs=None, mis=None, target: int | None = None, scatter_order=None, extra_length=None,
+                mid_g=None) -> None:
+        """Next-event estimation from vertices `points` (3, n) to the targets: the measurement equation.
 
-    def connect(self, points, shadow_origins, weights, paths, normals=None, in_dirs=None,
-                scatter_order=None, extra_length=None, brdf=None, mid_g=None):
-        """NEE from vertices (3, n) to every target; weights carry everything but the connection.
+            dH = throughput * f * R_target(cos_target) / d^2 * V(x, target) * T(x -> target) * mis,
 
-        Surface vertices give `normals` (factor max(cos, 0)) and, on non-Lambertian scenes,
-        `brdf` = (Materials per vertex, arriving directions (3, n)): the factor becomes
-        f(incoming, toward target) cos (else the caller folds rho / pi into the weights).
-        Medium vertices give the arriving directions `in_dirs` (factor phase(cos)). Cells use paths.k and
-        paths.s (or `scatter_order`); delays use paths.lengths (+ `extra_length`).
-        `mid_g` (per point): T / r^2 of the edge that reached a medium vertex, for the
-        weights of algorithm 5 from both devices (medium_nee.connection_weight).
+        `throughput` (n,) the path throughput at the vertex (power per watt over the sampling
+        densities); f the vertex's scattering function toward the target: at a surface vertex
+        (`normals`) rho / pi cos_x (`reflectance`, Lambertian) or f_bsdf(incoming, out) cos_x
+        (`materials` = (Materials per vertex, arriving directions)); at a medium vertex the phase
+        function p(dot(arriving `in_dirs`, out)). `mis` (n,) or a scalar: the caller's multiple
+        importance sampling weight; algorithm 5 from both devices multiplies medium_nee.connection_weight.
+        `target`: only the item's j-th target (else every one). Cells: paths.k and paths.s (or
+        `scatter_order`); delays: paths.lengths (+ `extra_length`) + d. `mid_g` (per vertex): T / r^2 of
+        the edge that reached a medium vertex (medium_nee.connection_weight).
         """
-        scene, targets, tgt = self.scene, self.targets, self.tgt
+        scene, targets = self.scene, self.targets
         isect, medium = scene.intersector, scene.medium
-        n_pts, n_tgt = points.shape[1], len(tgt)
-        step = max(1, NEE_CHUNK // max(n_tgt, 1))
-        for lo in range(0, n_pts, step):  # chunks bound memory; one chunk for ordinary batches
-            hi = min(lo + step, n_pts)
-            if n_tgt == 1:
-                pi, ti = np.arange(lo, hi), np.zeros(hi - lo, np.int64)
-                to = self.t_pos - points[:, lo:hi]
-                t_nrm = self.t_nrm
+        n_pts = points.shape[1]
+        columns = np.arange(len(self.tgt)) if target is None else np.array([target])
+        n_tgt = len(columns)
+        chunk = max(1, NEE_CHUNK // n_tgt)
+        for lo in range(0, n_pts, chunk):  # chunks bound memory; one chunk for ordinary batches
+            hi = min(lo + chunk, n_pts)
+            if n_tgt == 1:  # one target: every vertex of the chunk, no index arrays
+                vi = None if (lo, hi) == (0, n_pts) else np.arange(lo, hi)
+                ti = None
+                y, y_nrm = self.t_pos[:, columns[0]:columns[0] + 1], self.t_nrm[:, columns[0]:columns[0] + 1]
+                y_ids = np.full(hi - lo, self.tgt[columns[0]])
             else:
-                pi = np.repeat(np.arange(lo, hi), n_tgt)
-                ti = np.tile(np.arange(n_tgt), hi - lo)
-                to = self.t_pos.take(ti, axis=1) - points.take(pi, axis=1)
-                t_nrm = self.t_nrm.take(ti, axis=1)
-            ct = -_dot(to, t_nrm)  # cos at the target, times d
-            front = ct > 0 if targets.front_only else np.ones(len(ct), bool)  # luminaires may emit backwards
-            if normals is not None:
-                cs = _dot(to, normals[:, lo:hi] if n_tgt == 1 else normals.take(pi, axis=1))
-                sel = np.flatnonzero((cs > 0) & front)
-            else:
-                sel = np.flatnonzero(front)
-            if len(sel) == 0:
-                continue
-            pi, ti, ct = pi.take(sel), ti.take(sel), ct.take(sel)
-            to = to.take(sel, axis=1)
+                vi = np.repeat(np.arange(lo, hi), n_tgt)
+                ti = np.tile(columns, hi - lo)
+                y, y_nrm, y_ids = self.t_pos.take(ti, axis=1), self.t_nrm.take(ti, axis=1), self.tgt.take(ti)
+            to = y - _rows(points, vi)
             d2 = _dot(to, to)
             d = np.sqrt(d2)
-            wdir = to / d
-            if normals is not None:
-                lobe = cs.take(sel) / d
-                if brdf is not None:
-                    mat, arriving = brdf
-                    lobe = lobe * mat.take(pi).eval(arriving.take(pi, axis=1), normals.take(pi, axis=1), wdir)
-            else:
-                lobe = scene.phase.eval(_dot(in_dirs.take(pi, axis=1), wdir))
-            f = weights.take(pi) * lobe * targets.response(tgt.take(ti), ct / d, -wdir.T) / d2
-            sel = np.flatnonzero(f > 0)
-            if len(sel) == 0:
+            out_dir = to / d
+            cos_target = -_dot(out_dir, y_nrm)
+            f = targets.response(y_ids, cos_target, -out_dir.T) / d2 * _rows(throughput, vi)
+            if normals is not None:  # surface vertex: BRDF x cos
+                n_x = _rows(normals, vi)
+                cos_x = np.maximum(_dot(out_dir, n_x), 0.0)
+                if materials is not None:
+                    mat, arriving = materials
+                    f *= cos_x * (mat if vi is None else mat.take(vi)).eval(_rows(arriving, vi), n_x, out_dir)
+                else:
+                    f *= cos_x * _rows(reflectance, vi) * (1.0 / np.pi)
+            else:  # medium vertex: phase function
+                f *= scene.phase.eval(_dot(_rows(in_dirs, vi), out_dir))
+            if mis is not None:
+                f *= mis if np.isscalar(mis) else _rows(mis, vi)
+            live = np.flatnonzero(f > 0)
+            if len(live) == 0:
                 continue
-            pi, ti, f, d, wdir = pi.take(sel), ti.take(sel), f.take(sel), d.take(sel), wdir.take(sel, axis=1)
-            if not scene.all_visible:
-                # The shadow ray stops short of the device, which may sit on a surface itself.
-                keep = np.flatnonzero(~isect.occluded(shadow_origins.take(pi, axis=1).T, wdir.T,
+            pi = live if vi is None else vi.take(live)  # vertex of each live estimate
+            f, d, out_dir = f.take(live), d.take(live), out_dir.take(live, axis=1)
+            col = np.full(len(live), columns[0]) if ti is None else ti.take(live)
+            if not scene.all_visible:  # the shadow ray stops short of the device (it may sit on a surface)
+                seen = np.flatnonzero(~isect.occluded(shadow_origins.take(pi, axis=1).T, out_dir.T,
                                                       d - 2.0 * isect.offset))
-                pi, ti, f, d, wdir = pi.take(keep), ti.take(keep), f.take(keep), d.take(keep), wdir.take(keep, axis=1)
+                pi, col, f, d, out_dir = pi.take(seen), col.take(seen), f.take(seen), d.take(seen), \
+                    out_dir.take(seen, axis=1)
             if medium is not None:
-                tr = medium.transmittance(points.take(pi, axis=1).T, wdir.T, d)
+                tr = medium.transmittance(points.take(pi, axis=1).T, out_dir.T, d)
                 f = f * tr
                 if self.settings.both_sides:  # algorithm 5 from both devices (medium_nee.connection_weight)
-                    f = f * connection_weight(self, paths, pi, ti, d, wdir, tr, normals=normals, in_dirs=in_dirs,
-                                              mid_g=mid_g)
-            s_ord = (paths.s if scatter_order is None else scatter_order).take(pi)
-            length = paths.lengths.take(pi) + d + (0.0 if extra_length is None else extra_length.take(pi))
-            self.out["target"].append(ti)
-            self.out["k"].append(paths.k.take(pi))
-            self.out["s"].append(s_ord)
-            self.out["delay"].append(length * (1.0 / SPEED_OF_LIGHT))
-            self.out["power"].append(f)
-            self.out["path"].append(paths.path.take(pi))
+                    f = f * connection_weight(self, paths, pi, col, d, out_dir, tr, normals=normals,
+                                              in_dirs=in_dirs, mid_g=mid_g)
+            length = paths.lengths.take(pi) + d
+            if extra_length is not None:
+                length += extra_length.take(pi)
+            self.record(col, paths.k.take(pi), (paths.s if scatter_order is None else scatter_order).take(pi),
+                        length * (1.0 / SPEED_OF_LIGHT), f, paths.path.take(pi))
 
-    def connect_one(self, j: int, points, weights, paths, **kw) -> None:
-        """`connect` to the item's j-th target only (weights that depend on the target)."""
-        sub = _Context(self.scene, self.targets, self.tgt[j:j + 1], self.settings, None)
-        sub.connect(points, points, weights, paths, **kw)
-        for key in self.out:
-            if key == "target":
-                self.out[key] += [np.full(len(a), j, np.int64) for a in sub.out[key]]
-            else:
-                self.out[key] += sub.out[key]
+    def record(self, target, k, s, delay, power, path) -> None:
+        """One group of estimates: local target index, cell (k, s), delay [s], power [W/W], path in the batch."""
+        for key, value in zip(self.KEYS, (target, k, s, delay, power, path)):
+            self.out[key].append(value)
 
     def flush(self) -> None:
         """Tally this step's estimates (they all fall in cells of one depth k + s)."""
@@ -474,9 +575,8 @@ def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool, prim
         return
     partition = None
     if settings.mis and not first:
-        def partition(j, pp, points, s, density):  # after a specular first vertex: mirrors.py
-            return specular_first_share(ctx, j, pp, points, s, density,
-                                        side_weight(pp.first, target_factor(ctx, j, points)))
+        def partition(j, pp, points):
+            return side_weight(pp.first, target_factor(ctx, j, points))
     segment_points(ctx, paths.keep(alive), t_seg.take(alive), rng, order=1, direction_mis=settings.mis and first,
                    weight_fn=partition)
 
@@ -486,7 +586,7 @@ def segment_points(ctx: _Context, seg_paths: _Paths, t_seg, rng, order: int, dir
     """Points on the segments [0, t_seg) of `seg_paths` (time strata + equiangular, balance heuristic),
     each connected to every target as a scattering event of order `order`.
 
-    `weight_fn(j, pp, points, s, density)`, if given, multiplies each point's weight (e.g. a partition of unity).
+    `weight_fn(j, pp, points)`, if given, multiplies each point's weight (e.g. a partition of unity).
     """
     settings, medium = ctx.settings, ctx.scene.medium
     zeros = np.zeros(len(seg_paths))
@@ -495,7 +595,8 @@ def segment_points(ctx: _Context, seg_paths: _Paths, t_seg, rng, order: int, dir
         y = np.repeat(ctx.t_pos[:, j:j + 1], len(seg_paths), axis=1)
         o, d, l0 = seg_paths.origins, seg_paths.directions, seg_paths.lengths
         seg_t, s_t, _ = time_strata(l0, o, d, y, zeros, t_seg, h, lambda m: rng.random(m), settings.max_strata)
-        seg_e, s_e = equiangular(o, d, y, zeros, t_seg, n_eq, lambda m: rng.random(m))
+        frame = EquiangularFrame(o, d, y, zeros, t_seg)  # once per segment and target
+        seg_e, s_e = equiangular(o, d, y, zeros, t_seg, n_eq, lambda m: rng.random(m), frame=frame)
         found = _scattering_points(seg_paths, np.concatenate([seg_t, seg_e]), np.concatenate([s_t, s_e]), medium)
         if found is None:
             continue
@@ -503,16 +604,15 @@ def segment_points(ctx: _Context, seg_paths: _Paths, t_seg, rng, order: int, dir
         y_p, end = y.take(seg, axis=1), t_seg.take(seg)
         density = (time_density(pp.lengths, pp.origins, pp.directions, y_p, np.zeros(len(s)), end, s, h,
                                 settings.max_strata)
-                   + equiangular_density(pp.origins, pp.directions, y_p, np.zeros(len(s)), end, s, n_eq))
-        w = pp.weights * medium.transmittance(pp.origins.T, pp.directions.T, s) * sigma_s / density
-        if direction_mis and ctx.mirrors:  # source -> p -> mirror -> target, through the image (mirrors.py)
-            connect_segment_mirrors(ctx, j, points, w, pp, s, order, density)
-        if direction_mis:
-            w = w * _direction_mis(ctx, int(ctx.tgt[j]), pp, points, s, density)
+                   + (frame.density(s, n_eq, seg) if n_eq else 0.0))
+        # throughput of a point: w T(o -> p) sigma_s(p) / (n_T + n_E), the balance heuristic of the time
+        # strata and the equiangular points in Veach's multi-sample form (segments.py)
+        throughput = pp.weights * medium.transmittance(pp.origins.T, pp.directions.T, s) * sigma_s / density
+        mis = _direction_mis(ctx, int(ctx.tgt[j]), pp, points, s, density) if direction_mis else None
         if weight_fn is not None:
-            w = w * weight_fn(j, pp, points, s, density)
-        ctx.connect_one(j, points, w, pp, in_dirs=pp.directions, scatter_order=np.full(len(pp), order, np.int64),
-                        extra_length=s)
+            mis = weight_fn(j, pp, points) if mis is None else mis * weight_fn(j, pp, points)
+        ctx.connect(points, points, throughput, pp, in_dirs=pp.directions, mis=mis, target=j,
+                    scatter_order=np.full(len(pp), order, np.int64), extra_length=s)
 
 
 def _scattering_points(paths: _Paths, seg, s, medium):
@@ -529,43 +629,6 @@ def _scattering_points(paths: _Paths, seg, s, medium):
     if len(inside) == 0:
         return None
     return (seg.take(inside), pp.keep(inside), points.take(inside, axis=1), s.take(inside), sigma_s.take(inside))
-
-
-def _equiangular_in_scatter(ctx: _Context, paths: _Paths, t_seg, rng) -> None:
-    """Algorithm 5: extra next-event estimates of in-scattering at equiangular points of each segment.
-
-    With free-flight collisions at density p_ff(s) = sigma_t(s) T(o -> s) and
-    `equiangular_points` points at density n_E(s) per target, both estimate the
-    light scattered once more on this segment toward the target; the balance
-    heuristic weights a collision's estimate by p_ff / (p_ff + n_E) and an
-    equiangular point's by n_E / (p_ff + n_E), i.e. its weight is
-    w T(o -> s) sigma_s(s) / (p_ff + n_E). The path continues from the collision only.
-    """
-    settings, medium = ctx.settings, ctx.scene.medium
-    alive = np.flatnonzero((paths.s < settings.max_scattering) & np.isfinite(t_seg))
-    if len(alive) == 0:
-        return
-    base = paths.keep(alive)
-    end = t_seg.take(alive)
-    n_eq = settings.equiangular_points
-    for j in range(len(ctx.tgt)):
-        y = np.repeat(ctx.t_pos[:, j:j + 1], len(base), axis=1)
-        seg, s = equiangular(base.origins, base.directions, y, np.zeros(len(base)), end, n_eq, lambda m: rng.random(m))
-        found = _scattering_points(base, seg, s, medium)
-        if found is None:
-            continue
-        seg, pp, points, s, sigma_s = found
-        transmittance = medium.transmittance(pp.origins.T, pp.directions.T, s)
-        p_ff = medium.sigma_t_at(points.T) * transmittance
-        n_e = equiangular_density(pp.origins, pp.directions, y.take(seg, axis=1), np.zeros(len(s)), end.take(seg), s,
-                                  n_eq)
-        mid_g = None
-        if settings.both_sides:  # a point on the first segment is the path's first vertex
-            pp.first = np.where(pp.k + pp.s == 0, first_medium_factor(ctx, points, transmittance), pp.first)
-            mid_g = transmittance / (s * s)
-        pp.s = pp.s + 1
-        ctx.connect_one(j, points, pp.weights * transmittance * sigma_s / (p_ff + n_e), pp, in_dirs=pp.directions,
-                        extra_length=s, mid_g=mid_g)
 
 
 def _direction_mis(ctx: _Context, j: int, pp: _Paths, points, s, density):

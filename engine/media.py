@@ -122,6 +122,10 @@ class Medium:
             ids, tc, te = ids[k], tc[k], te[k]
         return t, scattered, n
 
+    def coefficients_at(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """(sigma_t, sigma_s) at each point [1/m] (0 outside the medium), in one evaluation."""
+        return self._coefficients_at(as_rows(points))
+
     def sigma_t_at(self, points) -> np.ndarray:
         """Extinction coefficient at each point [1/m] (0 outside the medium)."""
         return self._coefficients_at(as_rows(points))[0]

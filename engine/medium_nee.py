@@ -275,19 +275,6 @@ def _surface_target_factor(ctx, j: int, points, normals):
     return _device_factor(ctx.targets, int(ctx.tgt[j]), points, c)
 
 
-def _connect_surface(ctx, j: int, points, spawn, weights, paths, normals) -> None:
-    """NEE from surface points to the item's j-th target only (shadow rays from `spawn`)."""
-    from .kernel import _Context
-
-    sub = _Context(ctx.scene, ctx.targets, ctx.tgt[j:j + 1], ctx.settings, ctx.item)
-    sub.connect(points, spawn, weights, paths, normals=normals)
-    for key in ctx.out:
-        if key == "target":
-            ctx.out[key] += [np.full(len(a), j, np.int64) for a in sub.out[key]]
-        else:
-            ctx.out[key] += sub.out[key]
-
-
 def _scatter_on_first_segment(ctx, paths, t_seg, rng):
     """Branches from a free-flight collision p on the source's first segment (weight x albedo), leaving p
     in a phase-sampled direction, with `first` = the source factor at p and s = 1; None if none collide."""
@@ -330,14 +317,14 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
       side_weight(A(p), B(p_out)); the other run samples the family from its side.
     """
     from .kernel import segment_points
-    from .mirrors import branch_surface
+    from .sampling import cosine_about_soa
 
     scene, settings = ctx.scene, ctx.settings
-    medium, isect = scene.medium, scene.intersector
+    medium, isect, geo = scene.medium, scene.intersector, scene.geometry
     br = _scatter_on_first_segment(ctx, paths, t_seg, rng)
     K, far = settings.max_reflections, scene.medium_far_distance
 
-    def partition(j, pp, points, *_):
+    def partition(j, pp, points):
         return side_weight(pp.first, target_factor(ctx, j, points))
 
     for _bounce in range(K + 1):
@@ -359,11 +346,17 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
         prims = prim.take(nxt)
         normals = isect.normals_soa.take(prims, axis=1)
         normals *= np.where(_dot(normals, br.directions) > 0, -1.0, 1.0)
+        rho = geo.reflectance.take(prims)
         spawn = points + isect.offset * normals
         br.lengths = br.lengths + ts
         br.k = br.k + 1
-        # NEE (chain; materials and mirror images included), then reflection from the materials (mirrors.py)
-        br.directions, br.weights = branch_surface(ctx, br, points, spawn, normals, prims, rng, chain)
+        if chain:  # NEE at the branch's surface vertex, this run's share of the path (partition of unity)
+            for j in range(len(ctx.tgt)):
+                share = side_weight(br.first, _surface_target_factor(ctx, j, points, normals))
+                ctx.connect(points, spawn, br.weights, br, normals=normals, reflectance=rho, mis=share, target=j)
+        br.weights = br.weights * rho
+        u = rng.random((2, len(br)))
+        br.directions = cosine_about_soa(normals, u[0], u[1])
         br.origins = spawn
         br = br.keep_where(br.weights > 0)
 

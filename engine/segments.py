@@ -69,28 +69,53 @@ def time_density(l0, origins, directions, targets, a, b, s, h, max_strata: int =
     return np.where(length > 0, 1.0 / np.where(length > 0, length, 1.0), 0.0)
 
 
-def _equiangular_frame(origins, directions, targets, a, b):
-    v = targets - origins
-    D = v[0] * directions[0] + v[1] * directions[1] + v[2] * directions[2]
-    r = v - D * directions
-    h = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
-    h = np.maximum(h, 1e-9 * (1.0 + np.abs(D)))  # a target on the ray's line: keep the pdf finite
-    return D, h, np.arctan2(a - D, h), np.arctan2(b - D, h)
+class EquiangularFrame:
+    """The equiangular geometry of segments o + s w, a <= s <= b, toward a target y, computed once.
+
+    D = (y - o).w, h = |y - o - D w| (kept >= 1e-9 (1 + |D|): a target on the ray's line keeps a
+    finite pdf), theta_a, theta_b = atan((a - D) / h), atan((b - D) / h). `targets` may be (3, 1)
+    (one target for every segment). Sampling and densities reuse the frame (issue 13: the frame was
+    computed twice per point).
+    """
+
+    __slots__ = ("D", "h", "theta_a", "theta_b")
+
+    def __init__(self, origins, directions, targets, a, b):
+        v = targets - origins
+        D = v[0] * directions[0] + v[1] * directions[1] + v[2] * directions[2]
+        r = v - D * directions
+        h = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+        self.D, self.h = D, np.maximum(h, 1e-9 * (1.0 + np.abs(D)))
+        self.theta_a, self.theta_b = np.arctan2(a - D, self.h), np.arctan2(b - D, self.h)
+
+    def sample(self, seg, xi):
+        """s of the points with stratified uniforms `xi` on the segments `seg` (not clipped)."""
+        D, h, ta, tb = self.D.take(seg), self.h.take(seg), self.theta_a.take(seg), self.theta_b.take(seg)
+        return D + h * np.tan(ta + xi * (tb - ta))
+
+    def density(self, s, n_per: int, seg=None):
+        """n_E(s) = n_per h / ((theta_b - theta_a) (h^2 + (s - D)^2)) on the segments `seg` (all if None)."""
+        D, h, ta, tb = (self.D, self.h, self.theta_a, self.theta_b) if seg is None else \
+            (self.D.take(seg), self.h.take(seg), self.theta_a.take(seg), self.theta_b.take(seg))
+        span = tb - ta
+        x = s - D
+        pdf = h / (np.where(span > 0, span, 1.0) * (h * h + x * x))
+        return np.where(span > 0, n_per * pdf, 0.0)
 
 
-def equiangular(origins, directions, targets, a, b, n_per: int, u):
+def equiangular(origins, directions, targets, a, b, n_per: int, u, frame: EquiangularFrame | None = None):
     """`n_per` stratified equiangular points per segment [a, b] with respect to its target.
 
-    Returns (segment index (m,), s (m,)); `u(m)` gives the uniforms.
+    Returns (segment index (m,), s (m,)); `u(m)` gives the uniforms. `frame` reuses a computed
+    EquiangularFrame of these segments.
     """
     ok = np.flatnonzero(b > a)
     seg = np.repeat(ok, n_per)
     if len(seg) == 0:
         return seg, np.zeros(0)
-    D, h, ta, tb = _equiangular_frame(origins.take(seg, axis=1), directions.take(seg, axis=1),
-                                      targets.take(seg, axis=1), a.take(seg), b.take(seg))
+    frame = frame or EquiangularFrame(origins, directions, targets, a, b)
     xi = (np.tile(np.arange(n_per), len(ok)) + u(len(seg))) / n_per
-    s = D + h * np.tan(ta + xi * (tb - ta))
+    s = frame.sample(seg, xi)
     return seg, np.clip(s, a.take(seg), b.take(seg))
 
 
@@ -98,10 +123,7 @@ def equiangular_density(origins, directions, targets, a, b, s, n_per: int):
     """n_E(s) = n_per * pdf_E(s) (one point per segment, arrays as `equiangular`)."""
     if n_per == 0:
         return np.zeros(len(s))
-    D, h, ta, tb = _equiangular_frame(origins, directions, targets, a, b)
-    span = tb - ta
-    pdf = h / (np.where(span > 0, span, 1.0) * (h * h + (s - D) ** 2))
-    return np.where(span > 0, n_per * pdf, 0.0)
+    return EquiangularFrame(origins, directions, targets, a, b).density(s, n_per)
 
 
 def time_strata(l0, origins, directions, targets, a, b, h, u, max_strata: int = 64):
