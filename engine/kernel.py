@@ -485,17 +485,20 @@ class _Context:
             d = np.sqrt(d2)
             out_dir = to / d
             cos_target = -_dot(out_dir, y_nrm)
-            f = targets.response(y_ids, cos_target, -out_dir.T) / d2 * _rows(throughput, vi)
+            response = targets.response(y_ids, cos_target, -out_dir.T)
+            f = response / d2 * _rows(throughput, vi)
             if normals is not None:  # surface vertex: BRDF x cos
                 n_x = _rows(normals, vi)
-                cos_x = np.maximum(_dot(out_dir, n_x), 0.0)
+                vertex_factor = np.maximum(_dot(out_dir, n_x), 0.0)  # cos_x
                 if materials is not None:
                     mat, arriving = materials
-                    f *= cos_x * (mat if vi is None else mat.take(vi)).eval(_rows(arriving, vi), n_x, out_dir)
+                    f *= vertex_factor * (mat if vi is None else mat.take(vi)).eval(_rows(arriving, vi), n_x,
+                                                                                     out_dir)
                 else:
-                    f *= cos_x * _rows(reflectance, vi) * (1.0 / np.pi)
+                    f *= vertex_factor * _rows(reflectance, vi) * (1.0 / np.pi)
             else:  # medium vertex: phase function
-                f *= scene.phase.eval(_dot(_rows(in_dirs, vi), out_dir))
+                vertex_factor = scene.phase.eval(_dot(_rows(in_dirs, vi), out_dir))
+                f *= vertex_factor
             if mis is not None:
                 f *= mis if np.isscalar(mis) else _rows(mis, vi)
             live = np.flatnonzero(f > 0)
@@ -504,17 +507,23 @@ class _Context:
             pi = live if vi is None else vi.take(live)  # vertex of each live estimate
             f, d, out_dir = f.take(live), d.take(live), out_dir.take(live, axis=1)
             col = np.full(len(live), columns[0]) if ti is None else ti.take(live)
+            both_sides = self.settings.both_sides and medium is not None
+            if both_sides:
+                response, vertex_factor = response.take(live), vertex_factor.take(live)
             if not scene.all_visible:  # the shadow ray stops short of the device (it may sit on a surface)
                 seen = np.flatnonzero(~isect.occluded(shadow_origins.take(pi, axis=1).T, out_dir.T,
                                                       d - 2.0 * isect.offset))
-                pi, col, f, d, out_dir = pi.take(seen), col.take(seen), f.take(seen), d.take(seen), \
-                    out_dir.take(seen, axis=1)
+                if len(seen) < len(pi):
+                    pi, col, f, d, out_dir = pi.take(seen), col.take(seen), f.take(seen), d.take(seen), \
+                        out_dir.take(seen, axis=1)
+                    if both_sides:
+                        response, vertex_factor = response.take(seen), vertex_factor.take(seen)
             if medium is not None:
                 tr = medium.transmittance(points.take(pi, axis=1).T, out_dir.T, d)
                 f = f * tr
-                if self.settings.both_sides:  # algorithm 5 from both devices (medium_nee.connection_weight)
-                    f = f * connection_weight(self, paths, pi, col, d, out_dir, tr, normals=normals,
-                                              in_dirs=in_dirs, mid_g=mid_g)
+                if both_sides:  # algorithm 5 from both devices: this run's share (medium_nee.connection_weight)
+                    f = f * connection_weight(self, paths, pi, col, d, tr, response, vertex_factor,
+                                              surface=normals is not None, mid_g=mid_g)
             length = paths.lengths.take(pi) + d
             if extra_length is not None:
                 length += extra_length.take(pi)

@@ -157,7 +157,7 @@ def first_medium_factor(ctx, points, transmittance):
     return _device_factor(src, ctx.item.source, points, transmittance)
 
 
-def connection_weight(ctx, paths, pi, ti, d, wdir, tr, normals=None, in_dirs=None, mid_g=None):
+def connection_weight(ctx, paths, pi, ti, d, tr, response, vertex_factor, surface: bool, mid_g=None):
     """This run's share of the paths whose last vertices `paths`[pi] connect to targets ti (algorithm 5).
 
     With F = `_Paths.first` (the source factor of x_1, transmittance included) and
@@ -170,24 +170,22 @@ def connection_weight(ctx, paths, pi, ti, d, wdir, tr, normals=None, in_dirs=Non
       `connect_from_target` (x_1 from the transmitter, x_2 from the receiver, joined):
       q_self / (q_self + q_other + F L), q_self = F rho_1 g, q_other = L rho_2 g.
     Every strategy evaluates the same function of the path, so the shares sum to 1.
+    `response` R_tgt(cos) and `vertex_factor` (cos at a surface vertex, the phase function's value
+    at a medium vertex) come from the connection (kernel._Context.connect), which computed them.
     """
-    scene = ctx.scene
-    cos_t = -_dot(wdir, ctx.t_nrm.take(ti, axis=1))
-    resp = ctx.targets.response(ctx.tgt.take(ti), cos_t, -wdir.T) / ctx.t_total.take(ti)
-    if normals is not None:
-        c = np.abs(_dot(wdir, normals.take(pi, axis=1)))
-        rho_t = np.full(len(pi), 1.0 / np.pi)
+    resp = response / ctx.t_total.take(ti)
+    if surface:
+        c, rho_t = vertex_factor, 1.0 / np.pi
     else:
-        c = 1.0
-        rho_t = scene.phase.eval(_dot(in_dirs.take(pi, axis=1), wdir))
+        c, rho_t = 1.0, vertex_factor
     last = resp * c * tr / (d * d)
     first = paths.first.take(pi)
     rho_f = paths.first_rho.take(pi)
     k, s = paths.k.take(pi), paths.s.take(pi)
     several = k + s >= 2
-    a = first * np.where(several, rho_f, 1.0)
-    b = last * np.where(several, rho_t, 1.0)
-    if mid_g is not None and normals is None:
+    a = np.where(several, first * rho_f, first)
+    b = np.where(several, last * rho_t, last)
+    if mid_g is not None and not surface:
         g = mid_g.take(pi)
         three = (k == 0) & (s == 2)
         a = np.where(three, a * g, a)

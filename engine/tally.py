@@ -116,6 +116,19 @@ class BatchTally:
     medium_evaluations: int = 0
 
 
+def _accumulate(out: np.ndarray, idx: np.ndarray, weights: np.ndarray) -> None:
+    """out[idx] += weights, summed per index: `np.bincount` over the band of `out` the indices touch.
+
+    One kernel step's estimates fall in cells of one depth k + s and in a narrow range of delays, so
+    the band is a small part of the CIR split by order (K + 1 orders x bins): counting over the band
+    costs what the estimates cost, not what the whole tally costs, in every step.
+    """
+    if len(idx) == 0:
+        return
+    lo, hi = int(idx.min()), int(idx.max()) + 1
+    out[lo:hi] += np.bincount(idx - lo if lo else idx, weights, hi - lo)
+
+
 class BatchBuilder:
     """Reduces a batch's next-event estimates, step by step, into a BatchTally.
 
@@ -158,11 +171,10 @@ class BatchBuilder:
         plan, n = self.plan, self.n_paths
         # --- per-path moments of every link ------------------------------------------------
         key = target * n + path
-        size = self.abc.shape[1]
         wt = power * delay
-        self.abc[0] += np.bincount(key, power, size)
-        self.abc[1] += np.bincount(key, wt, size)
-        self.abc[2] += np.bincount(key, wt * delay, size)
+        _accumulate(self.abc[0], key, power)
+        _accumulate(self.abc[1], key, wt)
+        _accumulate(self.abc[2], key, wt * delay)
         # --- binned CIR -----------------------------------------------------------------------
         if self.n_cir:
             slot = self.cir_local.take(target)
@@ -177,7 +189,7 @@ class BatchBuilder:
                 n_cells = len(self.order_sum)
                 cell = (slot.take(sel) * plan.n_orders + k.take(sel)) * plan.n_scatter + s.take(sel)
                 p = power.take(sel)
-                self.order_sum += np.bincount(cell, p, n_cells)
+                _accumulate(self.order_sum, cell, p)
                 if self.across_steps:
                     self._order_parts.append((path.take(sel) * n_cells + cell, p))
                 elif self.several_per_cell:  # several estimates of one path in one cell: sum before squaring
@@ -185,7 +197,7 @@ class BatchBuilder:
                     per_path = np.bincount(inverse, p, len(keys))
                     self.order_sumsq += np.bincount(keys % n_cells, per_path * per_path, n_cells)
                 else:
-                    self.order_sumsq += np.bincount(cell, p * p, n_cells)
+                    _accumulate(self.order_sumsq, cell, p * p)
 
     def _bin(self, slot, k, s, delay, power) -> None:
         bins, plan = self.plan.bins, self.plan
@@ -197,10 +209,10 @@ class BatchBuilder:
             sel = np.flatnonzero(inside)
             slot, k, s, b, power = slot.take(sel), k.take(sel), s.take(sel), b.take(sel), power.take(sel)
         ib = b.astype(np.int64)
-        self.cir += np.bincount(slot * bins.n + ib, power, len(self.cir))
+        _accumulate(self.cir, slot * bins.n + ib, power)
         if self.cir_k is not None:
-            self.cir_k += np.bincount((slot * plan.n_orders + k) * bins.n + ib, power, len(self.cir_k))
-            self.cir_s += np.bincount((slot * plan.n_scatter + s) * bins.n + ib, power, len(self.cir_s))
+            _accumulate(self.cir_k, (slot * plan.n_orders + k) * bins.n + ib, power)
+            _accumulate(self.cir_s, (slot * plan.n_scatter + s) * bins.n + ib, power)
 
     def finish(self, channel_weights: np.ndarray | None = None) -> BatchTally:
         """The batch's tally; `channel_weights` (G, T) adds the per-path moments of G channels."""
