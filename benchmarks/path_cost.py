@@ -164,6 +164,38 @@ def measure_algorithms() -> dict:
     return out
 
 
+def measure_qmc(replicates: int = 64, paths: int = 2048) -> dict:
+    """Variance per path of H0 with scrambled Sobol first dimensions against pseudo-random ones.
+
+    `replicates` independent batches (their own streams) of `paths` paths per side; the variance per
+    path is the spread of the batch means x paths (valid for both, unlike the per-path formula under QMC).
+    The rooms run as in the cost figures (clear: backward; smoky: both devices, summed).
+    """
+    import dataclasses
+
+    from owcsim.engine.kernel import WorkItem, trace_batch
+    from owcsim.engine.scene import build_scene
+    from owcsim.engine.simulate import kernel_settings
+    from owcsim.schemas import SceneSpec
+
+    out = {}
+    for case, sides in (("clear", ("backward",)), ("smoky", ("forward", "backward"))):
+        spec = SceneSpec.model_validate(COST_CASES[case](paths))
+        scene = build_scene(spec)
+        base = kernel_settings(spec, scene)
+        for label, flag in (("pseudo-random", False), ("scrambled Sobol", True)):
+            settings = dataclasses.replace(base, qmc_first_dimensions=flag)
+            t = time.perf_counter()
+            means = [sum(trace_batch(scene, WorkItem(d, 0, (0,), r, paths, 11), settings).s1[0, 0] / paths
+                         for d in sides) for r in range(replicates)]
+            el = time.perf_counter() - t
+            out[f"{case} {label}"] = {"mean": float(np.mean(means)), "se": float(np.std(means, ddof=1)
+                                                                                 / np.sqrt(replicates)),
+                                      "var_per_path": float(np.var(means, ddof=1) * paths), "time_s": el,
+                                      "replicates": replicates, "paths": paths}
+    return out
+
+
 def measure(what: list[str]) -> dict:
     _simulate(COST_CASES["smoky"](2048))  # warm imports and caches
     from owcsim.engine import kernel
@@ -178,6 +210,8 @@ def measure(what: list[str]) -> dict:
             out[f"accuracy {case}"] = measure_accuracy(case)
     if "algorithms" in what:
         out["algorithms"] = measure_algorithms()
+    if "qmc" in what:
+        out["qmc"] = measure_qmc()
     return out
 
 
@@ -270,7 +304,7 @@ def _best(runs: list[dict]) -> dict:
     """Per figure, the run with the least time (the others are slowed by host load)."""
     best = {}
     for key in runs[0]:
-        if key in ("tree", "kernel", "algorithms"):
+        if key in ("tree", "kernel", "algorithms", "qmc"):
             best[key] = runs[0][key]
         elif key == "rays":
             best[key] = {sub: min((r[key][sub] for r in runs), key=lambda v: v["time_s"]) for sub in runs[0][key]}
@@ -323,6 +357,16 @@ def report(results: dict[str, dict], profiles: dict[str, dict], markdown: bool) 
             lines.append(f"| {key.split()[0]} room, algorithm {key.split()[1]}: H0 | {a[key]['dc_gain']:.5e} "
                          f"+- {a[key]['dc_gain_stderr']:.1e} | {b[key]['dc_gain']:.5e} +- {b[key]['dc_gain_stderr']:.1e}"
                          f" | z {z:+.2f}, time x{b[key]['time_s'] / a[key]['time_s']:.2f} |")
+    if "qmc" in results[names[-1]]:
+        q = results[names[-1]]["qmc"]
+        for case in ("clear", "smoky"):
+            mc, sob = q[f"{case} pseudo-random"], q[f"{case} scrambled Sobol"]
+            ratio = sob["var_per_path"] / mc["var_per_path"]
+            z = (sob["mean"] - mc["mean"]) / np.hypot(sob["se"], mc["se"])
+            rel = np.sqrt(2.0 / (mc["replicates"] - 1)) * np.sqrt(2.0)  # rough relative error of a variance ratio
+            lines.append(f"| QMC, {case} room: variance per path, Sobol / pseudo-random | {ratio:.2f} "
+                         f"(+- {rel * ratio:.2f}) | means differ by z {z:+.2f} | {mc['replicates']} x "
+                         f"{mc['paths']} paths |")
     for case in profiles.get(names[0], {}):
         for part in ("embree", "numpy", "interpreter"):
             row(f"profile {case} room: {part}", [profiles[n][case][part] for n in names], "{:.0%}", False)

@@ -81,6 +81,12 @@ class KernelSettings:
     both_sides: bool = False
     #: roulette threshold theta: survival min(1, w / (theta w0)); paths above theta w0 always survive
     rr_threshold: float = 0.25  # measured: benchmarks/replicate_study.py --study roulette (docs/smoke-error-bars.md)
+    #: scrambled Sobol points (scipy.stats.qmc, Owen scrambling from the batch's stream) for the first
+    #: dimensions of each path: emission direction, first free-flight distance, first bounce direction.
+    #: Unbiased, but the paths of a batch are no longer independent, so the per-path standard errors
+    #: (tally.py) overstate the error; off until the errors come from independent batches
+    #: (benchmarks/path_cost.py --what qmc measures the variance it saves).
+    qmc_first_dimensions: bool = False
 
     @property
     def in_then_out(self) -> bool:
@@ -198,7 +204,13 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
 
     # --- emission: directions with pdf R_source / W_source, throughput W_source ----------------------------
     w0 = sources.total_response(i)
-    u = rng.random((2, n))
+    if settings.qmc_first_dimensions:
+        from scipy.stats import qmc  # imported here: scipy costs 0.3-1.5 s to import
+
+        first_u = qmc.Sobol(d=5, scramble=True, seed=rng).random(n).T  # (5, n)
+        u = first_u[:2]
+    else:
+        first_u, u = None, rng.random((2, n))
     paths = _Paths(
         directions=np.ascontiguousarray(sources.sample_directions(i, u[0], u[1]).T),
         origins=np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1),
@@ -219,8 +231,10 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
             _segment_scatter(ctx, paths, t_seg, rng, first=step == 0, prim=prim)
         # ====== free flight (algorithm 5): collision distance, and equiangular points on the segment =======
         collided = np.zeros(len(paths), bool)
+        ctx.first_bounce_u = first_u[3:5] if first_u is not None and step == 0 else None
         if free_flight:
-            t_col, collided = medium.sample_distance(paths.origins.T, paths.directions.T, t_seg, rng.random(len(paths)))
+            u_ff = first_u[2] if first_u is not None and step == 0 else rng.random(len(paths))
+            t_col, collided = medium.sample_distance(paths.origins.T, paths.directions.T, t_seg, u_ff)
             if settings.both_sides and step == 0:
                 paths.first = first_vertex_factor(ctx, paths, prim, t, t_col, collided)
             frames = _EquiangularFrames(ctx, paths, t_seg) if settings.equiangular_points else None
@@ -280,7 +294,7 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
         rho = geo.reflectance.take(prims)
         ctx.connect(points, spawn, sp.weights, sp, normals=normals, reflectance=rho, mis=share)
         sp.weights = sp.weights * rho
-        u = rng.random((2, len(sp)))
+        u = ctx.bounce_uniforms(sp, rng)
         sp.directions = cosine_about_soa(normals, u[0], u[1])
     else:
         materials = geo.material.take(prims)
@@ -288,7 +302,7 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
         if ctx.mirrors:  # ... -> x -> mirror -> target, through the target's mirror images (mirrors.py)
             connect_mirrors(ctx, points, spawn, sp.weights * (share or 1.0), sp, normals=normals,
                             brdf=(materials, arriving))
-        u = rng.random((2, len(sp)))
+        u = ctx.bounce_uniforms(sp, rng)
         sp.directions, factor = materials.sample(arriving, normals, u[0], u[1])
         sp.weights = sp.weights * factor
     # after reflection K a path still matters if it can scatter (5) or host segment points (2-4)
@@ -391,7 +405,7 @@ def _medium_collision(ctx: "_Context", paths: _Paths, rows, t_col, eq: _Equiangu
         ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions, mid_g=mid_g)
     if settings.both_sides and S >= 2 and ctx.item.direction == "forward":  # third strategy, Tx -> x1 -> x2 -> Rx
         connect_from_target(ctx, mp, points, rng)
-    u = rng.random((2, len(mp)))
+    u = ctx.bounce_uniforms(mp, rng)
     arriving = mp.directions
     mp.directions = phase.sample(arriving, u[0], u[1])
     if settings.both_sides:  # leaving the path's first vertex: its phase density (medium_nee)
@@ -436,6 +450,15 @@ class _Context:
         self.out = {k: [] for k in self.KEYS}
         self.mirrors = scene.mirror_planes
         self.builder: BatchBuilder | None = None  # the batch's tally (trace_batch)
+        #: (2, n_paths) quasi-random uniforms of the first bounce (KernelSettings.qmc_first_dimensions), step 0
+        self.first_bounce_u: np.ndarray | None = None
+
+    def bounce_uniforms(self, paths: _Paths, rng) -> np.ndarray:
+        """(2, n) uniforms for the new directions of `paths`: the path's quasi-random pair on the first
+        bounce under KernelSettings.qmc_first_dimensions, else pseudo-random ones."""
+        if self.first_bounce_u is not None:
+            return self.first_bounce_u.take(paths.path, axis=1)
+        return rng.random((2, len(paths)))
 
     def start_tally(self, item: WorkItem) -> None:
         settings = self.settings
