@@ -478,7 +478,7 @@ class _Context:
 
         `throughput` (n,) the path throughput at the vertex (power per watt over the sampling
         densities); f the vertex's scattering function toward the target: at a surface vertex
-        (`normals`) rho / pi cos_x (`reflectance`, Lambertian) or f_bsdf(incoming, out) cos_x
+        (`normals`) rho / vertex cos_x (`reflectance`, Lambertian) or f_bsdf(incoming, out) cos_x
         (`materials` = (Materials per vertex, arriving directions)); at a medium vertex the phase
         function p(dot(arriving `in_dirs`, out)). `mis` (n,) or a scalar: the caller's multiple
         importance sampling weight; algorithm 5 from both devices multiplies medium_nee.connection_weight.
@@ -495,63 +495,65 @@ class _Context:
         for lo in range(0, n_pts, chunk):  # chunks bound memory; one chunk for ordinary batches
             hi = min(lo + chunk, n_pts)
             if n_tgt == 1:  # one target: every vertex of the chunk, no index arrays
-                vi = None if (lo, hi) == (0, n_pts) else np.arange(lo, hi)
-                ti = None
+                vertex_rows = None if (lo, hi) == (0, n_pts) else np.arange(lo, hi)
+                column_rows = None
                 y, y_nrm = self.t_pos[:, columns[0]:columns[0] + 1], self.t_nrm[:, columns[0]:columns[0] + 1]
                 y_ids = np.full(hi - lo, self.tgt[columns[0]])
             else:
-                vi = np.repeat(np.arange(lo, hi), n_tgt)
-                ti = np.tile(columns, hi - lo)
-                y, y_nrm, y_ids = self.t_pos.take(ti, axis=1), self.t_nrm.take(ti, axis=1), self.tgt.take(ti)
-            to = y - _rows(points, vi)
+                vertex_rows = np.repeat(np.arange(lo, hi), n_tgt)
+                column_rows = np.tile(columns, hi - lo)
+                y, y_nrm = self.t_pos.take(column_rows, axis=1), self.t_nrm.take(column_rows, axis=1)
+                y_ids = self.tgt.take(column_rows)
+            to = y - _rows(points, vertex_rows)
             d2 = _dot(to, to)
             d = np.sqrt(d2)
             out_dir = to / d
             cos_target = -_dot(out_dir, y_nrm)
             response = targets.response(y_ids, cos_target, -out_dir.T)
-            f = response / d2 * _rows(throughput, vi)
+            f = response / d2 * _rows(throughput, vertex_rows)
             if normals is not None:  # surface vertex: BRDF x cos
-                n_x = _rows(normals, vi)
+                n_x = _rows(normals, vertex_rows)
                 vertex_factor = np.maximum(_dot(out_dir, n_x), 0.0)  # cos_x
                 if materials is not None:
                     mat, arriving = materials
-                    f *= vertex_factor * (mat if vi is None else mat.take(vi)).eval(_rows(arriving, vi), n_x,
-                                                                                     out_dir)
+                    mat = mat if vertex_rows is None else mat.take(vertex_rows)
+                    f *= vertex_factor * mat.eval(_rows(arriving, vertex_rows), n_x, out_dir)
                 else:
-                    f *= vertex_factor * _rows(reflectance, vi) * (1.0 / np.pi)
+                    f *= vertex_factor * _rows(reflectance, vertex_rows) * (1.0 / np.pi)
             else:  # medium vertex: phase function
-                vertex_factor = scene.phase.eval(_dot(_rows(in_dirs, vi), out_dir))
+                vertex_factor = scene.phase.eval(_dot(_rows(in_dirs, vertex_rows), out_dir))
                 f *= vertex_factor
             if mis is not None:
-                f *= mis if np.isscalar(mis) else _rows(mis, vi)
+                f *= mis if np.isscalar(mis) else _rows(mis, vertex_rows)
             live = np.flatnonzero(f > 0)
             if len(live) == 0:
                 continue
-            pi = live if vi is None else vi.take(live)  # vertex of each live estimate
+            vertex = live if vertex_rows is None else vertex_rows.take(live)  # vertex of each live estimate
             f, d, out_dir = f.take(live), d.take(live), out_dir.take(live, axis=1)
-            col = np.full(len(live), columns[0]) if ti is None else ti.take(live)
+            column = np.full(len(live), columns[0]) if column_rows is None else column_rows.take(live)
             both_sides = self.settings.both_sides and medium is not None
             if both_sides:
                 response, vertex_factor = response.take(live), vertex_factor.take(live)
             if not scene.all_visible:  # the shadow ray stops short of the device (it may sit on a surface)
-                seen = np.flatnonzero(~isect.occluded(shadow_origins.take(pi, axis=1).T, out_dir.T,
+                seen = np.flatnonzero(~isect.occluded(shadow_origins.take(vertex, axis=1).T, out_dir.T,
                                                       d - 2.0 * isect.offset))
-                if len(seen) < len(pi):
-                    pi, col, f, d, out_dir = pi.take(seen), col.take(seen), f.take(seen), d.take(seen), \
-                        out_dir.take(seen, axis=1)
+                if len(seen) < len(vertex):
+                    vertex, column, f, d = vertex.take(seen), column.take(seen), f.take(seen), d.take(seen)
+                    out_dir = out_dir.take(seen, axis=1)
                     if both_sides:
                         response, vertex_factor = response.take(seen), vertex_factor.take(seen)
             if medium is not None:
-                tr = medium.transmittance(points.take(pi, axis=1).T, out_dir.T, d)
+                tr = medium.transmittance(points.take(vertex, axis=1).T, out_dir.T, d)
                 f = f * tr
                 if both_sides:  # algorithm 5 from both devices: this run's share (medium_nee.connection_weight)
-                    f = f * connection_weight(self, paths, pi, col, d, tr, response, vertex_factor,
+                    f = f * connection_weight(self, paths, vertex, column, d, tr, response, vertex_factor,
                                               surface=normals is not None, mid_g=mid_g)
-            length = paths.lengths.take(pi) + d
+            length = paths.lengths.take(vertex) + d
             if extra_length is not None:
-                length += extra_length.take(pi)
-            self.record(col, paths.k.take(pi), (paths.s if scatter_order is None else scatter_order).take(pi),
-                        length * (1.0 / SPEED_OF_LIGHT), f, paths.path.take(pi))
+                length += extra_length.take(vertex)
+            s_order = (paths.s if scatter_order is None else scatter_order).take(vertex)
+            self.record(column, paths.k.take(vertex), s_order, length * (1.0 / SPEED_OF_LIGHT), f,
+                        paths.path.take(vertex))
 
     def record(self, target, k, s, delay, power, path) -> None:
         """One group of estimates: local target index, cell (k, s), delay [s], power [W/W], path in the batch."""

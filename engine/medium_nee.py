@@ -157,14 +157,14 @@ def first_medium_factor(ctx, points, transmittance):
     return _device_factor(src, ctx.item.source, points, transmittance)
 
 
-def connection_weight(ctx, paths, pi, ti, d, tr, response, vertex_factor, surface: bool, mid_g=None):
-    """This run's share of the paths whose last vertices `paths`[pi] connect to targets ti (algorithm 5).
+def connection_weight(ctx, paths, vertex, column, d, tr, response, vertex_factor, surface: bool, mid_g=None):
+    """This run's share of the paths whose last vertices `paths`[vertex] connect to the item's targets `column` (algorithm 5).
 
     With F = `_Paths.first` (the source factor of x_1, transmittance included) and
     L = R_tgt / W_tgt c T(x_n -> target) / d^2 (c = |cos| at a surface, 1 in the medium):
     - one vertex (n = 1): F / (F + L);
     - n >= 2: the balance heuristic of the two unidirectional strategies, F rho_1 / (F rho_1 + L rho_n),
-      rho the direction density leaving the end vertex (phase, or 1/pi at a surface);
+      rho the direction density leaving the end vertex (phase, or 1/vertex at a surface);
     - two medium vertices and no reflection (Tx -> x_1 -> x_2 -> Rx, `mid_g` = T / r^2 of
       the edge x_1 -> x_2): the balance heuristic of three strategies, the third being
       `connect_from_target` (x_1 from the transmitter, x_2 from the receiver, joined):
@@ -173,20 +173,20 @@ def connection_weight(ctx, paths, pi, ti, d, tr, response, vertex_factor, surfac
     `response` R_tgt(cos) and `vertex_factor` (cos at a surface vertex, the phase function's value
     at a medium vertex) come from the connection (kernel._Context.connect), which computed them.
     """
-    resp = response / ctx.t_total.take(ti)
+    resp = response / ctx.t_total.take(column)
     if surface:
         c, rho_t = vertex_factor, 1.0 / np.pi
     else:
         c, rho_t = 1.0, vertex_factor
     last = resp * c * tr / (d * d)
-    first = paths.first.take(pi)
-    rho_f = paths.first_rho.take(pi)
-    k, s = paths.k.take(pi), paths.s.take(pi)
+    first = paths.first.take(vertex)
+    rho_f = paths.first_rho.take(vertex)
+    k, s = paths.k.take(vertex), paths.s.take(vertex)
     several = k + s >= 2
     a = np.where(several, first * rho_f, first)
     b = np.where(several, last * rho_t, last)
     if mid_g is not None and not surface:
-        g = mid_g.take(pi)
+        g = mid_g.take(vertex)
         three = (k == 0) & (s == 2)
         a = np.where(three, a * g, a)
         b = np.where(three, b * g + first * last, b)
@@ -257,12 +257,9 @@ def connect_from_target(ctx, mp, points, rng) -> None:
             continue
         from .constants import SPEED_OF_LIGHT
 
-        ctx.out["target"].append(np.full(len(ok), j, np.int64))
-        ctx.out["k"].append(np.zeros(len(ok), np.int64))  # k = 0, s = 2
-        ctx.out["s"].append(np.full(len(ok), 2, np.int64))
-        ctx.out["delay"].append((lengths.take(sel.take(ok)) + r12.take(ok) + r2.take(ok)) / SPEED_OF_LIGHT)
-        ctx.out["power"].append(power.take(ok))
-        ctx.out["path"].append(path.take(sel.take(ok)))
+        ctx.record(np.full(len(ok), j, np.int64), np.zeros(len(ok), np.int64), np.full(len(ok), 2, np.int64),
+                   (lengths.take(sel.take(ok)) + r12.take(ok) + r2.take(ok)) / SPEED_OF_LIGHT, power.take(ok),
+                   path.take(sel.take(ok)))  # cell k = 0, s = 2
 
 
 def _surface_target_factor(ctx, j: int, points, normals):
