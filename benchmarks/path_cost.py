@@ -1,5 +1,9 @@
 """Per-path cost toward the ray-casting limit (issue 13), before against after in one run.
 
+Times are the process's CPU time (`time.process_time`, one thread: numpy and Embree run on the
+calling thread), which other jobs on the host disturb far less than wall time; on an idle host the
+two agree.
+
 Scenes. The clear room: 5 x 5 x 3 m, walls and ceiling 0.8, floor 0.3, Tx (2.5, 2.5, 3) down
 m = 1, Rx (1, 1, 0) up, FOV 90 deg, 1 cm^2. The smoky room: the same with a homogeneous
 medium sigma_s 0.2, sigma_a 0 /m, Henyey-Greenstein g 0.5. Everything runs on one core
@@ -63,9 +67,9 @@ def _simulate(doc: dict, scene=None):
     from owcsim.schemas import SceneSpec
 
     spec = SceneSpec.model_validate(doc)
-    t = time.perf_counter()
+    t = time.process_time()
     res = simulate(spec, scene=scene)
-    return time.perf_counter() - t, res
+    return time.process_time() - t, res
 
 
 COST_CASES = {
@@ -97,12 +101,12 @@ def raw_embree(scene, n_intersect: int, n_occluded: int, batch: int, rng) -> flo
             d = rng.normal(size=(n, 3))
             d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
             dist = np.full(n, 1.0 if query == "OCCLUDED" else 1e30, np.float32)
-            t = time.perf_counter()
+            t = time.process_time()
             if query == "INTERSECT":
                 emb.run(o, d, dists=dist, output=1)
             else:
                 emb.run(o, d, dists=dist, query="OCCLUDED")
-            total += time.perf_counter() - t
+            total += time.process_time() - t
             done += n
     return total
 
@@ -185,10 +189,10 @@ def measure_qmc(replicates: int = 64, paths: int = 2048) -> dict:
         base = kernel_settings(spec, scene)
         for label, flag in (("pseudo-random", False), ("scrambled Sobol", True)):
             settings = dataclasses.replace(base, qmc_first_dimensions=flag)
-            t = time.perf_counter()
+            t = time.process_time()
             means = [sum(trace_batch(scene, WorkItem(d, 0, (0,), r, paths, 11), settings).s1[0, 0] / paths
                          for d in sides) for r in range(replicates)]
-            el = time.perf_counter() - t
+            el = time.process_time() - t
             out[f"{case} {label}"] = {"mean": float(np.mean(means)), "se": float(np.std(means, ddof=1)
                                                                                  / np.sqrt(replicates)),
                                       "var_per_path": float(np.var(means, ddof=1) * paths), "time_s": el,
@@ -407,7 +411,7 @@ def main() -> None:
     if args.profile:
         profiles = {name: {case: profile_split(sys.executable, e, case) for case in ("clear", "smoky")}
                     for name, e in trees.items()}
-    print(f"one core, best of {args.repeats}; host load average {os.getloadavg()[0]:.1f} (2 cores)")
+    print(f"one core, CPU time, best of {args.repeats}; host load average {os.getloadavg()[0]:.1f} (2 cores)")
     print(report(results, profiles, args.markdown))
 
 

@@ -229,7 +229,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         # ====== segment points (algorithms 2-4): single scattering at points along the segment ============
         if segment_scatter:
             _segment_scatter(ctx, paths, t_seg, rng, first=step == 0, prim=prim)
-        # ====== free flight (algorithm 5): collision distance, and equiangular points on the segment =======
+        # ====== free flight (algorithm 5): collision distance; NEE from the collision and equiangular points =
         collided = np.zeros(len(paths), bool)
         ctx.first_bounce_u = first_u[3:5] if first_u is not None and step == 0 else None
         if free_flight:
@@ -238,8 +238,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
             if settings.both_sides and step == 0:
                 paths.first = first_vertex_factor(ctx, paths, prim, t, t_col, collided)
             frames = _EquiangularFrames(ctx, paths, t_seg) if settings.equiangular_points else None
-            if frames is not None:
-                _equiangular_in_scatter(ctx, paths, frames, rng)
+            medium_rows = np.flatnonzero(collided & (paths.s < S))
+            _medium_next_events(ctx, paths, frames, medium_rows, t_col.take(medium_rows), rng)
         elif medium is not None:  # algorithm 1 (and 2-4): the segment's extinction
             paths.weights = paths.weights * medium.transmittance(paths.origins.T, paths.directions.T, t_seg)
         escaped_power += paths.weights[~hit & ~collided].sum()
@@ -251,10 +251,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
             surface_power += sp.weights.sum()
             survivors.append(_surface_vertex(ctx, sp, prim.take(surface_rows), t.take(surface_rows), rng))
         # ====== medium collision (algorithm 5) ==============================================================
-        if free_flight:
-            medium_rows = np.flatnonzero(collided & (paths.s < S))
-            if len(medium_rows):
-                survivors.append(_medium_collision(ctx, paths, medium_rows, t_col.take(medium_rows), frames, rng))
+        if free_flight and len(medium_rows):
+            survivors.append(_medium_collision(ctx, paths, medium_rows, t_col.take(medium_rows), rng))
         paths = _Paths.concat(survivors) if survivors else paths.gather(np.zeros(0, np.int64))
         ctx.flush()  # every estimate of this step went to cells of depth k + s = step + 1
         # ====== Russian roulette ==========================================================================
@@ -312,23 +310,26 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
     return sp.keep_where(alive & (sp.weights > 0))
 
 
-def _free_flight_equiangular_balance(p_ff, n_e):
-    """Algorithm 5's balance heuristic (Veach 1997, ch. 9): (w_ff, w_E) = (p_ff, n_E) / (p_ff + n_E).
+def _scattering_point_throughput(weights, transmittance, sigma_t, sigma_s, n_e):
+    """Algorithm 5's balance heuristic (Veach 1997, ch. 9) in one place: the throughput of a scattering point.
 
-    Two techniques place a scattering point at distance s on a segment: the free-flight collision,
-    density p_ff(s) = sigma_t(s) T(o -> s), and `equiangular_points` equiangular points per target,
-    density n_E(s) (segments.EquiangularFrame.density). The collision's next-event estimate gets w_ff,
-    each equiangular point's w_E; both estimate the light scattered once more on this segment.
+    Two techniques place scattering points at distance s on a segment o + s w: the free-flight
+    collision, density p_ff(s) = sigma_t(s) T(o -> s), and `equiangular_points` equiangular points per
+    target, density n_E(s) (segments.EquiangularFrame.density). Every point of either set makes a
+    next-event estimate with MIS weight p / (p_ff + n_E) over its own density p, i.e. throughput
+        w T(o -> s) sigma_s(s) / (p_ff(s) + n_E(s)),
+    the same formula for both (for the collision it is w x albedo x p_ff / (p_ff + n_E)); without
+    equiangular points (n_E = 0) it is the collision's w x albedo.
     """
+    p_ff = sigma_t * transmittance
     total = p_ff + n_e
-    safe = np.where(total > 0, total, 1.0)
-    return np.where(total > 0, p_ff / safe, 0.0), np.where(total > 0, n_e / safe, 0.0)
+    return np.where(total > 0, weights * transmittance * sigma_s / np.where(total > 0, total, 1.0), 0.0)
 
 
 class _EquiangularFrames:
     """Algorithm 5, one step: the segments that may scatter once more (s < S, finite) and, per target,
     their equiangular frame, computed once and shared by the equiangular points and the collision's
-    balance heuristic."""
+    density n_E."""
 
     def __init__(self, ctx: "_Context", paths: _Paths, t_seg):
         self.rows = np.flatnonzero((paths.s < ctx.settings.max_scattering) & np.isfinite(t_seg))
@@ -339,24 +340,32 @@ class _EquiangularFrames:
         self.frames = [EquiangularFrame(o, w, ctx.t_pos[:, j:j + 1], 0.0, self.end) for j in range(len(ctx.tgt))]
 
 
-def _equiangular_in_scatter(ctx: "_Context", paths: _Paths, eq: _EquiangularFrames, rng) -> None:
-    """Algorithm 5: next-event estimates of in-scattering at equiangular points of each segment.
+def _medium_next_events(ctx: "_Context", paths: _Paths, eq: _EquiangularFrames | None, collision_rows, t_col,
+                        rng) -> None:
+    """Algorithm 5: next-event estimation from the scattering points of this step's segments.
 
-    A point at s on the segment o + s w estimates with throughput w T(o -> s) sigma_s(s) / n_E(s)
-    and MIS weight w_E of `_free_flight_equiangular_balance`; the path continues from the collision only.
+    The points of a segment are its free-flight collision (paths `collision_rows`, at t_col) and,
+    with `equiangular_points`, that many stratified equiangular points per target (segments.py);
+    all connect with the phase function at (k, s + 1), with the throughput of
+    `_scattering_point_throughput`. The path itself continues from the collision only
+    (`_medium_collision`).
     """
     settings, medium = ctx.settings, ctx.scene.medium
-    n_eq = settings.equiangular_points
-    if len(eq.rows) == 0:
-        return
-    ok = np.flatnonzero(eq.end > 0)
-    seg = np.repeat(ok, n_eq)
-    if len(seg) == 0:
-        return
-    xi = (np.tile(np.arange(n_eq), len(ok)) + 0.0) / n_eq  # stratum starts; jitter added per target
-    for j, frame in enumerate(eq.frames):
-        s = np.clip(frame.sample(seg, xi + rng.random(len(seg)) / n_eq), 0.0, eq.end.take(seg))
-        pp = paths.gather(eq.rows.take(seg))
+    n_eq = settings.equiangular_points if eq is not None else 0
+    seg = np.repeat(np.flatnonzero(eq.end > 0), n_eq) if n_eq else np.zeros(0, np.int64)
+    xi = np.tile(np.arange(n_eq), len(seg) // n_eq) / n_eq if n_eq else None  # stratum starts
+    for j in range(len(ctx.tgt)):
+        if n_eq:
+            frame = eq.frames[j]
+            s_eq = np.clip(frame.sample(seg, xi + rng.random(len(seg)) / n_eq), 0.0, eq.end.take(seg))
+            rows = np.concatenate([eq.rows.take(seg), collision_rows])
+            s = np.concatenate([s_eq, t_col])
+            frame_rows = np.concatenate([seg, eq.row_of.take(collision_rows)])
+        else:
+            rows, s = collision_rows, t_col
+        if len(rows) == 0:
+            continue
+        pp = paths.gather(rows)
         points = pp.origins + s * pp.directions
         sigma_t, sigma_s = medium.coefficients_at(points.T)
         inside = np.flatnonzero(sigma_s > 0)
@@ -365,44 +374,31 @@ def _equiangular_in_scatter(ctx: "_Context", paths: _Paths, eq: _EquiangularFram
                 continue
             pp, points, s, sigma_t, sigma_s = (pp.gather(inside), points.take(inside, axis=1), s.take(inside),
                                                sigma_t.take(inside), sigma_s.take(inside))
-            n_e = frame.density(s, n_eq, seg.take(inside))
-        else:
-            n_e = frame.density(s, n_eq, seg)
+            if n_eq:
+                frame_rows = frame_rows.take(inside)
         transmittance = medium.transmittance(pp.origins.T, pp.directions.T, s)
-        _, w_eq = _free_flight_equiangular_balance(sigma_t * transmittance, n_e)
+        n_e = frame.density(s, n_eq, frame_rows) if n_eq else 0.0
+        throughput = _scattering_point_throughput(pp.weights, transmittance, sigma_t, sigma_s, n_e)
         mid_g = None
         if settings.both_sides:  # a point on the first segment is the path's first vertex (medium_nee)
             pp.first = np.where(pp.k + pp.s == 0, first_medium_factor(ctx, points, transmittance), pp.first)
-            mid_g = transmittance / (s * s)
+            mid_g = transmittance / (s * s)  # edge factor T / r^2 of the edge that reached the point
         pp.s = pp.s + 1
-        ctx.connect(points, points, pp.weights * transmittance * sigma_s / n_e, pp, in_dirs=pp.directions,
-                    mis=w_eq, target=j, extra_length=s, mid_g=mid_g)
+        ctx.connect(points, points, throughput, pp, in_dirs=pp.directions, target=j, extra_length=s, mid_g=mid_g)
 
 
-def _medium_collision(ctx: "_Context", paths: _Paths, rows, t_col, eq: _EquiangularFrames | None, rng) -> _Paths:
-    """Algorithm 5: paths `rows` collide at t_col: throughput x albedo, NEE with the phase function
-    (MIS weight w_ff against the equiangular points; from both devices, medium_nee's weights), and a
-    new direction from the phase function. Returns the paths that go on."""
+def _medium_collision(ctx: "_Context", paths: _Paths, rows, t_col, rng) -> _Paths:
+    """Algorithm 5: paths `rows` collide at t_col (their estimates: `_medium_next_events`): throughput x
+    albedo, the third strategy of medium_nee for Tx -> x_1 -> x_2 -> Rx, and a new direction from the
+    phase function. Returns the paths that go on."""
     settings, scene = ctx.settings, ctx.scene
     medium, phase = scene.medium, scene.phase
     K, S = settings.max_reflections, settings.max_scattering
     mp = paths.gather(rows)
     points = mp.origins + t_col * mp.directions
-    sigma_t, sigma_s = medium.coefficients_at(points.T)
     mp.lengths = mp.lengths + t_col
-    mp.weights = mp.weights * np.where(sigma_t > 0, sigma_s / np.where(sigma_t > 0, sigma_t, 1.0), 0.0)
+    mp.weights = mp.weights * medium.albedo_at(points.T)
     mp.s = mp.s + 1
-    seg_T = medium.transmittance(mp.origins.T, mp.directions.T, t_col) \
-        if eq is not None or settings.both_sides else None
-    mid_g = seg_T / (t_col * t_col) if settings.both_sides else None  # edge factor x_1 -> x_2 (medium_nee)
-    if eq is not None:
-        frame_rows = eq.row_of.take(rows)
-        for j, frame in enumerate(eq.frames):
-            w_ff, _ = _free_flight_equiangular_balance(sigma_t * seg_T,
-                                                       frame.density(t_col, settings.equiangular_points, frame_rows))
-            ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions, mis=w_ff, target=j, mid_g=mid_g)
-    else:
-        ctx.connect(points, points, mp.weights, mp, in_dirs=mp.directions, mid_g=mid_g)
     if settings.both_sides and S >= 2 and ctx.item.direction == "forward":  # third strategy, Tx -> x1 -> x2 -> Rx
         connect_from_target(ctx, mp, points, rng)
     u = ctx.bounce_uniforms(mp, rng)
