@@ -560,7 +560,7 @@ class _Context:
         """Tally this step's estimates (they all fall in cells of one depth k + s)."""
         if not self.out["power"]:
             return
-        cat = {k: np.concatenate(v) for k, v in self.out.items()}
+        cat = {k: v[0] if len(v) == 1 else np.concatenate(v) for k, v in self.out.items()}
         self.out = {k: [] for k in self.KEYS}
         self.builder.add_step(cat["target"], cat["k"], cat["s"], cat["delay"], cat["power"], cat["path"])
 
