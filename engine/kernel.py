@@ -254,7 +254,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         if free_flight and len(medium_rows):
             survivors.append(_medium_collision(ctx, paths, medium_rows, t_col.take(medium_rows), rng))
         paths = _Paths.concat(survivors) if survivors else paths.gather(np.zeros(0, np.int64))
-        ctx.flush()  # every estimate of this step went to cells of depth k + s = step + 1
+        ctx.flush(step + 1)  # the estimates of cells of depth k + s = step + 1 are complete
         # ====== Russian roulette ==========================================================================
         if settings.russian_roulette and len(paths):
             paths = _roulette(paths, settings, w0, rng)
@@ -444,6 +444,7 @@ class _Context:
         self.t_nrm = np.ascontiguousarray(targets.normals[tgt].T)
         self.t_total = np.array([targets.total_response(int(t)) for t in tgt], float)
         self.out = {k: [] for k in self.KEYS}
+        self.pending: dict[int, list[tuple]] = {}  # depth k + s -> estimate groups waiting for their step
         self.mirrors = scene.mirror_planes
         self.builder: BatchBuilder | None = None  # the batch's tally (trace_batch)
         #: (2, n_paths) quasi-random uniforms of the first bounce (KernelSettings.qmc_first_dimensions), step 0
@@ -458,12 +459,11 @@ class _Context:
 
     def start_tally(self, item: WorkItem) -> None:
         settings = self.settings
-        several = settings.segment_scatter or (settings.free_flight and settings.equiangular_points > 0)
-        # Mirror images, and the estimates of both devices' strategies (medium_nee), may reach one order cell
-        # of a path in two kernel steps: its per-cell sums are then formed over the whole batch.
-        across = bool(self.mirrors) or settings.both_sides or settings.in_then_out
-        self.builder = BatchBuilder(settings.tally, item_links(self.scene, item), item.n_paths, several,
-                                    across_steps=across)
+        # A path may add several estimates to one order cell in one step: points on segments, equiangular
+        # points with the collision, mirror images made one step early, the third strategy of medium_nee.
+        several = (settings.segment_scatter or (settings.free_flight and settings.equiangular_points > 0)
+                   or bool(self.mirrors) or settings.both_sides or settings.in_then_out)
+        self.builder = BatchBuilder(settings.tally, item_links(self.scene, item), item.n_paths, several)
 
     def connect(self, points, shadow_origins, throughput, paths, *, normals=None, reflectance=None, materials=None,
                 in_dirs=None, mis=None, target: int | None = None, scatter_order=None, extra_length=None,
@@ -556,13 +556,21 @@ class _Context:
         for key, value in zip(self.KEYS, (target, k, s, delay, power, path)):
             self.out[key].append(value)
 
-    def flush(self) -> None:
-        """Tally this step's estimates (they all fall in cells of one depth k + s)."""
-        if not self.out["power"]:
-            return
-        cat = {k: v[0] if len(v) == 1 else np.concatenate(v) for k, v in self.out.items()}
+    def flush(self, depth: int | None = None) -> None:
+        """Tally the estimates of cells of depth k + s <= `depth` (all with None).
+
+        Estimates of deeper cells made early (the branches of algorithms 2-4, mirror images, the third
+        strategy of medium_nee) wait for their depth, so that every estimate of a (path, cell) reaches
+        the tally in one call (tally.BatchBuilder.add_step sums them per path before squaring). Every
+        group of estimates lies in cells of one depth (each comes from paths of one depth).
+        """
+        for group in zip(*(self.out[key] for key in self.KEYS)):
+            if len(group[4]):
+                self.pending.setdefault(int(group[1][0] + group[2][0]), []).append(group)
         self.out = {k: [] for k in self.KEYS}
-        self.builder.add_step(cat["target"], cat["k"], cat["s"], cat["delay"], cat["power"], cat["path"])
+        for d in sorted(d for d in self.pending if depth is None or d <= depth):
+            groups = self.pending.pop(d)
+            self.builder.add_step(*(g[0] if len(groups) == 1 else np.concatenate(g) for g in zip(*groups)))
 
     def reduce(self, n_paths: int) -> BatchTally:
         self.flush()

@@ -19,8 +19,9 @@ Only what the job asks is tallied (schemas/outputs.py), so memory and time scale
 The dense per-path arrays hold targets x paths numbers: the plan caps the batch so that
 this product stays under `simulate.PATH_TARGET_BUDGET` whatever the number of receivers.
 
-Each path adds to a (target, k, s) cell only during one step of the kernel (every step
-raises k + s by one), so per-(path, cell) sums are formed step by step.
+Each path adds to a (target, k, s) cell only in one call of `BatchBuilder.add_step` (the kernel
+hands over the estimates of one depth k + s at a time, estimates of deeper cells made early
+waiting for their step), so per-(path, cell) sums are formed step by step.
 Batches are merged in batch order, so results are bit-identical whatever the number of
 workers. Batch groups (batch index mod N_GROUPS) keep per-bin power and per-link H0 for
 batch-spread standard errors, the jackknife, and the reliability of the error bars.
@@ -137,13 +138,10 @@ class BatchBuilder:
     order s, delay [s], power [W/W], path index in the batch.
     """
 
-    def __init__(self, plan: TallyPlan, links: np.ndarray, n_paths: int, several_per_cell: bool,
-                 across_steps: bool = False):
+    def __init__(self, plan: TallyPlan, links: np.ndarray, n_paths: int, several_per_cell: bool):
         self.plan, self.links, self.n_paths = plan, np.asarray(links, np.int64), n_paths
+        #: a path may add several estimates to one order cell in one step: sum them before squaring
         self.several_per_cell = several_per_cell
-        #: a path may add to one order cell in several steps (mirror images): per-cell sums over the batch
-        self.across_steps = across_steps
-        self._order_parts: list[tuple[np.ndarray, np.ndarray]] = []
         n_t = len(self.links)
         self.abc = np.zeros((3, n_t * n_paths))
         bins = plan.bins
@@ -164,6 +162,8 @@ class BatchBuilder:
         n_cells = self.n_ord * plan.n_orders * plan.n_scatter
         self.order_sum = np.zeros(n_cells)
         self.order_sumsq = np.zeros(n_cells)
+        #: scratch of `_add_squared_path_sums`: one representative cell per (path, order-split target)
+        self._cell_of_owner = np.zeros(n_paths * self.n_ord, np.int64) if several_per_cell else None
 
     def add_step(self, target, k, s, delay, power, path) -> None:
         if len(power) == 0:
@@ -186,18 +186,38 @@ class BatchBuilder:
             slot = self.order_local.take(target)
             sel = np.flatnonzero(slot >= 0)
             if len(sel):
-                n_cells = len(self.order_sum)
                 cell = (slot.take(sel) * plan.n_orders + k.take(sel)) * plan.n_scatter + s.take(sel)
                 p = power.take(sel)
                 _accumulate(self.order_sum, cell, p)
-                if self.across_steps:
-                    self._order_parts.append((path.take(sel) * n_cells + cell, p))
-                elif self.several_per_cell:  # several estimates of one path in one cell: sum before squaring
-                    keys, inverse = np.unique(path.take(sel) * n_cells + cell, return_inverse=True)
-                    per_path = np.bincount(inverse, p, len(keys))
-                    self.order_sumsq += np.bincount(keys % n_cells, per_path * per_path, n_cells)
+                if self.several_per_cell:  # several estimates of one path in one cell: sum before squaring
+                    self._add_squared_path_sums(path.take(sel) * self.n_ord + slot.take(sel), cell, p)
                 else:
                     _accumulate(self.order_sumsq, cell, p * p)
+
+    def _add_squared_path_sums(self, owner, cell, p) -> None:
+        """order_sumsq[c] += (sum of the p of each owner (path, target) in cell c)^2, without sorting.
+
+        Rounds: every owner with estimates left picks one of its cells (the last one written to a
+        scratch indexed by owner); the estimates in that cell are summed per owner with `np.bincount`
+        and squared; the others wait for the next round. An owner has estimates in one to three cells
+        per step (the cells of one depth k + s: surface, medium and segment-point estimates), so a
+        step costs a few passes over its estimates instead of a sort (np.unique) of them.
+        """
+        scratch = self._cell_of_owner
+        while len(owner):
+            scratch[owner] = cell
+            mine = scratch.take(owner) == cell
+            if mine.all():
+                o, w = owner, p
+                owner = cell = p = owner[:0]
+            else:
+                rest = ~mine
+                o, w = owner[mine], p[mine]
+                owner, cell, p = owner[rest], cell[rest], p[rest]
+            lo, hi = int(o.min()), int(o.max()) + 1
+            sums = np.bincount(o - lo, w, hi - lo)
+            touched = np.flatnonzero(np.bincount(o - lo, minlength=hi - lo))
+            _accumulate(self.order_sumsq, scratch.take(touched + lo), sums.take(touched) ** 2)
 
     def _bin(self, slot, k, s, delay, power) -> None:
         bins, plan = self.plan.bins, self.plan
@@ -231,12 +251,6 @@ class BatchBuilder:
             ch = np.einsum("gt,qtn->qgn", channel_weights, abc)
             ch_s1 = ch.sum(axis=2).T
             ch_s2 = np.einsum("qgn,rgn->gqr", ch, ch)
-        if self._order_parts:  # per-(path, cell) sums over the whole batch, then their squares
-            n_cells = len(self.order_sum)
-            keys, inverse = np.unique(np.concatenate([k for k, _ in self._order_parts]), return_inverse=True)
-            per_path = np.bincount(inverse, np.concatenate([p for _, p in self._order_parts]), len(keys))
-            self.order_sumsq = np.bincount(keys % n_cells, per_path * per_path, n_cells)
-            self._order_parts = []
         bins = plan.bins
         cir_sel = np.flatnonzero(self.cir_local >= 0)
         ord_sel = np.flatnonzero(self.order_local >= 0)
