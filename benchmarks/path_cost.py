@@ -214,7 +214,7 @@ def measure(what: list[str]) -> dict:
             out[f"accuracy {case}"] = measure_accuracy(case)
     if "algorithms" in what:
         out["algorithms"] = measure_algorithms()
-    if "qmc" in what:
+    if "qmc" in what and "qmc_first_dimensions" in kernel.KernelSettings.__dataclass_fields__:  # not in the baseline
         out["qmc"] = measure_qmc()
     return out
 
@@ -300,7 +300,9 @@ def baseline_env(rev: str) -> dict:
 
 def run_tree(env: dict, what: list[str]) -> dict:
     cmd = [sys.executable, __file__, "--measure", ",".join(what)]
-    out = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True)
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    if out.returncode:
+        raise RuntimeError(f"{env.get('OWCSIM_TREE', 'this tree')}: {out.stderr[-2000:]}")
     return json.loads(out.stdout.splitlines()[-1])
 
 
@@ -308,7 +310,7 @@ def _best(runs: list[dict]) -> dict:
     """Per figure, the run with the least time (the others are slowed by host load)."""
     best = {}
     for key in runs[0]:
-        if key in ("tree", "kernel", "algorithms", "qmc"):
+        if key in ("tree", "kernel", "algorithms", "qmc") or key not in runs[-1]:
             best[key] = runs[0][key]
         elif key == "rays":
             best[key] = {sub: min((r[key][sub] for r in runs), key=lambda v: v["time_s"]) for sub in runs[0][key]}

@@ -171,10 +171,13 @@ class BatchBuilder:
         plan, n = self.plan, self.n_paths
         # --- per-path moments of every link ------------------------------------------------
         key = target * n + path
+        lo, hi = int(key.min()), int(key.max()) + 1  # the band of (target, path) the step touches
+        if lo:
+            key = key - lo
         wt = power * delay
-        _accumulate(self.abc[0], key, power)
-        _accumulate(self.abc[1], key, wt)
-        _accumulate(self.abc[2], key, wt * delay)
+        self.abc[0, lo:hi] += np.bincount(key, power, hi - lo)
+        self.abc[1, lo:hi] += np.bincount(key, wt, hi - lo)
+        self.abc[2, lo:hi] += np.bincount(key, wt * delay, hi - lo)
         # --- binned CIR -----------------------------------------------------------------------
         if self.n_cir:
             slot = self.cir_local.take(target)
