@@ -203,7 +203,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     ctx.start_tally(item)
 
     # --- emission: directions with pdf R_source / W_source, throughput W_source ----------------------------
-    w0 = sources.total_response(i)
+    w0 = ctx.w0 = sources.total_response(i)
     if settings.qmc_first_dimensions:
         from scipy.stats import qmc  # imported here: scipy costs 0.3-1.5 s to import
 
@@ -253,11 +253,9 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         # ====== medium collision (algorithm 5) ==============================================================
         if free_flight and len(medium_rows):
             survivors.append(_medium_collision(ctx, paths, medium_rows, t_col.take(medium_rows), rng))
+        # ====== next step: the survivors (each event applied Russian roulette, `_roulette`) ==================
         paths = _Paths.concat(survivors) if survivors else paths.gather(np.zeros(0, np.int64))
         ctx.flush(step + 1)  # the estimates of cells of depth k + s = step + 1 are complete
-        # ====== Russian roulette ==========================================================================
-        if settings.russian_roulette and len(paths):
-            paths = _roulette(paths, settings, w0, rng)
         if len(paths) == 0:
             break
 
@@ -307,7 +305,7 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
     K, S = settings.max_reflections, settings.max_scattering
     alive = (sp.k < K) | ((settings.free_flight and scene.medium is not None) & (sp.s < S)) | \
         ((settings.segment_scatter and scene.medium is not None) & (sp.k <= K))
-    return sp.keep_where(alive & (sp.weights > 0))
+    return _roulette(ctx, sp, alive & (sp.weights > 0), rng)
 
 
 def _scattering_point_throughput(weights, transmittance, sigma_t, sigma_s, n_e):
@@ -409,23 +407,25 @@ def _medium_collision(ctx: "_Context", paths: _Paths, rows, t_col, rng) -> _Path
         if at_first.any():
             mp.first_rho = np.where(at_first, phase.eval(_dot(arriving, mp.directions)), mp.first_rho)
     mp.origins = points
-    return mp.keep_where(((mp.k < K) | (mp.s < S)) & (mp.weights > 0))
+    return _roulette(ctx, mp, ((mp.k < K) | (mp.s < S)) & (mp.weights > 0), rng)
 
 
-def _roulette(paths: _Paths, settings: KernelSettings, w0: float, rng) -> _Paths:
-    """Russian roulette from depth k + s >= rr_start_depth: survival q = min(1, w / (theta w0)), w /= q."""
-    at = np.flatnonzero(paths.k + paths.s >= settings.rr_start_depth)
-    if len(at) == 0:
-        return paths
-    q = np.minimum(1.0, paths.weights.take(at) * (1.0 / (settings.rr_threshold * w0)))
-    survive = rng.random(len(at)) < q
-    paths.weights[at] = paths.weights.take(at) / np.where(survive, q, 1.0)
-    dead = at[~survive]
-    if len(dead) == 0:
-        return paths
-    keep = np.ones(len(paths), bool)
-    keep[dead] = False
-    return paths.gather(np.flatnonzero(keep))
+def _roulette(ctx: "_Context", paths: _Paths, alive, rng) -> _Paths:
+    """Russian roulette on the paths that go on, folded into the step's one compaction.
+
+    From depth k + s >= rr_start_depth a path survives with q = min(1, w / (theta w0)) (theta =
+    `rr_threshold`, w0 the source's weight) and its throughput becomes w / q: unbiased. Returns the
+    paths where `alive` holds and the roulette spared them, gathered once.
+    """
+    settings = ctx.settings
+    if settings.russian_roulette:
+        at = np.flatnonzero(alive & (paths.k + paths.s >= settings.rr_start_depth))
+        if len(at):
+            q = np.minimum(1.0, paths.weights.take(at) * (1.0 / (settings.rr_threshold * ctx.w0)))
+            survive = rng.random(len(at)) < q
+            paths.weights[at] = paths.weights.take(at) / np.where(survive, q, 1.0)
+            alive[at[~survive]] = False
+    return paths.keep_where(alive)
 
 
 def _rows(a, idx):
@@ -444,6 +444,7 @@ class _Context:
         self.t_nrm = np.ascontiguousarray(targets.normals[tgt].T)
         self.t_total = np.array([targets.total_response(int(t)) for t in tgt], float)
         self.out = {k: [] for k in self.KEYS}
+        self.w0 = 1.0  # the source's weight W_source (trace_batch), the roulette's scale
         self.pending: dict[int, list[tuple]] = {}  # depth k + s -> estimate groups waiting for their step
         self.mirrors = scene.mirror_planes
         self.builder: BatchBuilder | None = None  # the batch's tally (trace_batch)
