@@ -180,22 +180,33 @@ class BatchBuilder:
         self.abc[2, lo:hi] += np.bincount(key, wt * delay, hi - lo)
         # --- binned CIR -----------------------------------------------------------------------
         if self.n_cir:
-            slot = self.cir_local.take(target)
-            sel = np.flatnonzero(slot >= 0)
-            if len(sel):
+            slot, sel = self._ranked(self.cir_local, target)
+            if sel is None:
+                self._bin(slot, k, s, delay, power)
+            elif len(sel):
                 self._bin(slot.take(sel), k.take(sel), s.take(sel), delay.take(sel), power.take(sel))
         # --- order split ----------------------------------------------------------------------
         if self.n_ord:
-            slot = self.order_local.take(target)
-            sel = np.flatnonzero(slot >= 0)
-            if len(sel):
-                cell = (slot.take(sel) * plan.n_orders + k.take(sel)) * plan.n_scatter + s.take(sel)
-                p = power.take(sel)
-                _accumulate(self.order_sum, cell, p)
-                if self.several_per_cell:  # several estimates of one path in one cell: sum before squaring
-                    self._add_squared_path_sums(path.take(sel) * self.n_ord + slot.take(sel), cell, p)
-                else:
-                    _accumulate(self.order_sumsq, cell, p * p)
+            slot, sel = self._ranked(self.order_local, target)
+            if sel is not None:
+                if len(sel) == 0:
+                    return
+                slot, k, s, power, path = slot.take(sel), k.take(sel), s.take(sel), power.take(sel), path.take(sel)
+            cell = (slot * plan.n_orders + k) * plan.n_scatter + s
+            _accumulate(self.order_sum, cell, power)
+            if self.several_per_cell:  # several estimates of one path in one cell: sum before squaring
+                self._add_squared_path_sums(path * self.n_ord + slot, cell, power)
+            else:
+                _accumulate(self.order_sumsq, cell, power * power)
+
+    def _ranked(self, local, target):
+        """(slot of each estimate, the estimates with a slot or None for all): `local` maps the batch's
+        targets to CIR or order-split slots (-1: none); one target (the usual batch) needs no gathers."""
+        if len(local) == 1:
+            return local[0], (None if local[0] >= 0 else np.zeros(0, np.int64))
+        slot = local.take(target)
+        sel = np.flatnonzero(slot >= 0)
+        return slot, (None if len(sel) == len(slot) else sel)
 
     def _add_squared_path_sums(self, owner, cell, p) -> None:
         """order_sumsq[c] += (sum of the p of each owner (path, target) in cell c)^2, without sorting.
@@ -227,10 +238,16 @@ class BatchBuilder:
         b = (delay - bins.t_min) * (1.0 / bins.dt)
         inside = (b >= 0) & (b < bins.n)
         if not inside.all():  # only bins inside the window are cast (a far arrival's index may not fit an int64)
-            self.early += np.bincount(slot, np.where(b < 0, power, 0.0), self.n_cir)
-            self.late += np.bincount(slot, np.where(b >= bins.n, power, 0.0), self.n_cir)
+            early, late = np.where(b < 0, power, 0.0), np.where(b >= bins.n, power, 0.0)
             sel = np.flatnonzero(inside)
-            slot, k, s, b, power = slot.take(sel), k.take(sel), s.take(sel), b.take(sel), power.take(sel)
+            if np.ndim(slot) == 0:  # one slot (`add_step` with one target)
+                self.early[slot] += early.sum()
+                self.late[slot] += late.sum()
+            else:
+                self.early += np.bincount(slot, early, self.n_cir)
+                self.late += np.bincount(slot, late, self.n_cir)
+                slot = slot.take(sel)
+            k, s, b, power = k.take(sel), s.take(sel), b.take(sel), power.take(sel)
         ib = b.astype(np.int64)
         _accumulate(self.cir, slot * bins.n + ib, power)
         if self.cir_k is not None:
