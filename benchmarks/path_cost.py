@@ -263,11 +263,11 @@ def profile_split(python: str, env: dict, case: str) -> dict:
         os.unlink(raw)
         total = max(sum(counts.values()), 1)
         return {"tool": "py-spy --native", **{k: v / total for k, v in counts.items()}}
-    code = ("import cProfile, pstats, sys; sys.argv = ['x', '--profile-target', %r]; "
-            "sys.path.insert(0, %r); import benchmarks.path_cost as b; from owcsim.engine import geometry as g; "
-            "p = cProfile.Profile(); p.enable(); b._profile_target(%r); p.disable(); s = pstats.Stats(p); "
+    code = (f"import cProfile, pstats, sys; sys.argv = ['x', '--profile-target', {case!r}]; "
+            f"sys.path.insert(0, {str(ROOT)!r}); import benchmarks.path_cost as b; "
+            f"p = cProfile.Profile(); p.enable(); b._profile_target({case!r}); p.disable(); s = pstats.Stats(p); "
             "tot = s.total_tt; emb = sum(v[3] for k, v in s.stats.items() if k[2] in ('intersect', 'occluded') "
-            "and k[0].endswith('geometry.py')); print(emb / tot)") % (case, str(ROOT), case)
+            "and k[0].endswith('geometry.py')); print(emb / tot)")
     emb = float(subprocess.run([python, "-c", code], env=env, check=True, capture_output=True,
                                text=True).stdout.split()[-1])
     return {"tool": "cProfile (Embree = time in Intersector.intersect/occluded)", "embree": emb,
@@ -360,9 +360,9 @@ def report(results: dict[str, dict], profiles: dict[str, dict], markdown: bool) 
         a, b = (results[n]["algorithms"] for n in names)
         for key in a:
             z = (b[key]["dc_gain"] - a[key]["dc_gain"]) / np.hypot(a[key]["dc_gain_stderr"], b[key]["dc_gain_stderr"])
-            lines.append(f"| {key.split()[0]} room, algorithm {key.split()[1]}: H0 | {a[key]['dc_gain']:.5e} "
-                         f"+- {a[key]['dc_gain_stderr']:.1e} | {b[key]['dc_gain']:.5e} +- {b[key]['dc_gain_stderr']:.1e}"
-                         f" | z {z:+.2f}, time x{b[key]['time_s'] / a[key]['time_s']:.2f} |")
+            before, after = (f"{r[key]['dc_gain']:.5e} +- {r[key]['dc_gain_stderr']:.1e}" for r in (a, b))
+            lines.append(f"| {key.split()[0]} room, algorithm {key.split()[1]}: H0 | {before} | {after} "
+                         f"| z {z:+.2f}, time x{b[key]['time_s'] / a[key]['time_s']:.2f} |")
     if "qmc" in results[names[-1]]:
         q = results[names[-1]]["qmc"]
         for case in ("clear", "smoky"):

@@ -37,6 +37,15 @@ and never sampled (los.py). Russian roulette from `rr_start_depth` (k + s) on, w
 survival probability min(1, w / (theta initial w)) (`rr_threshold` theta), keeps every
 estimator unbiased.
 
+Code map (one section per event, as in pbrt-v4's VolPathIntegrator and Mitsuba 3's volpath):
+`trace_batch` runs the steps: intersect, segment points (`_segment_scatter`, `segment_points`),
+free flight with its next-event estimates (`_medium_next_events`, whose balance heuristic is
+`_scattering_point_throughput`), surface vertex (`_surface_vertex`), medium collision
+(`_medium_collision`), roulette (`_roulette`, inside each event's one compaction). Every
+next-event estimate toward a target goes through `_Context.connect`: the measurement equation
+in one place (it evaluates the BRDF or the phase function itself; callers pass the path
+throughput and their MIS weight). Path state is a structure of arrays (`_Paths`).
+
 Every loop here is over steps of the paths; all work inside is array operations.
 """
 from __future__ import annotations
@@ -47,13 +56,20 @@ import numpy as np
 
 from .constants import SPEED_OF_LIGHT
 from .devices import Devices
-from .sampling import cosine_about_soa
-from .segments import EquiangularFrame, equiangular, equiangular_density, time_density, time_strata
-from .scene import Scene
-from .tally import BatchBuilder, BatchTally, TallyPlan, TimeBins
+from .medium_nee import (
+    connect_from_target,
+    connection_weight,
+    first_medium_factor,
+    first_segment_branch,
+    first_vertex_factor,
+    side_weight,
+    target_factor,
+)
 from .mirrors import connect_mirrors, connect_source_mirrors
-from .medium_nee import (connection_weight, connect_from_target, first_medium_factor, first_segment_branch,
-                         first_vertex_factor, side_weight, target_factor)
+from .sampling import cosine_about_soa
+from .scene import Scene
+from .segments import EquiangularFrame, equiangular, equiangular_density, time_density, time_strata
+from .tally import BatchBuilder, BatchTally, TallyPlan, TimeBins
 
 #: Upper bound on paths x targets connected in one array operation (memory bound).
 NEE_CHUNK = 1 << 20
@@ -690,7 +706,8 @@ def _direction_mis(ctx: _Context, j: int, pp: _Paths, points, s, density):
     to_p = points - o[:, None]
     r = np.sqrt(_dot(to_p, to_p))
     w_dir = to_p / r
-    q_other = dst_set.response(np.full(n, j), _dot(w_dir, dst_set.normals[j][:, None]), w_dir.T) / dst_set.total_response(j)
+    q_other = dst_set.response(np.full(n, j), _dot(w_dir, dst_set.normals[j][:, None]), w_dir.T) \
+        / dst_set.total_response(j)
     live = np.flatnonzero(q_other > 0)
     if len(live):
         origins = np.repeat(o[:, None], len(live), axis=1)

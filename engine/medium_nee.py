@@ -158,7 +158,7 @@ def first_medium_factor(ctx, points, transmittance):
 
 
 def connection_weight(ctx, paths, vertex, column, d, tr, response, vertex_factor, surface: bool, mid_g=None):
-    """This run's share of the paths whose last vertices `paths`[vertex] connect to the item's targets `column` (algorithm 5).
+    """This run's share of the paths whose last vertices `paths`[vertex] connect to the targets `column` (algorithm 5).
 
     With F = `_Paths.first` (the source factor of x_1, transmittance included) and
     L = R_tgt / W_tgt c T(x_n -> target) / d^2 (c = |cos| at a surface, 1 in the medium):
