@@ -230,7 +230,7 @@ class BatchBuilder:
                 owner, cell, p = owner[rest], cell[rest], p[rest]
             lo, hi = int(o.min()), int(o.max()) + 1
             sums = np.bincount(o - lo, w, hi - lo)
-            touched = np.flatnonzero(np.bincount(o - lo, minlength=hi - lo))
+            touched = np.flatnonzero(sums)  # estimates are >= 0: an owner summing to 0 adds 0 anyway
             _accumulate(self.order_sumsq, scratch.take(touched + lo), sums.take(touched) ** 2)
 
     def _bin(self, slot, k, s, delay, power) -> None:
