@@ -168,7 +168,8 @@ class _Paths:
 
     #: `weights`: the path throughput (power per watt carried so far, divided by the sampling densities);
     #: `first`: the source-side density factor of the path's first vertex (medium_nee.first_vertex_factor);
-    #: `first_rho`: the direction density of leaving it (phase, or 1/pi at a surface; medium_nee.side_weight)
+    #: `first_rho`: the direction density of leaving it (phase, or 1/pi at a surface; medium_nee.side_weight);
+    #: both None unless the run shares paths with the other device's (KernelSettings.mis, both_sides)
     FIELDS = ("origins", "directions", "weights", "lengths", "path", "k", "s", "first", "first_rho")
 
     def __init__(self, **arrays):
@@ -179,8 +180,8 @@ class _Paths:
         return len(self.weights)
 
     def gather(self, idx) -> "_Paths":
-        """The paths at rows `idx` (any order, repeats allowed), every field gathered once."""
-        return _Paths(**{f: getattr(self, f).take(idx, axis=-1) for f in self.FIELDS})
+        """The paths at rows `idx` (any order, repeats allowed), every field gathered once (None stays None)."""
+        return _Paths(**{f: None if (a := getattr(self, f)) is None else a.take(idx, axis=-1) for f in self.FIELDS})
 
     keep = gather
 
@@ -194,7 +195,8 @@ class _Paths:
     def concat(parts) -> "_Paths":
         if len(parts) == 1:
             return parts[0]
-        return _Paths(**{f: np.concatenate([getattr(p, f) for p in parts], axis=-1) for f in _Paths.FIELDS})
+        return _Paths(**{f: None if getattr(parts[0], f) is None else
+                         np.concatenate([getattr(p, f) for p in parts], axis=-1) for f in _Paths.FIELDS})
 
 
 def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> BatchTally:
@@ -220,6 +222,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
 
     # --- emission: directions with pdf R_source / W_source, throughput W_source ----------------------------
     w0 = ctx.w0 = sources.total_response(i)
+    two_sided = settings.mis or settings.both_sides
     if settings.qmc_first_dimensions:
         from scipy.stats import qmc  # imported here: scipy costs 0.3-1.5 s to import
 
@@ -231,7 +234,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         directions=np.ascontiguousarray(sources.sample_directions(i, u[0], u[1]).T),
         origins=np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1),
         weights=np.full(n, w0), lengths=np.zeros(n), path=np.arange(n),
-        k=np.zeros(n, np.int64), s=np.zeros(n, np.int64), first=np.zeros(n), first_rho=np.full(n, 1.0 / np.pi))
+        k=np.zeros(n, np.int64), s=np.zeros(n, np.int64),
+        first=np.zeros(n) if two_sided else None, first_rho=np.full(n, 1.0 / np.pi) if two_sided else None)
     if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each in algorithm 4
         connect_source_mirrors(ctx, sources, i, w0 * (0.5 if settings.mis else 1.0), n)
     surface_power = escaped_power = 0.0

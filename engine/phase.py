@@ -11,7 +11,7 @@ Directions are component arrays of shape (3, n) (rows x, y, z); all float64, vec
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 from pydantic import TypeAdapter
