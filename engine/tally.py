@@ -118,16 +118,14 @@ class BatchTally:
 
 
 def _accumulate(out: np.ndarray, idx: np.ndarray, weights: np.ndarray) -> None:
-    """out[idx] += weights, summed per index: `np.bincount` over the band of `out` the indices touch.
+    """out[idx] += weights, repeated indices adding up (`np.add.at`).
 
-    One kernel step's estimates fall in cells of one depth k + s and in a narrow range of delays, so
-    the band is a small part of the CIR split by order (K + 1 orders x bins): counting over the band
-    costs what the estimates cost, not what the whole tally costs, in every step.
+    A kernel step's estimates touch few cells of large tallies (the CIR split by order is K + 1 orders
+    x bins); `np.add.at` (fast since numpy 1.25) costs what the estimates cost, while `np.bincount` would zero and add
+    the whole tally, or a band of it after two reductions for its bounds (2-10x slower per step, measured
+    with numpy 2.4 for 16 to 65 536 estimates).
     """
-    if len(idx) == 0:
-        return
-    lo, hi = int(idx.min()), int(idx.max()) + 1
-    out[lo:hi] += np.bincount(idx - lo if lo else idx, weights, hi - lo)
+    np.add.at(out, idx, weights)
 
 
 class BatchBuilder:
@@ -171,13 +169,10 @@ class BatchBuilder:
         plan, n = self.plan, self.n_paths
         # --- per-path moments of every link ------------------------------------------------
         key = target * n + path
-        lo, hi = int(key.min()), int(key.max()) + 1  # the band of (target, path) the step touches
-        if lo:
-            key = key - lo
         wt = power * delay
-        self.abc[0, lo:hi] += np.bincount(key, power, hi - lo)
-        self.abc[1, lo:hi] += np.bincount(key, wt, hi - lo)
-        self.abc[2, lo:hi] += np.bincount(key, wt * delay, hi - lo)
+        _accumulate(self.abc[0], key, power)
+        _accumulate(self.abc[1], key, wt)
+        _accumulate(self.abc[2], key, wt * delay)
         # --- binned CIR -----------------------------------------------------------------------
         if self.n_cir:
             slot, sel = self._ranked(self.cir_local, target)
