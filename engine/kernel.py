@@ -27,8 +27,10 @@ serves both directions. Each step intersects the surfaces, then:
   p_out -> Rx at (k, 2) (medium_nee.py);
 - algorithm 5 (`free_flight`): the collision distance is sampled (regular tracking
   of the medium's optical depth); a collision before the surface is a medium vertex:
-  w *= albedo, NEE with the phase function at (k, s + 1), new direction from the
-  phase function. Surface vertices keep w (T / P(no collision) = 1). Run from both
+  w *= albedo, new direction from the phase function. NEE with the phase function at
+  (k, s + 1) from the collision and from `equiangular_points` equiangular points of the
+  segment, combined by the balance heuristic (`_scattering_point_throughput`). Surface
+  vertices keep w (T / P(no collision) = 1). Run from both
   devices (`both_sides`), every connection is weighted by the partition of unity of
   medium_nee.py (bounded weights near point devices).
 The phase cosine is dot(ray direction, direction to the target) in both directions
