@@ -40,7 +40,7 @@ survival probability min(1, w / (theta initial w)) (`rr_threshold` theta), keeps
 estimator unbiased.
 
 Code map (one section per event, as in pbrt-v4's VolPathIntegrator and Mitsuba 3's volpath):
-`trace_batch` runs the steps: intersect, segment points (`_segment_scatter`, `segment_points`),
+`trace_batch` runs the steps: intersect, segment points (segments.segment_scatter),
 free flight with its next-event estimates (`_medium_next_events`, whose balance heuristic is
 `_scattering_point_throughput`), surface vertex (`_surface_vertex`), medium collision
 (`_medium_collision`), roulette (`_roulette`, inside each event's one compaction). Every
@@ -62,15 +62,12 @@ from .medium_nee import (
     connect_from_target,
     connection_weight,
     first_medium_factor,
-    first_segment_branch,
     first_vertex_factor,
-    side_weight,
-    target_factor,
 )
 from .mirrors import connect_mirrors, connect_source_mirrors
 from .sampling import cosine_about_soa
 from .scene import Scene
-from .segments import EquiangularFrame, equiangular, equiangular_density, time_density, time_strata
+from .segments import EquiangularFrame, segment_scatter
 from .tally import BatchBuilder, BatchTally, TallyPlan, TimeBins
 
 #: Upper bound on paths x targets connected in one array operation (memory bound).
@@ -218,7 +215,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     forward = item.direction == "forward"
     K, S = settings.max_reflections, settings.max_scattering
     free_flight = settings.free_flight and medium is not None
-    segment_scatter = settings.segment_scatter and medium is not None
+    points_on_segments = settings.segment_scatter and medium is not None
     ctx = _Context(scene, targets, np.asarray(item.targets, np.int64), settings, item)
     ctx.start_tally(item)
 
@@ -249,8 +246,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         hit = prim >= 0
         t_seg = np.where(hit, t, far)
         # ====== segment points (algorithms 2-4): single scattering at points along the segment ============
-        if segment_scatter:
-            _segment_scatter(ctx, paths, t_seg, rng, first=step == 0, prim=prim)
+        if points_on_segments:
+            segment_scatter(ctx, paths, t_seg, rng, first=step == 0, prim=prim)
         # ====== free flight (algorithm 5): collision distance; NEE from the collision and equiangular points =
         collided = np.zeros(len(paths), bool)
         ctx.first_bounce_u = first_u[3:5] if first_u is not None and step == 0 else None
@@ -601,130 +598,3 @@ class _Context:
         if self.item.direction == "backward" and self.settings.tally.group_weights.size:
             weights = self.settings.tally.group_weights[:, self.tgt]  # (G, T): targets are transmitters
         return self.builder.finish(weights)
-
-
-def _segment_scatter(ctx: _Context, paths: _Paths, t_seg, rng, first: bool, prim=None) -> None:
-    """Single scattering at points of each segment, connected to the targets (algorithms 2-4).
-
-    Per target (the strata are ellipsoids with the target as a focus): one point per
-    time stratum plus `equiangular_points` equiangular points (segments.py), combined
-    by the balance heuristic: a point at s has weight
-        w * T(o -> p) * sigma_s(p) / (n_T(s) + n_E(s)),
-    and the connection adds phase, response, 1/d^2, visibility and T(p -> target).
-    Points on every segment estimate the family source -> (k) -> p -> target (forward:
-    algorithm 3's, backward: algorithm 2's). Run from both devices (`settings.mis`), the
-    family both sample on the first segment (k = 0: Tx -> p -> Rx) gets the direction
-    balance heuristic (`_direction_mis`); for k >= 1 the other device samples the same
-    family by scattering on its own first segment (medium_nee.first_segment_branch), and
-    the two share each path by the partition of unity of medium_nee.side_weight
-    (bounded weights near the devices). Algorithm 4 also starts the double-scattering
-    family on the first segment (the same branch).
-    """
-    settings = ctx.settings
-    forward = ctx.item.direction == "forward"
-    fam = settings.segment_family
-    points_everywhere = fam == 4 or (fam == 3) == forward  # this side's own family: points on all segments
-    if first and settings.mis:
-        paths.first = first_vertex_factor(ctx, paths, prim, t_seg, np.zeros(len(t_seg)), np.zeros(len(t_seg), bool))
-        chain = fam == 4 or not points_everywhere  # the other side's family, sampled from this side
-        if chain or settings.in_then_out:
-            first_segment_branch(ctx, paths, t_seg, rng, chain=chain, double=settings.in_then_out)
-    if not (points_everywhere or (first and settings.mis)):
-        return
-    alive = np.flatnonzero((paths.s == 0) & (paths.k <= settings.max_reflections) & np.isfinite(t_seg))
-    if len(alive) == 0:
-        return
-    partition = None
-    if settings.mis and not first:
-        def partition(j, pp, points):
-            return side_weight(pp.first, target_factor(ctx, j, points))
-    segment_points(ctx, paths.keep(alive), t_seg.take(alive), rng, order=1, direction_mis=settings.mis and first,
-                   weight_fn=partition)
-
-
-def segment_points(ctx: _Context, seg_paths: _Paths, t_seg, rng, order: int, direction_mis: bool = False,
-                   weight_fn=None) -> None:
-    """Points on the segments [0, t_seg) of `seg_paths` (time strata + equiangular, balance heuristic),
-    each connected to every target as a scattering event of order `order`.
-
-    `weight_fn(j, pp, points)`, if given, multiplies each point's weight (e.g. a partition of unity).
-    """
-    settings, medium = ctx.settings, ctx.scene.medium
-    zeros = np.zeros(len(seg_paths))
-    h, n_eq = settings.strata_length, settings.equiangular_points
-    for j in range(len(ctx.tgt)):  # strata depend on the target: a loop over devices, not rays
-        y = np.repeat(ctx.t_pos[:, j:j + 1], len(seg_paths), axis=1)
-        o, d, l0 = seg_paths.origins, seg_paths.directions, seg_paths.lengths
-        seg_t, s_t, _ = time_strata(l0, o, d, y, zeros, t_seg, h, lambda m: rng.random(m), settings.max_strata)
-        frame = EquiangularFrame(o, d, y, zeros, t_seg)  # once per segment and target
-        seg_e, s_e = equiangular(o, d, y, zeros, t_seg, n_eq, lambda m: rng.random(m), frame=frame)
-        found = _scattering_points(seg_paths, np.concatenate([seg_t, seg_e]), np.concatenate([s_t, s_e]), medium)
-        if found is None:
-            continue
-        seg, pp, points, s, sigma_s = found
-        y_p, end = y.take(seg, axis=1), t_seg.take(seg)
-        density = (time_density(pp.lengths, pp.origins, pp.directions, y_p, np.zeros(len(s)), end, s, h,
-                                settings.max_strata)
-                   + (frame.density(s, n_eq, seg) if n_eq else 0.0))
-        # throughput of a point: w T(o -> p) sigma_s(p) / (n_T + n_E), the balance heuristic of the time
-        # strata and the equiangular points in Veach's multi-sample form (segments.py)
-        throughput = pp.weights * medium.transmittance(pp.origins.T, pp.directions.T, s) * sigma_s / density
-        mis = _direction_mis(ctx, int(ctx.tgt[j]), pp, points, s, density) if direction_mis else None
-        if weight_fn is not None:
-            mis = weight_fn(j, pp, points) if mis is None else mis * weight_fn(j, pp, points)
-        ctx.connect(points, points, throughput, pp, in_dirs=pp.directions, mis=mis, target=j,
-                    scatter_order=np.full(len(pp), order, np.int64), extra_length=s)
-
-
-def _scattering_points(paths: _Paths, seg, s, medium):
-    """Points at distance s along the segments `seg` of `paths`, keeping those where sigma_s > 0.
-
-    Returns (seg, their paths, points (3, m), s, sigma_s), or None when no point scatters.
-    """
-    if len(seg) == 0:
-        return None
-    pp = paths.keep(seg)
-    points = pp.origins + s * pp.directions
-    sigma_s = medium.sigma_s_at(points.T)
-    inside = np.flatnonzero(sigma_s > 0)
-    if len(inside) == 0:
-        return None
-    return (seg.take(inside), pp.keep(inside), points.take(inside, axis=1), s.take(inside), sigma_s.take(inside))
-
-
-def _direction_mis(ctx: _Context, j: int, pp: _Paths, points, s, density):
-    """Balance heuristic for Tx -> p -> Rx, sampled from both devices (algorithm 4).
-
-    Per-path density of p in volume measure for the side that starts at device X:
-        q_X(p) = R_X(cos_X) / W_X / r_X^2 * (n_T + n_E)_X(p),
-    direction pdf times the point density along X's first segment. This run is one
-    side (its density is given); the other side's first segment is cast from the
-    other device through p. Both sides run the same number of paths (the plan
-    guarantees it), so the weight is q_self / (q_self + q_other).
-    """
-    scene, settings = ctx.scene, ctx.settings
-    src_set, dst_set = device_sets(scene, ctx.item.direction)
-    i, n = ctx.item.source, len(s)
-    cos_src = _dot(pp.directions, src_set.normals[i][:, None])
-    q_self = src_set.response(np.full(n, i), cos_src, pp.directions.T) / src_set.total_response(i) / (s * s) * density
-    isect = scene.intersector
-    o = dst_set.positions[j] + isect.offset * dst_set.normals[j]
-    to_p = points - o[:, None]
-    r = np.sqrt(_dot(to_p, to_p))
-    w_dir = to_p / r
-    q_other = dst_set.response(np.full(n, j), _dot(w_dir, dst_set.normals[j][:, None]), w_dir.T) \
-        / dst_set.total_response(j)
-    live = np.flatnonzero(q_other > 0)
-    if len(live):
-        origins = np.repeat(o[:, None], len(live), axis=1)
-        dirs = w_dir.take(live, axis=1)
-        _, t_hit = isect.intersect(origins.T, dirs.T)
-        t_hit = np.where(np.isfinite(t_hit), t_hit, scene.medium_far_distance)
-        src = np.repeat(src_set.positions[i][:, None], len(live), axis=1)
-        zeros, rl = np.zeros(len(live)), r.take(live)
-        other = (time_density(zeros, origins, dirs, src, zeros, t_hit, rl, settings.strata_length,
-                              settings.max_strata)
-                 + equiangular_density(origins, dirs, src, zeros, t_hit, rl, settings.equiangular_points))
-        q_other[live] = q_other.take(live) / (rl * rl) * other
-    total = q_self + q_other
-    return np.where(total > 0, q_self / np.where(total > 0, total, 1.0), 1.0)

@@ -311,8 +311,8 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
       heuristic), connected to the targets at scattering order 2, weighted by
       side_weight(A(p), B(p_out)); the other run samples the family from its side.
     """
-    from .kernel import segment_points
     from .sampling import cosine_about_soa
+    from .segments import segment_points
 
     scene, settings = ctx.scene, ctx.settings
     medium, isect, geo = scene.medium, scene.intersector, scene.geometry
