@@ -244,12 +244,12 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         # ====== intersect ==================================================================================
         prim, t = isect.intersect(paths.origins.T, paths.directions.T)
         hit = prim >= 0
-        t_seg = np.where(hit, t, far)
+        t_seg = np.where(hit, t, far) if medium is not None else t
         # ====== segment points (algorithms 2-4): single scattering at points along the segment ============
         if points_on_segments:
             segment_scatter(ctx, paths, t_seg, rng, first=step == 0, prim=prim)
         # ====== free flight (algorithm 5): collision distance; NEE from the collision and equiangular points =
-        collided = np.zeros(len(paths), bool)
+        collided = None
         ctx.first_bounce_u = first_u[3:5] if first_u is not None and step == 0 else None
         if free_flight:
             u_ff = first_u[2] if first_u is not None and step == 0 else rng.random(len(paths))
@@ -261,13 +261,16 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
             _medium_next_events(ctx, paths, frames, medium_rows, t_col.take(medium_rows), rng)
         elif medium is not None:  # algorithm 1 (and 2-4): the segment's extinction
             paths.weights = paths.weights * medium.transmittance(paths.origins.T, paths.directions.T, t_seg)
-        escaped_power += paths.weights[~hit & ~collided].sum()
+        at_surface = hit if collided is None else hit & ~collided
+        if forward:  # the power balance of the result's diagnostics (forward runs)
+            escaped_power += paths.weights[~hit if collided is None else ~hit & ~collided].sum()
         survivors = []
         # ====== surface vertex =============================================================================
-        surface_rows = np.flatnonzero(hit & ~collided & (paths.k < K))
+        surface_rows = np.flatnonzero(at_surface & (paths.k < K))
         if len(surface_rows):
             sp = paths.gather(surface_rows) if len(surface_rows) < len(paths) else paths
-            surface_power += sp.weights.sum()
+            if forward:
+                surface_power += sp.weights.sum()
             survivors.append(_surface_vertex(ctx, sp, prim.take(surface_rows), t.take(surface_rows), rng))
         # ====== medium collision (algorithm 5) ==============================================================
         if free_flight and len(medium_rows):
@@ -322,9 +325,14 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
         sp.weights = sp.weights * factor
     # after reflection K a path still matters if it can scatter (5) or host segment points (2-4)
     K, S = settings.max_reflections, settings.max_scattering
-    alive = (sp.k < K) | ((settings.free_flight and scene.medium is not None) & (sp.s < S)) | \
-        ((settings.segment_scatter and scene.medium is not None) & (sp.k <= K))
-    return _roulette(ctx, sp, alive & (sp.weights > 0), rng)
+    alive = sp.weights > 0
+    if scene.medium is not None and settings.free_flight:
+        alive &= (sp.k < K) | (sp.s < S)
+    elif scene.medium is not None and settings.segment_scatter:
+        alive &= sp.k <= K
+    else:
+        alive &= sp.k < K
+    return _roulette(ctx, sp, alive, rng)
 
 
 def _scattering_point_throughput(weights, transmittance, sigma_t, sigma_s, n_e):
