@@ -235,8 +235,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         weights=np.full(n, w0), lengths=np.zeros(n), path=np.arange(n),
         k=np.zeros(n, np.int64), s=np.zeros(n, np.int64),
         first=np.zeros(n) if two_sided else None, first_rho=np.full(n, 1.0 / np.pi) if two_sided else None)
-    if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each in algorithm 4
-        connect_source_mirrors(ctx, sources, i, w0 * (0.5 if settings.mis else 1.0), n)
+    if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each from both devices
+        connect_source_mirrors(ctx, sources, i, w0 * (0.5 if settings.mis or settings.both_sides else 1.0), n)
     surface_power = escaped_power = 0.0
     far = scene.medium_far_distance  # segments that leave the scene run to where the medium has absorbed all
 
@@ -424,6 +424,8 @@ def _medium_collision(ctx: "_Context", paths: _Paths, rows, t_col, rng) -> _Path
     mp.lengths = mp.lengths + t_col
     mp.weights = mp.weights * medium.albedo_at(points.T)
     mp.s = mp.s + 1
+    if ctx.mirrors:  # ... -> x -> mirror -> target: only the collision reaches it (mirrors.py)
+        connect_mirrors(ctx, points, points, mp.weights, mp, in_dirs=mp.directions)
     if settings.both_sides and S >= 2 and ctx.item.direction == "forward":  # third strategy, Tx -> x1 -> x2 -> Rx
         connect_from_target(ctx, mp, points, rng)
     u = ctx.bounce_uniforms(mp, rng)
@@ -495,7 +497,7 @@ class _Context:
 
     def connect(self, points, shadow_origins, throughput, paths, *, normals=None, reflectance=None, materials=None,
                 in_dirs=None, mis=None, target: int | None = None, scatter_order=None, extra_length=None,
-                mid_g=None) -> None:
+                mid_g=None, brdf=None) -> None:
         """Next-event estimation from vertices `points` (3, n) to the targets: the measurement equation.
 
             dH = throughput * f * R_target(cos_target) / d^2 * V(x, target) * T(x -> target) * mis,
@@ -508,8 +510,11 @@ class _Context:
         importance sampling weight; algorithm 5 from both devices multiplies medium_nee.connection_weight.
         `target`: only the item's j-th target (else every one). Cells: paths.k and paths.s (or
         `scatter_order`); delays: paths.lengths (+ `extra_length`) + d. `mid_g` (per vertex): T / r^2 of
-        the edge that reached a medium vertex (medium_nee.connection_weight).
+        the edge that reached a medium vertex (medium_nee.connection_weight). `brdf` is `materials`
+        under its former name, and a surface vertex with neither takes f = cos_x: the caller folded the
+        BRDF into `throughput` (mirrors.branch_surface calls it so).
         """
+        materials = materials if materials is not None else brdf
         scene, targets = self.scene, self.targets
         isect, medium = scene.intersector, scene.medium
         n_pts = points.shape[1]
@@ -542,8 +547,10 @@ class _Context:
                     mat, arriving = materials
                     mat = mat if vertex_rows is None else mat.take(vertex_rows)
                     f *= vertex_factor * mat.eval(_rows(arriving, vertex_rows), n_x, out_dir)
-                else:
+                elif reflectance is not None:
                     f *= vertex_factor * _rows(reflectance, vertex_rows) * (1.0 / np.pi)
+                else:
+                    f *= vertex_factor
             else:  # medium vertex: phase function
                 vertex_factor = scene.phase.eval(_dot(_rows(in_dirs, vertex_rows), out_dir))
                 f *= vertex_factor

@@ -311,15 +311,15 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
       heuristic), connected to the targets at scattering order 2, weighted by
       side_weight(A(p), B(p_out)); the other run samples the family from its side.
     """
-    from .sampling import cosine_about_soa
+    from .mirrors import branch_surface
     from .segments import segment_points
 
     scene, settings = ctx.scene, ctx.settings
-    medium, isect, geo = scene.medium, scene.intersector, scene.geometry
+    medium, isect = scene.medium, scene.intersector
     br = _scatter_on_first_segment(ctx, paths, t_seg, rng)
     K, far = settings.max_reflections, scene.medium_far_distance
 
-    def partition(j, pp, points):
+    def partition(j, pp, points, *_):
         return side_weight(pp.first, target_factor(ctx, j, points))
 
     for _bounce in range(K + 1):
@@ -341,17 +341,11 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
         prims = prim.take(nxt)
         normals = isect.normals_soa.take(prims, axis=1)
         normals *= np.where(_dot(normals, br.directions) > 0, -1.0, 1.0)
-        rho = geo.reflectance.take(prims)
         spawn = points + isect.offset * normals
         br.lengths = br.lengths + ts
         br.k = br.k + 1
-        if chain:  # NEE at the branch's surface vertex, this run's share of the path (partition of unity)
-            for j in range(len(ctx.tgt)):
-                share = side_weight(br.first, _surface_target_factor(ctx, j, points, normals))
-                ctx.connect(points, spawn, br.weights, br, normals=normals, reflectance=rho, mis=share, target=j)
-        br.weights = br.weights * rho
-        u = rng.random((2, len(br)))
-        br.directions = cosine_about_soa(normals, u[0], u[1])
+        # NEE (chain; materials and mirror images included), then reflection from the materials (mirrors.py)
+        br.directions, br.weights = branch_surface(ctx, br, points, spawn, normals, prims, rng, chain)
         br.origins = spawn
         br = br.keep_where(br.weights > 0)
 

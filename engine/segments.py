@@ -204,8 +204,11 @@ def segment_scatter(ctx, paths, t_seg, rng, first: bool, prim=None) -> None:
         return
     partition = None
     if settings.mis and not first:
-        def partition(j, pp, points):
-            return side_weight(pp.first, target_factor(ctx, j, points))
+        from .mirrors import specular_first_share
+
+        def partition(j, pp, points, s, density):  # after a specular first vertex: mirrors.py
+            return specular_first_share(ctx, j, pp, points, s, density,
+                                        side_weight(pp.first, target_factor(ctx, j, points)))
     segment_points(ctx, paths.keep(alive), t_seg.take(alive), rng, order=1, direction_mis=settings.mis and first,
                    weight_fn=partition)
 
@@ -215,7 +218,7 @@ def segment_points(ctx, seg_paths, t_seg, rng, order: int, direction_mis: bool =
     """Points on the segments [0, t_seg) of `seg_paths` (time strata + equiangular, balance heuristic),
     each connected to every target as a scattering event of order `order`.
 
-    `weight_fn(j, pp, points)`, if given, multiplies each point's weight (e.g. a partition of unity).
+    `weight_fn(j, pp, points, s, density)`, if given, multiplies each point's weight (e.g. a partition of unity).
     """
     settings, medium = ctx.settings, ctx.scene.medium
     zeros = np.zeros(len(seg_paths))
@@ -237,9 +240,14 @@ def segment_points(ctx, seg_paths, t_seg, rng, order: int, direction_mis: bool =
         # throughput of a point: w T(o -> p) sigma_s(p) / (n_T + n_E), the balance heuristic of the time
         # strata and the equiangular points in Veach's multi-sample form (segments.py)
         throughput = pp.weights * medium.transmittance(pp.origins.T, pp.directions.T, s) * sigma_s / density
+        if direction_mis and ctx.mirrors:  # source -> p -> mirror -> target, through the image (mirrors.py)
+            from .mirrors import connect_segment_mirrors
+
+            connect_segment_mirrors(ctx, j, points, throughput, pp, s, order, density)
         mis = _direction_mis(ctx, int(ctx.tgt[j]), pp, points, s, density) if direction_mis else None
         if weight_fn is not None:
-            mis = weight_fn(j, pp, points) if mis is None else mis * weight_fn(j, pp, points)
+            share = weight_fn(j, pp, points, s, density)
+            mis = share if mis is None else mis * share
         ctx.connect(points, points, throughput, pp, in_dirs=pp.directions, mis=mis, target=j,
                     scatter_order=np.full(len(pp), order, np.int64), extra_length=s)
 
