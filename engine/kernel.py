@@ -170,6 +170,15 @@ class _Paths:
     #: `first_rho`: the direction density of leaving it (phase, or 1/pi at a surface; medium_nee.side_weight);
     #: both None unless the run shares paths with the other device's (KernelSettings.mis, both_sides)
     FIELDS = ("origins", "directions", "weights", "lengths", "path", "k", "s", "first", "first_rho")
+    origins: np.ndarray  # (3, n) [m]
+    directions: np.ndarray  # (3, n) unit
+    weights: np.ndarray  # (n,) path throughput
+    lengths: np.ndarray  # (n,) path length so far [m]
+    path: np.ndarray  # (n,) index of the path in the batch
+    k: np.ndarray  # (n,) reflections so far
+    s: np.ndarray  # (n,) scattering events so far
+    first: np.ndarray | None
+    first_rho: np.ndarray | None
 
     def __init__(self, **arrays):
         for name in self.FIELDS:

@@ -160,11 +160,8 @@ class BatchBuilder:
         n_cells = self.n_ord * plan.n_orders * plan.n_scatter
         self.order_sum = np.zeros(n_cells)
         self.order_sumsq = np.zeros(n_cells)
-        #: scratches of `_add_squared_path_sums` per owner (path, order-split target): cell, sum, last estimate
-        n_owners = n_paths * self.n_ord if several_per_cell else 0
-        self._cell_of_owner = np.zeros(n_owners, np.int64)
-        self._sum_of_owner = np.zeros(n_owners)
-        self._last_of_owner = np.zeros(n_owners, np.int64)
+        #: scratch of `_add_squared_path_sums`: one representative cell per owner (path, order-split target)
+        self._cell_of_owner = np.zeros(n_paths * self.n_ord if several_per_cell else 0, np.int64)
 
     def add_step(self, target, k, s, delay, power, path) -> None:
         if len(power) == 0:
@@ -196,43 +193,6 @@ class BatchBuilder:
                 self._add_squared_path_sums(path * self.n_ord + slot, cell, power)
             else:
                 _accumulate(self.order_sumsq, cell, power * power)
-
-    def _ranked(self, local, target):
-        """(slot of each estimate, the estimates with a slot or None for all): `local` maps the batch's
-        targets to CIR or order-split slots (-1: none); one target (the usual batch) needs no gathers."""
-        if len(local) == 1:
-            return local[0], (None if local[0] >= 0 else np.zeros(0, np.int64))
-        slot = local.take(target)
-        sel = np.flatnonzero(slot >= 0)
-        return slot, (None if len(sel) == len(slot) else sel)
-
-    def _add_squared_path_sums(self, owner, cell, p) -> None:
-        """order_sumsq[c] += (sum of the p of each owner (path, target) in cell c)^2, without sorting.
-
-        Rounds: every owner with estimates left picks one of its cells (the last one written to a
-        scratch indexed by owner); the estimates in that cell are summed per owner into a scratch
-        (`np.add.at`), each owner's sum is squared once (at the estimate that last wrote the owner's
-        slot) and the scratch is cleared; the others wait for the next round. An owner has estimates
-        in one to three cells per step (the cells of one depth k + s), so a step costs a few passes
-        over its estimates, nothing over the batch, and no sort (np.unique).
-        """
-        cell_of, sums, last = self._cell_of_owner, self._sum_of_owner, self._last_of_owner
-        while len(owner):
-            cell_of[owner] = cell
-            mine = cell_of.take(owner) == cell
-            if mine.all():
-                o, w = owner, p
-                owner = cell = p = owner[:0]
-            else:
-                rest = ~mine
-                o, w = owner[mine], p[mine]
-                owner, cell, p = owner[rest], cell[rest], p[rest]
-            np.add.at(sums, o, w)
-            order = np.arange(len(o))
-            last[o] = order
-            rep = o[last.take(o) == order]  # each owner once
-            _accumulate(self.order_sumsq, cell_of.take(rep), sums.take(rep) ** 2)
-            sums[rep] = 0.0
 
     def _ranked(self, local, target):
         """(slot of each estimate, the estimates with a slot or None for all): `local` maps the batch's
