@@ -261,6 +261,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         collided = None
         ctx.first_bounce_u = first_u[3:5] if first_u is not None and step == 0 else None
         if free_flight:
+            assert medium is not None  # free_flight holds only with a medium
             u_ff = first_u[2] if first_u is not None and step == 0 else rng.random(len(paths))
             t_col, collided = medium.sample_distance(paths.origins.T, paths.directions.T, t_seg, u_ff)
             if settings.both_sides and step == 0:
@@ -386,10 +387,10 @@ def _medium_next_events(ctx: "_Context", paths: _Paths, eq: _EquiangularFrames |
     """
     settings, medium = ctx.settings, ctx.scene.medium
     n_eq = settings.equiangular_points if eq is not None else 0
-    seg = np.repeat(np.flatnonzero(eq.end > 0), n_eq) if n_eq else np.zeros(0, np.int64)
+    seg = np.repeat(np.flatnonzero(eq.end > 0), n_eq) if eq is not None and n_eq else np.zeros(0, np.int64)
     xi = np.tile(np.arange(n_eq), len(seg) // n_eq) / n_eq if n_eq else None  # stratum starts
     for j in range(len(ctx.tgt)):
-        if n_eq:
+        if eq is not None and n_eq:
             frame = eq.frames[j]
             s_eq = np.clip(frame.sample(seg, xi + rng.random(len(seg)) / n_eq), 0.0, eq.end.take(seg))
             rows = np.concatenate([eq.rows.take(seg), collision_rows])
@@ -415,7 +416,8 @@ def _medium_next_events(ctx: "_Context", paths: _Paths, eq: _EquiangularFrames |
         throughput = _scattering_point_throughput(pp.weights, transmittance, sigma_t, sigma_s, n_e)
         mid_g = None
         if settings.both_sides:  # a point on the first segment is the path's first vertex (medium_nee)
-            pp.first = np.where(pp.k + pp.s == 0, first_medium_factor(ctx, points, transmittance), pp.first)
+            pp.first = np.asarray(np.where(pp.k + pp.s == 0, first_medium_factor(ctx, points, transmittance),
+                                           pp.first))
             mid_g = transmittance / (s * s)  # edge factor T / r^2 of the edge that reached the point
         pp.s = pp.s + 1
         ctx.connect(points, points, throughput, pp, in_dirs=pp.directions, target=j, extra_length=s, mid_g=mid_g)
@@ -443,7 +445,7 @@ def _medium_collision(ctx: "_Context", paths: _Paths, rows, t_col, rng) -> _Path
     if settings.both_sides:  # leaving the path's first vertex: its phase density (medium_nee)
         at_first = mp.k + mp.s == 1
         if at_first.any():
-            mp.first_rho = np.where(at_first, phase.eval(_dot(arriving, mp.directions)), mp.first_rho)
+            mp.first_rho = np.asarray(np.where(at_first, phase.eval(_dot(arriving, mp.directions)), mp.first_rho))
     mp.origins = points
     return _roulette(ctx, mp, ((mp.k < K) | (mp.s < S)) & (mp.weights > 0), rng)
 
@@ -481,7 +483,7 @@ class _Context:
         self.t_pos = np.ascontiguousarray(targets.positions[tgt].T)  # (3, T)
         self.t_nrm = np.ascontiguousarray(targets.normals[tgt].T)
         self.t_total = np.array([targets.total_response(int(t)) for t in tgt], float)
-        self.out = {k: [] for k in self.KEYS}
+        self.out: dict[str, list[np.ndarray]] = {k: [] for k in self.KEYS}
         self.w0 = 1.0  # the source's weight W_source (trace_batch), the roulette's scale
         self.pending: dict[int, list[tuple]] = {}  # depth k + s -> estimate groups waiting for their step
         self.mirrors = scene.mirror_planes
@@ -614,6 +616,7 @@ class _Context:
         self.out = {k: [] for k in self.KEYS}
         for d in sorted(d for d in self.pending if depth is None or d <= depth):
             groups = self.pending.pop(d)
+            assert self.builder is not None  # start_tally ran (trace_batch)
             self.builder.add_step(*(g[0] if len(groups) == 1 else np.concatenate(g) for g in zip(*groups)))
 
     def reduce(self, n_paths: int) -> BatchTally:
@@ -621,4 +624,5 @@ class _Context:
         weights = None
         if self.item.direction == "backward" and self.settings.tally.group_weights.size:
             weights = self.settings.tally.group_weights[:, self.tgt]  # (G, T): targets are transmitters
+        assert self.builder is not None
         return self.builder.finish(weights)
