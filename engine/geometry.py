@@ -51,6 +51,9 @@ class Geometry:
     group: np.ndarray
     group_names: list[str]
     material: Materials | None = None
+    #: per-face surface specs (numbers or materials) when some face is not a plain number, else None
+    #: (spectral scenes read their per-band reflectances here: engine/spectra.py)
+    surfaces: np.ndarray | None = None
 
     @property
     def normals(self) -> np.ndarray:
@@ -191,8 +194,12 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
         warnings.warn(f"dropped {int((~ok).sum())} degenerate (zero-area) triangles from {bad}", stacklevel=2)
     if not ok.any():
         raise SceneError("every triangle of the scene is degenerate")
-    rho, material = _materials(rho[ok])
-    return Geometry(vertices, faces[ok], rho, group[ok], list(group_names), material)
+    surfaces = rho[ok]
+    from .spectra import grey_surfaces  # spectral surfaces: the carrier's reflectance (max over the bands)
+
+    rho, material = _materials(grey_surfaces(surfaces, spec))
+    return Geometry(vertices, faces[ok], rho, group[ok], list(group_names), material,
+                    surfaces if surfaces.dtype == object else None)
 
 
 def _f32(a: np.ndarray) -> np.ndarray:

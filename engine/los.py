@@ -65,11 +65,22 @@ def los_geometry(scene: Scene) -> LosGeometry:
 
 
 def line_of_sight(scene: Scene, geometry: LosGeometry | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(gain per watt, delay [s]) per link, flat in link order (tx * n_rx + rx)."""
+    """(gain per watt, delay [s]) per link, flat in link order (tx * n_rx + rx).
+
+    A spectral scene's gain is the whole spectrum's, sum_b f_b H_los,b (engine/spectra.py)."""
     g = geometry if geometry is not None else los_geometry(scene)
+    gain = los_gain_grey(scene, g)
+    if scene.spectra is not None:
+        gain = scene.spectra.los_channels(scene, g, gain)[scene.spectra.n_bands]
+    return gain, g.delay
+
+
+def los_gain_grey(scene: Scene, g: LosGeometry | None) -> np.ndarray:
+    """Per link: the line-of-sight gain of the grey scene (a spectral scene's carrier band)."""
+    if g is None:
+        return np.zeros(scene.n_links)
     tx, rx = scene.transmitters, scene.receivers
     ti, ri = np.divmod(np.arange(scene.n_links), len(rx))
     ok = g.clear > 0
     d = np.where(ok, g.distance, 1.0)
-    gain = np.where(ok, tx.response(ti, g.cos_tx, g.directions) * rx.response(ri, g.cos_rx) / (d * d) * g.clear, 0.0)
-    return gain, g.delay
+    return np.where(ok, tx.response(ti, g.cos_tx, g.directions) * rx.response(ri, g.cos_rx) / (d * d) * g.clear, 0.0)

@@ -24,6 +24,7 @@ from . import metrics, mie, reliability
 from .auto import _max_albedo, _scatters
 from .estimates import channel_moments, link_moments, link_reliability, los_moments, reported_rel_stderr
 from .lighting import Lighting
+from .los import los_gain_grey, los_geometry
 from .result_parts import cir_block, column, document_rows, grid_maps, order_block
 
 if TYPE_CHECKING:
@@ -219,6 +220,12 @@ def build_result(spec: SceneSpec, scene: Scene, accs: dict[str, Accumulator], se
         else grid_maps(spec, scene, cols, list(tx.ids)),
         "run": run, "diagnostics": diagnostics, "scene": original or spec,  # the model itself: not validated again
     }
+    if getattr(scene, "spectra", None) is not None:  # per band and combined (engine/spectra.py)
+        from .spectra import result_block
+
+        g = geometry if geometry is not None else los_geometry(scene)
+        doc["spectral"] = result_block(spec, scene, accs, g, los_gain_grey(scene, g), los_delay)
+        doc["warnings"] += scene.spectra.warnings
     return SimulationResultPublic.model_validate(doc)
 
 

@@ -38,6 +38,8 @@ class Scene:
     grid_slices: list = None  # type: ignore[assignment]
     #: planar groups of perfect-mirror faces (bsdf.MirrorPlane): devices are reached through their images
     mirror_planes: list = field(default_factory=list)
+    #: per-band tables of a spectral scene (engine/spectra.py), None when grey
+    spectra: object = None
 
     @property
     def n_links(self) -> int:
@@ -63,7 +65,7 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
     medium = medium_from_spec(spec.medium)
     intersector = Intersector(geometry)
     planes = _mirror_planes(geometry, intersector)
-    return Scene(
+    scene = Scene(
         spec=spec,
         geometry=geometry,
         intersector=intersector,
@@ -77,6 +79,11 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
         grid_slices=grid_slices,
         mirror_planes=planes,
     )
+    if spec.spectral is not None:  # per-band tables; the scene becomes the carrier band's (engine/spectra.py)
+        from .spectra import attach
+
+        attach(scene)
+    return scene
 
 
 def _unit_rows(v: np.ndarray) -> np.ndarray:

@@ -34,6 +34,7 @@ from .kernel import KernelSettings, WorkItem
 from .los import line_of_sight, los_geometry
 from .medium_nee import two_sided_settings
 from .result import build_result
+from . import spectra
 from .scene import Scene, build_scene
 from .tally import Accumulator, TallyPlan, TimeBins
 
@@ -124,7 +125,7 @@ def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = N
         max_reflections=sim.max_reflections, russian_roulette=sim.russian_roulette,
         rr_start_depth=sim.rr_start_depth, tally=tally_plan(spec, scene), max_scattering=sim.scattering_orders,
         strata_length=step * SPEED_OF_LIGHT, max_strata=sim.max_strata, equiangular_points=sim.equiangular_points,
-        **alg.kernel)
+        tally_channels=1 + (scene.spectra.n_channels if scene.spectra is not None else 0), **alg.kernel)
     both = two_sided(spec, scene) if both_devices is None else both_devices
     return two_sided_settings(settings, alg.number, scene.medium is not None) if both else settings
 
@@ -217,6 +218,7 @@ def batch_size(sim: SimulationSpec, settings: KernelSettings, n_targets: int) ->
     if settings.free_flight:
         per_segment += settings.equiangular_points
     n_targets = max(1, n_targets)
+    n_targets *= settings.tally_channels  # spectral scenes tally 1 + V channels per target (engine/spectra.py)
     return max(1, min(sim.batch_size, PATH_TARGET_BUDGET // n_targets,
                       ESTIMATE_BUDGET // (n_targets * per_segment)))
 
@@ -261,8 +263,10 @@ def _items(runs: list[Run], sim: SimulationSpec, settings: KernelSettings, phase
 
 
 def _new_accumulators(scene: Scene, settings: KernelSettings) -> dict[Direction, Accumulator]:
-    return {d: Accumulator(scene.n_links, settings.tally, backward=d is Direction.BACKWARD)
+    accs = {d: Accumulator(scene.n_links, settings.tally, backward=d is Direction.BACKWARD)
             for d in (Direction.FORWARD, Direction.BACKWARD)}
+    spectra.new_accumulators(accs, scene, settings)  # spectral scenes: per-band channel tallies
+    return accs
 
 
 def _merge(accs: dict[Direction, Accumulator], executor: Executor, job: JobRef, items: Iterable[WorkItem],
@@ -280,6 +284,7 @@ def _merge(accs: dict[Direction, Accumulator], executor: Executor, job: JobRef, 
         for tally in results:
             item = pulled.popleft()
             accs[item.direction].add(tally, item.batch, item.source)
+            spectra.add_batch(accs[item.direction], tally, item)
             if on_batch is not None and on_batch(item):
                 break
     finally:

@@ -9,6 +9,7 @@ from pydantic import Field, model_validator
 from .base import Direction, Point, SpecModel
 from .link_budget import LuminousOutputSpec
 from .photometry import PhotometrySpec
+from .spectra import Curve
 
 Fov = Annotated[float, Field(ge=1e-6, le=90.0, description=(
     "field of view, half-angle [deg], in (0, 90] (at least 1e-6 deg: below it a concentrator's gain overflows)"))]
@@ -32,6 +33,8 @@ class TransmitterSpec(SpecModel):
         None, description="luminous flux [lm] or centre luminous intensity [cd] of the source: gives the "
                           "illuminance on the receivers (the optical power stays `power`)")
     photometry: PhotometrySpec | None = Field(None, description="tabulated emission from an IES / EULUMDAT file")
+    spectrum: Curve | None = Field(None, description="relative spectral power distribution over the scene's bands "
+                                   "(a spectral curve, any scale; default flat); `power` is the total")
 
     @model_validator(mode="after")
     def _one_pattern(self) -> "TransmitterSpec":
@@ -75,6 +78,10 @@ class ReceiverSpec(SpecModel):
     fov_deg: Fov = 90.0
     filter_gain: float = Field(1.0, gt=0.0, le=1.0, description="optical filter gain T_s")
     concentrator_index: float | None = Field(None, ge=1.0, le=4.0, description="concentrator refractive index n_c")
+    responsivity: Curve | None = Field(None, description="photodiode responsivity per band [A/W] (a spectral curve): "
+                                       "gives the electrical gain of spectral scenes")
+    filter_transmission: Curve | None = Field(None, description="optical filter transmission per band, in [0, 1] "
+                                              "(a spectral curve; applies to the electrical gain)")
 
 
 def _unit(d: tuple[float, float, float]) -> tuple[float, float, float]:
@@ -103,6 +110,8 @@ class ReceiverGridSpec(SpecModel):
     fov_deg: Fov = 90.0
     filter_gain: float = Field(1.0, gt=0.0, le=1.0)
     concentrator_index: float | None = Field(None, ge=1.0, le=4.0)
+    responsivity: Curve | None = Field(None, description="photodiode responsivity per band [A/W] (spectral scenes)")
+    filter_transmission: Curve | None = Field(None, description="optical filter transmission per band (spectral)")
 
     @model_validator(mode="after")
     def _sane(self) -> "ReceiverGridSpec":
@@ -138,7 +147,8 @@ class ReceiverGridSpec(SpecModel):
         p = tuple(o + self.spacing * (i * a + j * b) for o, a, b in zip(self.origin, u, v))
         return ReceiverSpec(id=f"{self.id_prefix}[{i},{j}]", position=p, normal=self.normal, area=self.area,
                             fov_deg=self.fov_deg, filter_gain=self.filter_gain,
-                            concentrator_index=self.concentrator_index)
+                            concentrator_index=self.concentrator_index, responsivity=self.responsivity,
+                            filter_transmission=self.filter_transmission)
 
     def expand(self) -> list[ReceiverSpec]:
         """The grid as individual receivers, row-major in (i along u, j along v)."""

@@ -12,6 +12,7 @@ from .link_budget import LinkBudgetSpec
 from .medium import MediumSpec
 from .outputs import OutputsSpec
 from .simulation import SimulationSpec
+from .spectra import SpectralSpec, check_scene
 
 #: Most tally cells (links x reflection orders x time bins) a job may hold.
 MAX_TALLY_CELLS = 50_000_000
@@ -49,10 +50,14 @@ class SceneSpec(SpecModel):
     link_budget: LinkBudgetSpec | None = Field(
         None, description="photodiode and receiver electronics: adds SNR, BER of OOK and the bit rate the delay "
                           "spread allows to links, channels and maps (Komine & Nakagawa 2004 noise model)")
+    spectral: SpectralSpec | None = Field(
+        None, description="wavelength bands: per-band spectra of sources, surfaces, detectors and smoke "
+                          "(docs/spectra.md); without it the scene is grey")
     simulation: SimulationSpec = Field(default_factory=SimulationSpec)
 
     @model_validator(mode="after")
     def _check(self) -> "SceneSpec":
+        check_scene(self)
         if not self.receivers and not self.receiver_grids:
             raise ValueError("the scene has no receiver: give `receivers` or `receiver_grids`")
         rx_ids = [r.id for r in self.receivers if r.id is not None] + [

@@ -12,6 +12,8 @@ one of these materials. Each states its split of the total reflectance rho:
 - `mirror`: diffuse rho_d = r_d rho plus a perfect mirror rho_m = (1 - r_d) rho
   (glass, metal, whiteboards). Mirror faces must be planar groups (room faces, box faces,
   flat mesh parts): point devices are reached through their mirror images.
+- `spectral`: Lambertian with a reflectance per wavelength band (schemas/spectra.py); the scene
+  must define its bands (`spectral`).
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, Discriminator, Field, Tag, WrapValidator
 
 from .base import SpecModel
+from .spectra import SpectralSurfaceSpec
 
 Rho = Annotated[float, Field(ge=0.0, le=1.0, description="total reflectance rho, in [0, 1]")]
 DiffuseFraction = Annotated[float, Field(ge=0.0, le=1.0, description="diffuse fraction r_d: rho_d = r_d rho")]
@@ -51,7 +54,8 @@ class MirrorSurfaceSpec(SpecModel):
 
 SurfaceSpec = Annotated[LambertianSurfaceSpec | PhongSurfaceSpec | MirrorSurfaceSpec, Field(discriminator="type")]
 
-_SURFACE_HELP = "a reflectance is a number in [0, 1] or a material with `type` lambertian, phong or mirror"
+_SURFACE_HELP = ("a reflectance is a number in [0, 1] or a material with `type` lambertian, phong, mirror or "
+                 "spectral")
 
 
 def _surface_kind(value) -> str | None:
@@ -72,7 +76,8 @@ def _number_first(value, handler):
 #: A Lambertian reflectance (a number) or a material: what a surface's `reflectance` takes.
 Surface = Annotated[
     Annotated[Rho, Tag("number")] | Annotated[LambertianSurfaceSpec, Tag("lambertian")]
-    | Annotated[PhongSurfaceSpec, Tag("phong")] | Annotated[MirrorSurfaceSpec, Tag("mirror")],
+    | Annotated[PhongSurfaceSpec, Tag("phong")] | Annotated[MirrorSurfaceSpec, Tag("mirror")]
+    | Annotated[SpectralSurfaceSpec, Tag("spectral")],
     Discriminator(_surface_kind, custom_error_type="invalid_surface", custom_error_message=_SURFACE_HELP),
     WrapValidator(_number_first)]
 
@@ -81,6 +86,8 @@ def split(surface) -> tuple[float, float, float, float]:
     """(rho_d, rho_s, exponent, rho_m) of a number (Lambertian rho) or a surface spec."""
     if isinstance(surface, (int, float)):
         return float(surface), 0.0, 0.0, 0.0
+    if surface.type == "spectral":
+        raise TypeError("a spectral surface has no single reflectance: engine/spectra.py resolves it per band")
     rho = surface.reflectance
     if surface.type == "lambertian":
         return rho, 0.0, 0.0, 0.0

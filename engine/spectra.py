@@ -1,0 +1,500 @@
+"""Spectral scenes: B wavelength bands traced together, one throughput per band and path (docs/spectra.md).
+
+The model. Within a band every curve is taken constant (its band average; the SPD is
+integrated), so a path's power in band b is the product of its grey geometry (the same
+for all bands) and the band's reflectances and transmittances. The kernel traces every
+path once with a *carrier*: the grey scene whose surfaces reflect rho_c = max_b rho_b and
+whose medium has sigma_t,c = min_b sigma_t,b (band c, the least attenuated). The path's
+weight w is the carrier's; its per-band ratio r_b (`_Paths.ratio`, shape (B, n)) collects
+
+    r_b *= rho_b(x) / rho_c(x)                at every reflection (the NEE from x too),
+    r_b *= exp(-tau_c (sigma_t,b / sigma_t,c - 1))   on every segment (algorithm 1),
+
+tau_c the carrier's optical depth, so that w r_b is exactly the band-b path weight and
+r_b <= 1 (the carrier is the brightest band: roulette driven by w leaves every band's weight
+bounded by the carrier's). Band b's gain is the tally of w r_b; all bands share the paths,
+so bands differ only through these factors (a two-band run equals two one-band runs with
+the same seed up to rounding, when no roulette decision depends on the carrier).
+
+Channels tallied per link (virtual links v * n_links + link of a second tally,
+`SceneSpectra.channel_power`), V = B + 3:
+  - band b: H_b, gain per watt emitted in band b [-];
+  - optical: H = sum_b f_b H_b, f_b the transmitter's power fraction in band b [-] (also the
+    main tally, so the result's dc_gain, CIR and delay figures are those of the whole spectrum);
+  - electrical: G = sum_b f_b T_b R_b H_b [A/W], R_b the responsivity, T_b the filter;
+  - luminous: H_v = sum_b f_b K_m Vbar_b H_b [lm/W], Vbar_b the SPD-weighted mean of V(lambda)
+    over the band; illuminance E_v = P_t H_v / (A T_s g) [lx] (the illuminance a cosine sensor
+    with the receiver's field of view reads, all reflection orders included).
+Per-band smoke: homogeneous coefficients per band, or Mie per band centre for particles
+(engine/mie.py). Algorithm 1 (extinction only) in any spectral scene; scattering algorithms
+(2-5) when the per-band ratios are trivial (one band, or grey surfaces and medium); otherwise
+a SceneError says what to run instead.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import SceneError
+from .spectra_tables import CURVES, K_M, VISIBLE, v_lambda
+
+#: Most (virtual link) tally entries a spectral job may hold: channels x links.
+MAX_CHANNEL_LINKS = 2_000_000
+#: Wavelength step of the band integrals [m].
+_STEP = 0.25e-9
+#: Channels after the B bands: combined optical gain, electrical gain, luminous gain.
+EXTRA = ("optical", "electrical", "luminous")
+
+
+# --- curves over bands ----------------------------------------------------------------------------------------------
+def _grid(lo: float, hi: float, knots=None) -> np.ndarray:
+    n = int(min(20001, max(65, np.ceil((hi - lo) / _STEP) + 1)))
+    g = np.linspace(lo, hi, n)
+    if knots is not None:
+        k = np.asarray(knots, float)
+        g = np.union1d(g, k[(k > lo) & (k < hi)])
+    return g
+
+
+def _function(curve):
+    """A callable of wavelength [m] for tables and named curves (None for numbers and per-band lists)."""
+    if isinstance(curve, (int, float, list, tuple)):
+        return None, None
+    if curve.type == "table":
+        w, v = np.asarray(curve.wavelengths, float), np.asarray(curve.values, float)
+        return (lambda lam: np.interp(lam, w, v)), w
+    return CURVES[curve.name], None
+
+
+def band_average(curve, spectral) -> np.ndarray:
+    """(B,) the curve's mean over each band (band_edges) or its value at each wavelength (wavelengths)."""
+    n = spectral.n_bands
+    if isinstance(curve, (int, float)):
+        return np.full(n, float(curve))
+    if isinstance(curve, (list, tuple)):
+        return np.asarray(curve, float)
+    fn, knots = _function(curve)
+    if spectral.wavelengths is not None:
+        return np.asarray(fn(np.asarray(spectral.wavelengths, float)), float)
+    e = spectral.edges()
+    out = np.empty(n)
+    for b in range(n):  # a loop over bands
+        g = _grid(e[b], e[b + 1], knots)
+        out[b] = np.trapezoid(fn(g), g) / (e[b + 1] - e[b])
+    return out
+
+
+def band_spd(curve, spectral) -> tuple[np.ndarray, np.ndarray]:
+    """(power fraction per band (B,), K_m Vbar_b per band (B,) [lm/W]) of a relative SPD (None: flat).
+
+    Numbers are a flat density (power proportional to the band's width); per-band lists are the
+    bands' powers; tables and named curves are integrated over each band (band_edges) or taken at
+    each wavelength times the band's width (wavelengths). Vbar_b = int_b S V / int_b S (S flat
+    inside the band for numbers and lists; V(lambda) at the wavelength with `wavelengths`)."""
+    n = spectral.n_bands
+    e = np.asarray(spectral.edges(), float)
+    width = np.diff(e)
+    visible = e[0] < VISIBLE[1] and e[-1] > VISIBLE[0]
+    fn, knots = _function(curve if curve is not None else 1.0)
+    if spectral.wavelengths is not None:
+        lam = np.asarray(spectral.wavelengths, float)
+        if curve is None or isinstance(curve, (int, float)):
+            power = width.copy()
+        elif isinstance(curve, (list, tuple)):
+            power = np.asarray(curve, float)
+        else:
+            power = fn(lam) * width
+        vbar = v_lambda(lam) if visible else np.zeros(n)
+    else:
+        power, vbar = np.empty(n), np.zeros(n)
+        for b in range(n):  # a loop over bands
+            g = _grid(e[b], e[b + 1], knots)
+            vis = visible and e[b] < VISIBLE[1] and e[b + 1] > VISIBLE[0]
+            v = v_lambda(g) if vis else None
+            if fn is None:  # flat inside the band
+                power[b] = width[b] if not isinstance(curve, (list, tuple)) else float(curve[b])
+                if vis:
+                    vbar[b] = np.trapezoid(v, g) / width[b]
+            else:
+                s = np.maximum(fn(g), 0.0)
+                power[b] = np.trapezoid(s, g)
+                if vis and power[b] > 0:
+                    vbar[b] = np.trapezoid(s * v, g) / power[b]
+    total = power.sum()
+    if not total > 0:
+        raise SceneError("a transmitter's spectrum has no power in the scene's bands")
+    frac = power / total
+    return frac, K_M * vbar
+
+
+# --- the scene's spectral tables ------------------------------------------------------------------------------------
+@dataclass
+class SceneSpectra:
+    """Per-band tables of a scene (built once per process with the Scene)."""
+
+    edges: np.ndarray  # (B + 1,) [m]
+    centres: np.ndarray  # (B,) [m]
+    face_rho: np.ndarray  # (B, F) reflectance per band
+    face_ratio: np.ndarray  # (B, F) rho_b / rho_c (1 where rho_c = 0)
+    tx_fraction: np.ndarray  # (n_tx, B) power fraction f_b
+    tx_luminous: np.ndarray  # (n_tx, B) K_m Vbar_b [lm/W]
+    rx_electrical: np.ndarray  # (n_rx, B) T_b R_b [A/W]
+    rx_responsive: np.ndarray  # (n_rx,) receivers with a responsivity
+    n_links: int
+    #: per-band medium: sigma_a, sigma_s (B,) [1/m], or None when grey
+    sigma_a: np.ndarray | None = None
+    sigma_s: np.ndarray | None = None
+    carrier_band: int = 0
+    #: sigma_t,b / sigma_t,c - 1 (B,) >= 0: the exponent of the transmittance ratio per unit carrier depth
+    tau_scale: np.ndarray | None = None
+    #: True when the kernel carries per-band ratios (some band differs from the carrier somewhere)
+    carry: bool = False
+    medium_bands: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
+
+    @property
+    def n_bands(self) -> int:
+        return len(self.centres)
+
+    @property
+    def n_channels(self) -> int:
+        return self.n_bands + len(EXTRA)
+
+    @property
+    def has_luminous(self) -> bool:
+        return bool(np.any(self.tx_luminous > 0))
+
+    # --- kernel ------------------------------------------------------------------------
+    def initial_ratio(self, n: int) -> np.ndarray:
+        """(B, n) ones when the kernel carries ratios, else (0, n)."""
+        return np.ones((self.n_bands if self.carry else 0, n))
+
+    def reflect(self, ratio: np.ndarray, prims: np.ndarray) -> np.ndarray:
+        """ratio * rho_b / rho_c of the faces `prims` (a reflection)."""
+        return ratio * self.face_ratio.take(prims, axis=1) if self.carry else ratio
+
+    def transmit(self, ratio: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """ratio * T_b / T_c for carrier optical depths `tau` (n,) of segments."""
+        if not self.carry or self.tau_scale is None:
+            return ratio
+        return ratio * np.exp(-self.tau_scale[:, None] * tau[None, :])
+
+    def channel_power(self, power, ratio, tx, rx) -> tuple[np.ndarray, np.ndarray]:
+        """(optical power (m,), channel powers (V, m)) of estimates of carrier power `power` (m,), band ratios
+        (B, m) (or (0, m): all 1), transmitter and receiver indices (m,)."""
+        r = ratio if ratio.shape[0] else np.ones((self.n_bands, len(power)))
+        f = self.tx_fraction.take(tx, axis=0).T  # (B, m)
+        bands = power[None, :] * r
+        fb = f * bands
+        optical = fb.sum(axis=0)
+        electrical = (fb * self.rx_electrical.take(rx, axis=0).T).sum(axis=0)
+        luminous = (bands * self.tx_luminous.take(tx, axis=0).T).sum(axis=0)
+        return optical, np.concatenate([bands, optical[None], electrical[None], luminous[None]])
+
+    # --- line of sight -------------------------------------------------------------------
+    def los_channels(self, scene, g, grey) -> np.ndarray:
+        """(V, L) line-of-sight gain of every channel from the carrier's LOS gain `grey` (L,) and geometry `g`."""
+        B = self.n_bands
+        bands = np.repeat(grey[None, :], B, axis=0)
+        if self.tau_scale is not None and scene.medium is not None:
+            idx = np.flatnonzero(grey > 0)
+            if len(idx):
+                tx = scene.transmitters.positions[np.arange(self.n_links) // len(scene.receivers)]
+                tau = scene.medium.optical_depth(tx[idx], g.directions[idx], g.distance[idx])
+                bands[:, idx] *= np.exp(-self.tau_scale[:, None] * tau[None, :])
+        ti, ri = np.divmod(np.arange(self.n_links), len(scene.receivers))
+        _, ch = self.channel_power(np.ones(self.n_links), bands / np.where(grey > 0, grey, 1.0), ti, ri)
+        return ch * grey[None, :]
+
+    # --- tallies -------------------------------------------------------------------------
+    def virtual_links(self, links: np.ndarray) -> np.ndarray:
+        """Channel-major virtual links v * n_links + link of the batch's targets (V T,)."""
+        v = np.arange(self.n_channels)[:, None] * self.n_links
+        return (v + np.asarray(links, np.int64)[None, :]).ravel()
+
+
+def _face_surfaces(geometry, n_faces: int):
+    if getattr(geometry, "surfaces", None) is None:
+        return None
+    return geometry.surfaces
+
+
+def surface_bands(surface, spectral) -> np.ndarray:
+    """(B,) reflectance per band of one surface: a number, a material (its total rho, grey) or a spectral spec."""
+    if isinstance(surface, (int, float)):
+        return np.full(spectral.n_bands, float(surface))
+    if surface.type == "spectral":
+        return np.clip(band_average(surface.reflectance, spectral), 0.0, 1.0)
+    return np.full(spectral.n_bands, float(surface.reflectance))
+
+
+def grey_surfaces(surfaces: np.ndarray, spec) -> np.ndarray:
+    """The carrier's surfaces: each spectral surface replaced by its largest band reflectance (geometry.py)."""
+    if surfaces.dtype != object or spec.spectral is None:
+        return surfaces
+    cache: dict[int, float] = {}
+    out = np.empty(len(surfaces), object)
+    for i, s in enumerate(surfaces):  # a loop over faces; surfaces are shared objects, computed once each
+        if getattr(s, "type", None) == "spectral":
+            if id(s) not in cache:
+                cache[id(s)] = float(surface_bands(s, spec.spectral).max())
+            out[i] = cache[id(s)]
+        else:
+            out[i] = s
+    if all(isinstance(v, (int, float)) for v in out):
+        return out.astype(float)
+    return out
+
+
+def _medium_bands(spec, spectral):
+    """Per band (sigma_a, sigma_s) arrays and phase specs, or None for a grey medium."""
+    med = spec.medium
+    if med is None:
+        return None
+    bm = spectral.medium
+    centres = spectral.centres()
+    if med.type == "particles":
+        from owcsim.schemas.medium import MiePhaseSpec
+
+        from .mie import medium_coefficients
+
+        idx = bm.refractive_index if bm is not None else [med.particles.refractive_index] * len(centres)
+        sa, ss, phases = [], [], []
+        for lam, m in zip(centres, idx):  # a loop over bands: one Mie average each
+            p = med.particles.model_copy(update={"wavelength": float(lam), "refractive_index": m})
+            a, s = medium_coefficients(med.model_copy(update={"particles": p}))
+            sa.append(a)
+            ss.append(s)
+            phases.append(MiePhaseSpec(particles=p))
+        return np.array(sa), np.array(ss), phases
+    if bm is None:
+        return None
+    return np.asarray(bm.sigma_a, float), np.asarray(bm.sigma_s, float), [med.phase] * len(centres)
+
+
+def attach(scene) -> None:
+    """Build `scene.spectra` and make the scene the carrier (largest reflectance, least attenuated band's medium).
+
+    The geometry's reflectances are already the carrier's (geometry.build_geometry via grey_surfaces).
+    """
+    spec = scene.spec
+    spectral = spec.spectral
+    B = spectral.n_bands
+    geo = scene.geometry
+    F = len(geo.faces)
+    surfaces = getattr(geo, "surfaces", None)
+    face_rho = np.repeat(np.asarray(geo.reflectance, float)[None, :], B, axis=0)
+    spectral_surfaces = False
+    if surfaces is not None:
+        cache: dict[int, np.ndarray] = {}
+        cols = []
+        for s in surfaces:  # a loop over faces (shared surface objects computed once)
+            if getattr(s, "type", None) == "spectral":
+                spectral_surfaces = True
+                if id(s) not in cache:
+                    cache[id(s)] = surface_bands(s, spectral)
+                cols.append(cache[id(s)])
+            else:
+                cols.append(None)
+        for f, c in enumerate(cols):
+            if c is not None:
+                face_rho[:, f] = c
+    carrier = np.asarray(geo.reflectance, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        face_ratio = np.where(carrier[None, :] > 0, face_rho / np.where(carrier > 0, carrier, 1.0)[None, :], 1.0)
+    n_tx, n_rx = len(scene.transmitters), len(scene.receivers)
+    frac, lum = np.zeros((n_tx, B)), np.zeros((n_tx, B))
+    for i, t in enumerate(spec.transmitters):  # a loop over transmitters
+        frac[i], lum[i] = band_spd(t.spectrum, spectral)
+    electrical, responsive = np.zeros((n_rx, B)), np.zeros(n_rx, bool)
+    rows = [(r, 1) for r in spec.receivers] + [(g, g.count) for g in spec.receiver_grids]
+    start = 0
+    for r, count in rows:  # a loop over receivers and grids (grid points share their grid's curves)
+        if r.responsivity is not None:
+            e = band_average(r.responsivity, spectral)
+            if r.filter_transmission is not None:
+                e = e * band_average(r.filter_transmission, spectral)
+            electrical[start:start + count] = e
+            responsive[start:start + count] = True
+        start += count
+    out = SceneSpectra(edges=np.asarray(spectral.edges(), float), centres=np.asarray(spectral.centres(), float),
+                       face_rho=face_rho, face_ratio=face_ratio, tx_fraction=frac, tx_luminous=lum,
+                       rx_electrical=electrical, rx_responsive=responsive, n_links=scene.n_links)
+    if out.n_channels * scene.n_links > MAX_CHANNEL_LINKS:
+        raise SceneError(f"spectral: {B} bands over {scene.n_links} links need {out.n_channels * scene.n_links} "
+                         f"tally channels, more than {MAX_CHANNEL_LINKS}: use fewer bands or fewer receivers")
+    med = _medium_bands(spec, spectral)
+    if med is not None:
+        _carrier_medium(scene, out, *med)
+    if spec.medium is not None and spec.medium.type == "particles":
+        out.warnings.append(f"medium.particles.wavelength ({spec.medium.particles.wavelength:.4g} m) is not used: a "
+                            "spectral scene computes the Mie optics at each band centre (spectral.medium_bands)")
+    out.carry = B >= 2 and (spectral_surfaces or out.tau_scale is not None)
+    scene.spectra = out
+    _check_supported(scene, out)
+
+
+def _carrier_medium(scene, out: SceneSpectra, sigma_a, sigma_s, phases) -> None:
+    from .media import HomogeneousMedium
+    from .phase import phase_from_spec
+    from .scene import _far_distance
+
+    sigma_t = sigma_a + sigma_s
+    c = int(np.argmin(sigma_t))
+    out.sigma_a, out.sigma_s, out.carrier_band = sigma_a, sigma_s, c
+    out.medium_bands = [{"band": b, "centre_m": float(out.centres[b]), "sigma_a": float(sigma_a[b]),
+                         "sigma_s": float(sigma_s[b]), "sigma_t": float(sigma_t[b]),
+                         "albedo": float(sigma_s[b] / sigma_t[b]) if sigma_t[b] > 0 else 0.0,
+                         "visibility_m": float(3.912 / sigma_t[b]) if sigma_t[b] > 0 else None}
+                        for b in range(len(sigma_t))]
+    if sigma_t.max() == 0:
+        scene.medium, scene.phase, scene.medium_far_distance = None, None, float("inf")
+        return
+    if sigma_t[c] == 0:
+        raise SceneError(f"spectral.medium: band {c} has sigma_t = 0 while others attenuate: give every band a "
+                         "positive extinction (e.g. 1e-9 1/m) or no medium")
+    spec_m = scene.spec.medium
+    box = region = None
+    if spec_m.region.type == "box":
+        box = (np.asarray(spec_m.region.min, float), np.asarray(spec_m.region.max, float))
+    elif spec_m.region.type == "mesh":
+        from .regions import MeshRegion
+
+        region = MeshRegion(spec_m.region.vertices, spec_m.region.faces, label="medium.region")
+    scene.medium = HomogeneousMedium(float(sigma_a[c]), float(sigma_s[c]), box, region=region, phase_spec=phases[c])
+    scene.phase = phase_from_spec(phases[c])
+    for b, p in enumerate(phases):
+        if p.type == "mie":
+            out.medium_bands[b]["g"] = float(phase_from_spec(p).mean_cosine) if b == c else None
+    varies = not (np.all(sigma_a == sigma_a[c]) and np.all(sigma_s == sigma_s[c]))
+    out.tau_scale = sigma_t / sigma_t[c] - 1.0 if varies else None
+    scene.medium_far_distance = _far_distance(scene.spec, scene.geometry, scene.medium, scene.receivers.positions)
+
+
+def _check_supported(scene, out: SceneSpectra) -> None:
+    """SceneError where the per-band ratios would be needed by a part of the kernel that does not carry them."""
+    if not out.carry:
+        return
+    if scene.mirror_planes:
+        raise SceneError("spectral: perfect-mirror surfaces are not supported with spectral surfaces or smoke yet "
+                         "(use a Phong material with a large exponent, or run one job per band)")
+    a = scene.spec.simulation.algorithm
+    scatters = scene.medium is not None and scene.medium.sigma_s > 0
+    if a in (2, 3, 4, 5) and scene.medium is not None and (scatters or a == 5):
+        raise SceneError(f"spectral: algorithm {a} in smoke with {out.n_bands} bands and spectral surfaces or smoke "
+                         "is not supported (its scattering branches carry one throughput): use algorithm 1 "
+                         "(extinction per band), or run one job per band (`spectral` with one band each), or make "
+                         "surfaces and smoke grey")
+
+
+# --- results ---------------------------------------------------------------------------------------------------------
+def new_accumulators(accs: dict, scene, settings) -> None:
+    """Attach a channel tally (`.spectral`, V n_links virtual links) to each direction's Accumulator."""
+    sp = getattr(scene, "spectra", None)
+    if sp is None:
+        return
+    from .tally import Accumulator
+
+    plan = channel_plan(settings.tally, sp)
+    for d, acc in accs.items():
+        acc.spectral = Accumulator(sp.n_channels * scene.n_links, plan, backward=d == "backward")
+
+
+def add_batch(acc, tally, item) -> None:
+    """Merge a batch's channel tally into the direction's Accumulator (simulate._merge)."""
+    extra = getattr(tally, "spectral", None)
+    if extra is not None:
+        acc.spectral.add(extra, item.batch, item.source)
+
+
+def channel_plan(plan, sp: SceneSpectra):
+    """The channel tally: moments only (no CIR, no order split, no groups) over the virtual links."""
+    n = len(plan.cir_rank)
+    none = np.full(n, -1, np.int64)
+    return dataclasses.replace(plan, cir_rank=none, order_rank=none, group_weights=np.zeros((0, 0)))
+
+
+def result_block(spec, scene, accs, los_geometry, los_grey, los_delay) -> dict | None:
+    """The `spectral` section of the result: bands, per-band smoke, and per link every channel's figures."""
+    sp = getattr(scene, "spectra", None)
+    if sp is None:
+        return None
+    from . import metrics
+    from .estimates import link_moments, los_moments
+    from .result_parts import column
+
+    V, B, L = sp.n_channels, sp.n_bands, scene.n_links
+    los = sp.los_channels(scene, los_geometry, los_grey) if los_geometry is not None \
+        else np.zeros((V, L))
+    los_abc = los_moments(los.ravel(), np.tile(los_delay, V))
+    chan = {d: a.spectral for d, a in accs.items() if hasattr(a, "spectral")}
+    mean, cov = link_moments(chan, los_abc)
+    d = metrics.delay_metrics_from_moments(mean, cov)
+    n_rx = len(scene.receivers)
+    ti, ri = np.divmod(np.arange(L), n_rx)
+    masked = np.tile(scene.masked != "", len(scene.transmitters))
+
+    def ch(key):
+        return np.where(masked[None, :], np.nan, np.asarray(d[key], float).reshape(V, L))
+
+    h, h_se = ch("dc_gain"), ch("dc_gain_stderr")
+    mean_d, rms, rms_se = ch("mean_delay_s"), ch("rms_delay_spread_s"), ch("rms_delay_spread_s_stderr")
+    ob, el, lu = B, B + 1, B + 2
+    gain = scene.receivers.gain.take(ri)  # A T_s g [m^2]
+    power = scene.transmitters.power.take(ti)
+    has_e = sp.rx_responsive.take(ri)
+    lux_ok = sp.has_luminous
+    links = []
+    for k in range(L):  # rows of the document
+        row = {"transmitter": scene.transmitters.ids[ti[k]], "receiver": scene.receivers.ids[ri[k]],
+               "dc_gain_by_band": column(h[:B, k]), "dc_gain_by_band_stderr": column(h_se[:B, k]),
+               "mean_delay_s_by_band": column(mean_d[:B, k]), "rms_delay_spread_s_by_band": column(rms[:B, k]),
+               "rms_delay_spread_s_by_band_stderr": column(rms_se[:B, k]),
+               "optical_gain": column(h[ob, k:k + 1])[0], "optical_gain_stderr": column(h_se[ob, k:k + 1])[0],
+               "electrical_gain_a_per_w": column(h[el, k:k + 1])[0] if has_e[k] else None,
+               "electrical_gain_a_per_w_stderr": column(h_se[el, k:k + 1])[0] if has_e[k] else None,
+               "electrical_rms_delay_spread_s": column(rms[el, k:k + 1])[0] if has_e[k] else None,
+               "photocurrent_a": column(h[el, k:k + 1] * power[k])[0] if has_e[k] else None,
+               "illuminance_lx": column(h[lu, k:k + 1] * power[k] / gain[k])[0] if lux_ok else None,
+               "illuminance_lx_stderr": column(h_se[lu, k:k + 1] * power[k] / gain[k])[0] if lux_ok else None}
+        links.append(row)
+    bands = [{"index": b, "lower_m": float(sp.edges[b]), "upper_m": float(sp.edges[b + 1]),
+              "centre_m": float(sp.centres[b]), "reflectance_range": [float(sp.face_rho[b].min()),
+                                                                      float(sp.face_rho[b].max())]
+              if sp.face_rho.shape[1] else None} for b in range(B)]
+    transmitters = [{"id": scene.transmitters.ids[i], "band_power_fraction": sp.tx_fraction[i].tolist(),
+                     "luminous_efficacy_lm_per_w": float(sp.tx_luminous[i] @ sp.tx_fraction[i]),
+                     "luminous_flux_lm": float(scene.transmitters.power[i] * sp.tx_luminous[i] @ sp.tx_fraction[i])}
+                    for i in range(len(scene.transmitters))]
+    rx_rows = [(r.id or f"rx{j}", j) for j, r in enumerate(spec.receivers)]
+    first = len(spec.receivers)
+    for g, (start, _shape) in zip(spec.receiver_grids, scene.grid_slices or []):
+        rx_rows.append((g.id_prefix, start))
+    receivers = [{"id": name, "electrical_weight_a_per_w": sp.rx_electrical[j].tolist()
+                  if sp.rx_responsive[j] else None} for name, j in rx_rows]
+    del first
+    return {"bands": bands, "carried_ratios": sp.carry, "transmitters": transmitters, "receivers": receivers,
+            "medium_bands": sp.medium_bands or None, "links": links,
+            "model": "bands traced together: carrier = largest reflectance / least-attenuated band, per-band ratios "
+                     "(engine/spectra.py); curves averaged over each band"}
+
+
+def add_channels(ctx, cat: dict) -> np.ndarray:
+    """Tally one kernel step's estimates in every channel (kernel._Context.flush); returns their optical power.
+
+    Estimate i of local target t goes to the virtual link v * n_links + link(t) of each channel v,
+    with the power of `SceneSpectra.channel_power`."""
+    sp = ctx.spectra
+    target, power = cat["target"], cat["power"]
+    m = len(power)
+    glob = ctx.tgt.take(target)
+    own = np.full(m, ctx.item.source, np.int64)
+    tx, rx = (own, glob) if ctx.item.direction == "forward" else (glob, own)
+    optical, channels = sp.channel_power(power, cat.get("ratio", np.ones((0, m))), tx, rx)
+    V, T = sp.n_channels, len(ctx.tgt)
+    tv = (np.arange(V)[:, None] * T + target[None, :]).ravel()
+    ctx.channels.add_step(tv, np.tile(cat["k"], V), np.tile(cat["s"], V), np.tile(cat["delay"], V),
+                          channels.ravel(), np.tile(cat["path"], V))
+    return optical
