@@ -190,7 +190,7 @@ class SceneSpectra:
         fb = f * bands
         optical = fb.sum(axis=0)
         electrical = (fb * self.rx_electrical.take(rx, axis=0).T).sum(axis=0)
-        luminous = (bands * self.tx_luminous.take(tx, axis=0).T).sum(axis=0)
+        luminous = (fb * self.tx_luminous.take(tx, axis=0).T).sum(axis=0)
         return optical, np.concatenate([bands, optical[None], electrical[None], luminous[None]])
 
     # --- line of sight -------------------------------------------------------------------

@@ -54,8 +54,8 @@ class MirrorSurfaceSpec(SpecModel):
 
 SurfaceSpec = Annotated[LambertianSurfaceSpec | PhongSurfaceSpec | MirrorSurfaceSpec, Field(discriminator="type")]
 
-_SURFACE_HELP = ("a reflectance is a number in [0, 1] or a material with `type` lambertian, phong, mirror or "
-                 "spectral")
+_SURFACE_HELP = ("a reflectance is a number in [0, 1] or a material with `type` lambertian, phong or mirror (or "
+                 "spectral, with the scene's bands)")
 
 
 def _surface_kind(value) -> str | None:

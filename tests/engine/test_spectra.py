@@ -1,0 +1,195 @@
+"""Spectral scenes (engine/spectra.py): bands traced together, each against its own reference.
+
+- flat spectra give the grey result (same paths, ratios exactly 1);
+- a two-band run equals two one-band runs with the same seed (the geometry is shared; no roulette);
+- the illuminance of a white LED equals K_m int S V / int S x the radiometric LOS irradiance,
+  integrated here with numpy on colour-science's CIE 1924 table (not the code under test);
+- the first bounce of a room with coloured walls per band against the deterministic integrator of
+  tests/reference.py (Barry et al. 1993), within 4 standard errors + 0.1 %;
+- algorithm 1 with smoke per band: LOS transmittance exp(-sigma_t,b d) per band in closed form.
+"""
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from owcsim.engine.errors import SceneError
+from owcsim.engine.simulate import simulate
+from tests import reference
+from tests.scenes import room_doc, spec
+
+NM = 1e-9
+
+
+def _spectral_room(walls, floor, ceiling, bands, **sim):
+    doc = room_doc(**{"russian_roulette": False, "paths": 6000, "batch_size": 2000, **sim})
+    doc["room"]["reflectance"] = {"floor": floor, "ceiling": ceiling, "walls": walls}
+    doc["spectral"] = bands
+    return doc
+
+
+def _surf(values):
+    return {"type": "spectral", "reflectance": values}
+
+
+def test_flat_spectra_give_the_grey_result():
+    grey = simulate(spec(room_doc(rho_walls=0.6, rho_floor=0.3, rho_ceiling=0.8, paths=6000)))
+    doc = _spectral_room(_surf([0.6, 0.6, 0.6]), _surf(0.3), 0.8, {"band_edges": [400 * NM, 500 * NM, 600 * NM,
+                                                                                 700 * NM]}, russian_roulette=True)
+    doc["simulation"]["batch_size"] = 16384
+    doc["transmitters"][0]["spectrum"] = [1.0, 2.0, 0.5]
+    res = simulate(spec(doc))
+    g, s = grey["links"][0], res["links"][0]
+    assert res["spectral"]["carried_ratios"]
+    assert s["dc_gain"] == pytest.approx(g["dc_gain"], rel=1e-12)
+    assert s["rms_delay_spread_s"] == pytest.approx(g["rms_delay_spread_s"], rel=1e-10)
+    assert np.allclose(s["cir"]["total"], g["cir"]["total"], rtol=1e-12, atol=0)
+    band = res["spectral"]["links"][0]
+    assert np.allclose(band["dc_gain_by_band"], g["dc_gain"], rtol=1e-12)
+    assert band["optical_gain"] == pytest.approx(g["dc_gain"], rel=1e-12)
+
+
+def test_two_bands_equal_two_single_band_runs():
+    walls, floor = [0.2, 0.7], [0.5, 0.1]
+    two = simulate(spec(_spectral_room(_surf(walls), _surf(floor), 0.8, {"wavelengths": [450 * NM, 650 * NM]})))
+    gains = two["spectral"]["links"][0]["dc_gain_by_band"]
+    rms = two["spectral"]["links"][0]["rms_delay_spread_s_by_band"]
+    for b in range(2):
+        one = simulate(spec(_spectral_room(_surf([walls[b]]), _surf([floor[b]]), 0.8,
+                                           {"wavelengths": [(450, 650)[b] * NM]})))
+        assert not one["spectral"]["carried_ratios"]
+        assert gains[b] == pytest.approx(one["links"][0]["dc_gain"], rel=1e-12)
+        assert rms[b] == pytest.approx(one["links"][0]["rms_delay_spread_s"], rel=1e-10)
+    # power check: the bands differ by far more than rounding, so a mix-up of bands would fail
+    assert abs(gains[0] / gains[1] - 1) > 0.05
+
+
+def test_two_bands_with_smoke_per_band_equal_single_band_runs():
+    medium = {"type": "homogeneous", "sigma_a": 0.1, "sigma_s": 0.0}
+    doc = _spectral_room(_surf([0.2, 0.7]), 0.3, 0.8, {"wavelengths": [450 * NM, 650 * NM],
+                                                       "medium": {"sigma_a": [0.3, 0.1], "sigma_s": [0.0, 0.0]}})
+    doc["medium"] = medium
+    two = simulate(spec(doc))
+    for b, (rho, sigma) in enumerate([(0.2, 0.3), (0.7, 0.1)]):
+        one_doc = _spectral_room(_surf([rho]), 0.3, 0.8, {"wavelengths": [(450, 650)[b] * NM]})
+        one_doc["medium"] = {"type": "homogeneous", "sigma_a": sigma, "sigma_s": 0.0}
+        one = simulate(spec(one_doc))
+        assert two["spectral"]["links"][0]["dc_gain_by_band"][b] == pytest.approx(one["links"][0]["dc_gain"],
+                                                                                   rel=1e-11)
+
+
+def test_smoke_per_band_line_of_sight_in_closed_form():
+    doc = room_doc(max_reflections=0)
+    doc["medium"] = {"type": "homogeneous", "sigma_a": 0.1, "sigma_s": 0.0}
+    doc["spectral"] = {"band_edges": [400 * NM, 500 * NM, 600 * NM], "medium": {"sigma_a": [0.4, 0.1],
+                                                                                 "sigma_s": [0.0, 0.05]}}
+    res = simulate(spec(doc))
+    d = math.dist((2.5, 2.5, 3.0), (1.0, 1.0, 0.0))
+    los, _ = reference.los_gain((2.5, 2.5, 3.0), (0, 0, -1), 1.0, (1.0, 1.0, 0.0), (0, 0, 1), 1e-4, math.pi / 2)
+    by_band = res["spectral"]["links"][0]["dc_gain_by_band"]
+    assert by_band == pytest.approx([los * math.exp(-0.4 * d), los * math.exp(-0.15 * d)], rel=1e-12)
+    assert res["links"][0]["dc_gain"] == pytest.approx(0.5 * sum(by_band), rel=1e-12)  # flat SPD: half per band
+    assert [m["sigma_t"] for m in res["spectral"]["medium_bands"]] == pytest.approx([0.4, 0.15])
+
+
+def _led(lam):
+    """A white LED of the test's own: blue chip (448 nm, FWHM 22 nm) + phosphor (565 nm, FWHM 120 nm)."""
+    def g(peak, fwhm):
+        return np.exp(-0.5 * ((lam - peak) / (fwhm / 2.3548)) ** 2)
+    return 1.8 * g(448 * NM, 22 * NM) + g(565 * NM, 120 * NM)
+
+
+def test_white_led_illuminance_against_a_hand_computation():
+    from colour.colorimetry import SDS_LEFS_PHOTOPIC
+
+    lam = np.linspace(380 * NM, 780 * NM, 801)
+    power, h = 2.0, 2.5
+    doc = room_doc(max_reflections=0, tx=(2.5, 2.5, 3.0), rx=(2.5, 2.5, 0.5), area=1e-4)
+    doc["transmitters"][0].update(power=power, spectrum={"type": "table", "wavelengths": lam.tolist(),
+                                                         "values": _led(lam).tolist()})
+    doc["spectral"] = {"band_edges": np.linspace(380 * NM, 780 * NM, 9).tolist()}
+    res = simulate(spec(doc))
+    # by hand: K_m int S V / int S on a fine grid, times the irradiance P (m + 1) / (2 pi h^2) below a Lambertian
+    fine = np.linspace(380, 780, 40001)
+    cie = SDS_LEFS_PHOTOPIC["CIE 1924 Photopic Standard Observer"]
+    v = np.interp(fine, cie.wavelengths, cie.values)
+    s = _led(fine * NM)
+    efficacy = 683.0 * np.trapezoid(s * v, fine) / np.trapezoid(s, fine)
+    e_v = efficacy * power * 2 / (2 * math.pi * h * h)
+    got = res["spectral"]["links"][0]["illuminance_lx"]
+    assert got == pytest.approx(e_v, rel=2e-4)
+    assert res["spectral"]["transmitters"][0]["luminous_efficacy_lm_per_w"] == pytest.approx(efficacy, rel=2e-4)
+    # power check: the luminous efficacy of a flat SPD over the same range differs by > 5 %
+    flat = 683.0 * np.trapezoid(v, fine) / 400
+    assert abs(flat / efficacy - 1) > 0.05
+
+
+def test_coloured_walls_first_bounce_against_the_integrator():
+    size, tx, rx = (5.0, 5.0, 3.0), (2.5, 2.5, 3.0), (1.0, 1.0, 0.0)
+    walls, floor, ceiling = [0.15, 0.75], [0.4, 0.2], [0.8, 0.8]
+    doc = _spectral_room(_surf(walls), _surf(floor), _surf(ceiling), {"wavelengths": [470 * NM, 620 * NM]},
+                         max_reflections=1, paths=100_000, batch_size=20_000)
+    doc["simulation"]["direction"] = "backward"
+    res = simulate(spec(doc))
+    link = res["spectral"]["links"][0]
+    los = res["links"][0]["los_gain"]
+    for b in range(2):
+        rho = {"floor": floor[b], "ceiling": ceiling[b], **{f: walls[b] for f in reference.FACES[2:]}}
+        ref = reference.first_bounce_box_dc_gain(size, rho, tx, (0, 0, -1), 1.0, rx, (0, 0, 1), 1e-4, math.pi / 2,
+                                                 rel_tol=1e-3)
+        h1, se = link["dc_gain_by_band"][b] - los, link["dc_gain_by_band_stderr"][b]
+        assert abs(h1 - ref) <= 4 * se + 1e-3 * ref, (b, h1, ref, se)
+        assert 4 * se < 0.03 * ref  # a 3 % error in a band would fail
+
+
+def test_electrical_gain_is_the_responsivity_weighted_sum():
+    doc = _spectral_room(_surf([0.3, 0.6]), 0.3, 0.8, {"band_edges": [500 * NM, 700 * NM, 900 * NM]})
+    doc["transmitters"][0]["spectrum"] = [3.0, 1.0]
+    doc["receivers"][0].update(responsivity=[0.3, 0.5], filter_transmission=[0.5, 0.9])
+    res = simulate(spec(doc))
+    link = res["spectral"]["links"][0]
+    h = link["dc_gain_by_band"]
+    assert link["electrical_gain_a_per_w"] == pytest.approx(0.75 * 0.3 * 0.5 * h[0] + 0.25 * 0.5 * 0.9 * h[1], rel=1e-12)
+    assert link["optical_gain"] == pytest.approx(0.75 * h[0] + 0.25 * h[1], rel=1e-12)
+    assert res["links"][0]["dc_gain"] == pytest.approx(link["optical_gain"], rel=1e-12)
+
+
+BASE = {"room": {"size": [4, 4, 3], "reflectance": {"floor": 0.3, "ceiling": 0.8, "walls": _surf([0.2, 0.7])}},
+        "transmitters": [{"position": [2, 2, 3], "normal": [0, 0, -1], "lambertian_order": 1}],
+        "receivers": [{"position": [1, 1, 0], "normal": [0, 0, 1], "area": 1e-4}],
+        "spectral": {"band_edges": [400e-9, 550e-9, 700e-9]}}
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda d: d.pop("spectral"), "room.reflectance.walls.reflectance: a spectral curve needs the scene's wavelength"),
+    (lambda d: d["spectral"].update(band_edges=[500e-9, 400e-9]), "strictly increasing: entry 1"),
+    (lambda d: d["spectral"].update(band_edges=[400, 500]), "wavelengths are in metres"),
+    (lambda d: d["room"]["reflectance"].update(walls=_surf([0.2, 1.3])), "walls.reflectance: entry 1 value 1.3 outside"),
+    (lambda d: d["receivers"][0].update(responsivity=[1, 2, 3]), "receivers[0].responsivity: 3 values but the scene "
+                                                                  "has 2 band(s)"),
+    (lambda d: d["transmitters"][0].update(spectrum={"type": "table", "wavelengths": [450e-9, 800e-9],
+                                                     "values": [1, 1]}), "transmitters[0].spectrum: the table covers"),
+    (lambda d: d["transmitters"][0].update(spectrum={"type": "named", "name": "white_paint"}),
+     "'white_paint' is a reflectance table, not a spectrum"),
+    (lambda d: d["transmitters"][0].update(spectrum=[0, 0]), "zero everywhere"),
+    (lambda d: d["receivers"][0].update(filter_transmission=[0.5, 1.5]), "filter_transmission: entry 1"),
+    (lambda d: d["spectral"].update(medium={"sigma_a": [0.1, 0.1], "sigma_s": [0, 0]}), "the scene has no medium"),
+])
+def test_validation_errors_are_located(change, message):
+    doc = copy.deepcopy(BASE)
+    change(doc)
+    with pytest.raises(ValidationError, match=None) as err:
+        spec(doc)
+    assert message in str(err.value)
+
+
+def test_scattering_algorithms_with_carried_ratios_say_what_to_use():
+    doc = _spectral_room(_surf([0.2, 0.7]), 0.3, 0.8, {"wavelengths": [450 * NM, 650 * NM]}, algorithm=5,
+                         max_scattering=2)
+    doc["medium"] = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2}
+    with pytest.raises(SceneError, match="use algorithm 1"):
+        simulate(spec(doc))
