@@ -32,7 +32,6 @@ a SceneError says what to run instead.
 """
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -153,6 +152,7 @@ class SceneSpectra:
     carry: bool = False
     medium_bands: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
+    _face_ratio_depth: np.ndarray | None = None
 
     @property
     def n_bands(self) -> int:
@@ -168,18 +168,39 @@ class SceneSpectra:
 
     # --- kernel ------------------------------------------------------------------------
     def initial_ratio(self, n: int) -> np.ndarray:
-        """(B, n) ones when the kernel carries ratios, else (0, n)."""
-        return np.ones((self.n_bands if self.carry else 0, n))
+        """A path's ratio state: (B, n) ones (rows: prod rho_b / rho_c), plus a row of the carrier optical depth
+        travelled (0) when the medium varies per band; (0, n) when the kernel carries no ratios."""
+        rows = (self.n_bands + (self.tau_scale is not None)) if self.carry else 0
+        r = np.ones((rows, n))
+        if rows > self.n_bands:
+            r[-1] = 0.0
+        return r
 
     def reflect(self, ratio: np.ndarray, prims: np.ndarray) -> np.ndarray:
-        """ratio * rho_b / rho_c of the faces `prims` (a reflection)."""
-        return ratio * self.face_ratio.take(prims, axis=1) if self.carry else ratio
+        """The state after a reflection on faces `prims`: bands times rho_b / rho_c."""
+        if not self.carry:
+            return ratio
+        if len(ratio) > self.n_bands:  # the depth row is multiplied by 1
+            if self._face_ratio_depth is None:
+                self._face_ratio_depth = np.vstack([self.face_ratio, np.ones((1, self.face_ratio.shape[1]))])
+            return ratio * self._face_ratio_depth.take(prims, axis=1)
+        return ratio * self.face_ratio.take(prims, axis=1)
 
     def transmit(self, ratio: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        """ratio * T_b / T_c for carrier optical depths `tau` (n,) of segments."""
+        """The state after segments of carrier optical depth `tau` (n,): the depth row grows (the band factors
+        T_b / T_c = exp(-tau_c (sigma_t,b / sigma_t,c - 1)) are applied once, at the estimates)."""
         if not self.carry or self.tau_scale is None:
             return ratio
-        return ratio * np.exp(-self.tau_scale[:, None] * tau[None, :])
+        out = ratio.copy()
+        out[-1] += tau
+        return out
+
+    def estimate_ratio(self, ratio: np.ndarray, tau: np.ndarray | None = None) -> np.ndarray:
+        """(B, m) band ratios of estimates from path states `ratio`, their connections adding carrier depth `tau`."""
+        if not self.carry or self.tau_scale is None:
+            return ratio
+        depth = ratio[-1] if tau is None else ratio[-1] + tau
+        return ratio[:self.n_bands] * np.exp(-self.tau_scale[:, None] * depth[None, :])
 
     def channel_power(self, power, ratio, tx, rx) -> tuple[np.ndarray, np.ndarray]:
         """(optical power (m,), channel powers (V, m)) of estimates of carrier power `power` (m,), band ratios
@@ -209,16 +230,10 @@ class SceneSpectra:
         return ch * grey[None, :]
 
     # --- tallies -------------------------------------------------------------------------
-    def virtual_links(self, links: np.ndarray) -> np.ndarray:
-        """Channel-major virtual links v * n_links + link of the batch's targets (V T,)."""
-        v = np.arange(self.n_channels)[:, None] * self.n_links
-        return (v + np.asarray(links, np.int64)[None, :]).ravel()
+    def builder(self, item, tgt: np.ndarray, links: np.ndarray) -> "ChannelBuilder":
+        """The channel tally of a batch (kernel.WorkItem) whose targets `tgt` are the global `links`."""
+        return ChannelBuilder(self, item.direction, item.source, tgt, links, item.n_paths)
 
-
-def _face_surfaces(geometry, n_faces: int):
-    if getattr(geometry, "surfaces", None) is None:
-        return None
-    return geometry.surfaces
 
 
 def surface_bands(surface, spectral) -> np.ndarray:
@@ -367,7 +382,9 @@ def _carrier_medium(scene, out: SceneSpectra, sigma_a, sigma_s, phases) -> None:
     scene.phase = phase_from_spec(phases[c])
     for b, p in enumerate(phases):
         if p.type == "mie":
-            out.medium_bands[b]["g"] = float(phase_from_spec(p).mean_cosine) if b == c else None
+            from .mie import particle_optics
+
+            out.medium_bands[b]["g"] = float(particle_optics(p.particles).g)
     varies = not (np.all(sigma_a == sigma_a[c]) and np.all(sigma_s == sigma_s[c]))
     out.tau_scale = sigma_t / sigma_t[c] - 1.0 if varies else None
     scene.medium_far_distance = _far_distance(scene.spec, scene.geometry, scene.medium, scene.receivers.positions)
@@ -389,31 +406,135 @@ def _check_supported(scene, out: SceneSpectra) -> None:
                          "surfaces and smoke grey")
 
 
-# --- results ---------------------------------------------------------------------------------------------------------
+# --- channel tallies --------------------------------------------------------------------------------------------------
+#: Path groups of the channel tallies (path index mod N_GROUPS in every batch, as tally.py's reliability groups).
+N_GROUPS = 16
+
+
+@dataclass
+class ChannelBatch:
+    """One batch's channel sums (see ChannelBuilder)."""
+
+    links: np.ndarray  # (T,) global links of the batch's targets
+    n_paths: int
+    sums: np.ndarray  # (B + 9, T, N_GROUPS): per band w, then per combination w, w t, w t^2
+    band_bc: np.ndarray  # (2, B, T): per band sums of w t and w t^2
+    group_paths: np.ndarray  # (N_GROUPS,)
+
+
+class ChannelBuilder:
+    """One batch's estimates summed per channel, target and path group (one bincount per kernel step).
+
+    Rows per target and path group: the B bands' power, then the optical, electrical and luminous
+    combinations' (w, w t, w t^2). Per band, w t and w t^2 are summed without groups (mean delay and
+    delay spread per band, without error bars). Standard errors come from the spread of the N_GROUPS
+    path-group means (batch means, 15 degrees of freedom: an error bar good to about 20 %), not from
+    per-path second moments: per-path sums would cost a scatter per band and estimate, these stay
+    small. The whole-spectrum optical gain also has the main tally's per-path error bars (dc_gain)."""
+
+    def __init__(self, sp: "SceneSpectra", item_direction: str, source: int, tgt: np.ndarray, links: np.ndarray,
+                 n_paths: int):
+        self.B, self.T, self.n_paths, self.links = sp.n_bands, len(tgt), n_paths, np.asarray(links, np.int64)
+        own = np.full(self.T, source, np.int64)
+        tx, rx = (own, tgt) if item_direction == "forward" else (tgt, own)
+        f = sp.tx_fraction[tx]  # (T, B)
+        #: (T, 3, B) weights of the combinations: optical f, electrical f T R, luminous f K_m Vbar
+        self.weights = np.stack([f, f * sp.rx_electrical[rx], f * sp.tx_luminous[tx]], axis=1)
+        self.sums = np.zeros((self.B + 9) * self.T * N_GROUPS)
+        self.band_bc = np.zeros((2, self.B, self.T))
+
+    def add(self, target, delay, power, ratio, path) -> np.ndarray:
+        """Estimates (m,) of local targets `target`, delays [s], carrier powers, band ratios (B, m) or (0, m)
+        (all 1), batch path indices; returns their optical (whole-spectrum) power (m,)."""
+        optical = np.zeros(len(power))
+        cells = self.T * N_GROUPS
+        rows = (np.arange(self.B + 9) * cells)[:, None]
+        for j in range(self.T):  # a loop over target devices
+            sel = slice(None) if self.T == 1 else np.flatnonzero(target == j)
+            p, t = power[sel], delay[sel]
+            if len(p) == 0:
+                continue
+            bands = p * ratio[:, sel] if ratio.shape[0] else np.broadcast_to(p, (self.B, len(p)))
+            combo = np.einsum("cb,bm->cm", self.weights[j], bands)  # (3, m_j); einsum, not BLAS threads
+            ct = combo * t
+            x = np.concatenate([bands, combo, ct, ct * t])
+            key = j * N_GROUPS + path[sel] % N_GROUPS
+            self.sums += np.bincount((rows + key[None, :]).ravel(), x.ravel(), len(self.sums))
+            if ratio.shape[0]:
+                bt = bands * t
+                self.band_bc[0, :, j] += bt.sum(axis=1)
+                self.band_bc[1, :, j] += (bt * t).sum(axis=1)
+            else:
+                pt = p * t
+                self.band_bc[0, :, j] += pt.sum()
+                self.band_bc[1, :, j] += (pt * t).sum()
+            optical[sel] = combo[0]
+        return optical
+
+    def finish(self) -> ChannelBatch:
+        paths = np.bincount(np.arange(self.n_paths) % N_GROUPS, minlength=N_GROUPS)
+        return ChannelBatch(self.links, self.n_paths, self.sums.reshape(self.B + 9, self.T, N_GROUPS),
+                            self.band_bc, paths)
+
+
+def _group_moments(sums: np.ndarray, paths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean per path (Q, L) of Q quantities and the covariance of those means (L, Q, Q) from group sums
+    (Q, L, G) and paths per group (L, G): sum_g (m_g - m)(m_g - m)^T / (G (G - 1)) over the groups with paths."""
+    n = paths.sum(axis=1)
+    live = paths > 0
+    g = live.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(n > 0, sums.sum(axis=2) / np.maximum(n, 1), 0.0)
+        dev = np.where(live[None], sums / np.where(live, paths, 1.0)[None] - mean[:, :, None], 0.0)
+        cov = np.einsum("qlg,rlg->lqr", dev, dev) / np.maximum(g * (g - 1), 1)[:, None, None]
+    return mean, np.where((g >= 2)[:, None, None], cov, np.where((n > 0)[:, None, None], np.nan, 0.0))
+
+
+class ChannelAccumulator:
+    """A direction's channel sums over the job; `moments` as tally.Accumulator's (estimates.link_moments)."""
+
+    def __init__(self, n_bands: int, n_links: int):
+        self.B, self.L = n_bands, n_links
+        self.sums = np.zeros((n_bands + 9, n_links, N_GROUPS))
+        self.band_bc = np.zeros((2, n_bands, n_links))
+        self.paths = np.zeros((n_links, N_GROUPS))
+
+    def add(self, batch: ChannelBatch) -> None:
+        self.sums[:, batch.links] += batch.sums
+        self.band_bc[:, :, batch.links] += batch.band_bc
+        self.paths[batch.links] += batch.group_paths[None, :]
+
+    def moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per virtual link (channel-major, V L): mean per path of (a, b, c) (V L, 3) and its covariance
+        (V L, 3, 3); for the bands only the variance of a is known (the rest NaN)."""
+        B, L = self.B, self.L
+        mean, cov = np.zeros((B + 3, L, 3)), np.full((B + 3, L, 3, 3), np.nan)
+        band_a, band_var = _group_moments(self.sums[:B], self.paths)
+        n = self.paths.sum(axis=1)
+        mean[:B, :, 0] = band_a
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean[:B, :, 1:] = np.where(n > 0, self.band_bc / np.maximum(n, 1), 0.0).transpose(1, 2, 0)
+        cov[:B, :, 0, 0] = np.diagonal(band_var, axis1=1, axis2=2).T
+        for c in range(3):  # optical, electrical, luminous
+            m, cv = _group_moments(self.sums[[B + c, B + 3 + c, B + 6 + c]], self.paths)
+            mean[B + c], cov[B + c] = m.T, cv
+        return mean.reshape(-1, 3), cov.reshape(-1, 3, 3)
+
+
 def new_accumulators(accs: dict, scene, settings) -> None:
     """Attach a channel tally (`.spectral`, V n_links virtual links) to each direction's Accumulator."""
     sp = getattr(scene, "spectra", None)
     if sp is None:
         return
-    from .tally import Accumulator
-
-    plan = channel_plan(settings.tally, sp)
-    for d, acc in accs.items():
-        acc.spectral = Accumulator(sp.n_channels * scene.n_links, plan, backward=d == "backward")
+    for acc in accs.values():
+        acc.spectral = ChannelAccumulator(sp.n_bands, scene.n_links)
 
 
 def add_batch(acc, tally, item) -> None:
     """Merge a batch's channel tally into the direction's Accumulator (simulate._merge)."""
     extra = getattr(tally, "spectral", None)
     if extra is not None:
-        acc.spectral.add(extra, item.batch, item.source)
-
-
-def channel_plan(plan, sp: SceneSpectra):
-    """The channel tally: moments only (no CIR, no order split, no groups) over the virtual links."""
-    n = len(plan.cir_rank)
-    none = np.full(n, -1, np.int64)
-    return dataclasses.replace(plan, cir_rank=none, order_rank=none, group_weights=np.zeros((0, 0)))
+        acc.spectral.add(extra)
 
 
 def result_block(spec, scene, accs, los_geometry, los_grey, los_delay) -> dict | None:
@@ -440,6 +561,7 @@ def result_block(spec, scene, accs, los_geometry, los_grey, los_delay) -> dict |
         return np.where(masked[None, :], np.nan, np.asarray(d[key], float).reshape(V, L))
 
     h, h_se = ch("dc_gain"), ch("dc_gain_stderr")
+    h_se[:B] = np.where(masked[None, :], np.nan, np.sqrt(np.maximum(cov[:, 0, 0], 0.0)).reshape(V, L)[:B])
     mean_d, rms, rms_se = ch("mean_delay_s"), ch("rms_delay_spread_s"), ch("rms_delay_spread_s_stderr")
     ob, el, lu = B, B + 1, B + 2
     gain = scene.receivers.gain.take(ri)  # A T_s g [m^2]
@@ -451,12 +573,17 @@ def result_block(spec, scene, accs, los_geometry, los_grey, los_delay) -> dict |
         row = {"transmitter": scene.transmitters.ids[ti[k]], "receiver": scene.receivers.ids[ri[k]],
                "dc_gain_by_band": column(h[:B, k]), "dc_gain_by_band_stderr": column(h_se[:B, k]),
                "mean_delay_s_by_band": column(mean_d[:B, k]), "rms_delay_spread_s_by_band": column(rms[:B, k]),
-               "rms_delay_spread_s_by_band_stderr": column(rms_se[:B, k]),
                "optical_gain": column(h[ob, k:k + 1])[0], "optical_gain_stderr": column(h_se[ob, k:k + 1])[0],
                "electrical_gain_a_per_w": column(h[el, k:k + 1])[0] if has_e[k] else None,
                "electrical_gain_a_per_w_stderr": column(h_se[el, k:k + 1])[0] if has_e[k] else None,
                "electrical_rms_delay_spread_s": column(rms[el, k:k + 1])[0] if has_e[k] else None,
+               "electrical_rms_delay_spread_s_stderr": column(rms_se[el, k:k + 1])[0]
+               if has_e[k] else None,
                "photocurrent_a": column(h[el, k:k + 1] * power[k])[0] if has_e[k] else None,
+               "electrical_gain_by_band_a_per_w": column(sp.tx_fraction[ti[k]] * sp.rx_electrical[ri[k]] * h[:B, k])
+               if has_e[k] else None,
+               "illuminance_by_band_lx": column(power[k] / gain[k] * sp.tx_fraction[ti[k]] * sp.tx_luminous[ti[k]]
+                                                * h[:B, k]) if lux_ok else None,
                "illuminance_lx": column(h[lu, k:k + 1] * power[k] / gain[k])[0] if lux_ok else None,
                "illuminance_lx_stderr": column(h_se[lu, k:k + 1] * power[k] / gain[k])[0] if lux_ok else None}
         links.append(row)
@@ -465,16 +592,15 @@ def result_block(spec, scene, accs, los_geometry, los_grey, los_delay) -> dict |
                                                                       float(sp.face_rho[b].max())]
               if sp.face_rho.shape[1] else None} for b in range(B)]
     transmitters = [{"id": scene.transmitters.ids[i], "band_power_fraction": sp.tx_fraction[i].tolist(),
+                     "luminous_efficacy_by_band_lm_per_w": sp.tx_luminous[i].tolist(),
                      "luminous_efficacy_lm_per_w": float(sp.tx_luminous[i] @ sp.tx_fraction[i]),
                      "luminous_flux_lm": float(scene.transmitters.power[i] * sp.tx_luminous[i] @ sp.tx_fraction[i])}
                     for i in range(len(scene.transmitters))]
     rx_rows = [(r.id or f"rx{j}", j) for j, r in enumerate(spec.receivers)]
-    first = len(spec.receivers)
     for g, (start, _shape) in zip(spec.receiver_grids, scene.grid_slices or []):
         rx_rows.append((g.id_prefix, start))
     receivers = [{"id": name, "electrical_weight_a_per_w": sp.rx_electrical[j].tolist()
                   if sp.rx_responsive[j] else None} for name, j in rx_rows]
-    del first
     return {"bands": bands, "carried_ratios": sp.carry, "transmitters": transmitters, "receivers": receivers,
             "medium_bands": sp.medium_bands or None, "links": links,
             "model": "bands traced together: carrier = largest reflectance / least-attenuated band, per-band ratios "
@@ -482,19 +608,6 @@ def result_block(spec, scene, accs, los_geometry, los_grey, los_delay) -> dict |
 
 
 def add_channels(ctx, cat: dict) -> np.ndarray:
-    """Tally one kernel step's estimates in every channel (kernel._Context.flush); returns their optical power.
-
-    Estimate i of local target t goes to the virtual link v * n_links + link(t) of each channel v,
-    with the power of `SceneSpectra.channel_power`."""
-    sp = ctx.spectra
-    target, power = cat["target"], cat["power"]
-    m = len(power)
-    glob = ctx.tgt.take(target)
-    own = np.full(m, ctx.item.source, np.int64)
-    tx, rx = (own, glob) if ctx.item.direction == "forward" else (glob, own)
-    optical, channels = sp.channel_power(power, cat.get("ratio", np.ones((0, m))), tx, rx)
-    V, T = sp.n_channels, len(ctx.tgt)
-    tv = (np.arange(V)[:, None] * T + target[None, :]).ravel()
-    ctx.channels.add_step(tv, np.tile(cat["k"], V), np.tile(cat["s"], V), np.tile(cat["delay"], V),
-                          channels.ravel(), np.tile(cat["path"], V))
-    return optical
+    """Tally one kernel step's estimates in every channel (kernel._Context.flush); returns their optical power."""
+    m = len(cat["power"])
+    return ctx.channels.add(cat["target"], cat["delay"], cat["power"], cat.get("ratio", np.ones((0, m))), cat["path"])
