@@ -585,7 +585,8 @@ def result_block(spec, scene, accs, los_geometry, los_grey, los_delay) -> dict |
                "illuminance_by_band_lx": column(power[k] / gain[k] * sp.tx_fraction[ti[k]] * sp.tx_luminous[ti[k]]
                                                 * h[:B, k]) if lux_ok else None,
                "illuminance_lx": column(h[lu, k:k + 1] * power[k] / gain[k])[0] if lux_ok else None,
-               "illuminance_lx_stderr": column(h_se[lu, k:k + 1] * power[k] / gain[k])[0] if lux_ok else None}
+               "illuminance_lx_stderr": column(h_se[lu, k:k + 1] * power[k] / gain[k])[0] if lux_ok else None,
+               "illuminance_direct_lx": float(los[lu, k] * power[k] / gain[k]) if lux_ok and not masked[k] else None}
         links.append(row)
     bands = [{"index": b, "lower_m": float(sp.edges[b]), "upper_m": float(sp.edges[b + 1]),
               "centre_m": float(sp.centres[b]), "reflectance_range": [float(sp.face_rho[b].min()),

@@ -144,6 +144,8 @@ def test_coloured_walls_first_bounce_against_the_integrator():
         h1, se = link["dc_gain_by_band"][b] - los, link["dc_gain_by_band_stderr"][b]
         assert abs(h1 - ref) <= 4 * se + 1e-3 * ref, (b, h1, ref, se)
         assert 4 * se < 0.03 * ref  # a 3 % error in a band would fail
+    # the channels' error bars (spread of 16 path groups) agree with the main tally's per-path ones
+    assert 0.5 < link["optical_gain_stderr"] / res["links"][0]["dc_gain_stderr"] < 2.0
 
 
 def test_electrical_gain_is_the_responsivity_weighted_sum():
@@ -193,3 +195,24 @@ def test_scattering_algorithms_with_carried_ratios_say_what_to_use():
     doc["medium"] = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2}
     with pytest.raises(SceneError, match="use algorithm 1"):
         simulate(spec(doc))
+
+
+def test_particle_smoke_per_band_equals_grey_runs_at_each_wavelength():
+    """Mie per band: each band of a two-band soot scene equals the grey scene at that band's wavelength and index."""
+    particles = {"geometric_mean_diameter": 1.5e-7, "geometric_std": 1.8,
+                 "refractive_index": {"real": 1.57, "imag": 0.56}, "wavelength": 850 * NM}
+    medium = {"type": "particles", "particles": particles, "mass_concentration": 1e-4, "particle_density": 1800.0}
+    index = [{"real": 1.55, "imag": 0.50}, {"real": 1.60, "imag": 0.60}]
+    doc = _spectral_room(_surf([0.3, 0.6]), 0.3, 0.8, {"wavelengths": [450 * NM, 850 * NM],
+                                                       "medium": {"refractive_index": index}}, max_reflections=2)
+    doc["medium"] = medium
+    two = simulate(spec(doc))
+    bands = two["spectral"]["medium_bands"]
+    assert bands[0]["sigma_t"] > bands[1]["sigma_t"]  # soot attenuates more in the blue
+    for b, (lam, rho) in enumerate([(450, 0.3), (850, 0.6)]):
+        grey = room_doc(rho_walls=rho, max_reflections=2, russian_roulette=False, paths=6000, batch_size=2000)
+        grey["medium"] = {**medium, "particles": {**particles, "wavelength": lam * NM, "refractive_index": index[b]}}
+        one = simulate(spec(grey))
+        assert one["modeled"]["medium"]["sigma_t"] == pytest.approx(bands[b]["sigma_t"], rel=1e-12)
+        assert two["spectral"]["links"][0]["dc_gain_by_band"][b] == pytest.approx(one["links"][0]["dc_gain"],
+                                                                                   rel=1e-10)
