@@ -74,19 +74,18 @@ def main(argv=None) -> None:
     print(f"{spec.name}: {args.paths} paths, K = {spec.simulation.max_reflections}")
     print(f"LED: {power:g} W, luminous efficacy {tx['luminous_efficacy_lm_per_w']:.1f} lm/W, "
           f"flux {tx['luminous_flux_lm']:.0f} lm")
-    print(f"{'band [nm]':>12s} {'power':>7s} {'H':>11s} {'+-':>8s} {'G [A/W]':>11s} {'E [lx]':>8s}")
+    print(f"{'band [nm]':>11s} {'power':>6s}  {'H [-]':^20s} {'G [A/W]':>10s} {'E [lx]':>7s}")
     for b, band in enumerate(sp["bands"]):
-        print(f"{band['lower_m'] / NM:5.0f}-{band['upper_m'] / NM:<6.0f} {tx['band_power_fraction'][b]:7.1%} "
-              f"{link['dc_gain_by_band'][b]:11.4e} {link['dc_gain_by_band_stderr'][b]:8.1e} "
-              f"{link['electrical_gain_by_band_a_per_w'][b]:11.4e} {link['illuminance_by_band_lx'][b]:8.2f}")
-    print(f"{'combined':>12s} {'100%':>7s} {link['optical_gain']:11.4e} {link['optical_gain_stderr']:8.1e} "
-          f"{link['electrical_gain_a_per_w']:11.4e} {link['illuminance_lx']:8.2f}")
-    print(f"photocurrent {link['photocurrent_a'] * 1e6:.3f} uA (+- {link['electrical_gain_a_per_w_stderr'] * power * 1e6:.2g}); "
-          f"illuminance {link['illuminance_lx']:.1f} +- {link['illuminance_lx_stderr']:.1g} lx, of which direct "
-          f"{link['illuminance_direct_lx']:.1f} lx")
+        print(f"{band['lower_m'] / NM:4.0f}-{band['upper_m'] / NM:<6.0f} {tx['band_power_fraction'][b]:6.1%}  "
+              f"{link['dc_gain_by_band'][b]:.4e} ± {link['dc_gain_by_band_stderr'][b]:.1e} "
+              f"{link['electrical_gain_by_band_a_per_w'][b]:10.3e} {link['illuminance_by_band_lx'][b]:7.2f}")
+    print(f"{'combined':11s} {'100%':>6s}  {link['optical_gain']:.4e} ± {link['optical_gain_stderr']:.1e} "
+          f"{link['electrical_gain_a_per_w']:10.3e} {link['illuminance_lx']:7.2f}")
+    print(f"photocurrent {link['photocurrent_a'] * 1e6:.3f} ± {link['electrical_gain_a_per_w_stderr'] * power * 1e6:.1g} uA; "
+          f"illuminance {link['illuminance_lx']:.2f} ± {link['illuminance_lx_stderr']:.1g} lx, of which direct "
+          f"{link['illuminance_direct_lx']:.2f} lx")
     print(f"rms delay spread: optical {res['links'][0]['rms_delay_spread_s'] * 1e9:.2f} ns, electrical "
           f"{link['electrical_rms_delay_spread_s'] * 1e9:.2f} ns")
-
 
 if __name__ == "__main__":
     main()

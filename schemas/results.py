@@ -14,6 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from .algorithms import Direction
 from .scene import SceneSpec
+from .spectra import SpectralResultPublic
 
 
 class StopReason(StrEnum):
@@ -246,4 +247,6 @@ class SimulationResultPublic(PublicModel):
     warnings: list[str] = Field(default_factory=list, description="what a careful reader of these numbers should know")
     modeled: ModeledPublic = Field(default_factory=ModeledPublic,
                                    description="what was simulated, what was left out, and why")
+    spectral: SpectralResultPublic | None = Field(None, description="per wavelength band and combined (scenes "
+                                                  "with `spectral`; docs/spectra.md)")
     scene: SceneSpec

@@ -297,3 +297,69 @@ def _surfaces(scene):
         yield f"meshes[{i}].reflectance", m.reflectance
         for k, v in m.group_reflectance.items():
             yield f"meshes[{i}].group_reflectance[{k!r}]", v
+
+
+# --- the result's `spectral` section ------------------------------------------------------------------------------------
+from pydantic import ConfigDict  # noqa: E402
+
+
+class _Out(BaseModel):
+    model_config = ConfigDict(extra="ignore")
+
+
+class SpectralBandPublic(_Out):
+    index: int
+    lower_m: float = Field(description="lower band edge [m]")
+    upper_m: float = Field(description="upper band edge [m]")
+    centre_m: float = Field(description="band centre (or the given wavelength) [m]")
+    reflectance_range: list[float] | None = Field(None, description="[min, max] surface reflectance in this band")
+
+
+class SpectralTransmitterPublic(_Out):
+    id: str
+    band_power_fraction: list[float] = Field(description="f_b: share of the optical power in each band")
+    luminous_efficacy_by_band_lm_per_w: list[float] = Field(description="K_m Vbar_b per band [lm/W]")
+    luminous_efficacy_lm_per_w: float = Field(description="luminous efficacy of the spectrum, sum f_b K_m Vbar_b")
+    luminous_flux_lm: float = Field(description="P_t x the luminous efficacy [lm]")
+
+
+class SpectralReceiverPublic(_Out):
+    id: str = Field(description="receiver id, or a grid's id_prefix (its points share the curves)")
+    electrical_weight_a_per_w: list[float] | None = Field(None, description="T_b R_b per band [A/W]")
+
+
+class SpectralLinkPublic(_Out):
+    """Per link: every band's gain, and the optical, electrical and luminous combinations (null when not defined)."""
+
+    transmitter: str
+    receiver: str
+    dc_gain_by_band: list[float | None] = Field(description="H_b, gain per watt emitted in band b")
+    dc_gain_by_band_stderr: list[float | None]
+    mean_delay_s_by_band: list[float | None]
+    rms_delay_spread_s_by_band: list[float | None]
+    optical_gain: float | None = Field(description="sum_b f_b H_b: the whole spectrum (= the link's dc_gain)")
+    optical_gain_stderr: float | None
+    electrical_gain_a_per_w: float | None = Field(None, description="sum_b f_b T_b R_b H_b [A/W]")
+    electrical_gain_a_per_w_stderr: float | None = None
+    electrical_gain_by_band_a_per_w: list[float | None] | None = None
+    electrical_rms_delay_spread_s: float | None = None
+    electrical_rms_delay_spread_s_stderr: float | None = None
+    photocurrent_a: float | None = Field(None, description="P_t x the electrical gain [A]")
+    illuminance_lx: float | None = Field(None, description="P_t sum_b f_b K_m Vbar_b H_b / (A T_s g) [lx], "
+                                                           "all reflection orders")
+    illuminance_lx_stderr: float | None = None
+    illuminance_by_band_lx: list[float | None] | None = None
+    illuminance_direct_lx: float | None = Field(None, description="the line of sight's part [lx]")
+
+
+class SpectralResultPublic(_Out):
+    """The `spectral` section of a spectral scene's result (docs/spectra.md)."""
+
+    bands: list[SpectralBandPublic]
+    carried_ratios: bool = Field(description="whether paths carried per-band ratios (spectral surfaces or smoke)")
+    transmitters: list[SpectralTransmitterPublic]
+    receivers: list[SpectralReceiverPublic]
+    medium_bands: list[dict] | None = Field(None, description="per band: sigma_a, sigma_s, sigma_t [1/m], albedo, "
+                                                              "visibility [m] (and g for particles)")
+    links: list[SpectralLinkPublic]
+    model: str

@@ -23,9 +23,9 @@ def test_white_led_room_prints_bands_and_combined():
     rows = [line for line in text.splitlines() if re.match(r"\s*\d{3}-\d{3}\s", line)]
     assert len(rows) == 8  # one line per 50 nm band over 380-780 nm
     combined = next(line for line in text.splitlines() if line.strip().startswith("combined"))
-    h, se, g, e_v = (float(x) for x in combined.split()[2:6])
+    h, se, g, e_v = (float(x) for x in combined.replace("±", " ").split()[2:6])
     assert 0 < se < 0.05 * h and g > 0 and e_v > 0
-    total, direct = (float(x) for x in re.search(r"illuminance ([\d.]+) \+- \S+ lx, of which direct ([\d.]+) lx",
+    total, direct = (float(x) for x in re.search(r"illuminance ([\d.]+) ± \S+ lx, of which direct ([\d.]+) lx",
                                                  text).groups())
     assert direct < total  # reflections add light
     # per-band illuminances add up to the combined one (printed to 0.01 lx)
