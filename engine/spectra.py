@@ -27,8 +27,8 @@ Channels tallied per link (virtual links v * n_links + link of a second tally,
     with the receiver's field of view reads, all reflection orders included).
 Per-band smoke: homogeneous coefficients per band, or Mie per band centre for particles
 (engine/mie.py). Algorithm 1 (extinction only) in any spectral scene; scattering algorithms
-(2-5) when the per-band ratios are trivial (one band, or grey surfaces and medium); otherwise
-a SceneError says what to run instead.
+(2-5) with spectral surfaces in grey smoke (the ratios change at reflections only, also on the
+branches of medium_nee.first_segment_branch); with smoke per band, a SceneError says what to run.
 """
 from __future__ import annotations
 
@@ -398,12 +398,12 @@ def _check_supported(scene, out: SceneSpectra) -> None:
         raise SceneError("spectral: perfect-mirror surfaces are not supported with spectral surfaces or smoke yet "
                          "(use a Phong material with a large exponent, or run one job per band)")
     a = scene.spec.simulation.algorithm
-    scatters = scene.medium is not None and scene.medium.sigma_s > 0
-    if a in (2, 3, 4, 5) and scene.medium is not None and (scatters or a == 5):
-        raise SceneError(f"spectral: algorithm {a} in smoke with {out.n_bands} bands and spectral surfaces or smoke "
-                         "is not supported (its scattering branches carry one throughput): use algorithm 1 "
-                         "(extinction per band), or run one job per band (`spectral` with one band each), or make "
-                         "surfaces and smoke grey")
+    if a in (2, 3, 4, 5) and scene.medium is not None and out.tau_scale is not None:
+        raise SceneError(f"spectral: algorithm {a} with smoke that varies over the {out.n_bands} bands is not "
+                         "supported (its scattering estimators would need a per-band albedo and phase function at "
+                         "every scattering event): use algorithm 1 (extinction per band), or run one job per band "
+                         "(`spectral` with one band each, any algorithm), or give grey smoke (spectral surfaces "
+                         "work with every algorithm in grey smoke)")
 
 
 # --- channel tallies --------------------------------------------------------------------------------------------------

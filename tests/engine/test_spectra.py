@@ -189,13 +189,39 @@ def test_validation_errors_are_located(change, message):
     assert message in str(err.value)
 
 
-def test_scattering_algorithms_with_carried_ratios_say_what_to_use():
-    doc = _spectral_room(_surf([0.2, 0.7]), 0.3, 0.8, {"wavelengths": [450 * NM, 650 * NM]}, algorithm=5,
-                         max_scattering=2)
+def test_scattering_algorithms_in_smoke_per_band_say_what_to_use():
+    doc = _spectral_room(_surf([0.2, 0.7]), 0.3, 0.8, {"wavelengths": [450 * NM, 650 * NM],
+                                                       "medium": {"sigma_a": [0.05, 0.02], "sigma_s": [0.2, 0.1]}},
+                         algorithm=5, max_scattering=2)
     doc["medium"] = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2}
     with pytest.raises(SceneError, match="use algorithm 1"):
         simulate(spec(doc))
 
+
+@pytest.mark.parametrize("algorithm", [4, 5])
+def test_spectral_surfaces_in_grey_smoke_with_scattering_algorithms(algorithm):
+    """Algorithms 4 and 5 (both devices, branches, double scattering): flat spectra give the grey result
+    (roulette on), and each band of a two-band run equals its one-band run (roulette off)."""
+    smoke = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2, "phase": {"type": "hg", "g": 0.5}}
+    sim = {"algorithm": algorithm, "max_reflections": 2, "paths": 1500, "batch_size": 1500, "time_bin_s": 2e-9}
+    if algorithm == 5:
+        sim["max_scattering"] = 2
+    grey = room_doc(rho_walls=0.6, medium=smoke, **sim)
+    flat = _spectral_room(_surf([0.6, 0.6]), 0.3, 0.8, {"wavelengths": [450 * NM, 650 * NM]},
+                          russian_roulette=True, **sim)
+    flat["medium"] = smoke
+    g, f = simulate(spec(grey)), simulate(spec(flat))
+    assert f["spectral"]["carried_ratios"]
+    assert f["links"][0]["dc_gain"] == pytest.approx(g["links"][0]["dc_gain"], rel=1e-12)
+    assert np.allclose(f["links"][0]["cir"]["total"], g["links"][0]["cir"]["total"], rtol=1e-11, atol=0)
+    two = _spectral_room(_surf([0.2, 0.7]), 0.3, 0.8, {"wavelengths": [450 * NM, 650 * NM]}, **sim)
+    two["medium"] = smoke
+    res = simulate(spec(two))
+    for b, rho in enumerate([0.2, 0.7]):
+        one = _spectral_room(_surf([rho]), 0.3, 0.8, {"wavelengths": [(450, 650)[b] * NM]}, **sim)
+        one["medium"] = smoke
+        assert res["spectral"]["links"][0]["dc_gain_by_band"][b] == pytest.approx(
+            simulate(spec(one))["links"][0]["dc_gain"], rel=1e-11)
 
 def test_particle_smoke_per_band_equals_grey_runs_at_each_wavelength():
     """Mie per band: each band of a two-band soot scene equals the grey scene at that band's wavelength and index."""
