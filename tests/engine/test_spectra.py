@@ -148,17 +148,29 @@ def test_coloured_walls_first_bounce_against_the_integrator():
     assert 0.5 < link["optical_gain_stderr"] / res["links"][0]["dc_gain_stderr"] < 2.0
 
 
-def test_electrical_gain_is_the_responsivity_weighted_sum():
-    doc = _spectral_room(_surf([0.3, 0.6]), 0.3, 0.8, {"band_edges": [500 * NM, 700 * NM, 900 * NM]})
+@pytest.mark.parametrize("direction", ["forward", "backward"])
+def test_electrical_gain_is_the_responsivity_weighted_sum(direction):
+    """Two transmitters with their own SPDs, receivers with their own responsivity and filter, a grid."""
+    doc = _spectral_room(_surf([0.3, 0.6]), 0.3, 0.8, {"band_edges": [500 * NM, 700 * NM, 900 * NM]},
+                         direction=direction, paths=2000)
     doc["transmitters"][0]["spectrum"] = [3.0, 1.0]
+    doc["transmitters"].append({"id": "tx2", "position": [1, 4, 3], "normal": [0, 0, -1], "lambertian_order": 2,
+                                "spectrum": [1.0, 3.0]})
     doc["receivers"][0].update(responsivity=[0.3, 0.5], filter_transmission=[0.5, 0.9])
+    doc["receivers"].append({"id": "rx2", "position": [4, 1, 0], "normal": [0, 0, 1], "area": 1e-4,
+                             "responsivity": [0.6, 0.2]})
+    doc["receiver_grids"] = [{"origin": [1, 1, 0.8], "size": [1, 1], "spacing": 1.0, "area": 1e-4,
+                              "responsivity": 0.4}]
     res = simulate(spec(doc))
-    link = res["spectral"]["links"][0]
-    h = link["dc_gain_by_band"]
-    assert link["electrical_gain_a_per_w"] == pytest.approx(0.75 * 0.3 * 0.5 * h[0] + 0.25 * 0.5 * 0.9 * h[1], rel=1e-12)
-    assert link["optical_gain"] == pytest.approx(0.75 * h[0] + 0.25 * h[1], rel=1e-12)
-    assert res["links"][0]["dc_gain"] == pytest.approx(link["optical_gain"], rel=1e-12)
-
+    f = {"tx": [0.75, 0.25], "tx2": [0.25, 0.75]}
+    e = {"rx": [0.15, 0.45], "rx2": [0.6, 0.2]}
+    assert len(res["spectral"]["links"]) == 2 * 6
+    for link, main in zip(res["spectral"]["links"], res["links"]):
+        h, fb, eb = link["dc_gain_by_band"], f[link["transmitter"]], e.get(link["receiver"], [0.4, 0.4])
+        assert link["electrical_gain_a_per_w"] == pytest.approx(fb[0] * eb[0] * h[0] + fb[1] * eb[1] * h[1],
+                                                                rel=1e-12)
+        assert link["optical_gain"] == pytest.approx(fb[0] * h[0] + fb[1] * h[1], rel=1e-12)
+        assert main["dc_gain"] == pytest.approx(link["optical_gain"], rel=1e-12)
 
 BASE = {"room": {"size": [4, 4, 3], "reflectance": {"floor": 0.3, "ceiling": 0.8, "walls": _surf([0.2, 0.7])}},
         "transmitters": [{"position": [2, 2, 3], "normal": [0, 0, -1], "lambertian_order": 1}],
