@@ -121,6 +121,9 @@ def memory_estimate(spec: SceneSpec, *, triangles: int | None = None, extent_m: 
     n_groups = len(spec.transmitter_groups)
     per_cir_link = n_bins * (1 + N_GROUPS) + 2 + n_split / max(n_cir, 1) * n_bins * ((k + 1) + (s + 1))
     accumulators = 2 * 8 * (n_links * 45 + int(n_cir * per_cir_link) + n_ord * 2 * cells + n_groups * n_rx * 13)
+    n_bands = spec.spectral.n_bands if spec.spectral is not None else 0
+    if n_bands:  # spectral channel sums per link and direction (engine/spectra.ChannelAccumulator)
+        accumulators += 2 * 8 * n_links * ((n_bands + 10) * N_GROUPS + 2 * n_bands)
     # Paths per batch as simulate.batch_size caps them (targets x paths and estimates per step bounded).
     segment_points = alg is None or bool(alg.kernel["segment_scatter"])  # auto: as if (the largest)
     per_segment = 1 + (sim.max_strata + sim.equiangular_points if segment_points and spec.medium is not None else 0)
@@ -140,7 +143,7 @@ def memory_estimate(spec: SceneSpec, *, triangles: int | None = None, extent_m: 
         devices=(n_tx + n_rx) * BYTES_PER_DEVICE,
         accumulators=accumulators,
         batch=in_flight * per_batch + pool,
-        result=(n_links * 40 + n_cir * n_bins * (k + s + 4) + map_numbers) * BYTES_PER_RESULT_NUMBER,
+        result=(n_links * (40 + 6 * n_bands) + n_cir * n_bins * (k + s + 4) + map_numbers) * BYTES_PER_RESULT_NUMBER,
     )
 
 

@@ -39,8 +39,8 @@ import numpy as np
 from .errors import SceneError
 from .spectra_tables import CURVES, K_M, VISIBLE, v_lambda
 
-#: Most (virtual link) tally entries a spectral job may hold: channels x links.
-MAX_CHANNEL_LINKS = 2_000_000
+#: Most channels x links a spectral job may tally (each link holds ~(B + 10) x 16 sums per direction).
+MAX_CHANNEL_LINKS = 400_000
 #: Wavelength step of the band integrals [m].
 _STEP = 0.25e-9
 #: Channels after the B bands: combined optical gain, electrical gain, luminous gain.

@@ -254,3 +254,15 @@ def test_particle_smoke_per_band_equals_grey_runs_at_each_wavelength():
         assert one["modeled"]["medium"]["sigma_t"] == pytest.approx(bands[b]["sigma_t"], rel=1e-12)
         assert two["spectral"]["links"][0]["dc_gain_by_band"][b] == pytest.approx(one["links"][0]["dc_gain"],
                                                                                    rel=1e-10)
+
+
+def test_job_memory_estimate_counts_the_channel_sums():
+    from owcsim.engine.budget import memory_estimate
+
+    doc = room_doc()
+    doc["receiver_grids"] = [{"origin": [0.5, 0.5, 0.8], "size": [4, 4], "spacing": 0.1, "area": 1e-4}]
+    grey = memory_estimate(spec(doc)).accumulators
+    doc["spectral"] = {"band_edges": np.linspace(400e-9, 700e-9, 9).tolist()}
+    spectral = memory_estimate(spec(doc)).accumulators
+    n_links = 1 + 41 * 41
+    assert spectral - grey == 2 * 8 * n_links * ((8 + 10) * 16 + 16)
