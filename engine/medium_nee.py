@@ -288,8 +288,13 @@ def _scatter_on_first_segment(ctx, paths, t_seg, rng):
     p_in = br.origins + t_in * br.directions
     br.weights = br.weights * medium.albedo_at(p_in.T)
     br.first = source_factor(ctx, p_in)
+    if ctx.spectra is not None:  # spectral smoke: sigma_s,b T_b over the carrier's (engine/spectra.py)
+        br.ratio = ctx.spectra.scatter(br.ratio, medium.optical_depth(br.origins.T, br.directions.T, t_in))
     u = rng.random((2, len(br)))
+    arriving = br.directions
     br.directions = scene.phase.sample(br.directions, u[0], u[1])
+    if ctx.spectra is not None and ctx.spectra.phase_bands is not None:  # p_b / p_c of the sampled direction
+        br.ratio = ctx.spectra.turn(br.ratio, _dot(arriving, br.directions))
     br.origins, br.lengths, br.s = p_in, br.lengths + t_in, br.s + 1
     return br.keep_where(br.weights > 0)
 
@@ -336,7 +341,10 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
             return
         br = br.keep(nxt)
         ts = t.take(nxt)
-        br.weights = br.weights * medium.transmittance(br.origins.T, br.directions.T, ts)
+        tau = medium.optical_depth(br.origins.T, br.directions.T, ts)
+        br.weights = br.weights * np.exp(-tau)  # = medium.transmittance
+        if ctx.spectra is not None:
+            br.ratio = ctx.spectra.transmit(br.ratio, tau)
         points = br.origins + ts * br.directions
         prims = prim.take(nxt)
         normals = isect.normals_soa.take(prims, axis=1)

@@ -26,9 +26,11 @@ Channels tallied per link (virtual links v * n_links + link of a second tally,
     over the band; illuminance E_v = P_t H_v / (A T_s g) [lx] (the illuminance a cosine sensor
     with the receiver's field of view reads, all reflection orders included).
 Per-band smoke: homogeneous coefficients per band, or Mie per band centre for particles
-(engine/mie.py). Algorithm 1 (extinction only) in any spectral scene; scattering algorithms
-(2-5) with spectral surfaces in grey smoke (the ratios change at reflections only, also on the
-branches of medium_nee.first_segment_branch); with smoke per band, a SceneError says what to run.
+(engine/mie.py). Algorithms 1-4 in any spectral scene: a scattering point p placed by the carrier
+(points on segments, or a collision starting a branch of medium_nee.first_segment_branch) multiplies
+the band's ratio by sigma_s,b / sigma_s,c and its depth factor, and the direction taken from p (the
+connection, or the branch's sampled direction) by p_b(cos) / p_c(cos). Algorithm 5 with spectral
+surfaces in grey smoke; in smoke that varies per band, a SceneError says what to run.
 """
 from __future__ import annotations
 
@@ -153,6 +155,10 @@ class SceneSpectra:
     medium_bands: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
     _face_ratio_depth: np.ndarray | None = None
+    #: sigma_s,b / sigma_s,c (B,) of a medium varying per band
+    scatter_scale: np.ndarray | None = None
+    #: the bands' phase functions when they differ (particles: Mie per band), else None
+    phase_bands: list | None = None
 
     @property
     def n_bands(self) -> int:
@@ -194,6 +200,32 @@ class SceneSpectra:
         out = ratio.copy()
         out[-1] += tau
         return out
+
+    def scatter(self, ratio: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """The state of paths scattered at points a carrier depth `tau` (n,) along their segment (algorithms 2-4):
+        bands times sigma_s,b / sigma_s,c, depth + tau (the density sigma_s T of the point, over the carrier's)."""
+        if not self.carry or self.tau_scale is None:
+            return ratio
+        out = ratio.copy()
+        out[:self.n_bands] *= self.scatter_scale[:, None]
+        out[-1] += tau
+        return out
+
+    def turn(self, ratio: np.ndarray, cos: np.ndarray) -> np.ndarray:
+        """The state after a direction sampled from the carrier's phase function (cosine `cos` (n,)): p_b / p_c."""
+        if self.phase_bands is None or not self.carry:
+            return ratio
+        out = ratio.copy()
+        out[:self.n_bands] *= self.phase_ratio(cos)
+        return out
+
+    def phase_ratio(self, cos: np.ndarray) -> np.ndarray:
+        """(B, m) p_b(cos) / p_c(cos) of the bands' phase functions over the carrier's (1 where p_c = 0)."""
+        c = self.phase_bands[self.carrier_band].eval(cos)
+        ok = c > 0
+        inv = np.where(ok, 1.0 / np.where(ok, c, 1.0), 0.0)
+        return np.stack([np.where(ok, p.eval(cos) * inv, 1.0) if b != self.carrier_band else np.ones(len(cos))
+                         for b, p in enumerate(self.phase_bands)])
 
     def estimate_ratio(self, ratio: np.ndarray, tau: np.ndarray | None = None) -> np.ndarray:
         """(B, m) band ratios of estimates from path states `ratio`, their connections adding carrier depth `tau`."""
@@ -387,6 +419,11 @@ def _carrier_medium(scene, out: SceneSpectra, sigma_a, sigma_s, phases) -> None:
             out.medium_bands[b]["g"] = float(particle_optics(p.particles).g)
     varies = not (np.all(sigma_a == sigma_a[c]) and np.all(sigma_s == sigma_s[c]))
     out.tau_scale = sigma_t / sigma_t[c] - 1.0 if varies else None
+    if varies:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out.scatter_scale = np.where(sigma_s > 0, sigma_s / sigma_s[c], 0.0) if sigma_s[c] > 0 else None
+        if len({p.model_dump_json() for p in phases}) > 1:
+            out.phase_bands = [phase_from_spec(p) for p in phases]
     scene.medium_far_distance = _far_distance(scene.spec, scene.geometry, scene.medium, scene.receivers.positions)
 
 
@@ -398,12 +435,17 @@ def _check_supported(scene, out: SceneSpectra) -> None:
         raise SceneError("spectral: perfect-mirror surfaces are not supported with spectral surfaces or smoke yet "
                          "(use a Phong material with a large exponent, or run one job per band)")
     a = scene.spec.simulation.algorithm
-    if a in (2, 3, 4, 5) and scene.medium is not None and out.tau_scale is not None:
-        raise SceneError(f"spectral: algorithm {a} with smoke that varies over the {out.n_bands} bands is not "
-                         "supported (its scattering estimators would need a per-band albedo and phase function at "
-                         "every scattering event): use algorithm 1 (extinction per band), or run one job per band "
-                         "(`spectral` with one band each, any algorithm), or give grey smoke (spectral surfaces "
-                         "work with every algorithm in grey smoke)")
+    if scene.medium is None or out.tau_scale is None or a == 1:
+        return
+    if a == 5:
+        raise SceneError(f"spectral: algorithm 5 with smoke that varies over the {out.n_bands} bands is not "
+                         "supported (free-flight tracking would need a per-band ratio at every collision): use "
+                         "algorithms 1-4, or run one job per band (`spectral` with one band each, any algorithm), or "
+                         "give grey smoke (spectral surfaces work with every algorithm in grey smoke)")
+    if out.scatter_scale is None and np.any(out.sigma_s > 0):
+        raise SceneError(f"spectral.medium: band {out.carrier_band} (the least attenuated) does not scatter while "
+                         "others do: algorithms 2-4 sample scattering points in that band; give it a positive "
+                         "sigma_s (e.g. 1e-9 1/m), or use algorithm 1")
 
 
 # --- channel tallies --------------------------------------------------------------------------------------------------

@@ -206,7 +206,7 @@ def test_scattering_algorithms_in_smoke_per_band_say_what_to_use():
                                                        "medium": {"sigma_a": [0.05, 0.02], "sigma_s": [0.2, 0.1]}},
                          algorithm=5, max_scattering=2)
     doc["medium"] = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2}
-    with pytest.raises(SceneError, match="use algorithm 1"):
+    with pytest.raises(SceneError, match="use algorithms 1-4"):
         simulate(spec(doc))
 
 
@@ -266,3 +266,57 @@ def test_job_memory_estimate_counts_the_channel_sums():
     spectral = memory_estimate(spec(doc)).accumulators
     n_links = 1 + 41 * 41
     assert spectral - grey == 2 * 8 * n_links * ((8 + 10) * 16 + 16)
+
+
+def _smoke_room(medium, bands, rx=(4.0, 2.5, 1.5), rx_normal=(-1, 0, 0), **sim):
+    """A beam along x from (1, 2.5, 1.5) in a dark room with smoke; by default the receiver faces it 3 m away."""
+    doc = room_doc(rho_walls=0.1, rho_floor=0.1, rho_ceiling=0.1, tx=(1.0, 2.5, 1.5), tx_normal=(1, 0, 0), m=3.0,
+                   rx=rx, rx_normal=rx_normal, medium=medium,
+                   **{"algorithm": 4, "max_reflections": 1, "paths": 4000, "batch_size": 1000, **sim})
+    if bands is not None:
+        doc["spectral"] = bands
+    return doc
+
+
+def test_algorithm_4_in_smoke_per_band_against_one_band_runs():
+    """Algorithm 4 with coefficients that differ per band: each band agrees with a one-band run of that band's
+    smoke within 4 combined standard errors (leaving out the sigma_s,b / sigma_s,c factor fails it)."""
+    medium = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.3, "phase": {"type": "hg", "g": 0.6}}
+    bands = {"wavelengths": [450 * NM, 850 * NM], "medium": {"sigma_a": [0.2, 0.05], "sigma_s": [0.6, 0.3]}}
+    two = simulate(spec(_smoke_room(medium, bands)))["spectral"]["links"][0]
+    gains = []
+    for b, (sigma_a, sigma_s) in enumerate([(0.2, 0.6), (0.05, 0.3)]):
+        one = simulate(spec(_smoke_room({**medium, "sigma_a": sigma_a, "sigma_s": sigma_s}, None, seed=11)))
+        one = one["links"][0]
+        h, se = two["dc_gain_by_band"][b], two["dc_gain_by_band_stderr"][b]
+        assert abs(h - one["dc_gain"]) <= 4 * math.hypot(se, one["dc_gain_stderr"]), (b, h, one["dc_gain"], se)
+        gains.append((h, se))
+    # power: the two bands' smoke differ by far more than the error bars, so a band mix-up would fail
+    assert abs(gains[0][0] - gains[1][0]) > 8 * math.hypot(gains[0][1], gains[1][1])
+
+
+@pytest.mark.slow
+def test_algorithm_4_with_mie_per_band_carries_the_phase_ratio(monkeypatch):
+    """Mie per band (phase functions differ: g 0.69 at 450 nm, 0.60 at 850 nm): each band of a two-band run agrees
+    with a one-band run at that wavelength within 4 combined standard errors, seen by a receiver below the beam
+    (light scattered sideways); without the phase ratio p_b / p_c the blue band misses by more than 4."""
+    from owcsim.engine.spectra import SceneSpectra
+
+    particles = {"geometric_mean_diameter": 1.5e-7, "geometric_std": 1.8,
+                 "refractive_index": {"real": 1.5, "imag": 0.01}, "wavelength": 850 * NM}
+    medium = {"type": "particles", "particles": particles, "mass_concentration": 4e-4, "particle_density": 1800.0}
+    where = {"rx": (2.5, 2.5, 0.3), "rx_normal": (0, 0, 1), "paths": 40_000, "batch_size": 5000}
+    bands = {"wavelengths": [450 * NM, 850 * NM]}
+    two = simulate(spec(_smoke_room(medium, bands, **where)))["spectral"]
+    g = [m["g"] for m in two["medium_bands"]]
+    assert abs(g[0] - g[1]) > 0.05
+    ones = [simulate(spec(_smoke_room({**medium, "particles": {**particles, "wavelength": lam * NM}}, None, seed=11,
+                                      **where)))["links"][0] for lam in (450, 850)]
+
+    def z(link, b):
+        return (link["dc_gain_by_band"][b] - ones[b]["dc_gain"]) / math.hypot(link["dc_gain_by_band_stderr"][b],
+                                                                               ones[b]["dc_gain_stderr"])
+    assert all(abs(z(two["links"][0], b)) <= 4 for b in range(2))
+    monkeypatch.setattr(SceneSpectra, "phase_ratio", lambda self, cos: np.ones((self.n_bands, len(cos))))
+    wrong = simulate(spec(_smoke_room(medium, bands, **where)))["spectral"]["links"][0]
+    assert abs(z(wrong, 0)) > 4
