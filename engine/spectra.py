@@ -10,14 +10,15 @@ weight w is the carrier's; its per-band ratio r_b (`_Paths.ratio`, shape (B, n))
     r_b *= rho_b(x) / rho_c(x)                at every reflection (the NEE from x too),
     r_b *= exp(-tau_c (sigma_t,b / sigma_t,c - 1))   on every segment (algorithm 1),
 
-tau_c the carrier's optical depth, so that w r_b is exactly the band-b path weight and
-r_b <= 1 (the carrier is the brightest band: roulette driven by w leaves every band's weight
-bounded by the carrier's). Band b's gain is the tally of w r_b; all bands share the paths,
-so bands differ only through these factors (a two-band run equals two one-band runs with
-the same seed up to rounding, when no roulette decision depends on the carrier).
+tau_c the carrier's optical depth (kept as a row of the state and applied at each estimate), so
+that w r_b is exactly the band-b path weight. Reflections and extinction keep r_b <= 1 (the carrier
+is the brightest band: roulette driven by w leaves every band's weight bounded by the carrier's);
+scattering (below) multiplies by bounded constants. Bands share the paths and the random numbers,
+so they differ only through these factors (a two-band run equals two one-band runs with the same
+seed up to rounding, when the carrier's sampling decisions are the bands' own: no roulette, and
+smoke that does not vary per band).
 
-Channels tallied per link (virtual links v * n_links + link of a second tally,
-`SceneSpectra.channel_power`), V = B + 3:
+Channels tallied per link (`ChannelBuilder`, one bincount per kernel step), V = B + 3:
   - band b: H_b, gain per watt emitted in band b [-];
   - optical: H = sum_b f_b H_b, f_b the transmitter's power fraction in band b [-] (also the
     main tally, so the result's dc_gain, CIR and delay figures are those of the whole spectrum);
