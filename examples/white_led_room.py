@@ -20,6 +20,7 @@ Run: .venv/bin/python examples/white_led_room.py [--paths 200000]
 from __future__ import annotations
 
 import argparse
+import json
 
 import numpy as np
 
@@ -68,6 +69,7 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     spec = scene(args.paths)
     res = simulate(spec)
+    res = res if isinstance(res, dict) else json.loads(res.model_dump_json())  # the result document
     sp = res["spectral"]
     link, tx = sp["links"][0], sp["transmitters"][0]
     power = spec.transmitters[0].power

@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import copy
+import json
 import math
 
 import numpy as np
@@ -18,11 +19,17 @@ import pytest
 from pydantic import ValidationError
 
 from owcsim.engine.errors import SceneError
-from owcsim.engine.simulate import simulate
+from owcsim.engine.simulate import simulate as _simulate
 from tests import reference
 from tests.scenes import room_doc, spec
 
 NM = 1e-9
+
+
+def simulate(scene_spec, **kw) -> dict:
+    """The result as its JSON document (the engine returns a dict or a typed result, by version)."""
+    res = _simulate(scene_spec, **kw)
+    return res if isinstance(res, dict) else json.loads(res.model_dump_json())
 
 
 def _spectral_room(walls, floor, ceiling, bands, **sim):
