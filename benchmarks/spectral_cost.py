@@ -7,7 +7,8 @@ every band is tallied as its own channel plus the optical, electrical and lumino
 Cases: the grey scene (no `spectral`), one band, 8 and 32 bands over 400-900 nm; optionally the same
 with smoke per band (algorithm 1: a transmittance ratio per band and segment).
 Targets (issue 15): 8 bands < 1.5x and 32 bands < 3x the one-band cost per path.
-Timings are wall-clock, best of N rounds with the cases interleaved; on a shared machine they are noisy. BLAS runs on one thread
+Timings are wall-clock, best of N rounds with the cases interleaved; on a shared machine they are noisy.
+BLAS runs on one thread
 (OPENBLAS_NUM_THREADS=1, set here): under load, OpenBLAS's threads made the small per-batch matrix
 product of tally.BatchBuilder.finish take 30-120 ms instead of 0.2 ms, swamping what is measured.
 Run: .venv/bin/python benchmarks/spectral_cost.py [--paths 200000] [--repeats 3] [--smoke]

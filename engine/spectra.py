@@ -117,7 +117,7 @@ def band_spd(curve, spectral) -> tuple[np.ndarray, np.ndarray]:
             v = v_lambda(g) if vis else None
             if fn is None:  # flat inside the band
                 power[b] = width[b] if not isinstance(curve, (list, tuple)) else float(curve[b])
-                if vis:
+                if v is not None:
                     vbar[b] = np.trapezoid(v, g) / width[b]
             else:
                 s = np.maximum(fn(g), 0.0)
@@ -208,7 +208,8 @@ class SceneSpectra:
         if not self.carry or self.tau_scale is None:
             return ratio
         out = ratio.copy()
-        out[:self.n_bands] *= self.scatter_scale[:, None]
+        if self.scatter_scale is not None:  # None: the carrier does not scatter (algorithm 1 only)
+            out[:self.n_bands] *= self.scatter_scale[:, None]
         out[-1] += tau
         return out
 
@@ -222,6 +223,7 @@ class SceneSpectra:
 
     def phase_ratio(self, cos: np.ndarray) -> np.ndarray:
         """(B, m) p_b(cos) / p_c(cos) of the bands' phase functions over the carrier's (1 where p_c = 0)."""
+        assert self.phase_bands is not None
         c = self.phase_bands[self.carrier_band].eval(cos)
         ok = c > 0
         inv = np.where(ok, 1.0 / np.where(ok, c, 1.0), 0.0)
@@ -331,13 +333,12 @@ def attach(scene) -> None:
     spectral = spec.spectral
     B = spectral.n_bands
     geo = scene.geometry
-    F = len(geo.faces)
     surfaces = getattr(geo, "surfaces", None)
     face_rho = np.repeat(np.asarray(geo.reflectance, float)[None, :], B, axis=0)
     spectral_surfaces = False
     if surfaces is not None:
         cache: dict[int, np.ndarray] = {}
-        cols = []
+        cols: list[np.ndarray | None] = []
         for s in surfaces:  # a loop over faces (shared surface objects computed once)
             if getattr(s, "type", None) == "spectral":
                 spectral_surfaces = True
@@ -443,7 +444,7 @@ def _check_supported(scene, out: SceneSpectra) -> None:
                          "supported (free-flight tracking would need a per-band ratio at every collision): use "
                          "algorithms 1-4, or run one job per band (`spectral` with one band each, any algorithm), or "
                          "give grey smoke (spectral surfaces work with every algorithm in grey smoke)")
-    if out.scatter_scale is None and np.any(out.sigma_s > 0):
+    if out.scatter_scale is None and out.sigma_s is not None and np.any(out.sigma_s > 0):
         raise SceneError(f"spectral.medium: band {out.carrier_band} (the least attenuated) does not scatter while "
                          "others do: algorithms 2-4 sample scattering points in that band; give it a positive "
                          "sigma_s (e.g. 1e-9 1/m), or use algorithm 1")

@@ -40,7 +40,8 @@ def led_spd(lam: np.ndarray) -> np.ndarray:
 
 def green_paint(lam: np.ndarray) -> np.ndarray:
     """Reflectance of a sage-green wall paint (this example's own table)."""
-    return 0.18 + 0.32 * np.exp(-0.5 * ((lam - 530 * NM) / (45 * NM)) ** 2) + 0.25 / (1 + np.exp(-(lam - 700 * NM) / (20 * NM)))
+    bump = np.exp(-0.5 * ((lam - 530 * NM) / (45 * NM)) ** 2)
+    return 0.18 + 0.32 * bump + 0.25 / (1 + np.exp(-(lam - 700 * NM) / (20 * NM)))
 
 
 def scene(paths: int) -> SceneSpec:
@@ -83,7 +84,8 @@ def main(argv=None) -> None:
               f"{link['electrical_gain_by_band_a_per_w'][b]:10.3e} {link['illuminance_by_band_lx'][b]:7.2f}")
     print(f"{'combined':11s} {'100%':>6s}  {link['optical_gain']:.4e} ± {link['optical_gain_stderr']:.1e} "
           f"{link['electrical_gain_a_per_w']:10.3e} {link['illuminance_lx']:7.2f}")
-    print(f"photocurrent {link['photocurrent_a'] * 1e6:.3f} ± {link['electrical_gain_a_per_w_stderr'] * power * 1e6:.1g} uA; "
+    current_se = link["electrical_gain_a_per_w_stderr"] * power
+    print(f"photocurrent {link['photocurrent_a'] * 1e6:.3f} ± {current_se * 1e6:.1g} uA; "
           f"illuminance {link['illuminance_lx']:.2f} ± {link['illuminance_lx_stderr']:.1g} lx, of which direct "
           f"{link['illuminance_direct_lx']:.2f} lx")
     print(f"rms delay spread: optical {res['links'][0]['rms_delay_spread_s'] * 1e9:.2f} ns, electrical "

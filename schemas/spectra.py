@@ -154,7 +154,8 @@ class SpectralSpec(SpecModel):
     def _bands(self) -> "SpectralSpec":
         if (self.band_edges is None) == (self.wavelengths is None):
             raise ValueError("give exactly one of `band_edges` and `wavelengths` [m]")
-        name, w = ("band_edges", self.band_edges) if self.band_edges is not None else ("wavelengths", self.wavelengths)
+        name = "band_edges" if self.band_edges is not None else "wavelengths"
+        w: list[float] = self.band_edges if self.band_edges is not None else (self.wavelengths or [])
         bad = next((i for i, x in enumerate(w) if not MIN_WAVELENGTH <= x <= MAX_WAVELENGTH), None)
         if bad is not None:
             raise ValueError(f"`{name}` entry {bad} is {w[bad]!r} m: wavelengths are in metres, between "
@@ -173,7 +174,7 @@ class SpectralSpec(SpecModel):
         """Band edges [m] (B + 1) from either input form."""
         if self.band_edges is not None:
             return list(self.band_edges)
-        w = self.wavelengths
+        w = self.wavelengths or []
         if len(w) == 1:
             return [w[0] - self.band_width / 2, w[0] + self.band_width / 2]
         mid = [(a + b) / 2 for a, b in zip(w[:-1], w[1:])]
@@ -255,8 +256,9 @@ def check_scene(scene) -> None:
                 if len(getattr(bm, name)) != n:
                     raise ValueError(f"spectral.medium.{name}: {len(getattr(bm, name))} values for {n} bands")
     if scene.medium is not None and scene.medium.type == "particles":
-        from .medium import SIZE_WINDOW_SIGMAS, MAX_SIZE_PARAMETER
         import math
+
+        from .medium import MAX_SIZE_PARAMETER, SIZE_WINDOW_SIGMAS
 
         p = scene.medium.particles
         s = math.log(p.geometric_std)
@@ -299,7 +301,7 @@ def _surfaces(scene):
             yield f"meshes[{i}].group_reflectance[{k!r}]", v
 
 
-# --- the result's `spectral` section ------------------------------------------------------------------------------------
+# --- the result's `spectral` section -------------------------------------------------------------------------------
 from pydantic import ConfigDict  # noqa: E402
 
 

@@ -189,7 +189,8 @@ BASE = {"room": {"size": [4, 4, 3], "reflectance": {"floor": 0.3, "ceiling": 0.8
     (lambda d: d.pop("spectral"), "room.reflectance.walls.reflectance: a spectral curve needs the scene's wavelength"),
     (lambda d: d["spectral"].update(band_edges=[500e-9, 400e-9]), "strictly increasing: entry 1"),
     (lambda d: d["spectral"].update(band_edges=[400, 500]), "wavelengths are in metres"),
-    (lambda d: d["room"]["reflectance"].update(walls=_surf([0.2, 1.3])), "walls.reflectance: entry 1 value 1.3 outside"),
+    (lambda d: d["room"]["reflectance"].update(walls=_surf([0.2, 1.3])),
+     "walls.reflectance: entry 1 value 1.3 outside"),
     (lambda d: d["receivers"][0].update(responsivity=[1, 2, 3]), "receivers[0].responsivity: 3 values but the scene "
                                                                   "has 2 band(s)"),
     (lambda d: d["transmitters"][0].update(spectrum={"type": "table", "wavelengths": [450e-9, 800e-9],
