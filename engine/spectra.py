@@ -429,15 +429,18 @@ def _carrier_medium(scene, out: SceneSpectra, sigma_a, sigma_s, phases) -> None:
     scene.medium_far_distance = _far_distance(scene.spec, scene.geometry, scene.medium, scene.receivers.positions)
 
 
-def _check_supported(scene, out: SceneSpectra) -> None:
-    """SceneError where the per-band ratios would be needed by a part of the kernel that does not carry them."""
+def _check_supported(scene, out: SceneSpectra, algorithm=None) -> None:
+    """SceneError where the per-band ratios would be needed by a part of the kernel that does not carry them.
+
+    Checked when the scene is built (for the document's algorithm) and again when a job starts its tallies
+    (`new_accumulators`: the algorithm the automatic settings chose, on a scene built before)."""
     if not out.carry:
         return
     if scene.mirror_planes:
         raise SceneError("spectral: perfect-mirror surfaces are not supported with spectral surfaces or smoke yet "
                          "(use a Phong material with a large exponent, or run one job per band)")
-    a = scene.spec.simulation.algorithm
-    if scene.medium is None or out.tau_scale is None or a == 1:
+    a = scene.spec.simulation.algorithm if algorithm is None else algorithm
+    if scene.medium is None or out.tau_scale is None or a in (1, "auto"):
         return
     if a == 5:
         raise SceneError(f"spectral: algorithm 5 with smoke that varies over the {out.n_bands} bands is not "
@@ -570,6 +573,7 @@ def new_accumulators(accs: dict, scene, settings) -> None:
     sp = getattr(scene, "spectra", None)
     if sp is None:
         return
+    _check_supported(scene, sp, 5 if settings.free_flight else 4 if settings.segment_scatter else 1)
     for acc in accs.values():
         acc.spectral = ChannelAccumulator(sp.n_bands, scene.n_links)
 
