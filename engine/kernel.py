@@ -102,6 +102,8 @@ class KernelSettings:
     #: (tally.py) overstate the error; off until the errors come from independent batches
     #: (benchmarks/path_cost.py --what qmc measures the variance it saves).
     qmc_first_dimensions: bool = False
+    #: tallies per target: 1, or 1 + the channels of a spectral scene (engine/spectra.py); bounds batch memory
+    tally_channels: int = 1
 
     @property
     def in_then_out(self) -> bool:
@@ -169,7 +171,8 @@ class _Paths:
     #: `first`: the source-side density factor of the path's first vertex (medium_nee.first_vertex_factor);
     #: `first_rho`: the direction density of leaving it (phase, or 1/pi at a surface; medium_nee.side_weight);
     #: both None unless the run shares paths with the other device's (KernelSettings.mis, both_sides)
-    FIELDS = ("origins", "directions", "weights", "lengths", "path", "k", "s", "first", "first_rho")
+    #: `ratio`: (B, n) per-band throughput over the carrier's of spectral scenes, (0, n) otherwise (spectra.py)
+    FIELDS = ("origins", "directions", "weights", "lengths", "path", "k", "s", "first", "first_rho", "ratio")
     origins: np.ndarray  # (3, n) [m]
     directions: np.ndarray  # (3, n) unit
     weights: np.ndarray  # (n,) path throughput
@@ -179,6 +182,7 @@ class _Paths:
     s: np.ndarray  # (n,) scattering events so far
     first: np.ndarray | None
     first_rho: np.ndarray | None
+    ratio: np.ndarray  # (B, n) band ratios (+ a carrier-depth row), or (0, n): spectra.SceneSpectra
 
     def __init__(self, **arrays):
         for name in self.FIELDS:
@@ -243,7 +247,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         origins=np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1),
         weights=np.full(n, w0), lengths=np.zeros(n), path=np.arange(n),
         k=np.zeros(n, np.int64), s=np.zeros(n, np.int64),
-        first=np.zeros(n) if two_sided else None, first_rho=np.full(n, 1.0 / np.pi) if two_sided else None)
+        first=np.zeros(n) if two_sided else None, first_rho=np.full(n, 1.0 / np.pi) if two_sided else None,
+        ratio=ctx.spectra.initial_ratio(n) if ctx.spectra is not None else np.ones((0, n)))
     if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each from both devices
         connect_source_mirrors(ctx, sources, i, w0 * (0.5 if settings.mis or settings.both_sides else 1.0), n)
     surface_power = escaped_power = 0.0
@@ -270,7 +275,10 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
             medium_rows = np.flatnonzero(collided & (paths.s < S))
             _medium_next_events(ctx, paths, frames, medium_rows, t_col.take(medium_rows), rng)
         elif medium is not None:  # algorithm 1 (and 2-4): the segment's extinction
-            paths.weights = paths.weights * medium.transmittance(paths.origins.T, paths.directions.T, t_seg)
+            tau = medium.optical_depth(paths.origins.T, paths.directions.T, t_seg)
+            paths.weights = paths.weights * np.exp(-tau)  # = medium.transmittance
+            if ctx.spectra is not None:  # spectral smoke: the carrier depth travelled (spectra.py)
+                paths.ratio = ctx.spectra.transmit(paths.ratio, tau)
         at_surface = hit if collided is None else hit & ~collided
         if forward:  # the power balance of the result's diagnostics (forward runs)
             escaped_power += paths.weights[~hit if collided is None else ~hit & ~collided].sum()
@@ -316,7 +324,9 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
     spawn = points + isect.offset * normals
     arriving = sp.directions
     sp = _Paths(origins=spawn, directions=arriving, weights=sp.weights, lengths=sp.lengths + ts, path=sp.path,
-                k=sp.k + 1, s=sp.s, first=sp.first, first_rho=sp.first_rho)
+                k=sp.k + 1, s=sp.s, first=sp.first, first_rho=sp.first_rho,
+                # spectral scenes: rho_b / rho_c of the face, for the NEE from here and the reflected path
+                ratio=ctx.spectra.reflect(sp.ratio, prims) if ctx.spectra is not None else sp.ratio)
     share = 0.5 if settings.mis else None
     if geo.material is None:  # every surface Lambertian
         rho = geo.reflectance.take(prims)
@@ -483,7 +493,11 @@ class _Context:
         self.t_pos = np.ascontiguousarray(targets.positions[tgt].T)  # (3, T)
         self.t_nrm = np.ascontiguousarray(targets.normals[tgt].T)
         self.t_total = np.array([targets.total_response(int(t)) for t in tgt], float)
-        self.out: dict[str, list[np.ndarray]] = {k: [] for k in self.KEYS}
+        #: spectral scenes: per-band tables; estimates carry their band ratios ("ratio") when paths do
+        self.spectra = scene.spectra
+        self.channels = None  # the per-(link, channel) sums of spectral scenes (spectra.ChannelBuilder)
+        self.keys = self.KEYS + (("ratio",) if self.spectra is not None and self.spectra.carry else ())
+        self.out: dict[str, list[np.ndarray]] = {k: [] for k in self.keys}
         self.w0 = 1.0  # the source's weight W_source (trace_batch), the roulette's scale
         self.pending: dict[int, list[tuple]] = {}  # depth k + s -> estimate groups waiting for their step
         self.mirrors = scene.mirror_planes
@@ -505,6 +519,8 @@ class _Context:
         several = (settings.segment_scatter or (settings.free_flight and settings.equiangular_points > 0)
                    or bool(self.mirrors) or settings.both_sides or settings.in_then_out)
         self.builder = BatchBuilder(settings.tally, item_links(self.scene, item), item.n_paths, several)
+        if self.spectra is not None:  # per-(link, channel) sums (spectra.py)
+            self.channels = self.spectra.builder(item, self.tgt, item_links(self.scene, item))
 
     def connect(self, points, shadow_origins, throughput, paths, *, normals=None, reflectance=None, materials=None,
                 in_dirs=None, mis=None, target: int | None = None, scatter_order=None, extra_length=None,
@@ -585,7 +601,8 @@ class _Context:
                     if both_sides:
                         response, vertex_factor = response.take(seen), vertex_factor.take(seen)
             if medium is not None:
-                tr = medium.transmittance(points.take(vertex, axis=1).T, out_dir.T, d)
+                tau = medium.optical_depth(points.take(vertex, axis=1).T, out_dir.T, d)
+                tr = np.exp(-tau)  # = medium.transmittance
                 f = f * tr
                 if both_sides:  # algorithm 5 from both devices: this run's share (medium_nee.connection_weight)
                     f = f * connection_weight(self, paths, vertex, column, d, tr, response, vertex_factor,
@@ -594,13 +611,24 @@ class _Context:
             if extra_length is not None:
                 length += extra_length.take(vertex)
             s_order = (paths.s if scatter_order is None else scatter_order).take(vertex)
+            ratio = None
+            if "ratio" in self.out:  # spectral: the path's band ratios, with T_b / T_c of the connection
+                ratio = self.spectra.estimate_ratio(paths.ratio.take(vertex, axis=1),
+                                                    tau if medium is not None else None)
+                if normals is None and self.spectra.phase_bands is not None:  # medium vertex: p_b / p_c
+                    ratio = ratio * self.spectra.phase_ratio(_dot(_rows(in_dirs, vertex), out_dir))
             self.record(column, paths.k.take(vertex), s_order, length * (1.0 / SPEED_OF_LIGHT), f,
-                        paths.path.take(vertex))
+                        paths.path.take(vertex), ratio)
 
-    def record(self, target, k, s, delay, power, path) -> None:
-        """One group of estimates: local target index, cell (k, s), delay [s], power [W/W], path in the batch."""
+    def record(self, target, k, s, delay, power, path, ratio=None) -> None:
+        """One group of estimates: local target index, cell (k, s), delay [s], power [W/W], path in the batch,
+        and in spectral scenes whose paths carry band ratios, those (B, m) (spectra.py)."""
         for key, value in zip(self.KEYS, (target, k, s, delay, power, path)):
             self.out[key].append(value)
+        if "ratio" in self.out:
+            if ratio is None:
+                raise RuntimeError("an estimate of a spectral scene was recorded without its band ratios")
+            self.out["ratio"].append(ratio)
 
     def flush(self, depth: int | None = None) -> None:
         """Tally the estimates of cells of depth k + s <= `depth` (all with None).
@@ -610,14 +638,19 @@ class _Context:
         the tally in one call (tally.BatchBuilder.add_step sums them per path before squaring). Every
         group of estimates lies in cells of one depth (each comes from paths of one depth).
         """
-        for group in zip(*(self.out[key] for key in self.KEYS)):
+        for group in zip(*(self.out[key] for key in self.keys)):
             if len(group[4]):
                 self.pending.setdefault(int(group[1][0] + group[2][0]), []).append(group)
-        self.out = {k: [] for k in self.KEYS}
+        self.out = {k: [] for k in self.keys}
         for d in sorted(d for d in self.pending if depth is None or d <= depth):
             groups = self.pending.pop(d)
             assert self.builder is not None  # start_tally ran (trace_batch)
-            self.builder.add_step(*(g[0] if len(groups) == 1 else np.concatenate(g) for g in zip(*groups)))
+            cat = [g[0] if len(groups) == 1 else np.concatenate(g, axis=-1) for g in zip(*groups)]
+            if self.channels is not None:  # every channel of every band (spectra.py); the main tally: the optical
+                target, _k, _s, delay, power, path = cat[:6]
+                ratio = cat[6] if len(cat) > 6 else np.ones((0, len(power)))
+                cat[4] = self.channels.add(target, delay, power, ratio, path)
+            self.builder.add_step(*cat[:6])
 
     def reduce(self, n_paths: int) -> BatchTally:
         self.flush()
@@ -625,4 +658,7 @@ class _Context:
         if self.item.direction == "backward" and self.settings.tally.group_weights.size:
             weights = self.settings.tally.group_weights[:, self.tgt]  # (G, T): targets are transmitters
         assert self.builder is not None
-        return self.builder.finish(weights)
+        tally = self.builder.finish(weights)
+        if self.channels is not None:
+            tally.spectral = self.channels.finish()  # type: ignore[attr-defined]
+        return tally

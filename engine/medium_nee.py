@@ -259,7 +259,9 @@ def connect_from_target(ctx, mp, points, rng) -> None:
 
         ctx.record(np.full(len(ok), j, np.int64), np.zeros(len(ok), np.int64), np.full(len(ok), 2, np.int64),
                    (lengths.take(sel.take(ok)) + r12.take(ok) + r2.take(ok)) / SPEED_OF_LIGHT, power.take(ok),
-                   path.take(sel.take(ok)))  # cell k = 0, s = 2
+                   path.take(sel.take(ok)),  # cell k = 0, s = 2
+                   # spectral scenes: k = 0 and grey smoke (spectra._check_supported), the ratios of the source
+                   mp.ratio.take(first.take(sel.take(ok)), axis=1) if "ratio" in ctx.out else None)
 
 
 def _surface_target_factor(ctx, j: int, points, normals):
@@ -352,6 +354,8 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
         spawn = points + isect.offset * normals
         br.lengths = br.lengths + ts
         br.k = br.k + 1
+        if ctx.spectra is not None:  # spectral scenes: rho_b / rho_c of the face (engine/spectra.py)
+            br.ratio = ctx.spectra.reflect(br.ratio, prims)
         # NEE (chain; materials and mirror images included), then reflection from the materials (mirrors.py)
         br.directions, br.weights = branch_surface(ctx, br, points, spawn, normals, prims, rng, chain)
         br.origins = spawn

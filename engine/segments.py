@@ -239,7 +239,10 @@ def segment_points(ctx, seg_paths, t_seg, rng, order: int, direction_mis: bool =
                    + (frame.density(s, n_eq, seg) if n_eq else 0.0))
         # throughput of a point: w T(o -> p) sigma_s(p) / (n_T + n_E), the balance heuristic of the time
         # strata and the equiangular points in Veach's multi-sample form (segments.py)
-        throughput = pp.weights * medium.transmittance(pp.origins.T, pp.directions.T, s) * sigma_s / density
+        tau = medium.optical_depth(pp.origins.T, pp.directions.T, s)
+        throughput = pp.weights * np.exp(-tau) * sigma_s / density  # exp(-tau) = medium.transmittance
+        if ctx.spectra is not None:  # spectral smoke: sigma_s,b T_b over the carrier's (spectra.py)
+            pp.ratio = ctx.spectra.scatter(pp.ratio, tau)
         if direction_mis and ctx.mirrors:  # source -> p -> mirror -> target, through the image (mirrors.py)
             from .mirrors import connect_segment_mirrors
 

@@ -655,8 +655,3 @@ def result_block(spec, scene, accs, los_geometry, los_grey, los_delay) -> dict |
             "model": "bands traced together: carrier = largest reflectance / least-attenuated band, per-band ratios "
                      "(engine/spectra.py); curves averaged over each band"}
 
-
-def add_channels(ctx, cat: dict) -> np.ndarray:
-    """Tally one kernel step's estimates in every channel (kernel._Context.flush); returns their optical power."""
-    m = len(cat["power"])
-    return ctx.channels.add(cat["target"], cat["delay"], cat["power"], cat.get("ratio", np.ones((0, m))), cat["path"])
