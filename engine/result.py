@@ -220,7 +220,7 @@ def build_result(spec: SceneSpec, scene: Scene, accs: dict[str, Accumulator], se
         else grid_maps(spec, scene, cols, list(tx.ids)),
         "run": run, "diagnostics": diagnostics, "scene": original or spec,  # the model itself: not validated again
     }
-    if getattr(scene, "spectra", None) is not None:  # per band and combined (engine/spectra.py)
+    if scene.spectra is not None:  # per band and combined (engine/spectra.py)
         from .spectra import result_block
 
         g = geometry if geometry is not None else los_geometry(scene)

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,6 +15,9 @@ from .errors import SceneError
 from .geometry import Geometry, Intersector, build_geometry, check_extent
 from .media import Medium, medium_from_spec
 from .phase import phase_from_spec
+
+if TYPE_CHECKING:
+    from .spectra import SceneSpectra
 
 
 @dataclass
@@ -39,7 +43,7 @@ class Scene:
     #: planar groups of perfect-mirror faces (bsdf.MirrorPlane): devices are reached through their images
     mirror_planes: list = field(default_factory=list)
     #: per-band tables of a spectral scene (engine/spectra.py), None when grey
-    spectra: object = None
+    spectra: SceneSpectra | None = None
 
     @property
     def n_links(self) -> int:
