@@ -73,8 +73,9 @@ def main() -> None:
         base = times["1 band"]
         for label, t in times.items():
             ratio = f"{t / base:5.2f}x one band" if cases[label] else ""
-            print(f"  {label:9s} {t / args.paths * 1e6:7.2f} us/path  H0 = {results[label]['links'][0]['dc_gain']:.5g}"
-                  f"  {ratio}")
+            res = results[label]
+            h0 = res["links"][0]["dc_gain"] if isinstance(res, dict) else res.links[0].dc_gain  # typed result
+            print(f"  {label:9s} {t / args.paths * 1e6:7.2f} us/path  H0 = {h0:.5g}  {ratio}")
         print(f"  targets: 8 bands < 1.5x -> {times['8 bands'] / base:.2f}x, "
               f"32 bands < 3x -> {times['32 bands'] / base:.2f}x")
 
