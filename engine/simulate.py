@@ -46,6 +46,10 @@ AMORTIZATION_RATIO = 8
 PROGRESS_INTERVAL_S = 0.25
 #: Accuracy mode checks the target only once each link has this many paths.
 MIN_PATHS_FOR_STOP = 2048
+#: Accuracy runs double their batches every this many rounds, up to the job's batch_size: small first
+#: batches check the target early, later ones pay the per-step fixed cost over more paths (a 4 096-path batch
+#: spends ~half its time in it: benchmarks/path_cost.py). A round is then at most ~1/8 of the paths so far.
+GROWTH_ROUNDS = 4
 #: Per-link direction codes (Direction.code): paths from the transmitter, from the receiver, both, or none.
 FORWARD, BACKWARD, BOTH, SKIP = (d.code for d in Direction)
 #: Most (path, target) pairs, times the estimates per segment, that one batch holds in its dense per-path
@@ -252,12 +256,15 @@ def _items(runs: list[Run], sim: SimulationSpec, settings: KernelSettings, phase
     sizes = {d: batch_size(sim, settings, max((len(t) for dd, _, t in runs if dd == d), default=1))
              for d in (Direction.FORWARD, Direction.BACKWARD)}
     bs = min(sizes[d] for d in {r[0] for r in runs}) if runs else sim.batch_size
-    if n_paths is None:  # accuracy mode: the stopping rule wants reliability.MIN_GROUPS filled batch groups, and
-        # a round of many sources checks the target sooner: batches of a quarter (or 1 / sources) of batch_size
+    if n_paths is None:  # accuracy mode: a round of many sources checks the target sooner: first batches of a
+        # quarter (or 1 / sources) of batch_size, growing to the largest batch the memory caps allow
+        grown = bs
         bs = min(bs, max(MIN_PATHS_FOR_STOP, sim.batch_size // max(len(runs), 4)))
     rounds = itertools.count() if n_paths is None else range(-(-n_paths // bs))
     for b in rounds:
         size = bs if n_paths is None else min(bs, n_paths - b * bs)
+        if n_paths is None:  # accuracy mode: batches double every GROWTH_ROUNDS rounds up to the memory cap
+            size = min(grown, bs << min(b // GROWTH_ROUNDS, 16))
         for direction, source, targets in runs:
             yield WorkItem(direction, source, targets, b, size, sim.seed, phase)
 

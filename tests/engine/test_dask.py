@@ -153,8 +153,9 @@ def test_cancel_reaches_the_cluster(client, dask):
     res = simulate(spec(doc), executor=dask, progress=lambda p: seen.append(p.paths),
                    should_stop=lambda: len(seen) >= 6)
     assert res["run"]["stop_reason"] == "cancelled"
-    # accuracy runs use batches of a quarter of batch_size, at least 2048 paths (simulate._items)
-    assert seen == [2048 * (i + 1) for i in range(6)]  # progress flows back, batch by batch
+    # accuracy runs start with batches of a quarter of batch_size, at least 2048 paths, and double them every
+    # GROWTH_ROUNDS (4) rounds up to batch_size (simulate._items)
+    assert seen == [2048, 4096, 6144, 8192, 12288, 16384]  # progress flows back, batch by batch
     serial = simulate(spec(doc), progress=lambda p: serial_seen.append(p.paths),
                       should_stop=lambda: len(serial_seen) >= 6)
     assert _strip(res) == _strip(serial)

@@ -216,14 +216,11 @@ def test_scattering_algorithms_in_smoke_per_band_say_what_to_use():
     doc["medium"] = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2}
     with pytest.raises(SceneError, match="use algorithms 1-4"):
         simulate(spec(doc))
-    # the same scene with automatic settings: refused too if algorithm 5 is chosen (the scene is built before)
+    # the same scene with automatic settings runs: auto picks algorithm 4 and says why
     doc["simulation"].update(algorithm="auto", max_scattering=None, paths=500)
-    try:
-        res = simulate(spec(doc))
-    except SceneError as err:
-        assert "use algorithms 1-4" in str(err)
-    else:
-        assert res["algorithm"] != 5
+    res = simulate(spec(doc))
+    assert res["algorithm"] == 4
+    assert "varies over the spectral bands" in res["modeled"]["algorithm_reason"]
 
 
 @pytest.mark.parametrize("algorithm", [4, 5])
