@@ -3,6 +3,7 @@
 `rng`: a fresh generator seeded with SEED for each test, so a test's draws do not depend on
 which other tests ran before it (Mitsuba's `np_rng`).
 """
+
 from __future__ import annotations
 
 import numpy as np

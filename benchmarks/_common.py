@@ -1,4 +1,5 @@
 """Shared set-up of the benchmarks: the Barry room document and timing helpers."""
+
 from __future__ import annotations
 
 import json

@@ -18,6 +18,7 @@ the same bits (checked). On a 2-core machine the Dask
 scheduler and the client share the cores with the workers.
 Run: .venv/bin/python benchmarks/dask_scaling.py [--paths N] [--repeats R] [--batches 512,2048,...]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,8 +40,9 @@ from owcsim.schemas import SceneSpec  # noqa: E402
 
 
 def job(paths: int, batch: int) -> SceneSpec:
-    return SceneSpec.model_validate(barry_doc(paths=paths, batch_size=batch, direction="backward",
-                                              max_reflections=3, seed=1))
+    return SceneSpec.model_validate(
+        barry_doc(paths=paths, batch_size=batch, direction="backward", max_reflections=3, seed=1)
+    )
 
 
 def strip(result) -> dict:
@@ -54,8 +56,14 @@ def strip(result) -> dict:
 def dask_cluster(n_workers: int):
     from distributed import Client, LocalCluster
 
-    cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address="127.0.0.1:0", silence_logs=40)
+    cluster = LocalCluster(
+        n_workers=n_workers,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",
+        silence_logs=40,
+    )
     return cluster, Client(cluster, set_as_default=False)
 
 
@@ -84,8 +92,11 @@ def worker_timeline(client, executor, spec: SceneSpec) -> tuple[float, float]:
         t = time.perf_counter()
         simulate(spec, executor=executor)
         wall = time.perf_counter() - t
-    compute = [sum(s["stop"] - s["start"] for s in d["startstops"] if s["action"] == "compute")
-               for d in ts.data if str(d["key"]).startswith("owcsim-batch-")]
+    compute = [
+        sum(s["stop"] - s["start"] for s in d["startstops"] if s["action"] == "compute")
+        for d in ts.data
+        if str(d["key"]).startswith("owcsim-batch-")
+    ]
     return sum(compute) / len(compute), (wall - sum(compute)) / len(compute)
 
 
@@ -125,8 +136,11 @@ def main() -> None:
             t_start = time.perf_counter() - t0
             t = time.perf_counter()
             simulate(main_spec, executor=ex)
-            print(f"Dask, {n} worker(s): cluster start {t_start:.2f} s, first (cold) job "
-                  f"{time.perf_counter() - t:.2f} s, window {ex.window}", flush=True)
+            print(
+                f"Dask, {n} worker(s): cluster start {t_start:.2f} s, first (cold) job "
+                f"{time.perf_counter() - t:.2f} s, window {ex.window}",
+                flush=True,
+            )
             executors[f"Dask, {n} worker{'s' if n > 1 else ''}"] = ex
         main_runs = round_robin(main_spec, executors, args.repeats)
         sweep_runs = {b: round_robin(s, executors, args.repeats) for b, s in sweep_specs.items()}
@@ -144,8 +158,10 @@ def main() -> None:
     for runs in sweep_runs.values():
         first = strip(runs["in-process"][1])
         identical &= all(strip(r) == first for _, r in runs.values())
-    print(f"\nthroughput: Barry A, backward, K = 3, {args.paths:,d} paths in batches of {args.batch} "
-          f"({-(-args.paths // args.batch)} tasks); best of {args.repeats}, warm")
+    print(
+        f"\nthroughput: Barry A, backward, K = 3, {args.paths:,d} paths in batches of {args.batch} "
+        f"({-(-args.paths // args.batch)} tasks); best of {args.repeats}, warm"
+    )
     base = main_runs["in-process"][0]
     print(f"{'executor':28s} {'time s':>7s} {'paths/s':>11s} {'vs in-process':>14s}")
     for name, (t, _) in main_runs.items():
@@ -153,9 +169,11 @@ def main() -> None:
     print(f"bit-identical results across all runs: {'yes' if identical else 'NO'}")
 
     print("\noverhead per task: one Dask worker against in-process; two Dask workers against the local pool of two")
-    print(f"{'batch':>7s} {'tasks':>6s} {'in-proc ms/task':>16s} {'Dask1 +ms/task':>15s} {'Dask1 overhead':>15s} "
-          f"{'worker ms/task':>15s} {'idle ms/task':>13s} {'idle/compute':>13s} "
-          f"{'pool2 paths/s':>14s} {'Dask2 paths/s':>14s} {'Dask2/pool2':>12s}")
+    print(
+        f"{'batch':>7s} {'tasks':>6s} {'in-proc ms/task':>16s} {'Dask1 +ms/task':>15s} {'Dask1 overhead':>15s} "
+        f"{'worker ms/task':>15s} {'idle ms/task':>13s} {'idle/compute':>13s} "
+        f"{'pool2 paths/s':>14s} {'Dask2 paths/s':>14s} {'Dask2/pool2':>12s}"
+    )
     rows = []
     for b in sweep:
         paths = sweep_specs[b].simulation.n_paths
@@ -167,9 +185,11 @@ def main() -> None:
         od = (td - tl) / n_tasks
         comp, idle = streams[b]
         rows.append((b, per, od, comp, idle))
-        print(f"{b:7d} {n_tasks:6d} {per * 1e3:16.2f} {od * 1e3:15.2f} {od / per:14.1%} "
-              f"{comp * 1e3:15.2f} {idle * 1e3:13.2f} {idle / comp:12.1%} "
-              f"{paths / tp:14,.0f} {paths / td2:14,.0f} {tp / td2:11.2f}x")
+        print(
+            f"{b:7d} {n_tasks:6d} {per * 1e3:16.2f} {od * 1e3:15.2f} {od / per:14.1%} "
+            f"{comp * 1e3:15.2f} {idle * 1e3:13.2f} {idle / comp:12.1%} "
+            f"{paths / tp:14,.0f} {paths / td2:14,.0f} {tp / td2:11.2f}x"
+        )
     # Model: in-process time per batch a + c b (least squares); an overhead o per task (the median of the
     # measured ones) is under 5 % of a batch from b* = (o / 0.05 - a) / c.
     bs = np.array([r[0] for r in rows], float)
@@ -178,9 +198,12 @@ def main() -> None:
     for label, col in (("wall time against in-process (this host)", 2), ("worker idle time (dispatch)", 4)):
         o = float(np.median([r[col] for r in rows]))
         measured = next((r[0] for r in rows if r[col] / (r[1] if col == 2 else r[3]) < 0.05), None)
-        print(f"overhead per task, {label}: {o * 1e3:.2f} ms (median); under 5 % from "
-              f"{max((o / 0.05 - a) / c, 0):,.0f} paths per batch (model), smallest measured batch under 5 %: "
-              f"{measured if measured else 'none'}")
+        print(
+            f"overhead per task, {label}: {o * 1e3:.2f} ms (median); under 5 % from "
+            f"{max((o / 0.05 - a) / c, 0):,.0f} paths per batch (model), smallest measured batch under 5 %: "
+            f"{measured if measured else 'none'}"
+        )
+
 
 if __name__ == "__main__":
     main()

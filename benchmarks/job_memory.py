@@ -8,6 +8,7 @@ budget needs; the address-space cap adds worker_memory_headroom_bytes on top).
 
     .venv/bin/python benchmarks/job_memory.py
 """
+
 from __future__ import annotations
 
 import multiprocessing as mp
@@ -37,8 +38,14 @@ def _child(doc: dict, conn) -> None:
     text = result.model_dump_json()  # as the worker stores it
     with tempfile.TemporaryDirectory() as tmp:
         render_all(result, text, Path(tmp))
-    conn.send((_peak_rss(), time.perf_counter() - t0, result.time_bins.n_bins,
-               result.scene.simulation.max_reflections or result.modeled.max_reflections))
+    conn.send(
+        (
+            _peak_rss(),
+            time.perf_counter() - t0,
+            result.time_bins.n_bins,
+            result.scene.simulation.max_reflections or result.modeled.max_reflections,
+        )
+    )
     conn.close()
 
 
@@ -47,8 +54,9 @@ def _grid(n_side: int, **sim) -> dict:
 
     doc = quick_doc(**{"paths": 2048, "direction": "forward", "max_reflections": 1, **sim})
     doc["receivers"] = []
-    doc["receiver_grids"] = [{"id_prefix": "g", "origin": [0.5, 0.5, 0.0], "size": [4.0, 4.0],
-                              "spacing": 4.0 / (n_side - 1), "area": 1e-4}]
+    doc["receiver_grids"] = [
+        {"id_prefix": "g", "origin": [0.5, 0.5, 0.0], "size": [4.0, 4.0], "spacing": 4.0 / (n_side - 1), "area": 1e-4}
+    ]
     return doc
 
 
@@ -74,8 +82,10 @@ def main() -> None:
 
     start_forkserver()
     ctx = mp.get_context("forkserver")
-    print(f"{'job':38s} {'links':>6s} {'bins':>7s} {'K':>3s} {'estimate':>9s} {'measured':>9s} {'ratio':>6s} "
-          f"{'time':>6s}  terms [MB]: accumulators batch result devices")
+    print(
+        f"{'job':38s} {'links':>6s} {'bins':>7s} {'K':>3s} {'estimate':>9s} {'measured':>9s} {'ratio':>6s} "
+        f"{'time':>6s}  terms [MB]: accumulators batch result devices"
+    )
     for name, doc in jobs():
         est = memory_estimate(SceneSpec.model_validate(doc))
         receive, send = ctx.Pipe(duplex=False)
@@ -87,9 +97,12 @@ def main() -> None:
         spec = SceneSpec.model_validate(doc)
         links = len(spec.transmitters) * (len(spec.receivers) + sum(g.count for g in spec.receiver_grids))
         mb = 2**20
-        print(f"{name:38s} {links:6d} {bins:7d} {k:3d} {est.total / mb:8.0f}M {peak / mb:8.0f}M "
-              f"{est.total / peak:6.2f} {wall:5.1f}s  {est.accumulators / mb:.0f} {est.batch / mb:.0f} "
-              f"{est.result / mb:.0f} {est.devices / mb:.0f}", flush=True)
+        print(
+            f"{name:38s} {links:6d} {bins:7d} {k:3d} {est.total / mb:8.0f}M {peak / mb:8.0f}M "
+            f"{est.total / peak:6.2f} {wall:5.1f}s  {est.accumulators / mb:.0f} {est.batch / mb:.0f} "
+            f"{est.result / mb:.0f} {est.devices / mb:.0f}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

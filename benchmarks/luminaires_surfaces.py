@@ -15,6 +15,7 @@ direction are timed round robin (repeat 1 of every case, then repeat 2, ...), so
 spell of a shared machine hits all of them.
 Run: .venv/bin/python benchmarks/luminaires_surfaces.py [--paths 400000] [--repeats 5]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -62,8 +63,10 @@ CASES = {
 }
 
 
-FURNITURE = [{"name": "desk", "min": [1.5, 1.5, 0.0], "max": [3.0, 2.3, 0.75], "reflectance": 0.5},
-             {"name": "cabinet", "min": [4.3, 0.2, 0.0], "max": [4.9, 1.4, 1.9], "reflectance": 0.6}]
+FURNITURE = [
+    {"name": "desk", "min": [1.5, 1.5, 0.0], "max": [3.0, 2.3, 0.75], "reflectance": 0.5},
+    {"name": "cabinet", "min": [4.3, 0.2, 0.0], "max": [4.9, 1.4, 1.9], "reflectance": 0.6},
+]
 
 
 def main() -> None:
@@ -72,8 +75,12 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
     print(f"Barry configuration A, K = 3, algorithm 1, {args.paths:,d} paths, best of {args.repeats}")
-    for room, direction in (("empty", "forward"), ("empty", "backward"), ("furnished", "forward"),
-                            ("furnished", "backward")):
+    for room, direction in (
+        ("empty", "forward"),
+        ("empty", "backward"),
+        ("furnished", "forward"),
+        ("furnished", "backward"),
+    ):
         specs = {}
         for name, edits in CASES.items():
             doc = barry_doc(paths=args.paths, max_reflections=3, direction=direction, algorithm=1)
@@ -96,9 +103,11 @@ def main() -> None:
         base = cpu[next(iter(specs))]
         for name in specs:
             link = links[name]
-            print(f"{room:9s} {direction:8s} {name:32s} wall {wall[name]:6.3f} s  cpu {cpu[name]:6.3f} s  "
-                  f"{cpu[name] / args.paths * 1e6:5.2f} us/path  x{cpu[name] / base:5.2f}  "
-                  f"H0 = {link.dc_gain:.4e} +- {link.dc_gain_stderr:.1e}")
+            print(
+                f"{room:9s} {direction:8s} {name:32s} wall {wall[name]:6.3f} s  cpu {cpu[name]:6.3f} s  "
+                f"{cpu[name] / args.paths * 1e6:5.2f} us/path  x{cpu[name] / base:5.2f}  "
+                f"H0 = {link.dc_gain:.4e} +- {link.dc_gain_stderr:.1e}"
+            )
 
 
 if __name__ == "__main__":

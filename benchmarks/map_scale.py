@@ -13,6 +13,7 @@ Prints, each case run in its own process (peak memory is that process's maximum 
      (time x (rel. error / 1 %)^2): what `auto` chooses for maps.
 Run: .venv/bin/python benchmarks/map_scale.py [--quick]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -53,9 +54,14 @@ def child(case: dict) -> dict:
     t = time.perf_counter()
     res = simulate(spec)
     elapsed = time.perf_counter() - t
-    out = {"time_s": elapsed, "peak_mb": _peak_mb(), "paths": res.run.paths_total,
-           "stop": str(res.run.stop_reason), "rule": res.run.direction_choice.rule,
-           "K": res.modeled.max_reflections}
+    out = {
+        "time_s": elapsed,
+        "peak_mb": _peak_mb(),
+        "paths": res.run.paths_total,
+        "stop": str(res.run.stop_reason),
+        "rule": res.run.direction_choice.rule,
+        "K": res.modeled.max_reflections,
+    }
     rows = res.channels or res.links
     rel = sorted(r.dc_gain_stderr / r.dc_gain for r in rows if r.dc_gain and r.dc_gain_stderr is not None)
     out["rel_median"] = rel[len(rel) // 2] if rel else None
@@ -73,8 +79,9 @@ def child(case: dict) -> dict:
 
 
 def run_child(case: dict) -> dict:
-    proc = subprocess.run([sys.executable, __file__, "--child"], input=json.dumps(case), capture_output=True,
-                          text=True, check=True)
+    proc = subprocess.run(
+        [sys.executable, __file__, "--child"], input=json.dumps(case), capture_output=True, text=True, check=True
+    )
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
@@ -84,8 +91,9 @@ def whole_command(doc: dict) -> float:
         scene.write_text(json.dumps(doc))
         owcsim = Path(sys.executable).with_name("owcsim")
         t = time.perf_counter()
-        subprocess.run([str(owcsim), "run", str(scene), "--out", str(Path(tmp) / "out")], check=True,
-                       capture_output=True)
+        subprocess.run(
+            [str(owcsim), "run", str(scene), "--out", str(Path(tmp) / "out")], check=True, capture_output=True
+        )
         return time.perf_counter() - t
 
 
@@ -104,15 +112,19 @@ def main() -> None:
     los = komine(side, max_reflections=0)
     a = run_child({"doc": los, "warm": True})
     cmd = min(whole_command(los) for _ in range(2))
-    print(f"(a) LOS only: in-process {a['time_s']:.3f} s (target 0.2 s); whole `owcsim run` {cmd:.2f} s "
-          f"(target 5 s), including a heatmap per quantity")
+    print(
+        f"(a) LOS only: in-process {a['time_s']:.3f} s (target 0.2 s); whole `owcsim run` {cmd:.2f} s "
+        f"(target 5 s), including a heatmap per quantity"
+    )
 
     # (b) every order, 1 % on every point
     target = 0.03 if args.quick else 0.01
     b = run_child({"doc": komine(side, target_rel_error=target), "write": True})
-    print(f"(b) all orders (K = {b['K']}), {target:.0%} on every point: {b['time_s']:.1f} s (target 60 s), "
-          f"{b['paths']:,d} paths, peak {b['peak_mb']:.0f} MB (target 2048 MB), output {b['output_mb']:.1f} MB "
-          f"(target 50 MB); worst point {b['rel_max']:.4f}, median {b['rel_median']:.4f} ({b['stop']})")
+    print(
+        f"(b) all orders (K = {b['K']}), {target:.0%} on every point: {b['time_s']:.1f} s (target 60 s), "
+        f"{b['paths']:,d} paths, peak {b['peak_mb']:.0f} MB (target 2048 MB), output {b['output_mb']:.1f} MB "
+        f"(target 50 MB); worst point {b['rel_max']:.4f}, median {b['rel_median']:.4f} ({b['stop']})"
+    )
     print(f"    direction: {b['rule']}")
 
     # (c) scaling with receivers
@@ -124,16 +136,20 @@ def main() -> None:
             r = run_child({"doc": komine(n, max_reflections=8, t_max_s=1e-7, paths=paths, direction=direction)})
             per_rx = r["time_s"] / n**2
             base = base or per_rx
-            print(f"    {n * n:>9,d}   {direction:<9}   {paths:>12,d}   {r['time_s']:>8.2f}   {r['peak_mb']:>9.0f}"
-                  f"   {per_rx / base:>6.2f}")
+            print(
+                f"    {n * n:>9,d}   {direction:<9}   {paths:>12,d}   {r['time_s']:>8.2f}   {r['peak_mb']:>9.0f}"
+                f"   {per_rx / base:>6.2f}"
+            )
 
     # (d) the two directions on the same map
     print("(d) direction   paths/source   time [s]   median rel.err   worst rel.err   est. time to 1 % at worst")
     for direction, paths in (("forward", 4000), ("backward", 1000)):
         r = run_child({"doc": komine(10, max_reflections=8, t_max_s=1e-7, paths=paths, direction=direction)})
         need = r["time_s"] * (r["rel_max"] / 0.01) ** 2
-        print(f"    {direction:<9}   {paths:>12,d}   {r['time_s']:>8.2f}   {r['rel_median']:>14.4f}   "
-              f"{r['rel_max']:>13.4f}   {need:>10.1f} s")
+        print(
+            f"    {direction:<9}   {paths:>12,d}   {r['time_s']:>8.2f}   {r['rel_median']:>14.4f}   "
+            f"{r['rel_max']:>13.4f}   {need:>10.1f} s"
+        )
 
 
 if __name__ == "__main__":

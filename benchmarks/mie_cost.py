@@ -10,6 +10,7 @@
 Timings are wall-clock, best of N; on a shared machine they are noisy.
 Run: .venv/bin/python benchmarks/mie_cost.py [--repeats 3] [--paths 100000]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -27,22 +28,46 @@ from owcsim.engine.simulate import simulate  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 from owcsim.schemas.medium import MAX_SIZE_PARAMETER, SIZE_WINDOW_SIGMAS, ParticlesSpec  # noqa: E402
 
-SOOT = {"geometric_mean_diameter": 1.5e-7, "geometric_std": 1.8, "refractive_index": {"real": 1.57, "imag": 0.56},
-        "wavelength": 8.5e-7}
+SOOT = {
+    "geometric_mean_diameter": 1.5e-7,
+    "geometric_std": 1.8,
+    "refractive_index": {"real": 1.57, "imag": 0.56},
+    "wavelength": 8.5e-7,
+}
 CASES = {
     "soot, D_g 0.15 um, sigma_g 1.8, 850 nm": SOOT,
-    "soot, D_g 0.5 um, sigma_g 2.0, 450 nm": {**SOOT, "geometric_mean_diameter": 5e-7, "geometric_std": 2.0,
-                                              "wavelength": 4.5e-7},
-    "water fog, D_g 4 um, sigma_g 1.5, 850 nm": {**SOOT, "geometric_mean_diameter": 4e-6, "geometric_std": 1.5,
-                                                 "refractive_index": {"real": 1.33, "imag": 0.0}},
+    "soot, D_g 0.5 um, sigma_g 2.0, 450 nm": {
+        **SOOT,
+        "geometric_mean_diameter": 5e-7,
+        "geometric_std": 2.0,
+        "wavelength": 4.5e-7,
+    },
+    "water fog, D_g 4 um, sigma_g 1.5, 850 nm": {
+        **SOOT,
+        "geometric_mean_diameter": 4e-6,
+        "geometric_std": 1.5,
+        "refractive_index": {"real": 1.33, "imag": 0.0},
+    },
     "largest accepted size parameter, non-absorbing": {
-        "geometric_mean_diameter": 0.999 * MAX_SIZE_PARAMETER * 8.5e-7 / np.pi
+        "geometric_mean_diameter": 0.999
+        * MAX_SIZE_PARAMETER
+        * 8.5e-7
+        / np.pi
         / np.exp(2 * np.log(1.5) ** 2 + SIZE_WINDOW_SIGMAS * np.log(1.5)),
-        "geometric_std": 1.5, "refractive_index": {"real": 1.5, "imag": 0.0}, "wavelength": 8.5e-7},
+        "geometric_std": 1.5,
+        "refractive_index": {"real": 1.5, "imag": 0.0},
+        "wavelength": 8.5e-7,
+    },
     "largest accepted size parameter, soot": {
-        "geometric_mean_diameter": 0.999 * MAX_SIZE_PARAMETER * 8.5e-7 / np.pi
+        "geometric_mean_diameter": 0.999
+        * MAX_SIZE_PARAMETER
+        * 8.5e-7
+        / np.pi
         / np.exp(2 * np.log(2.0) ** 2 + SIZE_WINDOW_SIGMAS * np.log(2.0)),
-        "geometric_std": 2.0, "refractive_index": {"real": 1.57, "imag": 0.56}, "wavelength": 8.5e-7},
+        "geometric_std": 2.0,
+        "refractive_index": {"real": 1.57, "imag": 0.56},
+        "wavelength": 8.5e-7,
+    },
 }
 
 
@@ -63,16 +88,18 @@ def main() -> None:
         p = ParticlesSpec.model_validate(doc)
         t, o = best_of(args.repeats, lambda p=p: _optics(p))
         soot = soot or o
-        print(f"   {name:62s} {t:7.3f} s  nodes {o.nodes:5d}  g {o.g:.4f}  "
-              f"albedo {o.c_sca / o.c_ext:.3f}")
+        print(f"   {name:62s} {t:7.3f} s  nodes {o.nodes:5d}  g {o.g:.4f}  albedo {o.c_sca / o.c_ext:.3f}")
 
     print("2. sample_cos, 1e6 cosines")
     u = np.random.default_rng(1).random(1_000_000)
     c = np.cos(np.pi * (np.arange(4001) / 4000) ** 2)[::-1].copy()
     c[0], c[-1] = -1.0, 1.0
     hg = HenyeyGreenstein(0.7)
-    fns = {"HG(0.7) closed form": hg, "4001-point table of HG(0.7)": Tabulated(c, hg.eval(c)),
-           "2001-point Mie table (soot)": MiePhase(soot.cos_theta, soot.phase)}
+    fns = {
+        "HG(0.7) closed form": hg,
+        "4001-point table of HG(0.7)": Tabulated(c, hg.eval(c)),
+        "2001-point Mie table (soot)": MiePhase(soot.cos_theta, soot.phase),
+    }
     base = None
     for name, f in fns.items():
         t, _ = best_of(args.repeats, lambda f=f: f.sample_cos(u))
@@ -81,9 +108,14 @@ def main() -> None:
 
     print(f"3. algorithm 5, Barry configuration A, {args.paths:,d} paths")
     g = soot.g
-    media = {f"HG(g = {g:.3f})": {"type": "hg", "g": g},
-             "Mie table of the same g": {"type": "tabulated", "cos_theta": soot.cos_theta.tolist(),
-                                         "values": soot.phase.tolist()}}
+    media = {
+        f"HG(g = {g:.3f})": {"type": "hg", "g": g},
+        "Mie table of the same g": {
+            "type": "tabulated",
+            "cos_theta": soot.cos_theta.tolist(),
+            "values": soot.phase.tolist(),
+        },
+    }
     base = None
     for name, phase in media.items():
         doc = barry_doc(algorithm=5, paths=args.paths, max_reflections=3, max_scattering=5, seed=3)

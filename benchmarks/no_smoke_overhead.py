@@ -8,6 +8,7 @@ and, for scale, the same room filled with that smoke (algorithm 1, extinction on
 Prints best-of-N times and ratios against the first; medium evaluations are counted.
 Run: .venv/bin/python benchmarks/no_smoke_overhead.py [--paths 400000] [--repeats 5]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,10 +32,12 @@ def main() -> None:
     cases = {
         "no medium": None,
         "medium with sigma_t = 0": {"type": "homogeneous", "sigma_a": 0.0, "sigma_s": 0.0},
-        "smoke box outside the room (auto)": dict(SMOKE, region={"type": "box", "min": [10, 10, 0],
-                                                                 "max": [12, 12, 3]}),
-        "smoke box outside the room (algorithm 1)": dict(SMOKE, region={"type": "box", "min": [10, 10, 0],
-                                                                        "max": [12, 12, 3]}),
+        "smoke box outside the room (auto)": dict(
+            SMOKE, region={"type": "box", "min": [10, 10, 0], "max": [12, 12, 3]}
+        ),
+        "smoke box outside the room (algorithm 1)": dict(
+            SMOKE, region={"type": "box", "min": [10, 10, 0], "max": [12, 12, 3]}
+        ),
         "room full of smoke (algorithm 1)": SMOKE,
     }
     print(f"Barry configuration A, K = 3, {args.paths:,d} paths, best of {args.repeats}")
@@ -48,8 +51,10 @@ def main() -> None:
         spec = SceneSpec.model_validate(doc)
         t, res = best_of(args.repeats, lambda spec=spec: simulate(spec))
         base = base or t
-        print(f"{name:42s} {t:7.3f} s  x{t / base:5.2f}  algorithm {res.algorithm}, "
-              f"medium evaluations {res.diagnostics.medium_evaluations:,d}")
+        print(
+            f"{name:42s} {t:7.3f} s  x{t / base:5.2f}  algorithm {res.algorithm}, "
+            f"medium evaluations {res.diagnostics.medium_evaluations:,d}"
+        )
 
 
 if __name__ == "__main__":

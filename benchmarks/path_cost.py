@@ -29,6 +29,7 @@ The baseline runs from a `git worktree` of REV under /tmp, imported through a sy
 `owcsim.engine` etc. to its folders (the same venv, the same numpy and Embree).
 Run: .venv/bin/python benchmarks/path_cost.py [--baseline d42d4e1] [--repeats 3] [--profile] [--markdown]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -45,8 +46,13 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 if "OWCSIM_TREE" in os.environ:  # a baseline tree: its symlink farm (PYTHONPATH), not this editable install
-    sys.meta_path[:] = [f for f in sys.meta_path if "editable" not in getattr(f, "__module__", "")
-                        and "editable" not in type(f).__module__ and "editable" not in repr(f)]
+    sys.meta_path[:] = [
+        f
+        for f in sys.meta_path
+        if "editable" not in getattr(f, "__module__", "")
+        and "editable" not in type(f).__module__
+        and "editable" not in repr(f)
+    ]
 #: The commit this work started from (issue 13's "today").
 DEFAULT_BASELINE = "d42d4e1"
 SMOKE = {"type": "homogeneous", "sigma_a": 0.0, "sigma_s": 0.2, "phase": {"type": "hg", "g": 0.5}}
@@ -77,15 +83,14 @@ def _simulate(doc: dict, scene=None):
 
 COST_CASES = {
     "clear": lambda paths: room_doc(False, algorithm=1, max_reflections=200, direction="backward", paths=paths),
-    "smoky": lambda paths: room_doc(True, algorithm=5, max_reflections=200, max_scattering=35, direction="auto",
-                                    paths=paths),
+    "smoky": lambda paths: room_doc(
+        True, algorithm=5, max_reflections=200, max_scattering=35, direction="auto", paths=paths
+    ),
 }
 COST_PATHS = {"clear": 262144, "smoky": 32768}
 ACCURACY_CASES = {
-    "clear": lambda: room_doc(False, algorithm="auto", max_reflections=200, direction="auto",
-                              target_rel_error=3e-4),
-    "smoky": lambda: room_doc(True, algorithm="auto", max_reflections=200, direction="auto",
-                              target_rel_error=3e-3),
+    "clear": lambda: room_doc(False, algorithm="auto", max_reflections=200, direction="auto", target_rel_error=3e-4),
+    "smoky": lambda: room_doc(True, algorithm="auto", max_reflections=200, direction="auto", target_rel_error=3e-3),
 }
 
 
@@ -129,8 +134,13 @@ def measure_rays(paths: int = 200_000) -> dict:
         n_i, n_o = res["run"]["rays_intersect"], res["run"]["rays_occluded"]
         raw = raw_embree(scene, n_i, n_o, 16384, rng)
         out["shadows cast" if cast else "empty room"] = {
-            "time_s": el, "rays": n_i + n_o, "pipeline_Mrays_s": (n_i + n_o) / el / 1e6,
-            "embree_Mrays_s": (n_i + n_o) / raw / 1e6, "ratio": raw / el, "paths_s": paths / el}
+            "time_s": el,
+            "rays": n_i + n_o,
+            "pipeline_Mrays_s": (n_i + n_o) / el / 1e6,
+            "embree_Mrays_s": (n_i + n_o) / raw / 1e6,
+            "ratio": raw / el,
+            "paths_s": paths / el,
+        }
     return out
 
 
@@ -138,17 +148,27 @@ def measure_cost(case: str, paths: int | None = None) -> dict:
     el, res = _simulate(COST_CASES[case](paths or COST_PATHS[case]))
     link = res["links"][0]
     traced = res["run"]["paths_total"]
-    return {"time_s": el, "paths": traced, "us_per_path": el / traced * 1e6, "dc_gain": link["dc_gain"],
-            "dc_gain_stderr": link["dc_gain_stderr"],
-            "rel_std_per_path": link["dc_gain_stderr"] / link["dc_gain"] * np.sqrt(traced),
-            "rays_per_path": (res["run"]["rays_intersect"] + res["run"]["rays_occluded"]) / traced}
+    return {
+        "time_s": el,
+        "paths": traced,
+        "us_per_path": el / traced * 1e6,
+        "dc_gain": link["dc_gain"],
+        "dc_gain_stderr": link["dc_gain_stderr"],
+        "rel_std_per_path": link["dc_gain_stderr"] / link["dc_gain"] * np.sqrt(traced),
+        "rays_per_path": (res["run"]["rays_intersect"] + res["run"]["rays_occluded"]) / traced,
+    }
 
 
 def measure_accuracy(case: str) -> dict:
     el, res = _simulate(ACCURACY_CASES[case]())
     link = res["links"][0]
-    return {"time_s": el, "paths": res["run"]["paths_total"], "dc_gain": link["dc_gain"],
-            "rel_stderr": link["dc_gain_stderr"] / link["dc_gain"], "stop": res["run"]["stop_reason"]}
+    return {
+        "time_s": el,
+        "paths": res["run"]["paths_total"],
+        "dc_gain": link["dc_gain"],
+        "rel_stderr": link["dc_gain_stderr"] / link["dc_gain"],
+        "stop": res["run"]["stop_reason"],
+    }
 
 
 #: Algorithms 1-5 on both rooms, fixed paths per side (K = 6, S = 3 for algorithm 5): the results must stay
@@ -166,8 +186,12 @@ def measure_algorithms() -> dict:
             el, res = _simulate(room_doc(smoke, **sim))
             link = res["links"][0]
             out[f"{'smoky' if smoke else 'clear'} {a}"] = {
-                "time_s": el, "dc_gain": link["dc_gain"], "dc_gain_stderr": link["dc_gain_stderr"],
-                "mean_delay_s": link.get("mean_delay_s"), "paths": res["run"]["paths_total"]}
+                "time_s": el,
+                "dc_gain": link["dc_gain"],
+                "dc_gain_stderr": link["dc_gain_stderr"],
+                "mean_delay_s": link.get("mean_delay_s"),
+                "paths": res["run"]["paths_total"],
+            }
     return out
 
 
@@ -193,13 +217,19 @@ def measure_qmc(replicates: int = 64, paths: int = 2048) -> dict:
         for label, flag in (("pseudo-random", False), ("scrambled Sobol", True)):
             settings = dataclasses.replace(base, qmc_first_dimensions=flag)
             t = time.process_time()
-            means = [sum(trace_batch(scene, WorkItem(d, 0, (0,), r, paths, 11), settings).s1[0, 0] / paths
-                         for d in sides) for r in range(replicates)]
+            means = [
+                sum(trace_batch(scene, WorkItem(d, 0, (0,), r, paths, 11), settings).s1[0, 0] / paths for d in sides)
+                for r in range(replicates)
+            ]
             el = time.process_time() - t
-            out[f"{case} {label}"] = {"mean": float(np.mean(means)), "se": float(np.std(means, ddof=1)
-                                                                                 / np.sqrt(replicates)),
-                                      "var_per_path": float(np.var(means, ddof=1) * paths), "time_s": el,
-                                      "replicates": replicates, "paths": paths}
+            out[f"{case} {label}"] = {
+                "mean": float(np.mean(means)),
+                "se": float(np.std(means, ddof=1) / np.sqrt(replicates)),
+                "var_per_path": float(np.var(means, ddof=1) * paths),
+                "time_s": el,
+                "replicates": replicates,
+                "paths": paths,
+            }
     return out
 
 
@@ -253,8 +283,22 @@ def profile_split(python: str, env: dict, case: str) -> dict:
     if Path(spy).exists():
         with tempfile.NamedTemporaryFile(suffix=".txt", delete=False) as f:
             raw = f.name
-        cmd = [spy, "record", "--native", "-r", "500", "-f", "raw", "-o", raw, "--", python, __file__,
-               "--profile-target", case]
+        cmd = [
+            spy,
+            "record",
+            "--native",
+            "-r",
+            "500",
+            "-f",
+            "raw",
+            "-o",
+            raw,
+            "--",
+            python,
+            __file__,
+            "--profile-target",
+            case,
+        ]
         subprocess.run(cmd, env=env, check=True, capture_output=True)
         counts = {"embree": 0, "numpy": 0, "interpreter": 0}
         for line in Path(raw).read_text().splitlines():
@@ -266,26 +310,35 @@ def profile_split(python: str, env: dict, case: str) -> dict:
         os.unlink(raw)
         total = max(sum(counts.values()), 1)
         return {"tool": "py-spy --native", **{k: v / total for k, v in counts.items()}}
-    code = (f"import cProfile, pstats, sys; sys.argv = ['x', '--profile-target', {case!r}]; "
-            f"sys.path.insert(0, {str(ROOT)!r}); import benchmarks.path_cost as b; "
-            f"p = cProfile.Profile(); p.enable(); b._profile_target({case!r}); p.disable(); s = pstats.Stats(p); "
-            "tot = s.total_tt; emb = sum(v[3] for k, v in s.stats.items() if k[2] in ('intersect', 'occluded') "
-            "and k[0].endswith('geometry.py')); print(emb / tot)")
-    emb = float(subprocess.run([python, "-c", code], env=env, check=True, capture_output=True,
-                               text=True).stdout.split()[-1])
-    return {"tool": "cProfile (Embree = time in Intersector.intersect/occluded)", "embree": emb,
-            "numpy": float("nan"), "interpreter": float("nan")}
+    code = (
+        f"import cProfile, pstats, sys; sys.argv = ['x', '--profile-target', {case!r}]; "
+        f"sys.path.insert(0, {str(ROOT)!r}); import benchmarks.path_cost as b; "
+        f"p = cProfile.Profile(); p.enable(); b._profile_target({case!r}); p.disable(); s = pstats.Stats(p); "
+        "tot = s.total_tt; emb = sum(v[3] for k, v in s.stats.items() if k[2] in ('intersect', 'occluded') "
+        "and k[0].endswith('geometry.py')); print(emb / tot)"
+    )
+    emb = float(
+        subprocess.run([python, "-c", code], env=env, check=True, capture_output=True, text=True).stdout.split()[-1]
+    )
+    return {
+        "tool": "cProfile (Embree = time in Intersector.intersect/occluded)",
+        "embree": emb,
+        "numpy": float("nan"),
+        "interpreter": float("nan"),
+    }
 
 
 # --- the baseline tree --------------------------------------------------------------------------
 def baseline_env(rev: str) -> dict:
     """Environment whose `owcsim` package is commit `rev` (a git worktree under /tmp + a symlink farm)."""
-    sha = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", rev], check=True, capture_output=True,
-                         text=True).stdout.strip()
+    sha = subprocess.run(
+        ["git", "-C", str(ROOT), "rev-parse", "--short", rev], check=True, capture_output=True, text=True
+    ).stdout.strip()
     tree = Path(tempfile.gettempdir()) / f"owcsim-baseline-{sha}"
     if not tree.exists():
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), sha], check=True,
-                       capture_output=True)
+        subprocess.run(
+            ["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), sha], check=True, capture_output=True
+        )
     farm = Path(tempfile.gettempdir()) / f"owcsim-baseline-{sha}-pkg"
     if not farm.exists():
         pkg = farm / "owcsim"
@@ -336,14 +389,22 @@ def report(results: dict[str, dict], profiles: dict[str, dict], markdown: bool) 
         lines.append(f"| {label} | " + " | ".join(cells) + " |" + extra)
 
     first = results[names[0]]
-    lines.append("| kernel | " + " | ".join(results[n]["kernel"].replace(str(ROOT), ".") for n in names) + " |"
-                 + (" |" if len(names) == 2 else ""))
+    lines.append(
+        "| kernel | "
+        + " | ".join(results[n]["kernel"].replace(str(ROOT), ".") for n in names)
+        + " |"
+        + (" |" if len(names) == 2 else "")
+    )
     if "rays" in first:
         for sub in first["rays"]:
-            row(f"rays, {sub}: pipeline / raw Embree rays/s", [results[n]["rays"][sub]["ratio"] for n in names],
-                "{:.2f}")
-            row(f"rays, {sub}: pipeline Mrays/s", [results[n]["rays"][sub]["pipeline_Mrays_s"] for n in names],
-                "{:.2f}")
+            row(
+                f"rays, {sub}: pipeline / raw Embree rays/s",
+                [results[n]["rays"][sub]["ratio"] for n in names],
+                "{:.2f}",
+            )
+            row(
+                f"rays, {sub}: pipeline Mrays/s", [results[n]["rays"][sub]["pipeline_Mrays_s"] for n in names], "{:.2f}"
+            )
     for case in ("clear", "smoky"):
         key = f"cost {case}"
         if key in first:
@@ -364,8 +425,10 @@ def report(results: dict[str, dict], profiles: dict[str, dict], markdown: bool) 
         for key in a:
             z = (b[key]["dc_gain"] - a[key]["dc_gain"]) / np.hypot(a[key]["dc_gain_stderr"], b[key]["dc_gain_stderr"])
             before, after = (f"{r[key]['dc_gain']:.5e} +- {r[key]['dc_gain_stderr']:.1e}" for r in (a, b))
-            lines.append(f"| {key.split()[0]} room, algorithm {key.split()[1]}: H0 | {before} | {after} "
-                         f"| z {z:+.2f}, time x{b[key]['time_s'] / a[key]['time_s']:.2f} |")
+            lines.append(
+                f"| {key.split()[0]} room, algorithm {key.split()[1]}: H0 | {before} | {after} "
+                f"| z {z:+.2f}, time x{b[key]['time_s'] / a[key]['time_s']:.2f} |"
+            )
     if "qmc" in results[names[-1]]:
         q = results[names[-1]]["qmc"]
         for case in ("clear", "smoky"):
@@ -373,9 +436,11 @@ def report(results: dict[str, dict], profiles: dict[str, dict], markdown: bool) 
             ratio = sob["var_per_path"] / mc["var_per_path"]
             z = (sob["mean"] - mc["mean"]) / np.hypot(sob["se"], mc["se"])
             rel = np.sqrt(2.0 / (mc["replicates"] - 1)) * np.sqrt(2.0)  # rough relative error of a variance ratio
-            lines.append(f"| QMC, {case} room: variance per path, Sobol / pseudo-random | {ratio:.2f} "
-                         f"(+- {rel * ratio:.2f}) | means differ by z {z:+.2f} | {mc['replicates']} x "
-                         f"{mc['paths']} paths |")
+            lines.append(
+                f"| QMC, {case} room: variance per path, Sobol / pseudo-random | {ratio:.2f} "
+                f"(+- {rel * ratio:.2f}) | means differ by z {z:+.2f} | {mc['replicates']} x "
+                f"{mc['paths']} paths |"
+            )
     for case in profiles.get(names[0], {}):
         for part in ("embree", "numpy", "interpreter"):
             row(f"profile {case} room: {part}", [profiles[n][case][part] for n in names], "{:.0%}", False)
@@ -414,8 +479,10 @@ def main() -> None:
     results = {name: _best(r) for name, r in runs.items()}
     profiles = {}
     if args.profile:
-        profiles = {name: {case: profile_split(sys.executable, e, case) for case in ("clear", "smoky")}
-                    for name, e in trees.items()}
+        profiles = {
+            name: {case: profile_split(sys.executable, e, case) for case in ("clear", "smoky")}
+            for name, e in trees.items()
+        }
     print(f"one core, CPU time, best of {args.repeats}; host load average {os.getloadavg()[0]:.1f} (2 cores)")
     print(report(results, profiles, args.markdown))
 

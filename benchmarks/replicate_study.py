@@ -22,6 +22,7 @@ error alone; "after" =
 algorithm 5 from both devices with engine/reliability.py's stopping rule. The true error
 is measured against a long two-sided run (`--ref-paths` per side) of the same K, S.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -52,36 +53,52 @@ def simulate(*args, **kwargs) -> dict:
 def simulate_two_sided(*args, **kwargs) -> dict:
     return json.loads(medium_nee.simulate_two_sided(*args, **kwargs).model_dump_json())
 
+
 VARIANTS = [(2, "one"), (3, "one"), (5, "one"), (2, "two"), (3, "two"), (4, "two"), (5, "two")]
 
 
 def scene(geometry: str, g: float, D: float, algorithm: int, paths: int, seed: int) -> dict:
-    sim = {"algorithm": algorithm, "paths": paths, "seed": seed, "batch_size": max(64, paths // 16),
-           "time_bin_s": 1e-9, "t_max_s": 2e-7, "segment_time_step_s": 5e-9, "max_strata": 8}
+    sim = {
+        "algorithm": algorithm,
+        "paths": paths,
+        "seed": seed,
+        "batch_size": max(64, paths // 16),
+        "time_bin_s": 1e-9,
+        "t_max_s": 2e-7,
+        "segment_time_step_s": 5e-9,
+        "max_strata": 8,
+    }
     if geometry == "room":
         sim.update(max_reflections=3, **({"max_scattering": 3} if algorithm == 5 else {}))
-        return {"room": {"size": [5, 5, 3], "reflectance": {"floor": 0.3, "ceiling": 0.8, "walls": 0.8}},
-                "transmitters": [{"id": "tx", "position": [2.5, 2.5, 3.0], "normal": [0, 0, -1],
-                                  "lambertian_order": 1}],
-                "receivers": [{"id": "rx", "position": [2.5, 2.5, 3.0 - D], "normal": [0, 0, 1], "area": 1e-4,
-                               "fov_deg": 90}],
-                "medium": {"type": "homogeneous", "sigma_a": 0.0, "sigma_s": 0.2, "phase": {"type": "hg", "g": g}},
-                "simulation": sim}
+        return {
+            "room": {"size": [5, 5, 3], "reflectance": {"floor": 0.3, "ceiling": 0.8, "walls": 0.8}},
+            "transmitters": [{"id": "tx", "position": [2.5, 2.5, 3.0], "normal": [0, 0, -1], "lambertian_order": 1}],
+            "receivers": [
+                {"id": "rx", "position": [2.5, 2.5, 3.0 - D], "normal": [0, 0, 1], "area": 1e-4, "fov_deg": 90}
+            ],
+            "medium": {"type": "homogeneous", "sigma_a": 0.0, "sigma_s": 0.2, "phase": {"type": "hg", "g": g}},
+            "simulation": sim,
+        }
     sim.update(max_reflections=0, **({"max_scattering": 2} if algorithm == 5 else {}))
-    return {"transmitters": [{"id": "tx", "position": [0, 0, 0], "normal": [1, 0, 0], "lambertian_order": 1}],
-            "receivers": [{"id": "rx", "position": [D, 0, 0], "normal": [-1, 0, 0], "area": 1e-4, "fov_deg": 90}],
-            "medium": {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2, "phase": {"type": "hg", "g": g}},
-            "simulation": sim}
+    return {
+        "transmitters": [{"id": "tx", "position": [0, 0, 0], "normal": [1, 0, 0], "lambertian_order": 1}],
+        "receivers": [{"id": "rx", "position": [D, 0, 0], "normal": [-1, 0, 0], "area": 1e-4, "fov_deg": 90}],
+        "medium": {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2, "phase": {"type": "hg", "g": g}},
+        "simulation": sim,
+    }
 
 
 def _with_reliability_warnings(build):
     """build_result plus engine/reliability.py's warning: the integration the result needs (see docs)."""
+
     def wrapped(spec, scene, accs, settings, los_gain, *a, **kw):
         doc = build(spec, scene, accs, settings, los_gain, *a, **kw)
         rel = reliability.from_accumulators(accs.values(), los_gain)
-        doc["warnings"] = doc["warnings"] + reliability.warnings(rel, [f"{lk['transmitter']}-{lk['receiver']}"
-                                                                       for lk in doc["links"]])
+        doc["warnings"] = doc["warnings"] + reliability.warnings(
+            rel, [f"{lk['transmitter']}-{lk['receiver']}" for lk in doc["links"]]
+        )
         return doc
+
     return wrapped
 
 
@@ -112,28 +129,38 @@ def smoky_room(g: float, seed: int, **sim) -> dict:
 def accuracy_study(args) -> None:
     import owcsim.engine.simulate as sim_mod
 
-    print(f"accuracy mode, {args.seeds} seeds per row; true error against a long two-sided run "
-          f"({args.ref_paths:,d} paths per side); batch_size 1024")
-    print(f"{'scene':22s} {'target':>6s} {'variant':8s} {'within 2x':>9s} {'median paths':>12s} "
-          f"{'median |err|/target':>19s} {'worst |err|/target':>18s} {'median s':>8s}")
+    print(
+        f"accuracy mode, {args.seeds} seeds per row; true error against a long two-sided run "
+        f"({args.ref_paths:,d} paths per side); batch_size 1024"
+    )
+    print(
+        f"{'scene':22s} {'target':>6s} {'variant':8s} {'within 2x':>9s} {'median paths':>12s} "
+        f"{'median |err|/target':>19s} {'worst |err|/target':>18s} {'median s':>8s}"
+    )
     for g in (0.5, 0.9):
         t = time.perf_counter()
-        ref = simulate_two_sided(SceneSpec.model_validate(smoky_room(g, 999_999, paths=args.ref_paths,
-                                                                     batch_size=32768)))["links"][0]
-        print(f"reference g={g}: H0 = {ref['dc_gain']:.6e} +- {ref['dc_gain_stderr'] / ref['dc_gain']:.3%} "
-              f"({time.perf_counter() - t:.0f} s)", flush=True)
+        ref = simulate_two_sided(
+            SceneSpec.model_validate(smoky_room(g, 999_999, paths=args.ref_paths, batch_size=32768))
+        )["links"][0]
+        print(
+            f"reference g={g}: H0 = {ref['dc_gain']:.6e} +- {ref['dc_gain_stderr'] / ref['dc_gain']:.3%} "
+            f"({time.perf_counter() - t:.0f} s)",
+            flush=True,
+        )
         for target in (0.03, 0.01):
             for variant in ("before", "after"):
                 errs, paths, times = [], [], []
                 for seed in range(args.seeds):
-                    doc = smoky_room(g, 500 + seed, paths=None, target_rel_error=target, batch_size=1024,
-                                     time_budget_s=600)
+                    doc = smoky_room(
+                        g, 500 + seed, paths=None, target_rel_error=target, batch_size=1024, time_budget_s=600
+                    )
                     if variant == "before":
                         doc["simulation"]["direction"] = "auto"
                         keep = sim_mod.reliability.may_stop, sim_mod.kernel_settings
                         sim_mod.reliability.may_stop = lambda *a, **k: True  # the old rule: per-path error only
                         sim_mod.kernel_settings = lambda spec, _k=keep[1]: dataclasses.replace(
-                            _k(spec), rr_threshold=1.0)  # and the old roulette
+                            _k(spec), rr_threshold=1.0
+                        )  # and the old roulette
                         try:
                             t = time.perf_counter()
                             res = simulate(SceneSpec.model_validate(doc))
@@ -147,9 +174,12 @@ def accuracy_study(args) -> None:
                     errs.append(abs(link["dc_gain"] - ref["dc_gain"]) / ref["dc_gain"] / target)
                     paths.append(res["run"]["paths_total"])
                 errs = np.array(errs)
-                print(f"{'smoky room g=' + str(g):22s} {target:6.0%} {variant:8s} "
-                      f"{int((errs <= 2).sum()):4d}/{len(errs):<4d} {int(np.median(paths)):12,d} "
-                      f"{np.median(errs):19.2f} {errs.max():18.2f} {np.median(times):8.2f}", flush=True)
+                print(
+                    f"{'smoky room g=' + str(g):22s} {target:6.0%} {variant:8s} "
+                    f"{int((errs <= 2).sum()):4d}/{len(errs):<4d} {int(np.median(paths)):12,d} "
+                    f"{np.median(errs):19.2f} {errs.max():18.2f} {np.median(times):8.2f}",
+                    flush=True,
+                )
 
 
 def clear_room(seed: int, **sim) -> dict:
@@ -166,17 +196,31 @@ ROULETTE = [(3, 1.0), (5, 1.0), (8, 1.0), (3, 0.5), (3, 0.25), (5, 0.5), (5, 0.2
 
 def roulette_study(args) -> None:
     """Variance per path x cost per path of roulette start depths and thresholds (KernelSettings)."""
-    print(f"roulette: start depth d (k + s) and threshold theta, survival min(1, w / (theta w0)); "
-          f"{args.paths:,d} paths per side per setting; efficiency = 1 / (rel. variance per path x s per path), "
-          "relative to d = 3, theta = 1 (the old rule); d = 1000: no roulette")
-    cases = [("clear room S1, algorithm 1 backward", lambda seed: clear_room(seed, paths=args.paths,
-                                                                               batch_size=16384), "backward", 0.0003),
-             ("smoky room g 0.5, algorithm 5 both", lambda seed: smoky_room(0.5, seed, paths=args.paths,
-                                                                              batch_size=16384), "both", 0.003)]
+    print(
+        f"roulette: start depth d (k + s) and threshold theta, survival min(1, w / (theta w0)); "
+        f"{args.paths:,d} paths per side per setting; efficiency = 1 / (rel. variance per path x s per path), "
+        "relative to d = 3, theta = 1 (the old rule); d = 1000: no roulette"
+    )
+    cases = [
+        (
+            "clear room S1, algorithm 1 backward",
+            lambda seed: clear_room(seed, paths=args.paths, batch_size=16384),
+            "backward",
+            0.0003,
+        ),
+        (
+            "smoky room g 0.5, algorithm 5 both",
+            lambda seed: smoky_room(0.5, seed, paths=args.paths, batch_size=16384),
+            "both",
+            0.003,
+        ),
+    ]
     for name, make, direction, target in cases:
         print(name)
-        print(f"{'d':>5s} {'theta':>6s} {'rel std/path':>12s} {'us/path':>8s} {'rays/path':>9s} {'efficiency':>10s} "
-              f"{'paths to ' + format(target, '.2%'):>16s} {'s to target':>11s}")
+        print(
+            f"{'d':>5s} {'theta':>6s} {'rel std/path':>12s} {'us/path':>8s} {'rays/path':>9s} {'efficiency':>10s} "
+            f"{'paths to ' + format(target, '.2%'):>16s} {'s to target':>11s}"
+        )
         base = None
         for depth, theta in ROULETTE:
             spec = SceneSpec.model_validate(make(11))
@@ -192,8 +236,11 @@ def roulette_study(args) -> None:
             eff = 1.0 / (rel_std**2 * per_path)
             base = base or eff
             need = sides * (rel_std / target) ** 2
-            print(f"{depth:5d} {theta:6.2f} {rel_std:12.3f} {per_path * 1e6:8.2f} {rays:9.2f} {eff / base:10.2f} "
-                  f"{need:16,.0f} {need * per_path:11.1f}", flush=True)
+            print(
+                f"{depth:5d} {theta:6.2f} {rel_std:12.3f} {per_path * 1e6:8.2f} {rays:9.2f} {eff / base:10.2f} "
+                f"{need:16,.0f} {need * per_path:11.1f}",
+                flush=True,
+            )
 
 
 def speed_study(args) -> None:
@@ -203,26 +250,43 @@ def speed_study(args) -> None:
 
     after = {"rr_start_depth": args.rr_depth, "rr_threshold": args.rr_theta}
     before = {"rr_start_depth": 3, "rr_threshold": 1.0}
-    print(f"speed to a target (accuracy mode, batches of 16384 (clear) / 2048 (smoky) paths, "
-          f"engine/reliability.py's stopping rule); after: roulette "
-          f"from depth {args.rr_depth} with theta {args.rr_theta} (kernel default theta "
-          f"{KernelSettings.__dataclass_fields__['rr_threshold'].default}); timings on a shared CPU")
+    print(
+        f"speed to a target (accuracy mode, batches of 16384 (clear) / 2048 (smoky) paths, "
+        f"engine/reliability.py's stopping rule); after: roulette "
+        f"from depth {args.rr_depth} with theta {args.rr_theta} (kernel default theta "
+        f"{KernelSettings.__dataclass_fields__['rr_threshold'].default}); timings on a shared CPU"
+    )
     print(f"{'case':44s} {'paths':>10s} {'time s':>7s} {'H0':>13s} {'rel err':>8s}")
-    cases = [("clear room S1 to 0.03 %", clear_room, 3e-4, 16384, [("before, backward", "backward", before),
-                                                                    ("after, backward", "backward", after)]),
-             ("smoky room g 0.5 to 0.3 %", lambda seed, **kw: smoky_room(0.5, seed, **kw), 3e-3, 2048,
-              [("before, algorithm 5 backward", "backward", before),
-               ("after, algorithm 5 both sides", "both", after)])]
+    cases = [
+        (
+            "clear room S1 to 0.03 %",
+            clear_room,
+            3e-4,
+            16384,
+            [("before, backward", "backward", before), ("after, backward", "backward", after)],
+        ),
+        (
+            "smoky room g 0.5 to 0.3 %",
+            lambda seed, **kw: smoky_room(0.5, seed, **kw),
+            3e-3,
+            2048,
+            [("before, algorithm 5 backward", "backward", before), ("after, algorithm 5 both sides", "both", after)],
+        ),
+    ]
     for name, make, target, batch, variants in cases:
         for label, direction, rr in variants:
-            spec = SceneSpec.model_validate(make(21, paths=None, target_rel_error=target, batch_size=batch,
-                                                 time_budget_s=900))
+            spec = SceneSpec.model_validate(
+                make(21, paths=None, target_rel_error=target, batch_size=batch, time_budget_s=900)
+            )
             t = time.perf_counter()
             res = simulate_two_sided(spec, direction=direction, **rr)
             el = time.perf_counter() - t
             link = res["links"][0]
-            print(f"{name + ': ' + label:44s} {res['run']['paths_total']:10,d} {el:7.1f} {link['dc_gain']:13.6e} "
-                  f"{link['dc_gain_stderr'] / link['dc_gain']:8.3%}", flush=True)
+            print(
+                f"{name + ': ' + label:44s} {res['run']['paths_total']:10,d} {el:7.1f} {link['dc_gain']:13.6e} "
+                f"{link['dc_gain_stderr'] / link['dc_gain']:8.3%}",
+                flush=True,
+            )
 
 
 def main() -> None:
@@ -247,8 +311,10 @@ def main() -> None:
         return
     rows = []
     t0 = time.perf_counter()
-    print(f"{args.seeds} seeds x {args.paths} paths per side; ratio = spread / median stderr of H0; "
-          "max z = worst |H0 - ref| / own stderr")
+    print(
+        f"{args.seeds} seeds x {args.paths} paths per side; ratio = spread / median stderr of H0; "
+        "max z = worst |H0 - ref| / own stderr"
+    )
     print(f"{'case':26s} " + " ".join(f"{a}{'/2s' if s == 'two' else '/1s'}".rjust(15) for a, s in VARIANTS))
     for geometry in args.geometries.split(","):
         for g in (0.0, 0.7, 0.9):
@@ -275,13 +341,26 @@ def main() -> None:
                     else:
                         ref = np.full(len(vals), ref_vals.mean())
                     z = float(np.max(np.abs(vals - ref) / errs))
-                    rows.append({"geometry": geometry, "g": g, "D": D, "algorithm": algorithm, "sides": sides,
-                                 "ratio": ratio, "max_z": z, "flagged": flags, "mean": float(vals.mean()),
-                                 "median_stderr": float(np.median(errs))})
+                    rows.append(
+                        {
+                            "geometry": geometry,
+                            "g": g,
+                            "D": D,
+                            "algorithm": algorithm,
+                            "sides": sides,
+                            "ratio": ratio,
+                            "max_z": z,
+                            "flagged": flags,
+                            "mean": float(vals.mean()),
+                            "median_stderr": float(np.median(errs)),
+                        }
+                    )
                     cells.append(f"{ratio:5.2f} {z:4.1f} {flags:2d}")
                 print(f"{geometry + f' g={g} D={D}':26s} " + " ".join(c.rjust(15) for c in cells), flush=True)
-    print(f"cells: ratio, max z, runs flagged unreliable (of {args.seeds}); 1s = one-sided as simulate runs it, "
-          f"2s = from both devices; {time.perf_counter() - t0:.0f} s (one process, CPU shared with other jobs)")
+    print(
+        f"cells: ratio, max z, runs flagged unreliable (of {args.seeds}); 1s = one-sided as simulate runs it, "
+        f"2s = from both devices; {time.perf_counter() - t0:.0f} s (one process, CPU shared with other jobs)"
+    )
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(rows, indent=1))

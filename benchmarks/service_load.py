@@ -13,6 +13,7 @@ status GETs and health, the 429s met, and the server's peak RSS.
 `--baseline DIR`: run the same load against the server of another checkout too (its own
 .venv), e.g. the code before issue 11, and print both.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -36,8 +37,6 @@ from tests.server.helpers import ServerProcess, quick_doc  # noqa: E402
 def pct(values: list[float], q: float) -> float:
     values = sorted(values)
     return values[min(len(values) - 1, int(round(q / 100 * (len(values) - 1))))] if values else float("nan")
-
-
 
 
 def main() -> int:
@@ -65,12 +64,21 @@ def run(args, root: Path, python: str, label: str) -> int:
         with lock:
             statuses[response.status_code] = statuses.get(response.status_code, 0) + 1
 
-    with ServerProcess(tmp / "jobs.sqlite", root=root, python=python, max_concurrent_jobs=2, max_queued_jobs=50,
-                       retry_after_s=1, max_queued_per_key=50, max_connections=500) as srv:
+    with ServerProcess(
+        tmp / "jobs.sqlite",
+        root=root,
+        python=python,
+        max_concurrent_jobs=2,
+        max_queued_jobs=50,
+        retry_after_s=1,
+        max_queued_per_key=50,
+        max_connections=500,
+    ) as srv:
         big = quick_doc(paths=1024, direction="forward", t_max_s=2e-7)
         big["receivers"] = []
-        big["receiver_grids"] = [{"id_prefix": "g", "origin": [0.5, 0.5, 0.0], "size": [4.0, 4.0],
-                                  "spacing": 4.0 / 29, "area": 1e-4}]
+        big["receiver_grids"] = [
+            {"id_prefix": "g", "origin": [0.5, 0.5, 0.0], "size": [4.0, 4.0], "spacing": 4.0 / 29, "area": 1e-4}
+        ]
         with Client(srv.url) as owc:
             big_job = owc.submit(big)
             big_job.wait(timeout=300)
@@ -99,8 +107,10 @@ def run(args, root: Path, python: str, label: str) -> int:
             suffixes = ["result", "result.csv", "result.npz", "plot.png"]
             try:
                 http = httpx.Client(base_url=srv.url, timeout=120, event_hooks={"response": [count]})
-                with Client(srv.url, retry=RetryPolicy(retries=200, backoff_s=0.2, max_backoff_s=2.0),
-                            http=http) as owc, httpx.Client(base_url=srv.url, timeout=120) as h:
+                with (
+                    Client(srv.url, retry=RetryPolicy(retries=200, backoff_s=0.2, max_backoff_s=2.0), http=http) as owc,
+                    httpx.Client(base_url=srv.url, timeout=120) as h,
+                ):
                     for k in range(args.per_client):
                         t0 = time.perf_counter()
                         job = owc.submit(quick_doc(seed=i * 1000 + k))
@@ -144,16 +154,23 @@ def run(args, root: Path, python: str, label: str) -> int:
         for t in threads:
             t.join()
     n = args.clients * args.per_client
-    print(f"{args.clients} clients x {args.per_client} jobs = {n} jobs, each followed by a status GET and a result "
-          "download (JSON/CSV/NPZ/PNG in turn, one 19 MB CSV result among the finished jobs)")
-    print(f"submissions accepted per second: {n / t_submitted:.1f} ({n} in {t_submitted:.1f} s); all done after "
-          f"{t_all:.1f} s ({n / t_all:.1f} jobs/s)")
+    print(
+        f"{args.clients} clients x {args.per_client} jobs = {n} jobs, each followed by a status GET and a result "
+        "download (JSON/CSV/NPZ/PNG in turn, one 19 MB CSV result among the finished jobs)"
+    )
+    print(
+        f"submissions accepted per second: {n / t_submitted:.1f} ({n} in {t_submitted:.1f} s); all done after "
+        f"{t_all:.1f} s ({n / t_all:.1f} jobs/s)"
+    )
     for name in ("submit", "status", "result", "health"):
         v = lat[name]
-        print(f"{name:7s} latency p50 / p95 / p99 / max: {pct(v, 50) * 1e3:7.0f} / {pct(v, 95) * 1e3:7.0f} / "
-              f"{pct(v, 99) * 1e3:7.0f} / {max(v) * 1e3:7.0f} ms  ({len(v)} requests)")
-    print(f"429 answers met (and retried): {statuses.get(429, 0)}; 5xx: "
-          f"{sum(c for s, c in statuses.items() if s >= 500)}")
+        print(
+            f"{name:7s} latency p50 / p95 / p99 / max: {pct(v, 50) * 1e3:7.0f} / {pct(v, 95) * 1e3:7.0f} / "
+            f"{pct(v, 99) * 1e3:7.0f} / {max(v) * 1e3:7.0f} ms  ({len(v)} requests)"
+        )
+    print(
+        f"429 answers met (and retried): {statuses.get(429, 0)}; 5xx: {sum(c for s, c in statuses.items() if s >= 500)}"
+    )
     print(f"server peak RSS: {peak[0]:.0f} MB (the server process; workers and pre-flights are separate)")
     if errors:
         print(f"errors: {len(errors)}: {errors[:5]}")

@@ -13,6 +13,7 @@ worker. After the last round a clean server runs every job to its end. Checks, p
 
     .venv/bin/python benchmarks/service_soak.py [--rounds 6] [--jobs 40] [--clients 8] [--seed 1]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -52,8 +53,10 @@ def main() -> int:
     args = ap.parse_args()
     rng = random.Random(args.seed)
     # jobs of about 0.5-3 s each; a share of them is submitted in each round, so every kill meets load
-    docs = [quick_doc(paths=rng.choice([2_000_000, 5_000_000, 10_000_000]), batch_size=4096, seed=i)
-            for i in range(args.jobs)]
+    docs = [
+        quick_doc(paths=rng.choice([2_000_000, 5_000_000, 10_000_000]), batch_size=4096, seed=i)
+        for i in range(args.jobs)
+    ]
     per_round = -(-args.jobs // args.rounds)
     keys = [f"soak-{args.seed}-{i}" for i in range(args.jobs)]
     tmp = Path(tempfile.mkdtemp(prefix="owcsim-soak-"))
@@ -83,8 +86,10 @@ def main() -> int:
         port = srv.port
         stop = threading.Event()
         todo = [i for i in range(min(args.jobs, (r + 1) * per_round)) if not ids[i]]
-        threads = [threading.Thread(target=client, args=(todo[k::args.clients], srv.url, stop), daemon=True)
-                   for k in range(args.clients)]
+        threads = [
+            threading.Thread(target=client, args=(todo[k :: args.clients], srv.url, stop), daemon=True)
+            for k in range(args.clients)
+        ]
         for t in threads:
             t.start()
         t_kill = time.monotonic() + rng.uniform(1.0, 5.0)
@@ -101,15 +106,19 @@ def main() -> int:
         stop.set()
         for t in threads:
             t.join(30)
-        print(f"round {r + 1}: killed at {time.monotonic() - t_start:.1f} s; "
-              f"{sum(1 for v in ids.values() if v)} of {args.jobs} submissions answered", flush=True)
+        print(
+            f"round {r + 1}: killed at {time.monotonic() - t_start:.1f} s; "
+            f"{sum(1 for v in ids.values() if v)} of {args.jobs} submissions answered",
+            flush=True,
+        )
 
     # a clean server runs everything to its end
     srv = ServerProcess(db, port=port, log=tmp / "server.log", **settings).start()
     stop = threading.Event()
     todo = [i for i in range(args.jobs) if not ids[i]]
-    threads = [threading.Thread(target=client, args=(todo[k::args.clients], srv.url, stop))
-               for k in range(args.clients)]
+    threads = [
+        threading.Thread(target=client, args=(todo[k :: args.clients], srv.url, stop)) for k in range(args.clients)
+    ]
     for t in threads:
         t.start()
     for t in threads:
@@ -141,11 +150,15 @@ def main() -> int:
         mine = _strip(simulate(SceneSpec.model_validate(docs[i])))["links"]
         if r.status_code != 200 or _strip(r.json())["links"] != mine:
             mismatched.append(i)
-    print(f"\n{args.rounds} rounds, {kills['server']} server kills (whole group), {kills['worker']} worker kills, "
-          f"{time.monotonic() - t_start:.0f} s")
-    print(f"jobs: {args.jobs} submitted, {len(set(all_ids))} distinct ids, {len(lost)} lost, {len(duplicated)} "
-          f"duplicated, {len(extra)} unknown jobs in the store, {len(not_done)} not succeeded; attempts per job "
-          f"max {max(attempts, default=0)}, mean {sum(attempts) / max(1, len(attempts)):.2f}")
+    print(
+        f"\n{args.rounds} rounds, {kills['server']} server kills (whole group), {kills['worker']} worker kills, "
+        f"{time.monotonic() - t_start:.0f} s"
+    )
+    print(
+        f"jobs: {args.jobs} submitted, {len(set(all_ids))} distinct ids, {len(lost)} lost, {len(duplicated)} "
+        f"duplicated, {len(extra)} unknown jobs in the store, {len(not_done)} not succeeded; attempts per job "
+        f"max {max(attempts, default=0)}, mean {sum(attempts) / max(1, len(attempts)):.2f}"
+    )
     print(f"results bit-identical to a clean engine run: {len(results) - len(mismatched)} of {len(results)}")
     print(f"server peak RSS {peak_rss:.0f} MB (the server process alone; workers are separate processes)")
     ok = not (lost or duplicated or extra or not_done or mismatched) and peak_rss < 600
@@ -159,8 +172,12 @@ def _running_workers(db: Path) -> list[int]:
 
     con = sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=5)
     try:
-        return [r[0] for r in con.execute("SELECT worker_pid FROM jobs WHERE status = 'running' AND worker_pid "
-                                          "IS NOT NULL").fetchall()]
+        return [
+            r[0]
+            for r in con.execute(
+                "SELECT worker_pid FROM jobs WHERE status = 'running' AND worker_pid IS NOT NULL"
+            ).fetchall()
+        ]
     finally:
         con.close()
 

@@ -11,6 +11,7 @@ plots error against time (PNG). The error of algorithms 1-4 includes their model
 error: the path families they leave out (physics.md section 4).
 Run: .venv/bin/python benchmarks/smoke_accuracy.py [--out out/bench] [--ref-paths 2000000]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,9 +35,17 @@ CASES = [(1, "auto"), (2, "both"), (3, "both"), (4, "both"), (5, "forward"), (5,
 
 
 def run(algorithm: int, direction: str, paths: int, seed: int, max_scattering: int = 3):
-    doc = barry_doc(algorithm=algorithm, direction="auto" if direction == "both" else direction,
-                    max_reflections=6, max_scattering=max_scattering, paths=paths, seed=seed,
-                    time_bin_s=1e-9, t_max_s=2e-7, batch_size=8192)
+    doc = barry_doc(
+        algorithm=algorithm,
+        direction="auto" if direction == "both" else direction,
+        max_reflections=6,
+        max_scattering=max_scattering,
+        paths=paths,
+        seed=seed,
+        time_bin_s=1e-9,
+        t_max_s=2e-7,
+        batch_size=8192,
+    )
     doc["medium"] = MEDIUM
     spec = SceneSpec.model_validate(doc)
     t = time.perf_counter()
@@ -54,9 +63,11 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     t_ref, ref = run(5, "backward", args.ref_paths, seed=999, max_scattering=30)
     h_ref = np.asarray(ref.cir.total)
-    print(f"reference: algorithm 5 backward, S = 30, {args.ref_paths:,d} paths, {t_ref:.1f} s: "
-          f"H0 = {ref.dc_gain:.5e} ± {ref.dc_gain_stderr:.1e} "
-          f"(by scattering order {[f'{v:.2e}' for v in ref.dc_gain_by_scattering_order[:4]]})")
+    print(
+        f"reference: algorithm 5 backward, S = 30, {args.ref_paths:,d} paths, {t_ref:.1f} s: "
+        f"H0 = {ref.dc_gain:.5e} ± {ref.dc_gain_stderr:.1e} "
+        f"(by scattering order {[f'{v:.2e}' for v in ref.dc_gain_by_scattering_order[:4]]})"
+    )
     print(f"{'algorithm':14s} {'paths':>8s} {'time s':>7s} {'H0':>12s} {'stderr':>8s} {'H0 err':>8s} {'CIR err':>8s}")
     rows = []
     for algorithm, direction in CASES:
@@ -66,13 +77,31 @@ def main() -> None:
             h0_err = abs(link.dc_gain - ref.dc_gain) / ref.dc_gain
             cir_err = float(np.linalg.norm(h - h_ref) / np.linalg.norm(h_ref))
             label = f"{algorithm} {direction}"
-            rows.append({"algorithm": algorithm, "direction": direction, "paths": paths, "time_s": el,
-                         "dc_gain": link.dc_gain, "dc_gain_stderr": link.dc_gain_stderr,
-                         "h0_rel_error": h0_err, "cir_rel_error": cir_err})
-            print(f"{label:14s} {paths:8d} {el:7.2f} {link.dc_gain:12.5e} {link.dc_gain_stderr:8.1e} "
-                  f"{h0_err:8.2%} {cir_err:8.2%}")
-    (out / "smoke_accuracy.json").write_text(json.dumps({"reference": {k: getattr(ref, k) for k in (
-        "dc_gain", "dc_gain_stderr", "dc_gain_by_scattering_order")}, "rows": rows}, indent=1))
+            rows.append(
+                {
+                    "algorithm": algorithm,
+                    "direction": direction,
+                    "paths": paths,
+                    "time_s": el,
+                    "dc_gain": link.dc_gain,
+                    "dc_gain_stderr": link.dc_gain_stderr,
+                    "h0_rel_error": h0_err,
+                    "cir_rel_error": cir_err,
+                }
+            )
+            print(
+                f"{label:14s} {paths:8d} {el:7.2f} {link.dc_gain:12.5e} {link.dc_gain_stderr:8.1e} "
+                f"{h0_err:8.2%} {cir_err:8.2%}"
+            )
+    (out / "smoke_accuracy.json").write_text(
+        json.dumps(
+            {
+                "reference": {k: getattr(ref, k) for k in ("dc_gain", "dc_gain_stderr", "dc_gain_by_scattering_order")},
+                "rows": rows,
+            },
+            indent=1,
+        )
+    )
     import matplotlib
 
     matplotlib.use("Agg")
@@ -89,8 +118,7 @@ def main() -> None:
         ax.set_title(title, fontsize=10)
         ax.grid(alpha=0.3, which="both")
     axes[0].legend(fontsize=8)
-    fig.suptitle("Smoke room (sigma_s 0.2, sigma_a 0.05 /m, g 0.7), K = 6; reference: algorithm 5, S = 30",
-                 fontsize=10)
+    fig.suptitle("Smoke room (sigma_s 0.2, sigma_a 0.05 /m, g 0.7), K = 6; reference: algorithm 5, S = 30", fontsize=10)
     fig.tight_layout()
     fig.savefig(out / "smoke_accuracy.png", dpi=120)
     print(f"wrote {out / 'smoke_accuracy.png'} and {out / 'smoke_accuracy.json'}")

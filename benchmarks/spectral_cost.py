@@ -13,6 +13,7 @@ BLAS runs on one thread
 product of tally.BatchBuilder.finish take 30-120 ms instead of 0.2 ms, swamping what is measured.
 Run: .venv/bin/python benchmarks/spectral_cost.py [--paths 200000] [--repeats 3] [--smoke]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -57,9 +58,12 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--smoke", action="store_true", help="also with smoke per band (algorithm 1)")
     args = ap.parse_args()
-    for smoke in ((False, True) if args.smoke else (False,)):
-        print(f"\nBarry configuration A, algorithm 1, K = 3, {args.paths} paths"
-              + (", smoke per band" if smoke else "") + f" (best of {args.repeats})")
+    for smoke in (False, True) if args.smoke else (False,):
+        print(
+            f"\nBarry configuration A, algorithm 1, K = 3, {args.paths} paths"
+            + (", smoke per band" if smoke else "")
+            + f" (best of {args.repeats})"
+        )
         cases = {"grey": None, "1 band": 1, "8 bands": 8, "32 bands": 32}
         specs = {label: scene(b, args.paths, smoke) for label, b in cases.items()}
         for spec in specs.values():
@@ -76,8 +80,11 @@ def main() -> None:
             res = results[label]
             h0 = res["links"][0]["dc_gain"] if isinstance(res, dict) else res.links[0].dc_gain  # typed result
             print(f"  {label:9s} {t / args.paths * 1e6:7.2f} us/path  H0 = {h0:.5g}  {ratio}")
-        print(f"  targets: 8 bands < 1.5x -> {times['8 bands'] / base:.2f}x, "
-              f"32 bands < 3x -> {times['32 bands'] / base:.2f}x")
+        print(
+            f"  targets: 8 bands < 1.5x -> {times['8 bands'] / base:.2f}x, "
+            f"32 bands < 3x -> {times['32 bands'] / base:.2f}x"
+        )
+
 
 if __name__ == "__main__":
     main()

@@ -7,6 +7,7 @@ inside the room, prepared float32 arrays: only `EmbreeScene.run` is timed), thei
 ratio, and paths/s with 2 worker processes (warm pool) against 1.
 Run: .venv/bin/python benchmarks/throughput.py [--paths N]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -86,8 +87,9 @@ def main() -> None:
     print(f"{'case':44s} {'time s':>7s} {'paths/s':>10s} {'Mrays/s':>8s} {'raw Embree':>10s} {'ratio':>6s}")
     for direction in ("forward", "backward"):
         for cast_shadows in (True, False):
-            spec = SceneSpec.model_validate(barry_doc(paths=args.paths, batch_size=args.batch, direction=direction,
-                                                      max_reflections=3))
+            spec = SceneSpec.model_validate(
+                barry_doc(paths=args.paths, batch_size=args.batch, direction=direction, max_reflections=3)
+            )
             scene = build_scene(spec)
             if cast_shadows:
                 scene.all_visible = False  # cast every shadow ray, as in a furnished room
@@ -96,11 +98,14 @@ def main() -> None:
             raw = min(raw_embree(scene, n_i, n_o, args.batch, rng) for _ in range(args.repeats))
             rays = n_i + n_o
             label = f"{direction}, shadow rays {'cast' if cast_shadows else 'skipped (convex room)'}"
-            print(f"{label:44s} {el:7.3f} {args.paths / el:10.0f} {rays / el / 1e6:8.2f} "
-                  f"{rays / raw / 1e6:10.2f} {raw / el:6.2f}")
+            print(
+                f"{label:44s} {el:7.3f} {args.paths / el:10.0f} {rays / el / 1e6:8.2f} "
+                f"{rays / raw / 1e6:10.2f} {raw / el:6.2f}"
+            )
     # Scaling: the same job on a warm pool of 2 workers against 1 process.
-    spec = SceneSpec.model_validate(barry_doc(paths=args.paths, batch_size=args.batch, direction="backward",
-                                              max_reflections=3))
+    spec = SceneSpec.model_validate(
+        barry_doc(paths=args.paths, batch_size=args.batch, direction="backward", max_reflections=3)
+    )
     t1, r1 = best_of(args.repeats, lambda: simulate(spec))
     pool = ProcessExecutor(2)
     try:
@@ -109,10 +114,14 @@ def main() -> None:
     finally:
         pool.close()
     assert r1.links[0].dc_gain == r2.links[0].dc_gain  # same seed, same bits
-    print(f"1 worker: {args.paths / t1:,.0f} paths/s; 2 workers (warm pool): {args.paths / t2:,.0f} paths/s; "
-          f"speed-up {t1 / t2:.2f}x")
-    print(f"hardware ceiling (two independent single-process jobs at once): "
-          f"{hardware_ceiling(args.paths, args.batch):.2f}x")
+    print(
+        f"1 worker: {args.paths / t1:,.0f} paths/s; 2 workers (warm pool): {args.paths / t2:,.0f} paths/s; "
+        f"speed-up {t1 / t2:.2f}x"
+    )
+    print(
+        f"hardware ceiling (two independent single-process jobs at once): "
+        f"{hardware_ceiling(args.paths, args.batch):.2f}x"
+    )
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ a warm pool of 2 workers. The anchor: a trusted general-purpose renderer takes 0
 for this on this machine (scene load included).
 Run: .venv/bin/python benchmarks/time_to_accuracy.py [--target 0.001] [--repeats 3]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -27,8 +28,15 @@ ANCHOR_S = 0.46
 
 
 def scene_text(target: float, direction: str) -> str:
-    doc = barry_doc(paths=None, target_rel_error=target, max_reflections=200, direction=direction,
-                    time_bin_s=1e-9, t_max_s=4e-7, batch_size=16384)
+    doc = barry_doc(
+        paths=None,
+        target_rel_error=target,
+        max_reflections=200,
+        direction=direction,
+        time_bin_s=1e-9,
+        t_max_s=4e-7,
+        batch_size=16384,
+    )
     doc["receivers"][0].update(position=[1.0, 1.0, 0.0], fov_deg=90.0)
     return json.dumps(doc)
 
@@ -49,8 +57,10 @@ def main() -> None:
     try:
         run_once(scene_text(0.05, "backward"), pool)  # start the workers once
         print(f"target rel. stderr {args.target:g}, all orders; anchor renderer {ANCHOR_S} s")
-        print(f"{'direction':10s} {'workers':>7s} {'time s':>7s} {'vs anchor':>9s} {'paths':>9s} "
-              f"{'rel.err':>8s} {'H0':>13s}  stop")
+        print(
+            f"{'direction':10s} {'workers':>7s} {'time s':>7s} {'vs anchor':>9s} {'paths':>9s} "
+            f"{'rel.err':>8s} {'H0':>13s}  stop"
+        )
         for direction in ("backward", "forward", "auto"):
             for executor, label in ((None, "1"), (pool, "2 warm")):
                 text = scene_text(args.target, direction)
@@ -58,8 +68,10 @@ def main() -> None:
                 el, res = min(runs, key=lambda r: r[0])
                 link = res.links[0]
                 rel = link.dc_gain_stderr / link.dc_gain
-                print(f"{direction:10s} {label:>7s} {el:7.3f} {ANCHOR_S / el:8.2f}x {link.paths:9d} "
-                      f"{rel:8.2e} {link.dc_gain:.6e}  {res.run.stop_reason} ({link.direction})")
+                print(
+                    f"{direction:10s} {label:>7s} {el:7.3f} {ANCHOR_S / el:8.2f}x {link.paths:9d} "
+                    f"{rel:8.2e} {link.dc_gain:.6e}  {res.run.stop_reason} ({link.direction})"
+                )
     finally:
         pool.close()
 

@@ -4,13 +4,26 @@
 they are imported on first use, so `clients.output` and `clients.plot` work without it.
 Depends on schemas only, never on engine or server.
 """
+
 from __future__ import annotations
 
 _LAZY = {
-    "Client": "client", "Job": "client", "AsyncClient": "aio", "AsyncJob": "aio", "RetryPolicy": "http",
-    "Result": "result", "OwcsimError": "errors", "ApiError": "errors", "ConnectionFailed": "errors",
-    "InvalidRequest": "errors", "Unauthorized": "errors", "NotFound": "errors", "Conflict": "errors",
-    "QueueFull": "errors", "ServerError": "errors", "JobFailed": "errors",
+    "Client": "client",
+    "Job": "client",
+    "AsyncClient": "aio",
+    "AsyncJob": "aio",
+    "RetryPolicy": "http",
+    "Result": "result",
+    "OwcsimError": "errors",
+    "ApiError": "errors",
+    "ConnectionFailed": "errors",
+    "InvalidRequest": "errors",
+    "Unauthorized": "errors",
+    "NotFound": "errors",
+    "Conflict": "errors",
+    "QueueFull": "errors",
+    "ServerError": "errors",
+    "JobFailed": "errors",
 }
 
 __all__ = sorted(_LAZY)

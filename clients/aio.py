@@ -1,10 +1,11 @@
 """The async twin of clients.client: AsyncClient and AsyncJob, on httpx.AsyncClient.
 
-    async with AsyncClient("http://127.0.0.1:8000") as owc:
-        job = await owc.submit(scene)
-        await job.wait(progress=True)
-        result = await job.result()
+async with AsyncClient("http://127.0.0.1:8000") as owc:
+    job = await owc.submit(scene)
+    await job.wait(progress=True)
+    result = await job.result()
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -116,8 +117,15 @@ class AsyncJob:
 class AsyncClient:
     """AsyncClient(base_url, api_key=None). `http` may be any httpx.AsyncClient."""
 
-    def __init__(self, base_url: str = "http://127.0.0.1:8000", api_key: str | None = None, *,
-                 timeout: float = 60.0, retry: RetryPolicy = RetryPolicy(), http: httpx.AsyncClient | None = None):
+    def __init__(
+        self,
+        base_url: str = "http://127.0.0.1:8000",
+        api_key: str | None = None,
+        *,
+        timeout: float = 60.0,
+        retry: RetryPolicy = RetryPolicy(),
+        http: httpx.AsyncClient | None = None,
+    ):
         self.base_url = base_url.rstrip("/")
         self.retry = retry
         self._own = http is None
@@ -135,8 +143,9 @@ class AsyncClient:
         if self._own:
             await self._http.aclose()
 
-    async def _request(self, method: str, path: str, *, answers: tuple[int, ...] = (),
-                 deadline: float | None = None, **kw) -> httpx.Response:
+    async def _request(
+        self, method: str, path: str, *, answers: tuple[int, ...] = (), deadline: float | None = None, **kw
+    ) -> httpx.Response:
         """Send with retries; an error answer raises its ApiError, except the statuses in `answers`.
         With `deadline` (time.monotonic), no try runs past it: TimeoutError instead."""
         extra = kw.pop("headers", {})
@@ -144,8 +153,9 @@ class AsyncClient:
         while True:
             timeout = attempt_timeout(self._timeout, deadline)
             try:
-                response = await self._http.request(method, path, headers={**self._headers, **extra}, timeout=timeout,
-                                                   **kw)
+                response = await self._http.request(
+                    method, path, headers={**self._headers, **extra}, timeout=timeout, **kw
+                )
             except httpx.TransportError as exc:
                 delay = retry_delay(self.retry, attempt, None, deadline)
                 if delay is None:
@@ -160,8 +170,13 @@ class AsyncClient:
                 await asyncio.sleep(delay)
             attempt += 1
 
-    async def submit(self, scene: SceneSpec | dict | str | Path, *, base_dir: str | Path | None = None,
-                     idempotency_key: str | None = None) -> AsyncJob:
+    async def submit(
+        self,
+        scene: SceneSpec | dict | str | Path,
+        *,
+        base_dir: str | Path | None = None,
+        idempotency_key: str | None = None,
+    ) -> AsyncJob:
         doc = scene_document(scene, base_dir)
         key = idempotency_key or uuid.uuid4().hex
         try:

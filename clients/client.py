@@ -11,6 +11,7 @@
 Connection errors and 429/503 answers are retried with backoff (RetryPolicy); other
 error answers raise an ApiError subclass carrying the server's problem document.
 """
+
 from __future__ import annotations
 
 import io
@@ -132,8 +133,15 @@ class Job:
 class Client:
     """Client(base_url, api_key=None). `http` may be any httpx.Client (tests pass a TestClient)."""
 
-    def __init__(self, base_url: str = "http://127.0.0.1:8000", api_key: str | None = None, *,
-                 timeout: float = 60.0, retry: RetryPolicy = RetryPolicy(), http: httpx.Client | None = None):
+    def __init__(
+        self,
+        base_url: str = "http://127.0.0.1:8000",
+        api_key: str | None = None,
+        *,
+        timeout: float = 60.0,
+        retry: RetryPolicy = RetryPolicy(),
+        http: httpx.Client | None = None,
+    ):
         self.base_url = base_url.rstrip("/")
         self.retry = retry
         self._own = http is None
@@ -151,8 +159,9 @@ class Client:
         if self._own:
             self._http.close()
 
-    def _request(self, method: str, path: str, *, answers: tuple[int, ...] = (),
-                 deadline: float | None = None, **kw) -> httpx.Response:
+    def _request(
+        self, method: str, path: str, *, answers: tuple[int, ...] = (), deadline: float | None = None, **kw
+    ) -> httpx.Response:
         """Send with retries; an error answer raises its ApiError, except the statuses in `answers`.
         With `deadline` (time.monotonic), no try runs past it: TimeoutError instead."""
         extra = kw.pop("headers", {})
@@ -160,8 +169,7 @@ class Client:
         while True:
             timeout = attempt_timeout(self._timeout, deadline)
             try:
-                response = self._http.request(method, path, headers={**self._headers, **extra}, timeout=timeout,
-                                                   **kw)
+                response = self._http.request(method, path, headers={**self._headers, **extra}, timeout=timeout, **kw)
             except httpx.TransportError as exc:
                 delay = retry_delay(self.retry, attempt, None, deadline)
                 if delay is None:
@@ -176,8 +184,13 @@ class Client:
                 time.sleep(delay)
             attempt += 1
 
-    def submit(self, scene: SceneSpec | dict | str | Path, *, base_dir: str | Path | None = None,
-               idempotency_key: str | None = None) -> Job:
+    def submit(
+        self,
+        scene: SceneSpec | dict | str | Path,
+        *,
+        base_dir: str | Path | None = None,
+        idempotency_key: str | None = None,
+    ) -> Job:
         """Queue a scene (a SceneSpec, a dict, or a path to a JSON file); mesh files are sent inline.
         A fresh Idempotency-Key makes the retries of this call safe."""
         doc = scene_document(scene, base_dir)

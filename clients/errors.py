@@ -1,4 +1,5 @@
 """Exceptions of the Python client. An answer of the server carries its problem document."""
+
 from __future__ import annotations
 
 from owcsim.schemas.errors import Problem, ProblemField

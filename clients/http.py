@@ -4,6 +4,7 @@ Retried: connection errors (and timeouts), 429, 502/503/504 and 507 (disk full),
 jitter, honouring Retry-After. A submission carries an Idempotency-Key, so a retry after a
 lost answer returns the first job instead of queueing a duplicate.
 """
+
 from __future__ import annotations
 
 import random
@@ -90,8 +91,9 @@ def attempt_timeout(timeout: float, deadline: float | None) -> float:
     return min(timeout, left)
 
 
-def retry_delay(policy: RetryPolicy, attempt: int, response: httpx.Response | None,
-                deadline: float | None) -> float | None:
+def retry_delay(
+    policy: RetryPolicy, attempt: int, response: httpx.Response | None, deadline: float | None
+) -> float | None:
     """Seconds to wait before the next try, or None: no retries left, or the next try would end past `deadline`."""
     if not policy.should_retry(attempt, response):
         return None
@@ -108,5 +110,8 @@ def unreachable(base_url: str, exc: Exception, policy: RetryPolicy, attempt: int
 
 def submission_lost(exc: ConnectionFailed, key: str) -> ConnectionFailed:
     """A submission whose answer never came: the job may exist; its Idempotency-Key finds it."""
-    return ConnectionFailed(f"{exc}. The server may have queued the job anyway: submit again with "
-                            f"idempotency_key={key!r} to get that job instead of a duplicate", idempotency_key=key)
+    return ConnectionFailed(
+        f"{exc}. The server may have queued the job anyway: submit again with "
+        f"idempotency_key={key!r} to get that job instead of a duplicate",
+        idempotency_key=key,
+    )

@@ -3,6 +3,7 @@ for links with a binned CIR; map files (netCDF, .mat, heatmaps) for receiver gri
 
 The result is the typed model (schemas.results.SimulationResultPublic, or the client's Result);
 it becomes JSON here, where its bytes leave the process."""
+
 from __future__ import annotations
 
 import csv
@@ -13,9 +14,25 @@ from owcsim.schemas.result_tables import cir_csv_chunks, csv_cell
 from owcsim.schemas.results import SimulationResultPublic
 
 #: Scalar columns of links.csv (and of the command line's summaries).
-LINK_COLUMNS = ("transmitter", "receiver", "direction", "paths", "dc_gain", "dc_gain_stderr", "path_loss_db",
-                "received_power_w", "mean_delay_s", "mean_delay_s_stderr", "rms_delay_spread_s",
-                "rms_delay_spread_s_stderr", "los_gain", "illuminance_lx", "snr_db", "ber", "max_bit_rate_bps")
+LINK_COLUMNS = (
+    "transmitter",
+    "receiver",
+    "direction",
+    "paths",
+    "dc_gain",
+    "dc_gain_stderr",
+    "path_loss_db",
+    "received_power_w",
+    "mean_delay_s",
+    "mean_delay_s_stderr",
+    "rms_delay_spread_s",
+    "rms_delay_spread_s_stderr",
+    "los_gain",
+    "illuminance_lx",
+    "snr_db",
+    "ber",
+    "max_bit_rate_bps",
+)
 #: Links above which result.json is written without indentation (a map of thousands of points).
 COMPACT_JSON_LINKS = 200
 

@@ -1,4 +1,5 @@
 """Plots of a result (schemas.results.SimulationResultPublic): h(t) per reflection order (schemas/plots.py)."""
+
 from __future__ import annotations
 
 from owcsim.schemas.plots import cir_figure, panels_of

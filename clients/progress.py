@@ -1,5 +1,6 @@
 """A one-line progress bar on stderr (terminals and notebooks): of a job on a server (`update`), or of a
 run in this process (`show`, the command line's bar over the engine's Progress)."""
+
 from __future__ import annotations
 
 import sys
@@ -31,8 +32,9 @@ class ProgressBar:
         frac = min(max(fraction, 0.0), 1.0)
         full = int(round(self.width * frac))
         err = f"  rel.err(H0) {rel_stderr:.2e}" if rel_stderr is not None else ""
-        self.stream.write(f"\r[{'#' * full}{'.' * (self.width - full)}] {100 * frac:5.1f}%  {paths:>12,d} paths"
-                          f"{err}  {tail}")
+        self.stream.write(
+            f"\r[{'#' * full}{'.' * (self.width - full)}] {100 * frac:5.1f}%  {paths:>12,d} paths{err}  {tail}"
+        )
         self.stream.flush()
         self._shown = True
 

@@ -1,4 +1,5 @@
 """The result of a job: the typed result document, with numpy arrays, plots and files at hand."""
+
 from __future__ import annotations
 
 import json
@@ -66,8 +67,9 @@ class Result(SimulationResultPublic):
 
         from .output import LINK_COLUMNS
 
-        return pd.DataFrame([lk.model_dump(mode="json", include=set(LINK_COLUMNS)) for lk in self.links],
-                            columns=list(LINK_COLUMNS))
+        return pd.DataFrame(
+            [lk.model_dump(mode="json", include=set(LINK_COLUMNS)) for lk in self.links], columns=list(LINK_COLUMNS)
+        )
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The arrays of the server's result.npz: t_edges_s (n_bins + 1) [s]; per link (axis 0, in `links`

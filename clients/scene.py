@@ -5,6 +5,7 @@ scene file's folder, or `base_dir`) and sent as `data_base64` + `format`. Only a
 file is read (not a FIFO, a device or a symbolic link: a scene document from elsewhere must
 not make you upload any file you can read), and at most `MAX_MESH_BYTES`.
 """
+
 from __future__ import annotations
 
 import base64
@@ -40,8 +41,9 @@ def read_mesh_file(path: Path, max_bytes: int = MAX_MESH_BYTES) -> bytes:
         if not stat.S_ISREG(st.st_mode):
             raise MeshFileError(f"mesh file {str(path)!r} is not a regular file (a FIFO, device or folder)")
         if st.st_size > max_bytes:
-            raise MeshFileError(f"mesh file {str(path)!r} has {st.st_size:,d} bytes, more than the {max_bytes:,d} "
-                             "a submission takes")
+            raise MeshFileError(
+                f"mesh file {str(path)!r} has {st.st_size:,d} bytes, more than the {max_bytes:,d} a submission takes"
+            )
         data = f.read(max_bytes + 1)
     if len(data) > max_bytes:  # it grew while being read
         raise MeshFileError(f"mesh file {str(path)!r} has more than {max_bytes:,d} bytes")

@@ -20,6 +20,7 @@ The geometric tail is an estimate, not a proof: it assumes that past the last me
 order each reflection (scattering) keeps at most rho_max (albedo_max) of the power,
 which holds for the diffuse field of a closed room; the result says so.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -65,8 +66,14 @@ def choose_algorithm(spec: SceneSpec, engine_medium, scene_bounds=None) -> tuple
             return 1, "the medium's region lies outside the room: no path can enter it; vacuum paths only", True
     if not _scatters(med):
         return 1, "sigma_s = 0: no scattering; algorithm 1 (extinction only) is exact", False
-    return 5, ("scattering medium: algorithm 5 covers every family and was measured faster per accuracy than "
-               "algorithms 2-4 (benchmarks/smoke_accuracy.py)"), False
+    return (
+        5,
+        (
+            "scattering medium: algorithm 5 covers every family and was measured faster per accuracy than "
+            "algorithms 2-4 (benchmarks/smoke_accuracy.py)"
+        ),
+        False,
+    )
 
 
 def _scatters(medium) -> bool:
@@ -119,8 +126,11 @@ def tail_ratio(gains, errors, bound: float, last: int = 8) -> tuple[float, str]:
     good = good[good >= 1][-last:]
     a_priori = (bound, f"at most {bound:.3g} per order (the largest {{what}})")
     if len(good) < 4:
-        return a_priori if bound < 1.0 else (
-            math.inf, "unbounded: {what} is 1 and the pilot measured too few orders to fit their decay")
+        return (
+            a_priori
+            if bound < 1.0
+            else (math.inf, "unbounded: {what} is 1 and the pilot measured too few orders to fit their decay")
+        )
     y = np.log(g[good])
     w = 1.0 / np.maximum(e[good] / g[good], 1e-3) ** 2  # var(log g) ~ (se / g)^2
     x = good.astype(float)
@@ -131,13 +141,19 @@ def tail_ratio(gains, errors, bound: float, last: int = 8) -> tuple[float, str]:
     if bound < 1.0 and r >= bound:
         return a_priori
     if bound < 1.0:
-        return r, (f"{r:.3g} per order, the upper bound (2 se) of a fit to the pilot's orders {good[0]}-{good[-1]} "
-                   f"(below {{what}} = {bound:.3g}; an estimate that assumes geometric decay past them)")
+        return r, (
+            f"{r:.3g} per order, the upper bound (2 se) of a fit to the pilot's orders {good[0]}-{good[-1]} "
+            f"(below {{what}} = {bound:.3g}; an estimate that assumes geometric decay past them)"
+        )
     if r >= 1.0:
-        return math.inf, (f"unbounded: {{what}} is 1 and the pilot's last orders show no decay (fitted ratio "
-                          f"{math.exp(slope):.3g}, upper bound {r:.3g})")
-    return r, (f"{r:.3g} per order, the upper bound (2 se) of a fit to the pilot's orders {good[0]}-{good[-1]} "
-               f"({{what}} is 1: no a-priori bound; an estimate that assumes geometric decay past them)")
+        return math.inf, (
+            f"unbounded: {{what}} is 1 and the pilot's last orders show no decay (fitted ratio "
+            f"{math.exp(slope):.3g}, upper bound {r:.3g})"
+        )
+    return r, (
+        f"{r:.3g} per order, the upper bound (2 se) of a fit to the pilot's orders {good[0]}-{good[-1]} "
+        f"({{what}} is 1: no a-priori bound; an estimate that assumes geometric decay past them)"
+    )
 
 
 def _order_moments(cir_by_order, t_mid):
@@ -161,8 +177,8 @@ def _tail_moments(n, gains, errors, t1, t2, ratio):
     errors = np.asarray([e or 0.0 for e in errors], float)
     good = np.flatnonzero((gains > 0) & (errors <= 0.3 * np.where(gains > 0, gains, 1.0)))
     if not len(good):
-        p = gains[n + 1:].sum()
-        noise = 2.0 * math.sqrt(float((errors[n + 1:] ** 2).sum()))
+        p = gains[n + 1 :].sum()
+        noise = 2.0 * math.sqrt(float((errors[n + 1 :] ** 2).sum()))
         return (0.0, 0.0, 0.0) if p + noise == 0 else (math.inf, math.inf, math.inf)
     L = int(good[-1])
     upto = slice(n + 1, L + 1)
@@ -182,13 +198,16 @@ def _tail_moments(n, gains, errors, t1, t2, ratio):
         s1 = ratio / (1 - ratio) ** 2  # sum i r^i
         s2 = ratio * (1 + ratio) / (1 - ratio) ** 3  # sum i^2 r^i
         base = t1[L] + (start - L) * step
-        geo = (g_start * s0, g_start * (base * s0 + step * s1),
-               g_start * ((base * base + var_L) * s0 + 2 * base * step * s1 + step * step * s2))
+        geo = (
+            g_start * s0,
+            g_start * (base * s0 + step * s1),
+            g_start * ((base * base + var_L) * s0 + 2 * base * step * s1 + step * step * s2),
+        )
         extra = geo if geo[0] >= measured_beyond[0] else measured_beyond
     else:
         extra = measured_beyond
     p, p1, p2 = p + extra[0], p1 + extra[1], p2 + extra[2]
-    noise = 2.0 * math.sqrt(float((errors[n + 1:] ** 2).sum()))
+    noise = 2.0 * math.sqrt(float((errors[n + 1 :] ** 2).sum()))
     if p > 0 and noise > 0:  # the pilot's error on the tail, at the tail's delays
         scale = (p + noise) / p
         p, p1, p2 = p * scale, p1 * scale, p2 * scale
@@ -281,15 +300,16 @@ def _apply(spec: SceneSpec, scene: Scene, update: dict, doc_update: dict) -> tup
     resolved = spec.model_copy(update={**doc_update, "simulation": spec.simulation.model_copy(update=update)})
     sim = resolved.simulation
     if sim.is_resolved:  # what validating the document would check of the chosen settings (not re-validated:
-        try:             # a large inline mesh would be parsed again)
+        try:  # a large inline mesh would be parsed again)
             if sim.t_max_s is not None and "t_max_s" in update:
                 check_bin_budget(sim.t_min_s, sim.t_max_s, sim.time_bin_s, automatic=True)
             resolved.check_tally_budget()
         except ValueError as exc:
             raise SceneError(f"the scene with its automatic settings: {exc}") from None
     if "medium" in doc_update and scene.medium is not None:
-        return resolved, dataclasses.replace(scene, spec=resolved, medium=None, phase=None,
-                                             medium_far_distance=math.inf)
+        return resolved, dataclasses.replace(
+            scene, spec=resolved, medium=None, phase=None, medium_far_distance=math.inf
+        )
     return resolved, dataclasses.replace(scene, spec=resolved)
 
 
@@ -305,8 +325,13 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
         number, why, drop_medium = choose_algorithm(spec, scene.medium, room_bounds)
         spectra = scene.spectra
         if number == 5 and spectra is not None and spectra.carry and spectra.tau_scale is not None:
-            number, why = 4, ("smoke that varies over the spectral bands: algorithm 4 (single and double scattering "
-                              "per band; algorithm 5 does not carry per-band ratios through collisions)")
+            number, why = (
+                4,
+                (
+                    "smoke that varies over the spectral bands: algorithm 4 (single and double scattering "
+                    "per band; algorithm 5 does not carry per-band ratios through collisions)"
+                ),
+            )
         update["algorithm"] = number
         modeled.algorithm_reason = why
         if drop_medium and spec.medium is not None:
@@ -331,26 +356,49 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
     if not (need_k or need_s or need_t):
         return Resolution(spec, resolved, job_scene, modeled)
     # --- the truncation pilot: the job's scene with up to PILOT_RECEIVERS of its receivers -------------------
-    extent = float(np.ptp(np.concatenate([scene.geometry.vertices, scene.transmitters.positions,
-                                          scene.receivers.positions]), axis=0).max()) if len(
-        scene.geometry.vertices) else 10.0
+    extent = (
+        float(
+            np.ptp(
+                np.concatenate([scene.geometry.vertices, scene.transmitters.positions, scene.receivers.positions]),
+                axis=0,
+            ).max()
+        )
+        if len(scene.geometry.vertices)
+        else 10.0
+    )
     cap_k = PILOT_CAP if need_k else resolved.simulation.max_reflections
     cap_s = PILOT_CAP if need_s else resolved.simulation.max_scattering
     t_long = resolved.simulation.t_max_s or (sim.t_min_s + (cap_k + cap_s + 3) * 1.8 * extent / SPEED_OF_LIGHT)
     usable = np.flatnonzero(scene.masked == "")  # grid points in furniture or outside the room are not run
     if not len(usable):
         usable = np.arange(len(scene.receivers))
-    pick = sorted(set(usable[np.linspace(0, len(usable) - 1, min(len(usable), PILOT_RECEIVERS)).round().astype(int)]
-                      .tolist()))
-    pilot_spec = resolved.model_copy(update={
-        "receivers": [resolved.receiver_at(i) for i in pick], "receiver_grids": [], "transmitter_groups": [],
-        "outputs": OutputsSpec(cir=True, orders=True),  # the pilot reads the order split and the CIR
-        "simulation": resolved.simulation.model_copy(update=dict(
-            max_reflections=cap_k, max_scattering=cap_s, t_max_s=t_long, time_bin_s=(t_long - sim.t_min_s) / PILOT_BINS,
-            paths=sim.pilot_paths, target_rel_error=None, seed=sim.seed + 1, batch_size=min(sim.batch_size, 4096)))})
+    pick = sorted(
+        set(usable[np.linspace(0, len(usable) - 1, min(len(usable), PILOT_RECEIVERS)).round().astype(int)].tolist())
+    )
+    pilot_spec = resolved.model_copy(
+        update={
+            "receivers": [resolved.receiver_at(i) for i in pick],
+            "receiver_grids": [],
+            "transmitter_groups": [],
+            "outputs": OutputsSpec(cir=True, orders=True),  # the pilot reads the order split and the CIR
+            "simulation": resolved.simulation.model_copy(
+                update=dict(
+                    max_reflections=cap_k,
+                    max_scattering=cap_s,
+                    t_max_s=t_long,
+                    time_bin_s=(t_long - sim.t_min_s) / PILOT_BINS,
+                    paths=sim.pilot_paths,
+                    target_rel_error=None,
+                    seed=sim.seed + 1,
+                    batch_size=min(sim.batch_size, 4096),
+                )
+            ),
+        }
+    )
     if not (scene.masked[pick] == "").all():  # every grid point masked: the document check says why
-        pilot_spec = validated(pilot_spec.model_dump(mode="python"),
-                               "the pilot run that chooses the automatic settings")
+        pilot_spec = validated(
+            pilot_spec.model_dump(mode="python"), "the pilot run that chooses the automatic settings"
+        )
     pilot = PilotRun(pilot_spec, with_receivers(job_scene, pilot_spec), pick, cap_k, cap_s, t_long)
     return Resolution(spec, resolved, job_scene, modeled, pilot, update, doc_update)
 
@@ -362,9 +410,13 @@ def with_receivers(scene: Scene, spec: SceneSpec) -> Scene:
 
     receivers, grid_slices = receivers_from_scene(spec)
     return dataclasses.replace(
-        scene, spec=spec, receivers=receivers, grid_slices=grid_slices,
+        scene,
+        spec=spec,
+        receivers=receivers,
+        grid_slices=grid_slices,
         masked=mask_reasons(spec, receivers, len(spec.receivers)),
-        medium_far_distance=_far_distance(spec, scene.geometry, scene.medium, receivers.positions))
+        medium_far_distance=_far_distance(spec, scene.geometry, scene.medium, receivers.positions),
+    )
 
 
 def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
@@ -395,8 +447,13 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
             gains, errors = getattr(lk, f"dc_gain_by_{key}_order"), getattr(lk, f"dc_gain_by_{key}_order_stderr")
             ratio, how = tail_ratio(gains, errors, bound)
             if key == "scattering" and bound >= 1.0 and not len(scene.geometry.faces):
-                ratio, how = math.inf, ("unbounded: {what} is 1 and no surface closes the medium: light diffuses "
-                                        "without loss and the orders decay algebraically, not geometrically")
+                ratio, how = (
+                    math.inf,
+                    (
+                        "unbounded: {what} is 1 and no surface closes the medium: light diffuses "
+                        "without loss and the orders decay algebraically, not geometrically"
+                    ),
+                )
             delays = None
             if lk.mean_delay_s is not None and lk.rms_delay_spread_s:
                 t1, t2 = _order_moments(getattr(lk.cir, f"by_{key}_order"), t_mid)
@@ -410,17 +467,23 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
         n, tail, d0, d_rms, how, tau_rms = best
         name = {"reflection": "reflection order", "scattering": "scattering order"}[key]
         if math.isfinite(tail) and tail <= allowed / 2 and d0 <= rel * tau_rms and d_rms <= rel * tau_rms:
-            reason = (f"{name} capped at {n}: estimated power of higher orders {tail:.2e} per watt <= "
-                      f"{allowed / 2:.2e} (half the allowed truncation); dropping them shifts the mean delay by "
-                      f"{d0:.2e} s and the RMS delay spread by {d_rms:.2e} s (each <= {rel:g} x tau_rms); "
-                      f"tail past the pilot's orders: {how}")
+            reason = (
+                f"{name} capped at {n}: estimated power of higher orders {tail:.2e} per watt <= "
+                f"{allowed / 2:.2e} (half the allowed truncation); dropping them shifts the mean delay by "
+                f"{d0:.2e} s and the RMS delay spread by {d_rms:.2e} s (each <= {rel:g} x tau_rms); "
+                f"tail past the pilot's orders: {how}"
+            )
         elif math.isfinite(tail):
-            reason = (f"{name} capped at {n}, the pilot's highest: the tail could not be brought under the "
-                      f"allowance (estimated {tail:.2e} per watt against {allowed / 2:.2e}; shifts of the mean "
-                      f"delay {d0:.2e} s, of the RMS delay spread {d_rms:.2e} s); tail: {how}")
+            reason = (
+                f"{name} capped at {n}, the pilot's highest: the tail could not be brought under the "
+                f"allowance (estimated {tail:.2e} per watt against {allowed / 2:.2e}; shifts of the mean "
+                f"delay {d0:.2e} s, of the RMS delay spread {d_rms:.2e} s); tail: {how}"
+            )
         else:
-            reason = (f"{name} capped at {n}, the pilot's highest: no finite bound on the power of higher orders "
-                      f"can be stated ({how}); set it explicitly and compare runs")
+            reason = (
+                f"{name} capped at {n}, the pilot's highest: no finite bound on the power of higher orders "
+                f"can be stated ({how}); set it explicitly and compare runs"
+            )
         notes.append(f"{what}: {how}")
         return n, tail, reason
 
@@ -428,8 +491,9 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
         K, k_tail, modeled.max_reflections_reason = choose("rho_max", "reflection", rho_max, run.cap_k)
         update["max_reflections"] = K
     if need_s:
-        S, s_tail, modeled.max_scattering_reason = choose("albedo_max", "scattering", _max_albedo(step.spec),
-                                                             run.cap_s, extra=1)
+        S, s_tail, modeled.max_scattering_reason = choose(
+            "albedo_max", "scattering", _max_albedo(step.spec), run.cap_s, extra=1
+        )
         update["max_scattering"] = S
     if need_t:
         dt = sim.time_bin_s
@@ -445,15 +509,25 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
         modeled.time_window_reason = (
             f"window ends at {update['t_max_s'] * 1e9:.1f} ns: the power arriving later, extrapolated from the "
             f"pilot's exponential decay, is < {allowed / 2:.2e} per watt (late power is counted in late_gain, "
-            "not dropped)")
-    modeled.pilot = PilotPublic(paths=sim.pilot_paths, receivers=[scene.receivers.ids[i] for i in run.receivers],
-                                max_reflections=run.cap_k, max_scattering=run.cap_s, t_max_s=run.t_long,
-                                allowed_truncation_per_watt=float(allowed), rho_max=rho_max)
+            "not dropped)"
+        )
+    modeled.pilot = PilotPublic(
+        paths=sim.pilot_paths,
+        receivers=[scene.receivers.ids[i] for i in run.receivers],
+        max_reflections=run.cap_k,
+        max_scattering=run.cap_s,
+        t_max_s=run.t_long,
+        allowed_truncation_per_watt=float(allowed),
+        rho_max=rho_max,
+    )
     total_tail = float(k_tail + s_tail)
     modeled.truncation_estimate_per_watt = total_tail if math.isfinite(total_tail) else None
-    modeled.truncation_note = ("estimated from the pilot: the orders it measured plus a geometric tail past its "
-                                  "last order (" + "; ".join(notes) + "), plus two of its standard errors"
-                                  if notes else "no order was chosen automatically")
+    modeled.truncation_note = (
+        "estimated from the pilot: the orders it measured plus a geometric tail past its "
+        "last order (" + "; ".join(notes) + "), plus two of its standard errors"
+        if notes
+        else "no order was chosen automatically"
+    )
     resolved, job_scene = _apply(spec, scene, update, step.doc_update)
     return Resolution(spec, resolved, job_scene, modeled)
 

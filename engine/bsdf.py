@@ -37,6 +37,7 @@ the target); the mirror part reaches point devices only through mirror images.
 Arrays are (3, n) component rows (as in the kernel); `d_in` is the arriving ray
 direction (pointing into the surface), `normals` face the arriving ray.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -140,8 +141,9 @@ class Materials:
                 w_o[k].put(idx, w[k])
             cos_o = _dot(w, n_i)
             cos_i = -_dot(d_i, n_i)
-            weight.put(idx, np.where(cos_o > 0, rho.take(idx) * cos_o / np.maximum(np.maximum(cos_i, cos_o), 1e-300),
-                                     0.0))
+            weight.put(
+                idx, np.where(cos_o > 0, rho.take(idx) * cos_o / np.maximum(np.maximum(cos_i, cos_o), 1e-300), 0.0)
+            )
         idx = np.flatnonzero(~diffuse & ~glossy)
         if len(idx):
             r = mirror_direction(d_in.take(idx, axis=1), normals.take(idx, axis=1))

@@ -27,6 +27,7 @@ The terms follow the arrays the engine allocates:
 When K, S or the time window are "auto", the estimate takes the most the engine may choose
 (auto.PILOT_CAP orders; the pilot's longest window), i.e. an upper bound.
 """
+
 from __future__ import annotations
 
 import math
@@ -87,8 +88,9 @@ def _extent(spec: SceneSpec) -> float:
     return DEFAULT_EXTENT_M
 
 
-def memory_estimate(spec: SceneSpec, *, triangles: int | None = None, extent_m: float | None = None,
-                    workers: int = 1) -> MemoryEstimate:
+def memory_estimate(
+    spec: SceneSpec, *, triangles: int | None = None, extent_m: float | None = None, workers: int = 1
+) -> MemoryEstimate:
     """Peak memory of `spec` run with `workers` engine processes [B], term by term.
 
     `triangles`: the scene's triangle count if known (meshes given as files); `extent_m`: the
@@ -127,11 +129,15 @@ def memory_estimate(spec: SceneSpec, *, triangles: int | None = None, extent_m: 
     # Paths per batch as simulate.batch_size caps them (targets x paths and estimates per step bounded).
     segment_points = alg is None or bool(alg.kernel["segment_scatter"])  # auto: as if (the largest)
     per_segment = 1 + (sim.max_strata + sim.equiangular_points if segment_points and spec.medium is not None else 0)
-    batch_paths = max(1, min(sim.batch_size, PATH_TARGET_BUDGET // max(targets, 1),
-                             ESTIMATE_BUDGET // max(targets * per_segment, 1)))
+    batch_paths = max(
+        1, min(sim.batch_size, PATH_TARGET_BUDGET // max(targets, 1), ESTIMATE_BUDGET // max(targets * per_segment, 1))
+    )
     pairs = batch_paths * targets
-    per_batch = pairs * 14 * 8 + min(pairs * per_segment, ESTIMATE_BUDGET) * BYTES_PER_CONTRIBUTION \
+    per_batch = (
+        pairs * 14 * 8
+        + min(pairs * per_segment, ESTIMATE_BUDGET) * BYTES_PER_CONTRIBUTION
         + (n_cir * n_bins * 8 * 2 if n_cir else 0)
+    )
     in_flight = 1 if workers <= 1 else 2 * workers
     geometry = tri * BYTES_PER_TRIANGLE
     # A pool's workers each hold the scene and compute one batch at a time.
@@ -147,7 +153,8 @@ def memory_estimate(spec: SceneSpec, *, triangles: int | None = None, extent_m: 
     )
 
 
-def job_memory_bytes(spec: SceneSpec, *, triangles: int | None = None, extent_m: float | None = None,
-                     workers: int = 1) -> int:
+def job_memory_bytes(
+    spec: SceneSpec, *, triangles: int | None = None, extent_m: float | None = None, workers: int = 1
+) -> int:
     """Estimated peak memory of the job [B] (see `memory_estimate` for the terms)."""
     return memory_estimate(spec, triangles=triangles, extent_m=extent_m, workers=workers).total

@@ -14,6 +14,7 @@ photometry.py): response I(gamma, C) / Phi [1/sr], with gamma from its aiming ax
 (`normal`) and C from its C = 0 half-plane (`frames`); its response needs the
 direction, not only the cosine, and it may emit behind its normal (gamma > 90 deg).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -148,12 +149,18 @@ def transmitters_from_specs(specs: list[TransmitterSpec], ids: list[str], base_d
         except SceneError as exc:
             raise PhotometryError(f"transmitters[{i}]: {exc}") from None
     return Devices(
-        kind="transmitter", ids=ids,
+        kind="transmitter",
+        ids=ids,
         positions=np.array([s.position for s in specs], float).reshape(n, 3),
         normals=unit_normals(specs),
-        order=np.array([s.m for s in specs], float), cos_fov=np.zeros(n), gain=np.ones(n),
-        power=np.array([s.power for s in specs], float), area=np.zeros(n),
-        patterns=patterns, frames=frames)
+        order=np.array([s.m for s in specs], float),
+        cos_fov=np.zeros(n),
+        gain=np.ones(n),
+        power=np.array([s.power for s in specs], float),
+        area=np.zeros(n),
+        patterns=patterns,
+        frames=frames,
+    )
 
 
 def concentrator_gain(fov: float, index: float | None) -> float:
@@ -164,13 +171,20 @@ def concentrator_gain(fov: float, index: float | None) -> float:
 def receivers_from_specs(specs: list[ReceiverSpec], ids: list[str]) -> Devices:
     n = len(specs)
     fov = np.radians([s.fov_deg for s in specs]).reshape(n)
-    gain = np.array([s.area * s.filter_gain * concentrator_gain(f, s.concentrator_index)
-                     for s, f in zip(specs, fov)], float).reshape(n)
+    gain = np.array(
+        [s.area * s.filter_gain * concentrator_gain(f, s.concentrator_index) for s, f in zip(specs, fov)], float
+    ).reshape(n)
     # cos(90 deg) is 6e-17 in floating point, not 0: clamp so FOV = 90 deg is the full hemisphere.
     cos_fov = np.where(np.isclose(fov, np.pi / 2, rtol=0, atol=1e-12), 0.0, np.cos(fov))
     return Devices(
-        kind="receiver", ids=ids,
+        kind="receiver",
+        ids=ids,
         positions=np.array([s.position for s in specs], float).reshape(n, 3),
         normals=unit_normals(specs),
-        order=np.zeros(n), cos_fov=cos_fov, gain=gain, power=np.ones(n),
-        area=np.array([s.area for s in specs], float).reshape(n), patterns=[None] * n)
+        order=np.zeros(n),
+        cos_fov=cos_fov,
+        gain=gain,
+        power=np.ones(n),
+        area=np.array([s.area for s in specs], float).reshape(n),
+        patterns=[None] * n,
+    )

@@ -7,4 +7,3 @@ class EngineError(Exception):
 
 class SceneError(EngineError, ValueError):
     """The scene cannot be simulated as given (message says where and why)."""
-

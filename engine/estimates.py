@@ -11,6 +11,7 @@ has its own per-path moments (tally.BatchBuilder.finish), which carry the correl
 Means are of the per-path vector (a, b, c) = (sum w, sum w t, sum w t^2): metrics.py turns
 them into H0, mean delay and RMS delay spread with standard errors.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -21,7 +22,7 @@ from .tally import Accumulator, TallyPlan
 
 def los_moments(los_gain: np.ndarray, los_delay: np.ndarray) -> np.ndarray:
     """(L, 3) exactly known part (a, b, c) = (H, H t, H t^2) of the line of sight."""
-    return np.stack([los_gain, los_gain * los_delay, los_gain * los_delay ** 2], axis=-1)
+    return np.stack([los_gain, los_gain * los_delay, los_gain * los_delay**2], axis=-1)
 
 
 def link_moments(accs: dict[str, Accumulator], los_abc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -34,8 +35,9 @@ def link_moments(accs: dict[str, Accumulator], los_abc: np.ndarray) -> tuple[np.
     return mean, cov
 
 
-def channel_moments(accs: dict[str, Accumulator], los_abc: np.ndarray, plan: TallyPlan
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def channel_moments(
+    accs: dict[str, Accumulator], los_abc: np.ndarray, plan: TallyPlan
+) -> tuple[np.ndarray, np.ndarray]:
     """Per (group, receiver): mean (G, R, 3) and covariance (G, R, 3, 3) of the group's channel."""
     w = plan.group_weights
     n_groups, n_tx = w.shape
@@ -83,8 +85,9 @@ def link_reliability(accs: dict[str, Accumulator], los_gain: np.ndarray) -> reli
     return reliability.from_accumulators(accs.values(), los_gain)
 
 
-def may_stop(accs: dict[str, Accumulator], los_gain: np.ndarray, scene, plan: TallyPlan, target: float,
-             served: np.ndarray) -> bool:
+def may_stop(
+    accs: dict[str, Accumulator], los_gain: np.ndarray, scene, plan: TallyPlan, target: float, served: np.ndarray
+) -> bool:
     """The accuracy rule (reliability.may_stop) on what the result reports: every group's channel and every
     link of a transmitter in no group, each on a trusted error bar."""
     w = plan.group_weights
@@ -102,8 +105,12 @@ def may_stop(accs: dict[str, Accumulator], los_gain: np.ndarray, scene, plan: Ta
     g_los = (w @ los_gain.reshape(n_tx, n_rx)).ravel()
     # a group's channel at a receiver runs when one of its members' links does
     ch_served = ((w > 0)[:, :, None] & served.reshape(1, n_tx, n_rx)).any(axis=1).ravel()
-    ok = reliability.may_stop(_rel(ch_mean[..., 0], ch_cov[..., 0, 0]).ravel(),
-                              reliability.group_reliability(g_means, g_counts, g_los), target, ch_served)
+    ok = reliability.may_stop(
+        _rel(ch_mean[..., 0], ch_cov[..., 0, 0]).ravel(),
+        reliability.group_reliability(g_means, g_counts, g_los),
+        target,
+        ch_served,
+    )
     solo = np.repeat(~(w > 0).any(axis=0), n_rx)
     if ok and solo.any():
         rel = reliability.group_reliability(means[:, solo], counts[:, solo], los_gain[solo])

@@ -13,6 +13,7 @@ on the executor or the number of workers. `map(job, items, settings)` yields bat
 tallies; `items` may be an endless generator (accuracy mode): only a bounded window
 is in flight, and closing the iterator cancels what has not started.
 """
+
 from __future__ import annotations
 
 import hashlib

@@ -37,6 +37,7 @@ How a job runs (`DaskExecutor.map`, the executor interface of engine.execution):
   `should_stop` answers True or on any error) cancels the job's pending tasks on
   the cluster.
 """
+
 from __future__ import annotations
 
 import base64
@@ -109,10 +110,19 @@ def portable_spec(spec: SceneSpec, base_dir: str | Path | None) -> SceneSpec:
             data = path.read_bytes()
         except OSError as exc:
             where = "" if base_dir is not None or path.is_absolute() else " (relative to the working directory)"
-            raise SceneError(f"{mesh.name or f'meshes[{i}]'}: cannot read mesh file {str(path)!r}{where} to send "
-                             f"it to the cluster ({exc.strerror or exc})") from None
-        meshes.append(mesh.model_copy(update={"file": None, "data_base64": base64.b64encode(data).decode("ascii"),
-                                              "format": mesh.format or path.suffix[1:].lower()}))
+            raise SceneError(
+                f"{mesh.name or f'meshes[{i}]'}: cannot read mesh file {str(path)!r}{where} to send "
+                f"it to the cluster ({exc.strerror or exc})"
+            ) from None
+        meshes.append(
+            mesh.model_copy(
+                update={
+                    "file": None,
+                    "data_base64": base64.b64encode(data).decode("ascii"),
+                    "format": mesh.format or path.suffix[1:].lower(),
+                }
+            )
+        )
     return spec.model_copy(update={"meshes": meshes})
 
 
@@ -132,10 +142,13 @@ def _inline_photometry(spec: SceneSpec, base_dir: str | Path | None) -> SceneSpe
         try:
             data = path.read_bytes()
         except OSError as exc:
-            raise SceneError(f"transmitters[{i}].photometry: cannot read {str(path)!r} to send it to the cluster "
-                             f"({exc.strerror or exc})") from None
-        phot = phot.model_copy(update={"file": None, "data_base64": base64.b64encode(data).decode("ascii"),
-                                       "format": phot.resolved_format})
+            raise SceneError(
+                f"transmitters[{i}].photometry: cannot read {str(path)!r} to send it to the cluster "
+                f"({exc.strerror or exc})"
+            ) from None
+        phot = phot.model_copy(
+            update={"file": None, "data_base64": base64.b64encode(data).decode("ascii"), "format": phot.resolved_format}
+        )
         txs.append(tx.model_copy(update={"photometry": phot}))
     return spec.model_copy(update={"transmitters": txs})
 
@@ -181,9 +194,15 @@ def worker_environment() -> dict:
     import pydantic
     import trimesh
 
-    return {"owcsim code": _code_digest(), "owcsim": _version("owcsim"), "python": platform.python_version(),
-            "numpy": np.__version__, "embreex": _version("embreex"), "trimesh": trimesh.__version__,
-            "pydantic": pydantic.VERSION}
+    return {
+        "owcsim code": _code_digest(),
+        "owcsim": _version("owcsim"),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "embreex": _version("embreex"),
+        "trimesh": trimesh.__version__,
+        "pydantic": pydantic.VERSION,
+    }
 
 
 # --------------------------------------------------------------------------- worker side
@@ -237,8 +256,10 @@ def _worker_scene(key: str, fingerprint: str, spec: SceneSpec) -> Scene:
             scene = build_scene(spec, None)
         got = scene_fingerprint(scene)
         if got != fingerprint:
-            raise SceneError(f"the Dask worker built a different scene than the client (fingerprint {got} vs "
-                             f"{fingerprint}): install the same owcsim, numpy, embreex and trimesh on every worker")
+            raise SceneError(
+                f"the Dask worker built a different scene than the client (fingerprint {got} vs "
+                f"{fingerprint}): install the same owcsim, numpy, embreex and trimesh on every worker"
+            )
         cache[key] = scene
         while len(cache) > SCENE_CACHE_SIZE:
             cache.popitem(last=False)
@@ -298,8 +319,10 @@ class DaskExecutor:
             try:
                 self._client.wait_for_workers(1, timeout=timeout_s)
             except TimeoutError:
-                raise ClusterError(f"no Dask worker joined the scheduler at {self.address} within {timeout_s:g} s; "
-                                   f"start some with: dask worker {self.address} --nthreads 1") from None
+                raise ClusterError(
+                    f"no Dask worker joined the scheduler at {self.address} within {timeout_s:g} s; "
+                    f"start some with: dask worker {self.address} --nthreads 1"
+                ) from None
             nthreads = self._client.nthreads()
             self._check_workers()
         except BaseException:
@@ -318,17 +341,25 @@ class DaskExecutor:
         try:
             envs = self._client.run(worker_environment)
         except Exception as exc:  # typically ModuleNotFoundError: owcsim is not installed on a worker
-            raise ClusterError(f"the Dask workers cannot run owcsim ({type(exc).__name__}: {exc}); install the "
-                               f"same owcsim on every worker: {PIP_INSTALL}") from None
+            raise ClusterError(
+                f"the Dask workers cannot run owcsim ({type(exc).__name__}: {exc}); install the "
+                f"same owcsim on every worker: {PIP_INSTALL}"
+            ) from None
         mine = worker_environment()
         for worker, env in envs.items():
             diff = {k: (mine[k], env.get(k)) for k in mine if env.get(k) != mine[k]}
             if "owcsim code" in diff:
-                raise ClusterError(f"Dask worker {worker} runs different owcsim engine code than this client "
-                                   f"({diff}); install the same owcsim version on the workers")
+                raise ClusterError(
+                    f"Dask worker {worker} runs different owcsim engine code than this client "
+                    f"({diff}); install the same owcsim version on the workers"
+                )
             if diff:
-                warnings.warn(f"Dask worker {worker} has other library versions than this client {diff}: "
-                              "results may differ in the last digits from a local run", RuntimeWarning, stacklevel=3)
+                warnings.warn(
+                    f"Dask worker {worker} has other library versions than this client {diff}: "
+                    "results may differ in the last digits from a local run",
+                    RuntimeWarning,
+                    stacklevel=3,
+                )
 
     def _ship(self, job: JobRef):
         """(key, fingerprint, future of the scene document) of a job, sent to the cluster once."""
@@ -359,9 +390,19 @@ class DaskExecutor:
         window: deque = deque()
         try:
             for i, item in enumerate(items):
-                window.append(self._client.submit(
-                    _run_batch, key, fingerprint, spec_future, item, settings,
-                    key=f"owcsim-batch-{token}-{i}", retries=self.retries, fifo_timeout=0))
+                window.append(
+                    self._client.submit(
+                        _run_batch,
+                        key,
+                        fingerprint,
+                        spec_future,
+                        item,
+                        settings,
+                        key=f"owcsim-batch-{token}-{i}",
+                        retries=self.retries,
+                        fifo_timeout=0,
+                    )
+                )
                 if len(window) >= self.window:
                     yield self._result(window.popleft())
             while window:
@@ -376,11 +417,14 @@ class DaskExecutor:
         try:
             return self._wait(future)
         except distributed.KilledWorker as exc:
-            raise ClusterError(f"a batch was running on every worker that died in turn ({exc}); the cluster gave "
-                               "up on it (distributed.scheduler.allowed-failures)") from None
+            raise ClusterError(
+                f"a batch was running on every worker that died in turn ({exc}); the cluster gave "
+                "up on it (distributed.scheduler.allowed-failures)"
+            ) from None
         except concurrent.futures.CancelledError as exc:
-            raise ClusterError(f"the Dask cluster dropped a batch of the job ({exc}); "
-                               "was the scheduler restarted?") from None
+            raise ClusterError(
+                f"the Dask cluster dropped a batch of the job ({exc}); was the scheduler restarted?"
+            ) from None
         finally:
             if future.status != "finished":
                 self._cancel([future])
@@ -398,8 +442,9 @@ class DaskExecutor:
                 continue
             alone_since = alone_since or time.monotonic()
             if time.monotonic() - alone_since > self.timeout_s:
-                raise ClusterError(f"the Dask cluster at {self.address} has had no worker for "
-                                   f"{self.timeout_s:g} s; the job stops") from None
+                raise ClusterError(
+                    f"the Dask cluster at {self.address} has had no worker for {self.timeout_s:g} s; the job stops"
+                ) from None
 
     def _n_workers(self) -> int:
         try:

@@ -7,6 +7,7 @@ keeps millimetre precision; ray origins are re-centred the same way.
 Note: embreex's `EmbreeScene.run` overwrites the `dists` array it is given, so
 every call passes a fresh array.
 """
+
 from __future__ import annotations
 
 import io
@@ -15,7 +16,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from .lazy import trimesh  # imported on first use: it pulls in scipy (issue 10)
 from embreex import rtcore_scene
 
 from owcsim.schemas import ROOM_FACES, SceneSpec
@@ -23,17 +23,20 @@ from owcsim.schemas.geometry import BoxSpec, MeshSpec, RoomSpec
 from owcsim.schemas.surfaces import split
 
 from .bsdf import Materials
-
 from .constants import DEGENERATE_AREA_FACTOR, MAX_SCENE_EXTENT, RAY_OFFSET_FACTOR
 from .errors import SceneError
 from .inputs import read_input
+from .lazy import trimesh  # imported on first use: it pulls in scipy (issue 10)
 
 # Unit-cube corners and the two triangles of each face, wound so normals point outward.
 _CUBE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
 _CUBE_FACES = {  # name -> two triangles, outward normal for a solid box
-    "floor": [(0, 2, 1), (0, 3, 2)], "ceiling": [(4, 5, 6), (4, 6, 7)],
-    "wall_x_min": [(0, 4, 7), (0, 7, 3)], "wall_x_max": [(1, 2, 6), (1, 6, 5)],
-    "wall_y_min": [(0, 1, 5), (0, 5, 4)], "wall_y_max": [(3, 7, 6), (3, 6, 2)],
+    "floor": [(0, 2, 1), (0, 3, 2)],
+    "ceiling": [(4, 5, 6), (4, 6, 7)],
+    "wall_x_min": [(0, 4, 7), (0, 7, 3)],
+    "wall_x_max": [(1, 2, 6), (1, 6, 5)],
+    "wall_y_min": [(0, 1, 5), (0, 5, 4)],
+    "wall_y_max": [(3, 7, 6), (3, 6, 2)],
 }
 
 
@@ -131,8 +134,10 @@ def _load_mesh(i: int, spec: MeshSpec, base_dir: Path | None, count_only: bool =
     except Exception as exc:  # trimesh raises many kinds; the user needs the file and the reason
         raise SceneError(f"{label}: cannot read mesh ({type(exc).__name__}: {exc})") from None
     if count_only:
-        return sum(len(getattr(loaded.geometry.get(name), "faces", ())) * len(nodes)
-                   for name, nodes in loaded.graph.geometry_nodes.items())
+        return sum(
+            len(getattr(loaded.geometry.get(name), "faces", ())) * len(nodes)
+            for name, nodes in loaded.graph.geometry_nodes.items()
+        )
     unknown = set(spec.group_reflectance)
     vs, fs, rhos, names, offset = [], [], [], [], 0
     for node in loaded.graph.nodes_geometry:
@@ -159,9 +164,11 @@ def check_extent(points: np.ndarray, what: str) -> float:
     with np.errstate(over="ignore", invalid="ignore"):
         extent = float(np.ptp(points, axis=0).max()) if len(points) else 0.0
     if not extent <= MAX_SCENE_EXTENT:
-        raise SceneError(f"{what} span {extent:.4g} m, more than the {MAX_SCENE_EXTENT:g} m owcsim traces "
-                         "accurately (float32 ray casting around the scene centre); coordinates are in metres "
-                         "(a mesh in millimetres?)")
+        raise SceneError(
+            f"{what} span {extent:.4g} m, more than the {MAX_SCENE_EXTENT:g} m owcsim traces "
+            "accurately (float32 ray casting around the scene centre); coordinates are in metres "
+            "(a mesh in millimetres?)"
+        )
     return extent
 
 
@@ -198,8 +205,9 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
     from .spectra import grey_surfaces  # spectral surfaces: the carrier's reflectance (max over the bands)
 
     rho, material = _materials(grey_surfaces(surfaces, spec))
-    return Geometry(vertices, faces[ok], rho, group[ok], list(group_names), material,
-                    surfaces if surfaces.dtype == object else None)
+    return Geometry(
+        vertices, faces[ok], rho, group[ok], list(group_names), material, surfaces if surfaces.dtype == object else None
+    )
 
 
 def _f32(a: np.ndarray) -> np.ndarray:
@@ -226,6 +234,7 @@ class Intersector:
         if not self.empty:
             self._scene = rtcore_scene.EmbreeScene()
             from embreex.mesh_construction import TriangleMesh
+
             TriangleMesh(self._scene, (v - self.center).astype(np.float32)[geometry.faces])
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray | None = None):
@@ -246,6 +255,7 @@ class Intersector:
         self.n_occluded += n
         if self.empty or n == 0:
             return np.zeros(n, bool)
-        res = self._scene.run(_f32(origins - self.center), _f32(directions),
-                              dists=np.asarray(t_max, np.float32).copy(), query="OCCLUDED")
+        res = self._scene.run(
+            _f32(origins - self.center), _f32(directions), dists=np.asarray(t_max, np.float32).copy(), query="OCCLUDED"
+        )
         return np.asarray(res) == 0

@@ -13,6 +13,7 @@ index (lo + (i + 1) h - o) / d rather than accumulated, so rounding does not bui
 Regular tracking inverts the depth inside the cell where it reaches -ln(1 - u); delta
 tracking (in `Medium`) uses the grid's largest sigma_t as majorant.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -121,7 +122,8 @@ class GridMedium(Medium):
             keep = np.flatnonzero(~done)
             if len(keep) < len(ids):
                 ids, oo, dd, tc, te, acc, cell, step, inv = (
-                    x[keep] for x in (ids, oo, dd, tc, te, acc, cell, step, inv))
+                    x[keep] for x in (ids, oo, dd, tc, te, acc, cell, step, inv)
+                )
                 if want is not None:
                     want = want[keep]
         tau[ids] = acc  # (none left: the loop bound is the longest walk)

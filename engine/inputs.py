@@ -1,4 +1,5 @@
 """Files a scene document names: given inline (base64) or as a path (command line only)."""
+
 from __future__ import annotations
 
 import base64
@@ -7,8 +8,9 @@ from pathlib import Path
 from .errors import SceneError
 
 
-def read_input(file: str | None, data_base64: str | None, base_dir: Path | None,
-               what: str) -> tuple[bytes, Path | None]:
+def read_input(
+    file: str | None, data_base64: str | None, base_dir: Path | None, what: str
+) -> tuple[bytes, Path | None]:
     """(bytes, path or None) of an input given as `file` (relative paths from `base_dir`, the scene file's
     folder) or inline as `data_base64`; SceneError "`what` ... not found" for a missing file."""
     if file is None:

@@ -50,6 +50,7 @@ throughput and their MIS weight). Path state is a structure of arrays (`_Paths`)
 
 Every loop here is over steps of the paths; all work inside is array operations.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -207,8 +208,12 @@ class _Paths:
     def concat(parts) -> "_Paths":
         if len(parts) == 1:
             return parts[0]
-        return _Paths(**{f: None if getattr(parts[0], f) is None else
-                         np.concatenate([getattr(p, f) for p in parts], axis=-1) for f in _Paths.FIELDS})
+        return _Paths(
+            **{
+                f: None if getattr(parts[0], f) is None else np.concatenate([getattr(p, f) for p in parts], axis=-1)
+                for f in _Paths.FIELDS
+            }
+        )
 
 
 def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> BatchTally:
@@ -245,10 +250,15 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     paths = _Paths(
         directions=np.ascontiguousarray(sources.sample_directions(i, u[0], u[1]).T),
         origins=np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1),
-        weights=np.full(n, w0), lengths=np.zeros(n), path=np.arange(n),
-        k=np.zeros(n, np.int64), s=np.zeros(n, np.int64),
-        first=np.zeros(n) if two_sided else None, first_rho=np.full(n, 1.0 / np.pi) if two_sided else None,
-        ratio=ctx.spectra.initial_ratio(n) if ctx.spectra is not None else np.ones((0, n)))
+        weights=np.full(n, w0),
+        lengths=np.zeros(n),
+        path=np.arange(n),
+        k=np.zeros(n, np.int64),
+        s=np.zeros(n, np.int64),
+        first=np.zeros(n) if two_sided else None,
+        first_rho=np.full(n, 1.0 / np.pi) if two_sided else None,
+        ratio=ctx.spectra.initial_ratio(n) if ctx.spectra is not None else np.ones((0, n)),
+    )
     if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each from both devices
         connect_source_mirrors(ctx, sources, i, w0 * (0.5 if settings.mis or settings.both_sides else 1.0), n)
     surface_power = escaped_power = 0.0
@@ -323,10 +333,19 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
     normals *= np.where(_dot(normals, sp.directions) > 0, -1.0, 1.0)  # two-sided: face the arriving ray
     spawn = points + isect.offset * normals
     arriving = sp.directions
-    sp = _Paths(origins=spawn, directions=arriving, weights=sp.weights, lengths=sp.lengths + ts, path=sp.path,
-                k=sp.k + 1, s=sp.s, first=sp.first, first_rho=sp.first_rho,
-                # spectral scenes: rho_b / rho_c of the face, for the NEE from here and the reflected path
-                ratio=ctx.spectra.reflect(sp.ratio, prims) if ctx.spectra is not None else sp.ratio)
+    sp = _Paths(
+        origins=spawn,
+        directions=arriving,
+        weights=sp.weights,
+        lengths=sp.lengths + ts,
+        path=sp.path,
+        k=sp.k + 1,
+        s=sp.s,
+        first=sp.first,
+        first_rho=sp.first_rho,
+        # spectral scenes: rho_b / rho_c of the face, for the NEE from here and the reflected path
+        ratio=ctx.spectra.reflect(sp.ratio, prims) if ctx.spectra is not None else sp.ratio,
+    )
     share = 0.5 if settings.mis else None
     if geo.material is None:  # every surface Lambertian
         rho = geo.reflectance.take(prims)
@@ -338,8 +357,9 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
         materials = geo.material.take(prims)
         ctx.connect(points, spawn, sp.weights, sp, normals=normals, materials=(materials, arriving), mis=share)
         if ctx.mirrors:  # ... -> x -> mirror -> target, through the target's mirror images (mirrors.py)
-            connect_mirrors(ctx, points, spawn, sp.weights * (share or 1.0), sp, normals=normals,
-                            brdf=(materials, arriving))
+            connect_mirrors(
+                ctx, points, spawn, sp.weights * (share or 1.0), sp, normals=normals, brdf=(materials, arriving)
+            )
         u = ctx.bounce_uniforms(sp, rng)
         sp.directions, factor = materials.sample(arriving, normals, u[0], u[1])
         sp.weights = sp.weights * factor
@@ -382,11 +402,12 @@ class _EquiangularFrames:
         self.row_of[self.rows] = np.arange(len(self.rows))
         self.end = t_seg.take(self.rows)
         o, w = paths.origins.take(self.rows, axis=1), paths.directions.take(self.rows, axis=1)
-        self.frames = [EquiangularFrame(o, w, ctx.t_pos[:, j:j + 1], 0.0, self.end) for j in range(len(ctx.tgt))]
+        self.frames = [EquiangularFrame(o, w, ctx.t_pos[:, j : j + 1], 0.0, self.end) for j in range(len(ctx.tgt))]
 
 
-def _medium_next_events(ctx: "_Context", paths: _Paths, eq: _EquiangularFrames | None, collision_rows, t_col,
-                        rng) -> None:
+def _medium_next_events(
+    ctx: "_Context", paths: _Paths, eq: _EquiangularFrames | None, collision_rows, t_col, rng
+) -> None:
     """Algorithm 5: next-event estimation from the scattering points of this step's segments.
 
     The points of a segment are its free-flight collision (paths `collision_rows`, at t_col) and,
@@ -417,8 +438,13 @@ def _medium_next_events(ctx: "_Context", paths: _Paths, eq: _EquiangularFrames |
         if len(inside) < len(s):
             if len(inside) == 0:
                 continue
-            pp, points, s, sigma_t, sigma_s = (pp.gather(inside), points.take(inside, axis=1), s.take(inside),
-                                               sigma_t.take(inside), sigma_s.take(inside))
+            pp, points, s, sigma_t, sigma_s = (
+                pp.gather(inside),
+                points.take(inside, axis=1),
+                s.take(inside),
+                sigma_t.take(inside),
+                sigma_s.take(inside),
+            )
             if n_eq:
                 frame_rows = frame_rows.take(inside)
         transmittance = medium.transmittance(pp.origins.T, pp.directions.T, s)
@@ -426,8 +452,7 @@ def _medium_next_events(ctx: "_Context", paths: _Paths, eq: _EquiangularFrames |
         throughput = _scattering_point_throughput(pp.weights, transmittance, sigma_t, sigma_s, n_e)
         mid_g = None
         if settings.both_sides:  # a point on the first segment is the path's first vertex (medium_nee)
-            pp.first = np.asarray(np.where(pp.k + pp.s == 0, first_medium_factor(ctx, points, transmittance),
-                                           pp.first))
+            pp.first = np.asarray(np.where(pp.k + pp.s == 0, first_medium_factor(ctx, points, transmittance), pp.first))
             mid_g = transmittance / (s * s)  # edge factor T / r^2 of the edge that reached the point
         pp.s = pp.s + 1
         ctx.connect(points, points, throughput, pp, in_dirs=pp.directions, target=j, extra_length=s, mid_g=mid_g)
@@ -516,15 +541,35 @@ class _Context:
         settings = self.settings
         # A path may add several estimates to one order cell in one step: points on segments, equiangular
         # points with the collision, mirror images made one step early, the third strategy of medium_nee.
-        several = (settings.segment_scatter or (settings.free_flight and settings.equiangular_points > 0)
-                   or bool(self.mirrors) or settings.both_sides or settings.in_then_out)
+        several = (
+            settings.segment_scatter
+            or (settings.free_flight and settings.equiangular_points > 0)
+            or bool(self.mirrors)
+            or settings.both_sides
+            or settings.in_then_out
+        )
         self.builder = BatchBuilder(settings.tally, item_links(self.scene, item), item.n_paths, several)
         if self.spectra is not None:  # per-(link, channel) sums (spectra.py)
             self.channels = self.spectra.builder(item, self.tgt, item_links(self.scene, item))
 
-    def connect(self, points, shadow_origins, throughput, paths, *, normals=None, reflectance=None, materials=None,
-                in_dirs=None, mis=None, target: int | None = None, scatter_order=None, extra_length=None,
-                mid_g=None, brdf=None) -> None:
+    def connect(
+        self,
+        points,
+        shadow_origins,
+        throughput,
+        paths,
+        *,
+        normals=None,
+        reflectance=None,
+        materials=None,
+        in_dirs=None,
+        mis=None,
+        target: int | None = None,
+        scatter_order=None,
+        extra_length=None,
+        mid_g=None,
+        brdf=None,
+    ) -> None:
         """Next-event estimation from vertices `points` (3, n) to the targets: the measurement equation.
 
             dH = throughput * f * R_target(cos_target) / d^2 * V(x, target) * T(x -> target) * mis,
@@ -553,7 +598,7 @@ class _Context:
             if n_tgt == 1:  # one target: every vertex of the chunk, no index arrays
                 vertex_rows = None if (lo, hi) == (0, n_pts) else np.arange(lo, hi)
                 column_rows = None
-                y, y_nrm = self.t_pos[:, columns[0]:columns[0] + 1], self.t_nrm[:, columns[0]:columns[0] + 1]
+                y, y_nrm = self.t_pos[:, columns[0] : columns[0] + 1], self.t_nrm[:, columns[0] : columns[0] + 1]
                 y_ids = np.full(hi - lo, self.tgt[columns[0]])
             else:
                 vertex_rows = np.repeat(np.arange(lo, hi), n_tgt)
@@ -593,8 +638,9 @@ class _Context:
             if both_sides:
                 response, vertex_factor = response.take(live), vertex_factor.take(live)
             if not scene.all_visible:  # the shadow ray stops short of the device (it may sit on a surface)
-                seen = np.flatnonzero(~isect.occluded(shadow_origins.take(vertex, axis=1).T, out_dir.T,
-                                                      d - 2.0 * isect.offset))
+                seen = np.flatnonzero(
+                    ~isect.occluded(shadow_origins.take(vertex, axis=1).T, out_dir.T, d - 2.0 * isect.offset)
+                )
                 if len(seen) < len(vertex):
                     vertex, column, f, d = vertex.take(seen), column.take(seen), f.take(seen), d.take(seen)
                     out_dir = out_dir.take(seen, axis=1)
@@ -605,20 +651,38 @@ class _Context:
                 tr = np.exp(-tau)  # = medium.transmittance
                 f = f * tr
                 if both_sides:  # algorithm 5 from both devices: this run's share (medium_nee.connection_weight)
-                    f = f * connection_weight(self, paths, vertex, column, d, tr, response, vertex_factor,
-                                              surface=normals is not None, mid_g=mid_g)
+                    f = f * connection_weight(
+                        self,
+                        paths,
+                        vertex,
+                        column,
+                        d,
+                        tr,
+                        response,
+                        vertex_factor,
+                        surface=normals is not None,
+                        mid_g=mid_g,
+                    )
             length = paths.lengths.take(vertex) + d
             if extra_length is not None:
                 length += extra_length.take(vertex)
             s_order = (paths.s if scatter_order is None else scatter_order).take(vertex)
             ratio = None
             if "ratio" in self.out:  # spectral: the path's band ratios, with T_b / T_c of the connection
-                ratio = self.spectra.estimate_ratio(paths.ratio.take(vertex, axis=1),
-                                                    tau if medium is not None else None)
+                ratio = self.spectra.estimate_ratio(
+                    paths.ratio.take(vertex, axis=1), tau if medium is not None else None
+                )
                 if normals is None and self.spectra.phase_bands is not None:  # medium vertex: p_b / p_c
                     ratio = ratio * self.spectra.phase_ratio(_dot(_rows(in_dirs, vertex), out_dir))
-            self.record(column, paths.k.take(vertex), s_order, length * (1.0 / SPEED_OF_LIGHT), f,
-                        paths.path.take(vertex), ratio)
+            self.record(
+                column,
+                paths.k.take(vertex),
+                s_order,
+                length * (1.0 / SPEED_OF_LIGHT),
+                f,
+                paths.path.take(vertex),
+                ratio,
+            )
 
     def record(self, target, k, s, delay, power, path, ratio=None) -> None:
         """One group of estimates: local target index, cell (k, s), delay [s], power [W/W], path in the batch,

@@ -10,6 +10,7 @@
   arriving after the first bit period is ISI (link_budget.isi_split).
 Quantities that do not apply are NaN (null in the document).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -45,8 +46,13 @@ class Lighting:
             c_rx, d, clear = geometry.cos_rx, geometry.distance, geometry.clear
             ok = (c_rx > 0) & (clear > 0)
             with np.errstate(under="ignore", invalid="ignore"):
-                e = np.nan_to_num(scale)[ti] * tx.response(ti, geometry.cos_tx, geometry.directions) * c_rx \
-                    / np.where(ok, d, 1.0) ** 2 * clear
+                e = (
+                    np.nan_to_num(scale)[ti]
+                    * tx.response(ti, geometry.cos_tx, geometry.directions)
+                    * c_rx
+                    / np.where(ok, d, 1.0) ** 2
+                    * clear
+                )
             self.illuminance = np.where(np.isfinite(scale)[ti], np.where(ok, e, 0.0), np.nan).reshape(shape)
         self.budget = lb.link_budget_from_spec(spec.link_budget) if spec.link_budget is not None else None
         self.area = rx.area
@@ -66,8 +72,9 @@ class Lighting:
         for key, values in arrays.items():
             cols[key] = column(values)
 
-    def add_channel_columns(self, cols: dict, weights: np.ndarray, h0: np.ndarray, rms: np.ndarray,
-                            group_power: np.ndarray) -> None:
+    def add_channel_columns(
+        self, cols: dict, weights: np.ndarray, h0: np.ndarray, rms: np.ndarray, group_power: np.ndarray
+    ) -> None:
         """weights (G, n_tx); h0, rms (G, n_rx) of the groups' channels; group_power (G,) [W]."""
         member = weights > 0
         illum = np.where(member[:, :, None], np.nan_to_num(self.illuminance)[None], 0.0).sum(axis=1)

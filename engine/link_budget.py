@@ -7,6 +7,7 @@ the arrays hold NaN, which callers map to JSON null. SI units throughout.
 Reference: T. Komine and M. Nakagawa, "Fundamental analysis for visible-light communication
 system using LED lights", IEEE Trans. Consumer Electronics 50(1), 100-107, 2004.
 """
+
 from __future__ import annotations
 
 import math
@@ -16,9 +17,22 @@ import numpy as np
 
 from owcsim.schemas.link_budget import IsiSplit  # one enum: the document's
 
-__all__ = ["IsiSplit", "LinkBudget", "ber_ook", "illuminance_los", "isi_split", "link_budget_from_spec",
-           "luminous_flux_from_intensity", "luminous_intensity_center", "max_bit_rate", "noise_variances",
-           "power_dbm", "received_power", "snr", "to_db"]
+__all__ = [
+    "IsiSplit",
+    "LinkBudget",
+    "ber_ook",
+    "illuminance_los",
+    "isi_split",
+    "link_budget_from_spec",
+    "luminous_flux_from_intensity",
+    "luminous_intensity_center",
+    "max_bit_rate",
+    "noise_variances",
+    "power_dbm",
+    "received_power",
+    "snr",
+    "to_db",
+]
 
 #: Elementary charge q [C] and Boltzmann constant k [J/K]: exact by definition of the SI (BIPM 2019), the
 #: values scipy.constants gives (not imported for them: scipy costs a command's start-up, issue 10).
@@ -58,14 +72,23 @@ class LinkBudget:
 def link_budget_from_spec(spec) -> LinkBudget:
     """schemas.link_budget.LinkBudgetSpec -> LinkBudget (B = bandwidth, else the bit rate)."""
     return LinkBudget(
-        noise_bandwidth=spec.noise_bandwidth, responsivity=spec.responsivity, bit_rate=spec.bit_rate,
-        background_current=spec.background_current, temperature=spec.temperature,
-        open_loop_gain=spec.open_loop_gain, capacitance_per_area=spec.capacitance_per_area,
-        channel_noise_factor=spec.channel_noise_factor, transconductance=spec.transconductance,
-        i2=spec.noise_bandwidth_factor_i2, i3=spec.noise_bandwidth_factor_i3, isi_split=spec.isi_split)
+        noise_bandwidth=spec.noise_bandwidth,
+        responsivity=spec.responsivity,
+        bit_rate=spec.bit_rate,
+        background_current=spec.background_current,
+        temperature=spec.temperature,
+        open_loop_gain=spec.open_loop_gain,
+        capacitance_per_area=spec.capacitance_per_area,
+        channel_noise_factor=spec.channel_noise_factor,
+        transconductance=spec.transconductance,
+        i2=spec.noise_bandwidth_factor_i2,
+        i3=spec.noise_bandwidth_factor_i3,
+        isi_split=spec.isi_split,
+    )
 
 
 # --- photometry -------------------------------------------------------------------------------
+
 
 def luminous_intensity_center(luminous_flux, m):
     """Centre luminous intensity I_v(0) = (m + 1) Phi_v / (2 pi) [cd] of a Lambertian source of order m.
@@ -107,6 +130,7 @@ def illuminance_los(center_intensity, m, cos_phi, cos_psi, d, visible=True):
 
 # --- power ------------------------------------------------------------------------------------
 
+
 def received_power(power, dc_gain):
     """Received optical power P_r = sum_tx P_t H(0) [W]; power (n_tx,) [W], dc_gain (n_tx, ...) [-]."""
     g = np.asarray(dc_gain, float)
@@ -128,6 +152,7 @@ def power_dbm(power):
 
 # --- noise, SNR, BER --------------------------------------------------------------------------
 
+
 def noise_variances(budget: LinkBudget, area, p_signal, p_isi=0.0):
     """(shot, thermal) noise variances [A^2] of Komine & Nakagawa 2004.
 
@@ -137,12 +162,15 @@ def noise_variances(budget: LinkBudget, area, p_signal, p_isi=0.0):
     """
     b, kt = budget.noise_bandwidth, K_B * budget.temperature
     a = np.asarray(area, float)
-    shot = (2.0 * Q_E * budget.responsivity * (np.asarray(p_signal, float) + np.asarray(p_isi, float)) * b
-            + 2.0 * Q_E * budget.background_current * budget.i2 * b)
+    shot = (
+        2.0 * Q_E * budget.responsivity * (np.asarray(p_signal, float) + np.asarray(p_isi, float)) * b
+        + 2.0 * Q_E * budget.background_current * budget.i2 * b
+    )
     cap = budget.capacitance_per_area * a
-    thermal = (8.0 * math.pi * kt / budget.open_loop_gain * cap * budget.i2 * b ** 2
-               + 16.0 * math.pi ** 2 * kt * budget.channel_noise_factor / budget.transconductance
-               * cap ** 2 * budget.i3 * b ** 3)
+    thermal = (
+        8.0 * math.pi * kt / budget.open_loop_gain * cap * budget.i2 * b**2
+        + 16.0 * math.pi**2 * kt * budget.channel_noise_factor / budget.transconductance * cap**2 * budget.i3 * b**3
+    )
     return tuple(np.broadcast_arrays(shot, thermal))
 
 
@@ -182,6 +210,7 @@ def max_bit_rate(rms_delay_spread, factor=10.0):
 
 
 # --- signal and ISI from a binned CIR ---------------------------------------------------------
+
 
 def _signal_primitive(x, period, rule: IsiSplit):
     """G(x) = integral_{-inf}^{x} w(u) du minus its value at 0, with w the signal weight of an arrival

@@ -6,6 +6,7 @@ It has no variance, so the Monte Carlo kernel never samples it; it is added to e
 Shadow rays are cast only where the scene has occluders (furniture, meshes) and only for
 pairs that face each other: an empty box room is convex.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass

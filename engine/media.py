@@ -23,14 +23,20 @@ never enter a bounded region are rejected by a bounding-box test and cost nothin
 Homogeneous media live here; the 3-D grid of homogeneous cells in `grid.py`, the
 regions (box, closed mesh) in `regions.py`.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from owcsim.schemas.medium import (GridMediumSpec, HomogeneousMediumSpec, IsotropicPhaseSpec, ParticleMediumSpec,
-                                  PhaseSpec)
+from owcsim.schemas.medium import (
+    GridMediumSpec,
+    HomogeneousMediumSpec,
+    IsotropicPhaseSpec,
+    ParticleMediumSpec,
+    PhaseSpec,
+)
 
 from .regions import BoxRegion, MeshRegion, WholeRegion, as_rows, clip_box
 

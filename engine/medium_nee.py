@@ -58,8 +58,9 @@ with c <= (1/h) r_n^2 / (r_1^2 + r_n^2), E[c^2] ~ int dr_1 int r_n dr_n r_n^2 / 
 is finite near r_1 = r_n = 0 (and for n = 2 the third strategy bounds the corner: there the
 weight is at most p(cos_1) p(cos_2) T / r_12^2 x W_tgt albedo^2, r_12 ~ D). What stays heavy
 at g -> 1 is the product of the two phase peaks on paths nearly collinear with the two
-devices, which no one of the three strategies samples (docs/smoke-error-bars.md). Surface vertices (devices on or near a wall) get the
-same treatment, which also bounds the 1/r^2 of a wall point next to a device.
+devices, which no one of the three strategies samples (docs/smoke-error-bars.md). Surface vertices
+(devices on or near a wall) get the same treatment, which also bounds the 1/r^2 of a wall point next
+to a device.
 
 Algorithms 2-4 (`first_segment_branch`). The points-on-segments estimators connect a point p of
 the source's k-th segment to the target; the target's own side samples the same single-
@@ -79,6 +80,7 @@ the same partition A / (A + B) with x_1 = p_in, x_n = p_out. Surface vertices of
 branch make no connections: Tx -> p_in -> (k) -> Rx is the s = 1 family of algorithm 2,
 estimated elsewhere, so nothing is counted twice.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -144,8 +146,7 @@ def first_vertex_factor(ctx, paths, prim, t, t_col, collided):
     if ctx.settings.both_sides and scene.medium is not None:
         live = np.flatnonzero(collided | hit)
         if len(live):
-            factor[live] *= scene.medium.transmittance(paths.origins[:, live].T, paths.directions[:, live].T,
-                                                       t1[live])
+            factor[live] *= scene.medium.transmittance(paths.origins[:, live].T, paths.directions[:, live].T, t1[live])
     return factor
 
 
@@ -211,15 +212,14 @@ def connect_from_target(ctx, mp, points, rng) -> None:
     scene, medium, isect = ctx.scene, ctx.scene.medium, ctx.scene.intersector
     x1 = points.take(first, axis=1)
     arriving = mp.directions.take(first, axis=1)
-    w, F, lengths, path = (mp.weights.take(first), mp.first.take(first), mp.lengths.take(first),
-                           mp.path.take(first))
+    w, F, lengths, path = (mp.weights.take(first), mp.first.take(first), mp.lengths.take(first), mp.path.take(first))
     n = len(first)
     for j in range(len(ctx.tgt)):
         t_idx = int(ctx.tgt[j])
         u = rng.random((3, n))
         dirs = np.ascontiguousarray(ctx.targets.sample_directions(t_idx, u[0], u[1]).T)
-        pos = ctx.t_pos[:, j:j + 1]
-        origin = pos + isect.offset * ctx.t_nrm[:, j:j + 1]
+        pos = ctx.t_pos[:, j : j + 1]
+        origin = pos + isect.offset * ctx.t_nrm[:, j : j + 1]
         origins = np.repeat(origin, n, axis=1)
         prim, t_hit = isect.intersect(origins.T, dirs.T)
         seg = np.where(prim >= 0, t_hit, scene.medium_far_distance)
@@ -237,15 +237,20 @@ def connect_from_target(ctx, mp, points, rng) -> None:
             keep = keep[~isect.occluded(a[:, keep].T, w12[:, keep].T, r12[keep] - 2.0 * isect.offset)]
         if len(keep) == 0:
             continue
-        sel, y, a, r12, w12 = sel.take(keep), y.take(keep, axis=1), a.take(keep, axis=1), r12.take(keep), \
-            w12.take(keep, axis=1)
+        sel, y, a, r12, w12 = (
+            sel.take(keep),
+            y.take(keep, axis=1),
+            a.take(keep, axis=1),
+            r12.take(keep),
+            w12.take(keep, axis=1),
+        )
         dj = dirs.take(sel, axis=1)
         p1 = scene.phase.eval(_dot(arriving.take(sel, axis=1), w12))
         p2 = scene.phase.eval(-_dot(w12, dj))
         g = medium.transmittance(a.T, w12.T, r12) / (r12 * r12)
         to_dev = pos - y
         r2 = np.sqrt(_dot(to_dev, to_dev))
-        resp = ctx.targets.response(np.full(len(sel), t_idx), _dot(dj, ctx.t_nrm[:, j:j + 1]), dj.T) / ctx.t_total[j]
+        resp = ctx.targets.response(np.full(len(sel), t_idx), _dot(dj, ctx.t_nrm[:, j : j + 1]), dj.T) / ctx.t_total[j]
         L = resp * medium.transmittance(y.T, (to_dev / r2).T, r2) / (r2 * r2)
         Fs = F.take(sel)
         q_c = Fs * L
@@ -257,16 +262,21 @@ def connect_from_target(ctx, mp, points, rng) -> None:
             continue
         from .constants import SPEED_OF_LIGHT
 
-        ctx.record(np.full(len(ok), j, np.int64), np.zeros(len(ok), np.int64), np.full(len(ok), 2, np.int64),
-                   (lengths.take(sel.take(ok)) + r12.take(ok) + r2.take(ok)) / SPEED_OF_LIGHT, power.take(ok),
-                   path.take(sel.take(ok)),  # cell k = 0, s = 2
-                   # spectral scenes: k = 0 and grey smoke (spectra._check_supported), the ratios of the source
-                   mp.ratio.take(first.take(sel.take(ok)), axis=1) if "ratio" in ctx.out else None)
+        ctx.record(
+            np.full(len(ok), j, np.int64),
+            np.zeros(len(ok), np.int64),
+            np.full(len(ok), 2, np.int64),
+            (lengths.take(sel.take(ok)) + r12.take(ok) + r2.take(ok)) / SPEED_OF_LIGHT,
+            power.take(ok),
+            path.take(sel.take(ok)),  # cell k = 0, s = 2
+            # spectral scenes: k = 0 and grey smoke (spectra._check_supported), the ratios of the source
+            mp.ratio.take(first.take(sel.take(ok)), axis=1) if "ratio" in ctx.out else None,
+        )
 
 
 def _surface_target_factor(ctx, j: int, points, normals):
     """B for surface points (3, n) with unit normals connected to the j-th target (c = |cos| at the point)."""
-    y = ctx.t_pos[:, j:j + 1]
+    y = ctx.t_pos[:, j : j + 1]
     v = y - points
     c = np.abs(_dot(v, normals)) / np.sqrt(_dot(v, v))
     return _device_factor(ctx.targets, int(ctx.tgt[j]), points, c)
@@ -408,9 +418,11 @@ def simulate_two_sided(spec, *, base_dir=None, executor=None, direction: str = "
     executor = executor or SerialExecutor()
     info = sim_mod.RunInfo(workers=executor.workers)
     info.pilot = {"rule": f"algorithm {a} from both devices, partition of unity (engine/medium_nee.py)"}
-    directions = np.full(scene.n_links, {"both": sim_mod.BOTH, "forward": sim_mod.FORWARD,
-                                         "backward": sim_mod.BACKWARD}[direction])
-    accs = sim_mod._run(scene, spec, settings, executor, JobRef(scene, "", "", None), directions, los_gain, info,
-                        None, None, t0)
+    directions = np.full(
+        scene.n_links, {"both": sim_mod.BOTH, "forward": sim_mod.FORWARD, "backward": sim_mod.BACKWARD}[direction]
+    )
+    accs = sim_mod._run(
+        scene, spec, settings, executor, JobRef(scene, "", "", None), directions, los_gain, info, None, None, t0
+    )
     info.wall_time_s = time.perf_counter() - t0
     return build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info)

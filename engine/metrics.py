@@ -8,14 +8,22 @@ Estimator model: N independent paths; path i gives per link the sums
 a_i = sum w, b_i = sum w t, c_i = sum w t^2 over its contributions. The engine
 keeps S1 = sum_i (a, b, c) and S2 = sum_i outer((a, b, c), (a, b, c)).
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["delay_metrics", "delay_metrics_from_moments", "path_loss_db", "rms_delay_spread_h2",
-           "bandwidth_3db", "jackknife", "bin_stderr"]
+__all__ = [
+    "delay_metrics",
+    "delay_metrics_from_moments",
+    "path_loss_db",
+    "rms_delay_spread_h2",
+    "bandwidth_3db",
+    "jackknife",
+    "bin_stderr",
+]
 
 
 def _safe(x, ok):
@@ -49,7 +57,7 @@ def delay_metrics(n_paths, s1, s2, deterministic=None) -> dict:
     with np.errstate(all="ignore"):
         nn = _safe(n, n > 0)[..., None]
         mu = np.where(n[..., None] > 0, s1 / nn, 0.0)
-        cov = (s2 - nn[..., None] * mu[..., :, None] * mu[..., None, :])
+        cov = s2 - nn[..., None] * mu[..., :, None] * mu[..., None, :]
         cov = cov / (_safe(n, n_ok) - 1)[..., None, None] / nn[..., None]
         cov = np.where(n_ok[..., None, None], cov, np.nan)
     m = mu if deterministic is None else mu + np.asarray(deterministic, float)
@@ -70,7 +78,7 @@ def delay_metrics_from_moments(m, cov) -> dict:
         reach = a > 0
         sa = _safe(a, reach)
         tau0 = b / sa
-        v = np.maximum(c / sa - tau0 ** 2, 0.0)
+        v = np.maximum(c / sa - tau0**2, 0.0)
         zero = np.zeros_like(a)
 
         def se(g):
@@ -79,7 +87,7 @@ def delay_metrics_from_moments(m, cov) -> dict:
 
         se_a = np.where(n_ok, np.sqrt(np.maximum(cov[..., 0, 0], 0.0)), np.nan)
         se_t0 = se(np.stack([-tau0 / sa, 1.0 / sa, zero], -1))
-        se_v = se(np.stack([(tau0 ** 2 - v) / sa, -2.0 * tau0 / sa, 1.0 / sa], -1))
+        se_v = se(np.stack([(tau0**2 - v) / sa, -2.0 * tau0 / sa, 1.0 / sa], -1))
         rms = np.sqrt(v)
         cap = np.sqrt(se_v)
         use_delta = 2.0 * rms * cap > se_v
@@ -124,7 +132,7 @@ def rms_delay_spread_h2(t_edges, power_per_bin):
     """
     t, dt = _centres_widths(t_edges)
     p = np.asarray(power_per_bin, float)
-    w = p ** 2 / dt
+    w = p**2 / dt
     s0 = w.sum(-1)
     ok = s0 > 0
     with np.errstate(all="ignore"):
@@ -156,11 +164,11 @@ def bandwidth_3db(t_edges, power_per_bin, oversample: int = 8) -> float | None:
     h0 = p.sum()
     if not h0 > 0:
         return None
-    thr = 0.5 * h0 ** 2
+    thr = 0.5 * h0**2
     nz = np.flatnonzero(p)
-    p, tk = p[nz[0]:nz[-1] + 1], t[nz[0]:nz[-1] + 1] - t[nz[0]]
+    p, tk = p[nz[0] : nz[-1] + 1], t[nz[0] : nz[-1] + 1] - t[nz[0]]
     m_fft = 1 << int(np.ceil(np.log2(max(oversample * p.size, 64))))
-    mag2 = np.abs(np.fft.rfft(p, m_fft)) ** 2     # f_j = j / (m_fft dt), j <= m_fft/2
+    mag2 = np.abs(np.fft.rfft(p, m_fft)) ** 2  # f_j = j / (m_fft dt), j <= m_fft/2
     below = np.flatnonzero(mag2[1:] <= thr)
     if below.size == 0:
         return None
@@ -171,8 +179,8 @@ def bandwidth_3db(t_edges, power_per_bin, oversample: int = 8) -> float | None:
     def g(f):
         return np.abs(np.sum(p * np.exp(-2j * np.pi * f * tk))) ** 2 - thr
 
-    glo, ghi, side = g(lo), g(hi), 0               # Illinois regula falsi
-    if glo <= 0 or ghi >= 0:                       # FFT grid hit the threshold
+    glo, ghi, side = g(lo), g(hi), 0  # Illinois regula falsi
+    if glo <= 0 or ghi >= 0:  # FFT grid hit the threshold
         return float(lo if glo <= 0 else hi)
     for _ in range(100):
         if ghi == 0 or hi - lo <= 1e-13 * hi:
@@ -206,8 +214,7 @@ def jackknife(estimator: Callable, groups, n_per_group=None):
     """
     groups = np.asarray(groups, float)
     n_g = groups.shape[0]
-    nj = np.ones(n_g) if n_per_group is None else np.broadcast_to(
-        np.asarray(n_per_group, float), (n_g,))
+    nj = np.ones(n_g) if n_per_group is None else np.broadcast_to(np.asarray(n_per_group, float), (n_g,))
 
     def est(x):
         r = estimator(x)
@@ -218,8 +225,7 @@ def jackknife(estimator: Callable, groups, n_per_group=None):
     if n_g < 2:
         return theta[()], np.full_like(theta, np.nan)[()]
     n_tot = nj.sum()
-    reps = np.stack([est((total - groups[j]) * (n_tot / (n_tot - nj[j])))
-                     for j in range(n_g)])
+    reps = np.stack([est((total - groups[j]) * (n_tot / (n_tot - nj[j]))) for j in range(n_g)])
     hj = (n_tot / nj).reshape((-1,) + (1,) * theta.ndim)
     wj = (1.0 - nj / n_tot).reshape(hj.shape)
     with np.errstate(all="ignore"):
@@ -246,5 +252,5 @@ def bin_stderr(groups, n_per_group):
         return np.full(groups.shape[1:], np.nan)[()]
     n_tot = nj.sum()
     x = groups.sum(0) / n_tot
-    var = n_g / (n_g - 1.0) * ((groups - nj * x) ** 2).sum(0) / n_tot ** 2
+    var = n_g / (n_g - 1.0) * ((groups - nj * x) ** 2).sum(0) / n_tot**2
     return np.sqrt(var)[()]

@@ -32,6 +32,7 @@ Mass concentration M with material density rho: N = M / (rho pi/6 <D^3>) with th
 log-normal moment <D^3> = D_g^3 exp(4.5 ln^2 sigma_g) (Hatch & Choate 1929).
 Visibility: Koschmieder, V = 3.912 / sigma_t.
 """
+
 from __future__ import annotations
 
 import math
@@ -44,9 +45,20 @@ from owcsim.schemas.medium import KOSCHMIEDER, MAX_COEFFICIENT, ParticleMediumSp
 
 from .errors import SceneError
 
-__all__ = ["ParticleOptics", "efficiencies", "intensity", "phase_single", "lognormal_nodes", "particle_optics",
-           "number_concentration", "medium_coefficients", "describe", "medium_report", "size_window",
-           "DEFAULT_ANGLES"]
+__all__ = [
+    "ParticleOptics",
+    "efficiencies",
+    "intensity",
+    "phase_single",
+    "lognormal_nodes",
+    "particle_optics",
+    "number_concentration",
+    "medium_coefficients",
+    "describe",
+    "medium_report",
+    "size_window",
+    "DEFAULT_ANGLES",
+]
 
 #: Points of the phase table: theta_i = pi (i / (n - 1))^2, dense near the forward peak
 #: (spacing 2 sqrt(pi theta) / n: ~1e-4 rad at theta = 0.01, 0.18 deg at 180 deg).
@@ -63,8 +75,7 @@ def _import_miepython():
     try:
         import miepython
     except ImportError as err:  # pragma: no cover - the engine extra installs it
-        raise SceneError("medium: particle smoke needs the `miepython` package (pip install 'owcsim[engine]')") \
-            from err
+        raise SceneError("medium: particle smoke needs the `miepython` package (pip install 'owcsim[engine]')") from err
     return miepython
 
 
@@ -101,19 +112,19 @@ def _coefficients(m: complex, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     a = np.zeros((len(x), n_max), complex)
     b = np.zeros((len(x), n_max), complex)
     for j, (aj, bj) in enumerate(coeffs):
-        a[j, :len(aj)], b[j, :len(bj)] = aj, bj
+        a[j, : len(aj)], b[j, : len(bj)] = aj, bj
     return a, b
 
 
 def _efficiencies_ab(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(Q_ext, Q_sca, g Q_sca) from the coefficients (B&H eqs. 4.61, 4.62 and 4.74)."""
     n = np.arange(1, a.shape[1] + 1)
-    qext = 2 / x ** 2 * ((2 * n + 1) * (a + b).real).sum(axis=1)
-    qsca = 2 / x ** 2 * ((2 * n + 1) * (np.abs(a) ** 2 + np.abs(b) ** 2)).sum(axis=1)
+    qext = 2 / x**2 * ((2 * n + 1) * (a + b).real).sum(axis=1)
+    qsca = 2 / x**2 * ((2 * n + 1) * (np.abs(a) ** 2 + np.abs(b) ** 2)).sum(axis=1)
     nn = n[:-1]
     cross = (nn * (nn + 2) / (nn + 1) * (a[:, :-1] * a[:, 1:].conj() + b[:, :-1] * b[:, 1:].conj()).real).sum(axis=1)
     own = ((2 * n + 1) / (n * (n + 1)) * (a * b.conj()).real).sum(axis=1)
-    return qext, qsca, 4 / x ** 2 * (cross + own)
+    return qext, qsca, 4 / x**2 * (cross + own)
 
 
 def _intensity_ab(a: np.ndarray, b: np.ndarray, pi: np.ndarray, tau: np.ndarray) -> np.ndarray:
@@ -126,7 +137,7 @@ def _intensity_ab(a: np.ndarray, b: np.ndarray, pi: np.ndarray, tau: np.ndarray)
     k = len(a)
     sa = np.concatenate([(a * scale).real, (a * scale).imag])
     sb = np.concatenate([(b * scale).real, (b * scale).imag])
-    pi, tau = pi[:a.shape[1]], tau[:a.shape[1]]
+    pi, tau = pi[: a.shape[1]], tau[: a.shape[1]]
     s1 = sa @ pi + sb @ tau  # rows 0..k-1: Re S1, k..2k-1: Im S1
     s2 = sa @ tau + sb @ pi
     return 0.5 * (s1[:k] ** 2 + s1[k:] ** 2 + s2[:k] ** 2 + s2[k:] ** 2)
@@ -149,8 +160,14 @@ def phase_single(m: complex, x: float, mu) -> np.ndarray:
     return intensity(m, x, mu)[0] / (np.pi * x * x * qsca[0])
 
 
-def lognormal_nodes(dg: float, sigma_g: float, wavelength: float, medium_index: float = 1.0,
-                    n_nodes: int | None = None, per_x: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def lognormal_nodes(
+    dg: float,
+    sigma_g: float,
+    wavelength: float,
+    medium_index: float = 1.0,
+    n_nodes: int | None = None,
+    per_x: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray]:
     """(D [m], w [-]) with sum_j w_j f(D_j) ~ int f(D) n(D) dD for the log-normal number pdf n.
 
     Trapezoid rule in a variable t with dt/dy = sqrt(A^2 + (c x)^2), y = ln D, A = 10 / ln sigma_g,
@@ -171,7 +188,7 @@ def lognormal_nodes(dg: float, sigma_g: float, wavelength: float, medium_index: 
 
     def t_of(y):
         x = x0 * np.exp(y)
-        return np.sqrt(big_a ** 2 + x * x) - big_a * np.arcsinh(big_a / x)
+        return np.sqrt(big_a**2 + x * x) - big_a * np.arcsinh(big_a / x)
 
     t_lo, t_hi = float(t_of(lo)), float(t_of(hi))
     if n_nodes is None:
@@ -180,9 +197,9 @@ def lognormal_nodes(dg: float, sigma_g: float, wavelength: float, medium_index: 
     fine = np.linspace(lo, hi, 4001)
     y = np.interp(t, t_of(fine), fine)
     for _ in range(4):  # Newton on t(y) = t from the interpolated start (t is smooth and increasing)
-        y = np.clip(y - (t_of(y) - t) / np.sqrt(big_a ** 2 + (x0 * np.exp(y)) ** 2), lo, hi)
+        y = np.clip(y - (t_of(y) - t) / np.sqrt(big_a**2 + (x0 * np.exp(y)) ** 2), lo, hi)
     step = (t_hi - t_lo) / (n_nodes - 1)
-    w = np.full(n_nodes, step) / np.sqrt(big_a ** 2 + (x0 * np.exp(y)) ** 2)
+    w = np.full(n_nodes, step) / np.sqrt(big_a**2 + (x0 * np.exp(y)) ** 2)
     w[[0, -1]] *= 0.5
     w *= np.exp(-0.5 * ((y - mu) / s) ** 2) / (s * math.sqrt(2 * math.pi))
     return np.exp(y), w
@@ -262,15 +279,16 @@ def _optics(p: ParticlesSpec, n_angles: int, n_nodes: int | None) -> ParticleOpt
     phase /= k0 * k0 * c_sca
     g_mean = float(np.sum(w * gqsc * area) / c_sca)
     s = math.log(p.geometric_std)
-    mean_d3 = p.geometric_mean_diameter ** 3 * math.exp(4.5 * s * s)
+    mean_d3 = p.geometric_mean_diameter**3 * math.exp(4.5 * s * s)
     x_med = float(np.pi * p.geometric_mean_diameter * p.medium_index / p.wavelength)
     phase.setflags(write=False)
     mu.setflags(write=False)
     return ParticleOptics(c_ext, c_sca, g_mean, mu, phase, mean_d3, x_med, len(x))
 
 
-def particle_optics(particles: ParticlesSpec, n_angles: int = DEFAULT_ANGLES, n_nodes: int | None = None) \
-        -> ParticleOptics:
+def particle_optics(
+    particles: ParticlesSpec, n_angles: int = DEFAULT_ANGLES, n_nodes: int | None = None
+) -> ParticleOptics:
     """Size-averaged Mie optics of `particles` (cached per spec)."""
     if not (p := particles).refractive_index.real > 0:
         raise SceneError("medium.particles.refractive_index: the real part must be > 0")
@@ -291,8 +309,10 @@ def medium_coefficients(spec: ParticleMediumSpec) -> tuple[float, float]:
     n = number_concentration(spec, optics)
     sigma_a, sigma_s = n * max(optics.c_abs, 0.0), n * optics.c_sca
     if sigma_a + sigma_s > MAX_COEFFICIENT:
-        raise SceneError(f"medium: the particles give sigma_t = {sigma_a + sigma_s:.4g} 1/m, above the limit of "
-                         f"{MAX_COEFFICIENT:g} 1/m (opaque); lower the concentration")
+        raise SceneError(
+            f"medium: the particles give sigma_t = {sigma_a + sigma_s:.4g} 1/m, above the limit of "
+            f"{MAX_COEFFICIENT:g} 1/m (opaque); lower the concentration"
+        )
     return sigma_a, sigma_s
 
 
@@ -307,7 +327,9 @@ def describe(spec: ParticleMediumSpec) -> dict:
     return {
         "model": "Mie, log-normal size distribution (engine/mie.py, miepython)",
         "number_concentration_per_m3": number_concentration(spec, optics),
-        "sigma_a": sigma_a, "sigma_s": sigma_s, "sigma_t": sigma_t,
+        "sigma_a": sigma_a,
+        "sigma_s": sigma_s,
+        "sigma_t": sigma_t,
         "albedo": sigma_s / sigma_t if sigma_t > 0 else 0.0,
         "g": optics.g,
         "visibility_m": KOSCHMIEDER / sigma_t if sigma_t > 0 else None,

@@ -33,6 +33,7 @@ stores when its first vertex is y. Hence
 The source's own mirror paths (source -> mirror -> target, no random choice) are computed
 identically by both runs, which count half each.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -66,8 +67,19 @@ class _Vertex(NamedTuple):
     s: np.ndarray
 
 
-def connect_mirrors(ctx, points, shadow_origins, weights, paths, normals=None, brdf=None, in_dirs=None,
-                    only=None, first_factor=None, share=None):
+def connect_mirrors(
+    ctx,
+    points,
+    shadow_origins,
+    weights,
+    paths,
+    normals=None,
+    brdf=None,
+    in_dirs=None,
+    only=None,
+    first_factor=None,
+    share=None,
+):
     """NEE from vertices (3, n) to the targets through one perfect-mirror reflection (image method).
 
     For a mirror plane, the target t seen through it is its image t' (normal and
@@ -99,16 +111,16 @@ def connect_mirrors(ctx, points, shadow_origins, weights, paths, normals=None, b
         images = plane.reflect_points(ctx.t_pos)  # (3, T)
         img_nrm = plane.reflect_vectors(ctx.t_nrm)
         side_t = _dot(ctx.t_pos - plane.point[:, None], plane.normal[:, None])
-        for j in (range(len(tgt)) if only is None else (only,)):  # a loop over devices
+        for j in range(len(tgt)) if only is None else (only,):  # a loop over devices
             # same side as the target, and off the plane (a vertex on the mirror cannot reflect on it)
             ok = live[(side_x * side_t[j] > 0) & (np.abs(side_x) > 4.0 * isect.offset)]
             if len(ok) == 0:
                 continue
-            to = images[:, j:j + 1] - points.take(ok, axis=1)
+            to = images[:, j : j + 1] - points.take(ok, axis=1)
             d2 = _dot(to, to)
             d = np.sqrt(d2)
             wdir = to / d
-            ct = -_dot(to, img_nrm[:, j:j + 1]) / d
+            ct = -_dot(to, img_nrm[:, j : j + 1]) / d
             keep = (ct > 0) | (not targets.front_only)
             if normals is not None:
                 cs = _dot(to, normals.take(ok, axis=1)) / d
@@ -127,8 +139,9 @@ def connect_mirrors(ctx, points, shadow_origins, weights, paths, normals=None, b
             back = -plane.reflect_vectors(wdir)  # from the real target toward y
             resp = targets.response(np.full(len(ok), tgt[j]), ct, back.T)
             f = weights.take(ok) * lobe * resp / d2
-            _record_mirror(ctx, plane, j, points, shadow_origins, ok, f, d, wdir, paths, mat_rho_m,
-                           share=share, resp=resp)
+            _record_mirror(
+                ctx, plane, j, points, shadow_origins, ok, f, d, wdir, paths, mat_rho_m, share=share, resp=resp
+            )
 
 
 def _partition_share(first_factor):
@@ -137,6 +150,7 @@ def _partition_share(first_factor):
 
     def share(ok, wdir, last, t_rest, image):
         return side_weight(first_factor.take(ok), last)
+
     return share
 
 
@@ -152,6 +166,7 @@ def _both_sides_share(ctx, paths, in_dirs):
         if in_dirs is not None and at_first.any():  # leaving a first medium vertex toward y: its phase density
             rho_f = np.where(at_first, scene.phase.eval(_dot(in_dirs.take(ok, axis=1), wdir)), rho_f)
         return side_weight(paths.first.take(ok) * rho_f, last * t_rest / np.pi)
+
     return share
 
 
@@ -178,13 +193,15 @@ def connect_segment_mirrors(ctx, j: int, points, weights, pp, s, order: int, den
     src_set, _ = device_sets(ctx.scene, ctx.item.direction)
     i = ctx.item.source
     cos_src = _dot(pp.directions, src_set.normals[i][:, None])
-    q_self = src_set.response(np.full(len(s), i), cos_src, pp.directions.T) / src_set.total_response(i) \
-        / (s * s) * density
+    q_self = (
+        src_set.response(np.full(len(s), i), cos_src, pp.directions.T) / src_set.total_response(i) / (s * s) * density
+    )
 
     def share(ok, wdir, last, t_rest, image):
         q_s = q_self.take(ok)
-        q_o = _specular_second_density(ctx, ctx.targets, int(ctx.tgt[image.j]), image, points.take(ok, axis=1),
-                                       src_set.positions[i])
+        q_o = _specular_second_density(
+            ctx, ctx.targets, int(ctx.tgt[image.j]), image, points.take(ok, axis=1), src_set.positions[i]
+        )
         total = q_s + q_o
         return np.where(total > 0, q_s / np.where(total > 0, total, 1.0), 1.0)
 
@@ -206,8 +223,9 @@ def _segment_point_density(ctx, origins, dirs, l0, other, s_p):
     end = np.where(np.isfinite(t_hit), t_hit, scene.medium_far_distance)
     tgt = np.repeat(np.asarray(other, float)[:, None], len(s_p), axis=1)
     zeros = np.zeros(len(s_p))
-    return (time_density(l0, origins, dirs, tgt, zeros, end, s_p, settings.strata_length, settings.max_strata)
-            + equiangular_density(origins, dirs, tgt, zeros, end, s_p, settings.equiangular_points))
+    return time_density(
+        l0, origins, dirs, tgt, zeros, end, s_p, settings.strata_length, settings.max_strata
+    ) + equiangular_density(origins, dirs, tgt, zeros, end, s_p, settings.equiangular_points)
 
 
 def _specular_second_density(ctx, devices, i, image, points, other, density=None):
@@ -276,8 +294,9 @@ def specular_first_share(ctx, j: int, pp, points, s, density, default):
         dist = _dot(org - plane.point[:, None], plane.normal[:, None])
         w_in = org - dist * plane.normal[:, None] - o[:, None]
         w_in = w_in / np.sqrt(_dot(w_in, w_in))
-        spec = (np.abs(dist) < 8.0 * isect.offset) & \
-            (_dot(plane.reflect_vectors(w_in), pp.directions.take(cand, axis=1)) > 1.0 - 1e-12)
+        spec = (np.abs(dist) < 8.0 * isect.offset) & (
+            _dot(plane.reflect_vectors(w_in), pp.directions.take(cand, axis=1)) > 1.0 - 1e-12
+        )
         sel = cand[spec]
         if len(sel) == 0:
             continue
@@ -315,7 +334,7 @@ def branch_surface(ctx, br, points, spawn, normals, prims, rng, chain: bool):
     if chain:
         for j in range(len(ctx.tgt)):
             part = side_weight(br.first, _surface_target_factor(ctx, j, points, normals))
-            sub = _Context(ctx.scene, ctx.targets, ctx.tgt[j:j + 1], ctx.settings, ctx.item)
+            sub = _Context(ctx.scene, ctx.targets, ctx.tgt[j : j + 1], ctx.settings, ctx.item)
             if mat is None:
                 sub.connect(points, spawn, br.weights * rho / np.pi * part, br, normals=normals)
             else:
@@ -326,8 +345,17 @@ def branch_surface(ctx, br, points, spawn, normals, prims, rng, chain: bool):
                 else:
                     ctx.out[key] += sub.out[key]
             if ctx.mirrors:
-                connect_mirrors(ctx, points, spawn, br.weights, br, normals=normals, brdf=(mat, br.directions),
-                                only=j, first_factor=br.first)
+                connect_mirrors(
+                    ctx,
+                    points,
+                    spawn,
+                    br.weights,
+                    br,
+                    normals=normals,
+                    brdf=(mat, br.directions),
+                    only=j,
+                    first_factor=br.first,
+                )
     u = rng.random((2, len(br)))
     if mat is None:
         return cosine_about_soa(normals, u[0], u[1]), br.weights * rho
@@ -340,8 +368,7 @@ def connect_source_mirrors(ctx, sources, i, w0, n_paths):
     isect = ctx.scene.intersector
     pos = sources.positions[i][:, None]
     nrm = sources.normals[i][:, None]
-    one = _Vertex(lengths=np.zeros(1), path=np.zeros(1, np.int64), k=np.zeros(1, np.int64),
-                  s=np.zeros(1, np.int64))
+    one = _Vertex(lengths=np.zeros(1), path=np.zeros(1, np.int64), k=np.zeros(1, np.int64), s=np.zeros(1, np.int64))
     mark = len(ctx.out["power"])
     targets, tgt = ctx.targets, ctx.tgt
     for plane in ctx.mirrors:
@@ -352,20 +379,32 @@ def connect_source_mirrors(ctx, sources, i, w0, n_paths):
         for j in range(len(tgt)):
             if not side_x[0] * side_t[j] > 0:
                 continue
-            to = images[:, j:j + 1] - pos
+            to = images[:, j : j + 1] - pos
             d = np.sqrt(_dot(to, to))
             wdir = to / d
-            ct = -_dot(to, img_nrm[:, j:j + 1]) / d
+            ct = -_dot(to, img_nrm[:, j : j + 1]) / d
             src = sources.response(np.array([i]), _dot(wdir, nrm), wdir.T) / sources.total_response(i)
             back = -plane.reflect_vectors(wdir)
             f = w0 * src * targets.response(np.array([tgt[j]]), ct, back.T) / (d * d)
             if f[0] > 0:
-                _record_mirror(ctx, plane, j, pos, pos + isect.offset * wdir, np.zeros(1, np.int64), f, d, wdir,
-                               one, ctx.scene.geometry.material.rho_m)
+                _record_mirror(
+                    ctx,
+                    plane,
+                    j,
+                    pos,
+                    pos + isect.offset * wdir,
+                    np.zeros(1, np.int64),
+                    f,
+                    d,
+                    wdir,
+                    one,
+                    ctx.scene.geometry.material.rho_m,
+                )
     for key in ctx.out:  # every path of the batch carries the same contribution
         added = ctx.out[key][mark:]
-        ctx.out[key][mark:] = [np.tile(np.arange(n_paths), len(a)) if key == "path" else np.repeat(a, n_paths)
-                               for a in added]
+        ctx.out[key][mark:] = [
+            np.tile(np.arange(n_paths), len(a)) if key == "path" else np.repeat(a, n_paths) for a in added
+        ]
 
 
 def _record_mirror(ctx, plane, j, points, shadow_origins, ok, f, d, wdir, paths, rho_m, share=None, resp=None):
@@ -389,8 +428,15 @@ def _record_mirror(ctx, plane, j, points, shadow_origins, ok, f, d, wdir, paths,
     sel = np.flatnonzero(hit)
     if len(sel) == 0:
         return
-    ok, f, d, wdir, t_y, prim, cos_p = ok.take(sel), f.take(sel), d.take(sel), wdir.take(sel, axis=1), \
-        t_y.take(sel), prim.take(sel), cos_p.take(sel)
+    ok, f, d, wdir, t_y, prim, cos_p = (
+        ok.take(sel),
+        f.take(sel),
+        d.take(sel),
+        wdir.take(sel, axis=1),
+        t_y.take(sel),
+        prim.take(sel),
+        cos_p.take(sel),
+    )
     if resp is not None:
         resp = resp.take(sel)
     f = f * rho_m.take(prim)
@@ -403,9 +449,18 @@ def _record_mirror(ctx, plane, j, points, shadow_origins, ok, f, d, wdir, paths,
     sel = np.flatnonzero(vis & (f > 0))
     if len(sel) == 0:
         return
-    ok, f, d, wdir, t_y, out_dir, y, rest, cos_p, prim = ok.take(sel), f.take(sel), d.take(sel), \
-        wdir.take(sel, axis=1), t_y.take(sel), out_dir.take(sel, axis=1), y.take(sel, axis=1), rest.take(sel), \
-        cos_p.take(sel), prim.take(sel)
+    ok, f, d, wdir, t_y, out_dir, y, rest, cos_p, prim = (
+        ok.take(sel),
+        f.take(sel),
+        d.take(sel),
+        wdir.take(sel, axis=1),
+        t_y.take(sel),
+        out_dir.take(sel, axis=1),
+        y.take(sel, axis=1),
+        rest.take(sel),
+        cos_p.take(sel),
+        prim.take(sel),
+    )
     t_rest = 1.0
     if medium is not None:
         t_rest = medium.transmittance(y.T, out_dir.T, rest)

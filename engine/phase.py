@@ -20,14 +20,26 @@ from owcsim.schemas.medium import PhaseSpec
 
 from .errors import SceneError
 
-__all__ = ["PhaseFunction", "Isotropic", "HenyeyGreenstein", "Schlick", "Rayleigh", "Mixture", "Tabulated",
-           "MiePhase", "schlick_mean_cosine", "SCHLICK_BLASI_G_MAX", "phase_functions", "phase_from_spec",
-           "describe_phase"]
+__all__ = [
+    "PhaseFunction",
+    "Isotropic",
+    "HenyeyGreenstein",
+    "Schlick",
+    "Rayleigh",
+    "Mixture",
+    "Tabulated",
+    "MiePhase",
+    "schlick_mean_cosine",
+    "SCHLICK_BLASI_G_MAX",
+    "phase_functions",
+    "phase_from_spec",
+    "describe_phase",
+]
 
 _INV_4PI = 1.0 / (4.0 * np.pi)
 _BELOW_ONE = np.nextafter(1.0, 0.0)
 #: |g| above which Blasi's k = 1.55 g - 0.55 g^3 reaches |k| = 1: root of 0.55 g^2 + 0.55 g - 1.
-SCHLICK_BLASI_G_MAX = (-0.55 + np.sqrt(0.55 ** 2 + 4 * 0.55)) / 1.1  # 0.938121...
+SCHLICK_BLASI_G_MAX = (-0.55 + np.sqrt(0.55**2 + 4 * 0.55)) / 1.1  # 0.938121...
 
 
 def _f64(x) -> np.ndarray:
@@ -187,9 +199,11 @@ class Schlick(PhaseFunction):
         g = _open_unit("Schlick g", g)
         if method == "blasi":
             if abs(g) >= SCHLICK_BLASI_G_MAX:
-                raise ValueError(f"Blasi's k = 1.55 g - 0.55 g^3 gives |k| >= 1 for |g| >= "
-                                 f"{SCHLICK_BLASI_G_MAX:.4f} (got g = {g}); give k, or method='exact'")
-            return cls(1.55 * g - 0.55 * g ** 3)
+                raise ValueError(
+                    f"Blasi's k = 1.55 g - 0.55 g^3 gives |k| >= 1 for |g| >= "
+                    f"{SCHLICK_BLASI_G_MAX:.4f} (got g = {g}); give k, or method='exact'"
+                )
+            return cls(1.55 * g - 0.55 * g**3)
         if method != "exact":
             raise ValueError(f"unknown Schlick mapping {method!r} (use 'blasi' or 'exact')")
         lo, hi = -1.0, 1.0
@@ -342,19 +356,25 @@ class Tabulated(PhaseFunction):
     def __init__(self, cos_theta, values):
         c, v = _f64(cos_theta), _f64(values)
         if c.ndim != 1 or v.ndim != 1 or len(c) != len(v):
-            raise ValueError(f"a tabulated phase function needs cos_theta and values of one length, got shapes "
-                             f"{c.shape} and {v.shape}")
+            raise ValueError(
+                f"a tabulated phase function needs cos_theta and values of one length, got shapes "
+                f"{c.shape} and {v.shape}"
+            )
         if len(c) < 2:
             raise ValueError("a tabulated phase function needs at least 2 points")
         if not (np.all(np.isfinite(c)) and np.all(np.isfinite(v))):
             raise ValueError("tabulated phase function: cos_theta and values must be finite")
         if c[0] != -1.0 or c[-1] != 1.0:
-            raise ValueError(f"tabulated phase function: cos_theta must run from exactly -1 to exactly 1, "
-                             f"got {float(c[0])!r} .. {float(c[-1])!r}")
+            raise ValueError(
+                f"tabulated phase function: cos_theta must run from exactly -1 to exactly 1, "
+                f"got {float(c[0])!r} .. {float(c[-1])!r}"
+            )
         if np.any(bad := np.diff(c) <= 0):
             i = int(np.argmax(bad)) + 1
-            raise ValueError(f"tabulated phase function: cos_theta must be strictly increasing (entry {i}, "
-                             f"{float(c[i])!r}, does not exceed entry {i - 1}, {float(c[i - 1])!r})")
+            raise ValueError(
+                f"tabulated phase function: cos_theta must be strictly increasing (entry {i}, "
+                f"{float(c[i])!r}, does not exceed entry {i - 1}, {float(c[i - 1])!r})"
+            )
         if np.any(v < 0):
             i = int(np.argmax(v < 0))
             raise ValueError(f"tabulated phase function: values must be >= 0 (entry {i} is {float(v[i])!r})")
@@ -375,8 +395,9 @@ class Tabulated(PhaseFunction):
         self._by_u = _Guide(cdf, 0.0, 1.0)
         self._by_cos = _Guide(c, -1.0, 1.0)
         a, b = c[:-1], c[1:]
-        self._mean = float(2.0 * np.pi * np.sum(h * (self.values[:-1] * (2 * a + b) + self.values[1:] * (a + 2 * b)))
-                           / 6.0)
+        self._mean = float(
+            2.0 * np.pi * np.sum(h * (self.values[:-1] * (2 * a + b) + self.values[1:] * (a + 2 * b))) / 6.0
+        )
 
     def eval(self, cos_theta):
         """Linear interpolation (as np.interp), the segment found by a guide table."""
@@ -412,8 +433,12 @@ class Tabulated(PhaseFunction):
         return cls(c, _f64(spec.values)[::-1])
 
     def describe(self) -> dict:
-        return {"type": "tabulated", "points": len(self.cos_theta), "mean_cosine": self.mean_cosine,
-                "normalisation": self.normalisation}
+        return {
+            "type": "tabulated",
+            "points": len(self.cos_theta),
+            "mean_cosine": self.mean_cosine,
+            "normalisation": self.normalisation,
+        }
 
     def __repr__(self):
         return f"Tabulated(points={len(self.cos_theta)}, mean_cosine={self.mean_cosine:.6g})"
@@ -438,8 +463,13 @@ class MiePhase(Tabulated):
 
 #: Phase-function classes keyed by the ``type`` literal of schemas.medium's phase specs.
 phase_functions: dict[str, type[PhaseFunction]] = {
-    "isotropic": Isotropic, "hg": HenyeyGreenstein, "schlick": Schlick,
-    "rayleigh": Rayleigh, "mixture": Mixture, "tabulated": Tabulated, "mie": MiePhase,
+    "isotropic": Isotropic,
+    "hg": HenyeyGreenstein,
+    "schlick": Schlick,
+    "rayleigh": Rayleigh,
+    "mixture": Mixture,
+    "tabulated": Tabulated,
+    "mie": MiePhase,
 }
 
 

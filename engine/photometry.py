@@ -29,6 +29,7 @@ CDF a (cos g_i - cos g) + b (sin g - sin g_i - (g - g_i) cos g) by Newton iterat
 (residual below 1e-10 of the cell's probability, ~1e-11 rad), and C, whose conditional
 density is linear on [C_j, C_j+1], by the closed-form root of a quadratic.
 """
+
 from __future__ import annotations
 
 import functools
@@ -66,8 +67,9 @@ class Photometry:
     _cdf: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
     @classmethod
-    def from_table(cls, gamma_deg, c_deg, candela, *, declared_flux=None, source="", symmetry="none",
-                   where="photometry") -> "Photometry":
+    def from_table(
+        cls, gamma_deg, c_deg, candela, *, declared_flux=None, source="", symmetry="none", where="photometry"
+    ) -> "Photometry":
         """From a full table: `c_deg` from 0 to 360 inclusive, `candela` (n_c, n_g) [cd]."""
         g = np.radians(np.asarray(gamma_deg, float))
         c = np.radians(np.asarray(c_deg, float))
@@ -78,8 +80,16 @@ class Photometry:
             raise PhotometryError(f"{where}: every intensity in the table is 0: the luminaire emits nothing")
         cdf = np.concatenate([[0.0], np.cumsum(masses.ravel())]) / flux
         cdf[-1] = 1.0
-        return cls(gamma=g, c=c, intensity=table / flux, flux=flux, declared_flux=declared_flux, source=source,
-                   symmetry=symmetry, _cdf=cdf)
+        return cls(
+            gamma=g,
+            c=c,
+            intensity=table / flux,
+            flux=flux,
+            declared_flux=declared_flux,
+            source=source,
+            symmetry=symmetry,
+            _cdf=cdf,
+        )
 
     @functools.cached_property
     def max_gamma(self) -> float:
@@ -232,8 +242,6 @@ def _cell_masses(g: np.ndarray, c: np.ndarray, table: np.ndarray) -> np.ndarray:
     return np.maximum(a * s0 + b * s1, 0.0)
 
 
-
-
 @functools.lru_cache(maxsize=16)
 def _trig_cached(grid_bytes: bytes) -> tuple[np.ndarray, np.ndarray]:
     grid = np.frombuffer(grid_bytes)
@@ -257,8 +265,10 @@ def _invert_gamma_cdf(a, b, g0, g1, v, iterations: int = 60, trig=None, with_tri
     (at most `iterations`, to 1e-12 rad). `with_trig`: returns (x, cos x, sin x).
     """
     shape = np.shape(v)
-    a, b, g0, g1, v = (x if np.shape(x) == shape else np.broadcast_to(x, shape)
-                       for x in (np.asarray(y, float) for y in (a, b, g0, g1, v)))
+    a, b, g0, g1, v = (
+        x if np.shape(x) == shape else np.broadcast_to(x, shape)
+        for x in (np.asarray(y, float) for y in (a, b, g0, g1, v))
+    )
     # cos, sin of the cell's ends (`trig`: precomputed and gathered by the caller)
     cos0, sin0, cos1, sin1 = trig if trig is not None else (np.cos(g0), np.sin(g0), np.cos(g1), np.sin(g1))
     total = a * (cos0 - cos1) + b * (sin1 - sin0 - (g1 - g0) * cos1)
@@ -329,8 +339,10 @@ def _expand(c_deg: np.ndarray, rows: np.ndarray, symmetry: str, where: str) -> t
         for angle, row in zip(c_deg, rows):
             key = round(float(fold(angle)) % 360.0, 6)
             if key in values and not np.allclose(values[key], row, rtol=1e-6, atol=1e-9 * rows.max()):
-                raise PhotometryError(f"{where}: the C-plane at {key:g} deg is given twice with different "
-                                      f"intensities (symmetry {symmetry})")
+                raise PhotometryError(
+                    f"{where}: the C-plane at {key:g} deg is given twice with different "
+                    f"intensities (symmetry {symmetry})"
+                )
             values.setdefault(key, row)
     if 0.0 not in values:
         raise PhotometryError(f"{where}: no C-plane at 0 deg (or its mirror image): cannot cover 0..360 deg")
@@ -339,8 +351,13 @@ def _expand(c_deg: np.ndarray, rows: np.ndarray, symmetry: str, where: str) -> t
 
 
 # ----------------------------------------------------------------------------- IES LM-63
-_IES_TAGS = {"IESNA:LM-63-1995": "IES LM-63-1995", "IESNA:LM-63-2002": "IES LM-63-2002",
-             "IES:LM-63-2019": "IES LM-63-2019", "IESNA91": "IES LM-63-1991", "IESNA:LM-63-1991": "IES LM-63-1991"}
+_IES_TAGS = {
+    "IESNA:LM-63-1995": "IES LM-63-1995",
+    "IESNA:LM-63-2002": "IES LM-63-2002",
+    "IES:LM-63-2019": "IES LM-63-2019",
+    "IESNA91": "IES LM-63-1991",
+    "IESNA:LM-63-1991": "IES LM-63-1991",
+}
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
 
 
@@ -348,8 +365,9 @@ class _Tokens:
     """Whitespace/comma separated numbers with their line numbers, for located errors."""
 
     def __init__(self, lines: list[str], first_line: int, where: str):
-        self.items = [(tok, first_line + k) for k, line in enumerate(lines)
-                      for tok in re.split(r"[\s,]+", line.strip()) if tok]
+        self.items = [
+            (tok, first_line + k) for k, line in enumerate(lines) for tok in re.split(r"[\s,]+", line.strip()) if tok
+        ]
         self.pos, self.where = 0, where
         self.last_line = first_line + len(lines) - 1
 
@@ -386,8 +404,9 @@ def _check_angles(values: np.ndarray, what: str, lo: float, hi: float, where: st
     if np.any(np.diff(values) <= 0):
         raise PhotometryError(f"{where}: near line {line}: {what} must increase strictly: {values.tolist()}")
     if values[0] < lo - 1e-9 or values[-1] > hi + 1e-9:
-        raise PhotometryError(f"{where}: near line {line}: {what} must lie in [{lo:g}, {hi:g}] deg, "
-                              f"found {values[0]:g}..{values[-1]:g}")
+        raise PhotometryError(
+            f"{where}: near line {line}: {what} must lie in [{lo:g}, {hi:g}] deg, found {values[0]:g}..{values[-1]:g}"
+        )
 
 
 def parse_ies(data: bytes, where: str = "photometry") -> Photometry:
@@ -405,21 +424,24 @@ def parse_ies(data: bytes, where: str = "photometry") -> Photometry:
     first = lines[0].strip() if lines else ""
     source = _IES_TAGS.get(first.upper(), "IES LM-63-1986")
     if source == "IES LM-63-1986" and first.upper().startswith("IES"):
-        raise PhotometryError(f"{where}: line 1: unknown IES version tag {first!r} "
-                              f"(known: {', '.join(sorted(_IES_TAGS))})")
+        raise PhotometryError(
+            f"{where}: line 1: unknown IES version tag {first!r} (known: {', '.join(sorted(_IES_TAGS))})"
+        )
     tilt = next((k for k, line in enumerate(lines) if line.strip().upper().startswith("TILT")), None)
     if tilt is None:
         raise PhotometryError(f"{where}: no TILT= line: not an IES LM-63 file")
     mode = lines[tilt].split("=", 1)[1].strip().upper() if "=" in lines[tilt] else ""
-    tok = _Tokens(lines[tilt + 1:], tilt + 2, where)
+    tok = _Tokens(lines[tilt + 1 :], tilt + 2, where)
     if mode == "INCLUDE":
         tok.number("the lamp-to-luminaire geometry (TILT=INCLUDE)", integer=True)
         n_tilt = int(tok.number("the number of tilt angles", integer=True))
         tok.numbers(n_tilt, "tilt angles")
         tok.numbers(n_tilt, "tilt multiplying factors")
     elif mode != "NONE":
-        raise PhotometryError(f"{where}: line {tilt + 1}: TILT={mode or '?'} names an external tilt file; "
-                              "only TILT=NONE or TILT=INCLUDE can be read")
+        raise PhotometryError(
+            f"{where}: line {tilt + 1}: TILT={mode or '?'} names an external tilt file; "
+            "only TILT=NONE or TILT=INCLUDE can be read"
+        )
     n_lamps = tok.number("the number of lamps", integer=True)
     lumens = tok.number("the lumens per lamp")
     multiplier = tok.number("the candela multiplier")
@@ -434,15 +456,20 @@ def parse_ies(data: bytes, where: str = "photometry") -> Photometry:
     tok.number("the ballast-lamp factor / file generation type")
     tok.number("the input watts")
     if n_lamps < 1 or not (lumens > 0 or lumens == -1) or not multiplier > 0 or not ballast > 0:
-        raise PhotometryError(f"{where}: near line {line}: need lamps >= 1, lumens per lamp > 0 (or -1), "
-                              f"candela multiplier > 0 and ballast factor > 0; found {n_lamps:g}, {lumens:g}, "
-                              f"{multiplier:g}, {ballast:g}")
+        raise PhotometryError(
+            f"{where}: near line {line}: need lamps >= 1, lumens per lamp > 0 (or -1), "
+            f"candela multiplier > 0 and ballast factor > 0; found {n_lamps:g}, {lumens:g}, "
+            f"{multiplier:g}, {ballast:g}"
+        )
     if ptype != 1:
-        raise PhotometryError(f"{where}: near line {line}: photometric type {ptype} ({'B' if ptype == 2 else 'A'}) "
-                              "is not supported: owcsim reads type C (1), the type of indoor luminaires")
+        raise PhotometryError(
+            f"{where}: near line {line}: photometric type {ptype} ({'B' if ptype == 2 else 'A'}) "
+            "is not supported: owcsim reads type C (1), the type of indoor luminaires"
+        )
     if n_v < 2 or n_h < 1:
-        raise PhotometryError(f"{where}: near line {line}: need at least 2 vertical angles and 1 horizontal "
-                              f"angle, found {n_v} and {n_h}")
+        raise PhotometryError(
+            f"{where}: near line {line}: need at least 2 vertical angles and 1 horizontal angle, found {n_v} and {n_h}"
+        )
     line = tok.line()
     v = tok.numbers(n_v, "vertical angles")
     _check_angles(v, "vertical angles", 0.0, 180.0, where, line)
@@ -473,12 +500,13 @@ def parse_ies(data: bytes, where: str = "photometry") -> Photometry:
                 raise PhotometryError(f"{where}: the horizontal angles 0 and 360 deg have different candela values")
             h, cd = h[:-1], cd[:-1]
     else:
-        raise PhotometryError(f"{where}: horizontal angles {h[0]:g}..{h[-1]:g} deg: LM-63 type C allows 0 (one "
-                              "angle), 0..90, 0..180, 90..270 or 0..360")
+        raise PhotometryError(
+            f"{where}: horizontal angles {h[0]:g}..{h[-1]:g} deg: LM-63 type C allows 0 (one "
+            "angle), 0..90, 0..180, 90..270 or 0..360"
+        )
     c_full, rows = _expand(h, cd * multiplier, symmetry, where)
     declared = None if lumens == -1 else float(n_lamps * lumens * multiplier * ballast)
-    return Photometry.from_table(v, c_full, rows, declared_flux=declared, source=source, symmetry=symmetry,
-                                 where=where)
+    return Photometry.from_table(v, c_full, rows, declared_flux=declared, source=source, symmetry=symmetry, where=where)
 
 
 # ----------------------------------------------------------------------------- EULUMDAT
@@ -524,14 +552,19 @@ def parse_ldt(data: bytes, where: str = "photometry") -> Photometry:
         raise PhotometryError(f"{where}: line 26: need at least one lamp set, found {n_sets}")
     lamp_flux = sum(field_(27 + 2 * n_sets + k, f"the luminous flux of lamp set {k + 1} [lm]") for k in range(n_sets))
     first = 27 + 6 * n_sets + 10  # first line of the C angles
-    tok = _Tokens([ln.replace(",", ".") for ln in lines[first - 1:]], first, where)
+    tok = _Tokens([ln.replace(",", ".") for ln in lines[first - 1 :]], first, where)
     c = tok.numbers(mc, "C angles")
     line = tok.line()
     g = tok.numbers(ng, "gamma angles")
     _check_angles(c, "C angles", 0.0, 360.0, where, first)
     _check_angles(g, "gamma angles", 0.0, 180.0, where, line)
-    stored = {0: np.arange(mc), 1: np.arange(1), 2: np.arange(mc // 2 + 1),
-              3: (3 * mc // 4 + np.arange(mc // 2 + 1)) % mc, 4: np.arange(mc // 4 + 1)}[isym]
+    stored = {
+        0: np.arange(mc),
+        1: np.arange(1),
+        2: np.arange(mc // 2 + 1),
+        3: (3 * mc // 4 + np.arange(mc // 2 + 1)) % mc,
+        4: np.arange(mc // 4 + 1),
+    }[isym]
     if isym == 3 and mc % 4:
         raise PhotometryError(f"{where}: line 4: Isym = 3 needs Mc divisible by 4, found {mc}")
     line = tok.line()
@@ -546,12 +579,21 @@ def parse_ldt(data: bytes, where: str = "photometry") -> Photometry:
     expect = {2: (0.0, 180.0), 3: (270.0, 90.0), 4: (0.0, 90.0)}.get(isym)
     c_stored = c[stored]
     if expect is not None and (abs(c_stored[0] - expect[0]) > 1e-6 or abs(c_stored[-1] - expect[1]) > 1e-6):
-        raise PhotometryError(f"{where}: line {first}: with Isym = {isym} the stored C planes must run from "
-                              f"{expect[0]:g} to {expect[1]:g} deg, found {c_stored[0]:g}..{c_stored[-1]:g}")
+        raise PhotometryError(
+            f"{where}: line {first}: with Isym = {isym} the stored C planes must run from "
+            f"{expect[0]:g} to {expect[1]:g} deg, found {c_stored[0]:g}..{c_stored[-1]:g}"
+        )
     symmetry = _LDT_SYMMETRY[isym]
     c_full, rows = _expand(c_stored, values * factor * lamp_flux / 1000.0, symmetry, where)
-    return Photometry.from_table(g, c_full, rows, declared_flux=float(lamp_flux * lor / 100.0) if lor > 0 else None,
-                                 source="EULUMDAT", symmetry=symmetry, where=where)
+    return Photometry.from_table(
+        g,
+        c_full,
+        rows,
+        declared_flux=float(lamp_flux * lor / 100.0) if lor > 0 else None,
+        source="EULUMDAT",
+        symmetry=symmetry,
+        where=where,
+    )
 
 
 def parse_photometry(data: bytes, fmt: str, where: str = "photometry") -> Photometry:
@@ -573,8 +615,9 @@ def luminaire_frame(aim, c0_direction=None, rotation_deg: float = 0.0) -> np.nda
     """
     aim = np.asarray(aim, float)
     aim = aim / np.linalg.norm(aim)
-    ref = np.asarray(c0_direction if c0_direction is not None else
-                     ((1.0, 0.0, 0.0) if abs(aim[0]) < 0.9 else (0.0, 1.0, 0.0)), float)
+    ref = np.asarray(
+        c0_direction if c0_direction is not None else ((1.0, 0.0, 0.0) if abs(aim[0]) < 0.9 else (0.0, 1.0, 0.0)), float
+    )
     e0 = ref - (ref @ aim) * aim
     norm = np.linalg.norm(e0)
     if norm < 1e-6:

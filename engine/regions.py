@@ -8,6 +8,7 @@ segments that actually cross the region appear (zero-length overlaps are dropped
 Whole scene: one chunk [0, length]; box: one chunk (slab method); closed mesh: one
 chunk per pair of boundary crossings, found by closest-hit queries on Embree.
 """
+
 from __future__ import annotations
 
 import warnings
@@ -91,8 +92,12 @@ def _winding_number(points: np.ndarray, tri: np.ndarray) -> np.ndarray:
         a, b, c = (tri[:, j] - p for j in range(3))
         la, lb, lc = (np.linalg.norm(x, axis=1) for x in (a, b, c))
         num = np.einsum("ij,ij->i", a, np.cross(b, c))
-        den = la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", b, c) * la \
+        den = (
+            la * lb * lc
+            + np.einsum("ij,ij->i", a, b) * lc
+            + np.einsum("ij,ij->i", b, c) * la
             + np.einsum("ij,ij->i", c, a) * lb
+        )
         out[i] = 2.0 * np.arctan2(num, den).sum() / (4.0 * np.pi)
     return out
 
@@ -159,8 +164,10 @@ class MeshRegion:
             raise SceneError(f"{label}: vertices contain NaN or infinite values")
         mesh = trimesh.Trimesh(vertices, np.asarray(faces, np.int64), process=True)  # merges duplicate vertices
         if len(mesh.faces) == 0 or not mesh.is_watertight:
-            raise SceneError(f"{label}: the mesh region is not closed (every edge must be shared by exactly two "
-                             f"triangles), so it has no inside")
+            raise SceneError(
+                f"{label}: the mesh region is not closed (every edge must be shared by exactly two "
+                f"triangles), so it has no inside"
+            )
         faces, shell = _orient(np.asarray(mesh.faces, np.int64), label)
         tri = np.asarray(mesh.vertices, np.float64)[faces]
         shells = [np.flatnonzero(shell == s) for s in np.unique(shell)]
@@ -173,8 +180,11 @@ class MeshRegion:
             flip = []
             for i, fi in enumerate(shells):
                 p = tri[fi[0], :1]
-                depth = sum(abs(_winding_number(p, tri[fj])[0]) > 0.5 for j, fj in enumerate(shells)
-                            if j != i and np.all(p >= box[j][0]) and np.all(p <= box[j][1]))
+                depth = sum(
+                    abs(_winding_number(p, tri[fj])[0]) > 0.5
+                    for j, fj in enumerate(shells)
+                    if j != i and np.all(p >= box[j][0]) and np.all(p <= box[j][1])
+                )
                 flip.append(depth % 2 == 1)
             for fi, f in zip(shells, flip):
                 if f:
@@ -195,8 +205,12 @@ class MeshRegion:
         The query starts at origin + start * direction; t is exact (float64 plane intersection).
         """
         pos = origins + start[:, None] * directions - self.center
-        out = self._scene.run(np.ascontiguousarray(pos, np.float32), np.ascontiguousarray(directions, np.float32),
-                              dists=np.asarray(t_far, np.float32).copy(), output=1)
+        out = self._scene.run(
+            np.ascontiguousarray(pos, np.float32),
+            np.ascontiguousarray(directions, np.float32),
+            dists=np.asarray(t_far, np.float32).copy(),
+            output=1,
+        )
         prim = out["primID"].astype(np.int64)
         hit = prim >= 0
         f = np.where(hit, prim, 0)
@@ -240,8 +254,11 @@ class MeshRegion:
             keep = np.flatnonzero(hit & (t < L))
             ids, o, d, L, t_start, opened, t_query = (x[keep] for x in (ids, o, d, L, t_start, opened, t_query))
         if len(ids):
-            warnings.warn(f"{len(ids)} segments cross the mesh region more than {MAX_CROSSINGS} times; "
-                          f"their remaining length is counted as outside", stacklevel=3)
+            warnings.warn(
+                f"{len(ids)} segments cross the mesh region more than {MAX_CROSSINGS} times; "
+                f"their remaining length is counted as outside",
+                stacklevel=3,
+            )
         return chunks
 
     def contains(self, points: np.ndarray) -> np.ndarray:

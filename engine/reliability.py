@@ -24,6 +24,7 @@ target is not enough; the group spread must agree (within `GROUP_SLACK`), enough
 must be filled, no single group may dominate and the error bar's own relative error
 must be small. `warnings` turns the same figures into result warnings.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -54,8 +55,11 @@ class Reliability:
     def trusted(self) -> np.ndarray:
         """(L,) bool: enough groups, no dominant group, a stable error bar."""
         fair = 1.0 / np.maximum(self.groups, 1)
-        return ((self.groups >= MIN_GROUPS) & (self.max_group_share <= SHARE_FACTOR * fair)
-                & (self.stderr_rel_error <= MAX_STDERR_REL_ERROR))
+        return (
+            (self.groups >= MIN_GROUPS)
+            & (self.max_group_share <= SHARE_FACTOR * fair)
+            & (self.stderr_rel_error <= MAX_STDERR_REL_ERROR)
+        )
 
 
 def group_reliability(group_means, group_paths, los=None) -> Reliability:
@@ -90,8 +94,14 @@ def group_reliability(group_means, group_paths, los=None) -> Reliability:
         se_err = 0.5 * np.sqrt(2.0 / np.maximum(G - 1, 1) + np.maximum(kurt, 0.0) / np.maximum(G, 1))
     se_err = np.where(G >= 2, se_err, np.inf)
     rel = np.where(G >= 2, rel, np.inf)
-    return Reliability(groups=G, estimate=mean, group_rel_stderr=rel, max_group_share=share,
-                       effective_groups=eff, stderr_rel_error=se_err)
+    return Reliability(
+        groups=G,
+        estimate=mean,
+        group_rel_stderr=rel,
+        max_group_share=share,
+        effective_groups=eff,
+        stderr_rel_error=se_err,
+    )
 
 
 def group_means(accs) -> tuple[np.ndarray, np.ndarray]:
@@ -128,7 +138,7 @@ def may_stop(rel_stderr, rel: Reliability, target: float, served=None) -> bool:
     mask = np.ones(len(rel_stderr), bool) if served is None else np.asarray(served, bool)
     if not mask.any():
         return True
-    ok = ((rel_stderr <= target) & (rel.group_rel_stderr <= GROUP_SLACK * target) & rel.trusted())
+    ok = (rel_stderr <= target) & (rel.group_rel_stderr <= GROUP_SLACK * target) & rel.trusted()
     return bool(ok[mask].all())
 
 
@@ -139,8 +149,10 @@ def warnings(rel: Reliability, ids=None, limit: int = 3) -> list[str]:
         return []
     names = [ids[i] if ids is not None else f"link {i}" for i in bad[:limit]]
     j = bad[0]
-    return [f"{len(bad)} link(s) have an unreliable error bar on H0 (e.g. {', '.join(names)}): "
-            f"{int(rel.groups[j])} batch groups, the largest carries {rel.max_group_share[j]:.0%} of the estimate "
-            f"(fair share {1 / max(int(rel.groups[j]), 1):.0%}), effective groups {rel.effective_groups[j]:.1f}, "
-            f"the standard error itself is uncertain by ~{rel.stderr_rel_error[j]:.0%}; "
-            "run more paths (or another seed) before quoting it"]
+    return [
+        f"{len(bad)} link(s) have an unreliable error bar on H0 (e.g. {', '.join(names)}): "
+        f"{int(rel.groups[j])} batch groups, the largest carries {rel.max_group_share[j]:.0%} of the estimate "
+        f"(fair share {1 / max(int(rel.groups[j]), 1):.0%}), effective groups {rel.effective_groups[j]:.1f}, "
+        f"the standard error itself is uncertain by ~{rel.stderr_rel_error[j]:.0%}; "
+        "run more paths (or another seed) before quoting it"
+    ]

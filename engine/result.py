@@ -8,6 +8,7 @@ server and the client read its attributes; it becomes JSON only where bytes leav
 A link is estimated by one direction's paths, or by both (algorithm 4): independent
 estimators of the same quantity, so means and variances add.
 """
+
 from __future__ import annotations
 
 import math
@@ -50,9 +51,11 @@ def _warnings(spec, scene) -> list[str]:
     out = []
     alg = algorithm(spec.simulation.algorithm)
     if scene.phase is not None and alg.counts_scattering and abs(scene.phase.mean_cosine) > PEAKED_PHASE_G:
-        out.append(f"phase function mean cosine {scene.phase.mean_cosine:.4g}: connections from scattering "
-                   "points to point-like devices are heavy-tailed, so the scattered part converges slowly and its "
-                   "error bars may be too small; compare runs with different seeds")
+        out.append(
+            f"phase function mean cosine {scene.phase.mean_cosine:.4g}: connections from scattering "
+            "points to point-like devices are heavy-tailed, so the scattered part converges slowly and its "
+            "error bars may be too small; compare runs with different seeds"
+        )
     if alg.warning_in_scattering_medium and _scatters(spec.medium):
         out.append(alg.warning_in_scattering_medium)
     out += _size_warnings(scene)
@@ -65,15 +68,20 @@ OUTSIDE_WINDOW_WARNING = 0.1
 
 def _window_warnings(cols: dict[str, list]) -> list[str]:
     """Links with much of H0 arriving before t_min_s or after t_max_s (early_gain + late_gain)."""
-    outside = [(early + late) / h0 for h0, early, late in zip(cols["dc_gain"], cols["early_gain"], cols["late_gain"])
-               if h0 and early is not None]
+    outside = [
+        (early + late) / h0
+        for h0, early, late in zip(cols["dc_gain"], cols["early_gain"], cols["late_gain"])
+        if h0 and early is not None
+    ]
     worst = max(outside, default=0.0)
     if worst <= OUTSIDE_WINDOW_WARNING:
         return []
     n = sum(f > OUTSIDE_WINDOW_WARNING for f in outside)
-    return [f"{n} link(s) receive more than {OUTSIDE_WINDOW_WARNING:.0%} of H0 outside the time window (up to "
-            f"{worst:.0%}): the binned CIR, the h2-weighted delay figures and the 3 dB bandwidth describe only the "
-            "part inside it (H0, mean delay and tau_rms count every arrival); widen t_min_s..t_max_s"]
+    return [
+        f"{n} link(s) receive more than {OUTSIDE_WINDOW_WARNING:.0%} of H0 outside the time window (up to "
+        f"{worst:.0%}): the binned CIR, the h2-weighted delay figures and the 3 dB bandwidth describe only the "
+        "part inside it (H0, mean delay and tau_rms count every arrival); widen t_min_s..t_max_s"
+    ]
 
 
 #: A receiver is a point while its side sqrt(area) is below this fraction of its distance to a transmitter.
@@ -89,14 +97,15 @@ def _size_warnings(scene) -> list[str]:
     if not len(big):
         return []
     j = big[0]
-    return [f"{len(big)} receiver(s) too large for the point-receiver model, e.g. {scene.receivers.ids[j]}: side "
-            f"sqrt(area) = {math.sqrt(areas[j]):.3g} m against {nearest[j]:.3g} m to the nearest transmitter "
-            f"(the model needs under {POINT_RECEIVER_RATIO:g} of it); their gains are overestimated and may exceed 1"]
+    return [
+        f"{len(big)} receiver(s) too large for the point-receiver model, e.g. {scene.receivers.ids[j]}: side "
+        f"sqrt(area) = {math.sqrt(areas[j]):.3g} m against {nearest[j]:.3g} m to the nearest transmitter "
+        f"(the model needs under {POINT_RECEIVER_RATIO:g} of it); their gains are overestimated and may exceed 1"
+    ]
 
 
 def _albedo_max(scene) -> float:
     return _max_albedo(scene.spec)
-
 
 
 def _geometric_tail(gain: float, ratio: float) -> float:
@@ -113,15 +122,22 @@ def _modeled(spec, scene, modeled: ModeledPublic | None, unreachable, settings) 
     if alg.scattering_orders is None and scene.medium is not None:  # S chosen, not fixed by the algorithm
         left.append(f"scattering orders above S = {sim.max_scattering}")
     left.append(f"arrivals after t_max_s = {settings.bins.edges[-1]:.4g} s in the binned CIR (counted in late_gain)")
-    why = "it faces into a solid or lies flush against a surface (no transmitter in view): no light reaches it; " \
-          "not simulated"
-    return chosen.model_copy(update=dict(
-        algorithm=sim.algorithm,
-        families=alg.families if scene.medium is not None else "vacuum paths, reflection orders 0..K",
-        left_out=left, medium=mie.medium_report(spec.medium, scene.phase),  # derived coefficients, g, visibility
-        max_reflections=sim.max_reflections, max_scattering=sim.scattering_orders if scene.medium is not None else 0,
-        time_window_s=(settings.bins.t_min, float(settings.bins.edges[-1])),
-        unreachable_receivers=[UnreachablePublic(receiver=scene.receivers.ids[j], reason=why) for j in unreachable]))
+    why = (
+        "it faces into a solid or lies flush against a surface (no transmitter in view): no light reaches it; "
+        "not simulated"
+    )
+    return chosen.model_copy(
+        update=dict(
+            algorithm=sim.algorithm,
+            families=alg.families if scene.medium is not None else "vacuum paths, reflection orders 0..K",
+            left_out=left,
+            medium=mie.medium_report(spec.medium, scene.phase),  # derived coefficients, g, visibility
+            max_reflections=sim.max_reflections,
+            max_scattering=sim.scattering_orders if scene.medium is not None else 0,
+            time_window_s=(settings.bins.t_min, float(settings.bins.edges[-1])),
+            unreachable_receivers=[UnreachablePublic(receiver=scene.receivers.ids[j], reason=why) for j in unreachable],
+        )
+    )
 
 
 def _paths_traced(accs, n_tx: int, n_rx: int) -> int:
@@ -132,10 +148,20 @@ def _paths_traced(accs, n_tx: int, n_rx: int) -> int:
     return int(fwd.max(axis=1).sum() + bwd.max(axis=0).sum())
 
 
-def build_result(spec: SceneSpec, scene: Scene, accs: dict[str, Accumulator], settings: KernelSettings,
-                 los_gain: np.ndarray, los_delay: np.ndarray, directions: np.ndarray, info: RunInfo,
-                 original: SceneSpec | None = None, modeled: ModeledPublic | None = None,
-                 unreachable: Sequence[int] = (), geometry: LosGeometry | None = None) -> SimulationResultPublic:
+def build_result(
+    spec: SceneSpec,
+    scene: Scene,
+    accs: dict[str, Accumulator],
+    settings: KernelSettings,
+    los_gain: np.ndarray,
+    los_delay: np.ndarray,
+    directions: np.ndarray,
+    info: RunInfo,
+    original: SceneSpec | None = None,
+    modeled: ModeledPublic | None = None,
+    unreachable: Sequence[int] = (),
+    geometry: LosGeometry | None = None,
+) -> SimulationResultPublic:
     """The typed result; every per-link figure is computed for all links at once as arrays."""
     plan = settings.tally
     bins = plan.bins
@@ -152,32 +178,51 @@ def build_result(spec: SceneSpec, scene: Scene, accs: dict[str, Accumulator], se
     h0 = np.where(link_masked, np.nan, delay["dc_gain"])
     nan_masked = {k: np.where(link_masked, np.nan, v) for k, v in delay.items()}
     cols = {
-        "transmitter": [tx.ids[i] for i in link_tx], "receiver": [rx.ids[j] for j in link_rx],
-        "transmitter_index": link_tx.tolist(), "receiver_index": link_rx.tolist(),
+        "transmitter": [tx.ids[i] for i in link_tx],
+        "receiver": [rx.ids[j] for j in link_rx],
+        "transmitter_index": link_tx.tolist(),
+        "receiver_index": link_rx.tolist(),
         "receiver_position": [tuple(p) for p in rx.positions[link_rx].tolist()],
-        "direction": [Direction.of_code(d) for d in directions], "paths": n_paths.tolist(),
-        "dc_gain": column(h0), "dc_gain_stderr": column(nan_masked["dc_gain_stderr"]),
+        "direction": [Direction.of_code(d) for d in directions],
+        "paths": n_paths.tolist(),
+        "dc_gain": column(h0),
+        "dc_gain_stderr": column(nan_masked["dc_gain_stderr"]),
         "path_loss_db": column(metrics.path_loss_db(h0)),
         "received_power_w": column(h0 * tx.power[link_tx]),
         "mean_delay_s": column(nan_masked["mean_delay_s"]),
         "mean_delay_s_stderr": column(nan_masked["mean_delay_s_stderr"]),
         "rms_delay_spread_s": column(nan_masked["rms_delay_spread_s"]),
         "rms_delay_spread_s_stderr": column(nan_masked["rms_delay_spread_s_stderr"]),
-        "los_gain": column(np.where(link_masked, np.nan, los_gain)), "los_delay_s": los_delay.tolist(),
+        "los_gain": column(np.where(link_masked, np.nan, los_gain)),
+        "los_delay_s": los_delay.tolist(),
     }
     empty = [None] * scene.n_links
-    for key in ("mean_delay_h2_s", "rms_delay_spread_h2_s", "rms_delay_spread_h2_s_stderr", "bandwidth_3db_hz",
-                "bandwidth_3db_hz_stderr", "truncated_gain_estimate", "dc_gain_by_reflection_order",
-                "dc_gain_by_reflection_order_stderr", "dc_gain_by_scattering_order",
-                "dc_gain_by_scattering_order_stderr", "early_gain", "late_gain", "cir"):
+    for key in (
+        "mean_delay_h2_s",
+        "rms_delay_spread_h2_s",
+        "rms_delay_spread_h2_s_stderr",
+        "bandwidth_3db_hz",
+        "bandwidth_3db_hz_stderr",
+        "truncated_gain_estimate",
+        "dc_gain_by_reflection_order",
+        "dc_gain_by_reflection_order_stderr",
+        "dc_gain_by_scattering_order",
+        "dc_gain_by_scattering_order_stderr",
+        "early_gain",
+        "late_gain",
+        "cir",
+    ):
         cols[key] = list(empty)
     cir_links = np.flatnonzero(plan.cir_slots(np.arange(scene.n_links)) >= 0)
     cir_totals = cir_block(accs, plan, cir_links, los_gain, los_delay, cols)
     order_links = np.flatnonzero(plan.order_slots(np.arange(scene.n_links)) >= 0)
     rho_max = float(scene.geometry.reflectance.max()) if len(scene.geometry.reflectance) else 0.0
     # the albedo tail concerns algorithm 5's truncated scattering orders (algorithm 4's S = 2 is a family, not a cut)
-    albedo_max = _albedo_max(scene) if settings.free_flight and settings.max_scattering > 1 \
-        and scene.medium is not None else None
+    albedo_max = (
+        _albedo_max(scene)
+        if settings.free_flight and settings.max_scattering > 1 and scene.medium is not None
+        else None
+    )
     order_block(accs, plan, order_links, los_gain, cols, rho_max, albedo_max, enclosed=len(scene.geometry.faces) > 0)
     for link in np.flatnonzero(link_masked & (plan.cir_slots(np.arange(scene.n_links)) >= 0)):
         cols["cir"][link] = None
@@ -190,35 +235,51 @@ def build_result(spec: SceneSpec, scene: Scene, accs: dict[str, Accumulator], se
     all_accs = list(accs.values())
     fwd = accs[Direction.FORWARD]
     run = {
-        "stop_reason": info.stop_reason, "target_rel_error": spec.simulation.target_rel_error,
+        "stop_reason": info.stop_reason,
+        "target_rel_error": spec.simulation.target_rel_error,
         "max_dc_gain_rel_stderr": _num(rel.max()) if len(rel) else None,
-        "wall_time_s": info.wall_time_s, "workers": info.workers, "batches": info.batches,
+        "wall_time_s": info.wall_time_s,
+        "workers": info.workers,
+        "batches": info.batches,
         "paths_total": _paths_traced(accs, n_tx, n_rx),
         "rays_intersect": sum(a.rays_intersect for a in all_accs),
-        "rays_occluded": sum(a.rays_occluded for a in all_accs), "direction_choice": info.pilot,
+        "rays_occluded": sum(a.rays_occluded for a in all_accs),
+        "direction_choice": info.pilot,
     }
 
     def per_tx(values):
-        return {tx.ids[i]: float(p) / max(fwd.n_paths[scene.link(i, 0):scene.link(i + 1, 0)].max(), 1)
-                for i, p in values.items()}
+        return {
+            tx.ids[i]: float(p) / max(fwd.n_paths[scene.link(i, 0) : scene.link(i + 1, 0)].max(), 1)
+            for i, p in values.items()
+        }
 
     diagnostics = {
-        "power_on_surfaces": per_tx(fwd.surface_power), "escaped_power": per_tx(fwd.escaped_power),
+        "power_on_surfaces": per_tx(fwd.surface_power),
+        "escaped_power": per_tx(fwd.escaped_power),
         "medium_evaluations": sum(a.medium_evaluations for a in all_accs),
     }
     receivers = _receivers(spec, scene)
     doc = {
-        "owcsim_version": __version__, "algorithm": spec.simulation.algorithm,
-        "warnings": _warnings(spec, scene) + _window_warnings(cols) + _mask_warnings(scene)
-        + reliability.warnings(link_reliability(accs, los_gain), [f"{t}-{r}" for t, r in zip(cols["transmitter"],
-                                                                                          cols["receiver"])]),
+        "owcsim_version": __version__,
+        "algorithm": spec.simulation.algorithm,
+        "warnings": _warnings(spec, scene)
+        + _window_warnings(cols)
+        + _mask_warnings(scene)
+        + reliability.warnings(
+            link_reliability(accs, los_gain), [f"{t}-{r}" for t, r in zip(cols["transmitter"], cols["receiver"])]
+        ),
         "modeled": _modeled(spec, scene, modeled, unreachable, settings),
         "families": algorithm(spec.simulation.algorithm).families,
         "time_bins": {"t_min_s": bins.t_min, "time_bin_s": bins.dt, "n_bins": bins.n},
-        "links": links, "receivers": receivers, "channels": channels,
-        "maps": grid_maps(spec, scene, channel_cols, [g.name for g in spec.transmitter_groups]) if channels
+        "links": links,
+        "receivers": receivers,
+        "channels": channels,
+        "maps": grid_maps(spec, scene, channel_cols, [g.name for g in spec.transmitter_groups])
+        if channels
         else grid_maps(spec, scene, cols, list(tx.ids)),
-        "run": run, "diagnostics": diagnostics, "scene": original or spec,  # the model itself: not validated again
+        "run": run,
+        "diagnostics": diagnostics,
+        "scene": original or spec,  # the model itself: not validated again
     }
     if scene.spectra is not None:  # per band and combined (engine/spectra.py)
         from .spectra import result_block
@@ -233,8 +294,10 @@ def _mask_warnings(scene) -> list[str]:
     masked = np.flatnonzero(scene.masked != "")
     if not len(masked):
         return []
-    return [f"{len(masked)} grid point(s) not simulated (values null), e.g. {scene.receivers.ids[masked[0]]}: "
-            f"{scene.masked[masked[0]]}; the receivers list gives every reason"]
+    return [
+        f"{len(masked)} grid point(s) not simulated (values null), e.g. {scene.receivers.ids[masked[0]]}: "
+        f"{scene.masked[masked[0]]}; the receivers list gives every reason"
+    ]
 
 
 def _receivers(spec, scene) -> list[dict]:
@@ -243,12 +306,18 @@ def _receivers(spec, scene) -> list[dict]:
     ii, jj = [None] * len(rx), [None] * len(rx)
     for g, (first, (nu, nv)) in zip(spec.receiver_grids, scene.grid_slices):
         i, j = np.divmod(np.arange(nu * nv), nv)
-        grid[first:first + nu * nv] = [g.id_prefix] * (nu * nv)
-        ii[first:first + nu * nv] = i.tolist()
-        jj[first:first + nu * nv] = j.tolist()
-    cols = {"id": list(rx.ids), "position": [tuple(p) for p in rx.positions.tolist()],
-            "normal": [tuple(n) for n in rx.normals.tolist()], "grid": grid, "i": ii, "j": jj,
-            "masked": [m or None for m in scene.masked.tolist()]}
+        grid[first : first + nu * nv] = [g.id_prefix] * (nu * nv)
+        ii[first : first + nu * nv] = i.tolist()
+        jj[first : first + nu * nv] = j.tolist()
+    cols = {
+        "id": list(rx.ids),
+        "position": [tuple(p) for p in rx.positions.tolist()],
+        "normal": [tuple(n) for n in rx.normals.tolist()],
+        "grid": grid,
+        "i": ii,
+        "j": jj,
+        "masked": [m or None for m in scene.masked.tolist()],
+    }
     return document_rows(cols, len(rx))
 
 
@@ -266,12 +335,15 @@ def _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=
     g_idx, r_idx = np.divmod(np.arange(n_groups * n_rx), n_rx)
     flat = {k: np.where(nan, np.nan, v).ravel() for k, v in d.items()}
     cols = {
-        "group": [spec.transmitter_groups[g].name for g in g_idx], "receiver": [scene.receivers.ids[j] for j in r_idx],
-        "receiver_index": r_idx.tolist(), "dc_gain": column(h0.ravel()),
+        "group": [spec.transmitter_groups[g].name for g in g_idx],
+        "receiver": [scene.receivers.ids[j] for j in r_idx],
+        "receiver_index": r_idx.tolist(),
+        "dc_gain": column(h0.ravel()),
         "dc_gain_stderr": column(flat["dc_gain_stderr"]),
         "path_loss_db": column(metrics.path_loss_db(h0.ravel())),
         "received_power_w": column((h0 * group_power[:, None]).ravel()),
-        "mean_delay_s": column(flat["mean_delay_s"]), "mean_delay_s_stderr": column(flat["mean_delay_s_stderr"]),
+        "mean_delay_s": column(flat["mean_delay_s"]),
+        "mean_delay_s_stderr": column(flat["mean_delay_s_stderr"]),
         "rms_delay_spread_s": column(flat["rms_delay_spread_s"]),
         "rms_delay_spread_s_stderr": column(flat["rms_delay_spread_s_stderr"]),
         "cir": [None] * (n_groups * n_rx),

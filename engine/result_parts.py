@@ -4,6 +4,7 @@ Per-link figures are columns (one array over links) turned into JSON lists once;
 links that asked for a CIR (a handful of explicit receivers by default) get per-link work
 (the jackknife of their h^2 delay spread and 3 dB bandwidth).
 """
+
 from __future__ import annotations
 
 import math
@@ -64,8 +65,9 @@ def _group_estimates(accs, link: int, slot: int):
     return est * weight[:, None], weight
 
 
-def cir_block(accs: dict[str, Accumulator], plan: TallyPlan, cir_links: np.ndarray, los_gain, los_delay,
-              cols: dict) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+def cir_block(
+    accs: dict[str, Accumulator], plan: TallyPlan, cir_links: np.ndarray, los_gain, los_delay, cols: dict
+) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """Fill the CIR columns of the links that have one; returns {link: (total per bin, per-group per-path
     estimates (N_GROUPS, bins))} for the groups' channels."""
     out: dict[int, tuple[np.ndarray, np.ndarray]] = {}
@@ -109,8 +111,9 @@ def cir_block(accs: dict[str, Accumulator], plan: TallyPlan, cir_links: np.ndarr
         t0_h2, rms_h2 = metrics.rms_delay_spread_h2(rel_edges, total[r])
         rms_h2_se = np.nan
         if enough:
-            _, rms_h2_se = metrics.jackknife(lambda x: metrics.rms_delay_spread_h2(rel_edges, per_path(x))[1],
-                                             groups, weight)
+            _, rms_h2_se = metrics.jackknife(
+                lambda x: metrics.rms_delay_spread_h2(rel_edges, per_path(x))[1], groups, weight
+            )
         bw = metrics.bandwidth_3db(rel_edges, total[r])
         bw_se = None
         if bw is not None and enough:
@@ -122,16 +125,27 @@ def cir_block(accs: dict[str, Accumulator], plan: TallyPlan, cir_links: np.ndarr
         cols["bandwidth_3db_hz_stderr"][link] = None if bw_se is None else _num(bw_se)
         cols["early_gain"][link] = float(early[r])
         cols["late_gain"][link] = float(late[r])
-        cols["cir"][link] = {"total": total[r].tolist(), "total_stderr": column(bin_se),
-                             "by_reflection_order": None if by_k is None else by_k[r].tolist(),
-                             "by_scattering_order": None if by_s is None else by_s[r].tolist()}
+        cols["cir"][link] = {
+            "total": total[r].tolist(),
+            "total_stderr": column(bin_se),
+            "by_reflection_order": None if by_k is None else by_k[r].tolist(),
+            "by_scattering_order": None if by_s is None else by_s[r].tolist(),
+        }
         est = groups / np.where(weight > 0, weight, 1.0)[:, None] if len(weight) else np.zeros((0, bins.n))
         out[link] = (total[r], est + los_vec[r])
     return out
 
 
-def order_block(accs: dict[str, Accumulator], plan: TallyPlan, order_links: np.ndarray, los_gain, cols: dict,
-                rho_max: float, albedo_max: float | None, enclosed: bool = True) -> None:
+def order_block(
+    accs: dict[str, Accumulator],
+    plan: TallyPlan,
+    order_links: np.ndarray,
+    los_gain,
+    cols: dict,
+    rho_max: float,
+    albedo_max: float | None,
+    enclosed: bool = True,
+) -> None:
     """Fill the order-split columns (H0 per reflection and scattering order) and the truncation estimate."""
     if not len(order_links):
         return
@@ -147,7 +161,7 @@ def order_block(accs: dict[str, Accumulator], plan: TallyPlan, order_links: np.n
 
     tail = np.zeros(len(order_links))
     for r in range(len(order_links)):  # the decay past the last order: fitted to the measured orders, capped by
-        if by_k.shape[1] > 1:            # rho_max (albedo_max) when below 1 (auto.tail_ratio)
+        if by_k.shape[1] > 1:  # rho_max (albedo_max) when below 1 (auto.tail_ratio)
             tail[r] += _geometric_tail(by_k[r, -1], tail_ratio(by_k[r], by_k_se[r], rho_max)[0])
         if albedo_max is not None:  # albedo 1 and no surface: algebraic decay, no geometric bound (as auto.py)
             ratio = tail_ratio(by_s[r], by_s_se[r], albedo_max)[0] if albedo_max < 1.0 or enclosed else np.inf
@@ -215,7 +229,18 @@ def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[d
             for q, unit in OPTIONAL_MAP_QUANTITIES.items():
                 if q in columns and np.isfinite(arr := part(q)).any():
                     values[q], units[q] = column(arr), unit
-            out.append({"grid": grid.id_prefix, "channel": name, "shape": (nu, nv), "origin": tuple(grid.origin),
-                        "u": tuple(u.tolist()), "v": tuple(v.tolist()), "spacing": grid.spacing, "units": units,
-                        "values": values, "stderr": stderr})
+            out.append(
+                {
+                    "grid": grid.id_prefix,
+                    "channel": name,
+                    "shape": (nu, nv),
+                    "origin": tuple(grid.origin),
+                    "u": tuple(u.tolist()),
+                    "v": tuple(v.tolist()),
+                    "spacing": grid.spacing,
+                    "units": units,
+                    "values": values,
+                    "stderr": stderr,
+                }
+            )
     return out

@@ -1,4 +1,5 @@
 """The engine's view of a scene: geometry on Embree, devices, medium. Built once per process."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -60,12 +61,14 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
     `base_dir` resolves relative mesh file paths (the scene file's folder).
     """
     geometry = build_geometry(spec, Path(base_dir) if base_dir is not None else None)
-    transmitters = transmitters_from_specs(spec.transmitters, spec.transmitter_ids(),
-                                           Path(base_dir) if base_dir is not None else None)
+    transmitters = transmitters_from_specs(
+        spec.transmitters, spec.transmitter_ids(), Path(base_dir) if base_dir is not None else None
+    )
     receivers, grid_slices = receivers_from_scene(spec)
     if len(geometry.faces):  # rays are cast in float32 around the surfaces' centre: devices count too
-        check_extent(np.concatenate([geometry.vertices, transmitters.positions, receivers.positions]),
-                     "the surfaces and devices")
+        check_extent(
+            np.concatenate([geometry.vertices, transmitters.positions, receivers.positions]), "the surfaces and devices"
+        )
     medium = medium_from_spec(spec.medium)
     intersector = Intersector(geometry)
     planes = _mirror_planes(geometry, intersector)
@@ -108,7 +111,7 @@ def receivers_from_scene(spec: SceneSpec) -> tuple[Devices, list]:
 
     Returns the Devices and, per grid, (first receiver index, (nu, nv)).
     """
-    rows, slices, ids = [], [], list(spec.receiver_ids()[:len(spec.receivers)])
+    rows, slices, ids = [], [], list(spec.receiver_ids()[: len(spec.receivers)])
     for r in spec.receivers:
         rows.append((np.asarray([r.position]), r.normal, r.area, r.fov_deg, r.filter_gain, r.concentrator_index))
     first = len(spec.receivers)
@@ -130,9 +133,18 @@ def receivers_from_scene(spec: SceneSpec) -> tuple[Devices, list]:
     cos_fov = np.where(np.isclose(fov, np.pi / 2, rtol=0, atol=1e-12), 0.0, np.cos(fov))
     positions = np.concatenate([r[0] for r in rows]).reshape(n, 3) if rows else np.zeros((0, 3))
     normals = _unit_rows(per_point([r[1] for r in rows]).reshape(n, 3)) if rows else np.zeros((0, 3))
-    devices = Devices(kind="receiver", ids=ids, positions=positions, normals=normals, order=np.zeros(n),
-                      cos_fov=cos_fov, gain=gain, power=np.ones(n), area=per_point([r[2] for r in rows]),
-                      patterns=[None] * n)
+    devices = Devices(
+        kind="receiver",
+        ids=ids,
+        positions=positions,
+        normals=normals,
+        order=np.zeros(n),
+        cos_fov=cos_fov,
+        gain=gain,
+        power=np.ones(n),
+        area=per_point([r[2] for r in rows]),
+        patterns=[None] * n,
+    )
     return devices, slices
 
 
@@ -169,8 +181,10 @@ def _mirror_planes(geometry: Geometry, intersector: Intersector) -> list:
         return []
     planes = mirror_planes(geometry.vertices, geometry.faces, geometry.material.rho_m, tol=intersector.offset)
     if len(planes) > MAX_MIRROR_PLANES:
-        raise SceneError(f"the mirror surfaces lie in {len(planes)} distinct planes, more than {MAX_MIRROR_PLANES}: "
-                         "perfect mirrors must be flat (use a Phong material for curved glossy surfaces)")
+        raise SceneError(
+            f"the mirror surfaces lie in {len(planes)} distinct planes, more than {MAX_MIRROR_PLANES}: "
+            "perfect mirrors must be flat (use a Phong material for curved glossy surfaces)"
+        )
     return planes
 
 

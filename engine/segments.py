@@ -28,6 +28,7 @@ The estimators of algorithms 2-4 built on them (`segment_scatter`, `segment_poin
 segment-points event of kernel.trace_batch) live at the end of this module; they connect
 through the kernel's `_Context.connect` (the measurement equation).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -106,8 +107,11 @@ class EquiangularFrame:
 
     def density(self, s, n_per: int, seg=None):
         """n_E(s) = n_per h / ((theta_b - theta_a) (h^2 + (s - D)^2)) on the segments `seg` (all if None)."""
-        D, h, ta, tb = (self.D, self.h, self.theta_a, self.theta_b) if seg is None else \
-            (self.D.take(seg), self.h.take(seg), self.theta_a.take(seg), self.theta_b.take(seg))
+        D, h, ta, tb = (
+            (self.D, self.h, self.theta_a, self.theta_b)
+            if seg is None
+            else (self.D.take(seg), self.h.take(seg), self.theta_a.take(seg), self.theta_b.take(seg))
+        )
         span = tb - ta
         x = s - D
         pdf = h / (np.where(span > 0, span, 1.0) * (h * h + x * x))
@@ -207,14 +211,22 @@ def segment_scatter(ctx, paths, t_seg, rng, first: bool, prim=None) -> None:
         from .mirrors import specular_first_share
 
         def partition(j, pp, points, s, density):  # after a specular first vertex: mirrors.py
-            return specular_first_share(ctx, j, pp, points, s, density,
-                                        side_weight(pp.first, target_factor(ctx, j, points)))
-    segment_points(ctx, paths.keep(alive), t_seg.take(alive), rng, order=1, direction_mis=settings.mis and first,
-                   weight_fn=partition)
+            return specular_first_share(
+                ctx, j, pp, points, s, density, side_weight(pp.first, target_factor(ctx, j, points))
+            )
+
+    segment_points(
+        ctx,
+        paths.keep(alive),
+        t_seg.take(alive),
+        rng,
+        order=1,
+        direction_mis=settings.mis and first,
+        weight_fn=partition,
+    )
 
 
-def segment_points(ctx, seg_paths, t_seg, rng, order: int, direction_mis: bool = False,
-                   weight_fn=None) -> None:
+def segment_points(ctx, seg_paths, t_seg, rng, order: int, direction_mis: bool = False, weight_fn=None) -> None:
     """Points on the segments [0, t_seg) of `seg_paths` (time strata + equiangular, balance heuristic),
     each connected to every target as a scattering event of order `order`.
 
@@ -224,7 +236,7 @@ def segment_points(ctx, seg_paths, t_seg, rng, order: int, direction_mis: bool =
     zeros = np.zeros(len(seg_paths))
     h, n_eq = settings.strata_length, settings.equiangular_points
     for j in range(len(ctx.tgt)):  # strata depend on the target: a loop over devices, not rays
-        y = np.repeat(ctx.t_pos[:, j:j + 1], len(seg_paths), axis=1)
+        y = np.repeat(ctx.t_pos[:, j : j + 1], len(seg_paths), axis=1)
         o, d, l0 = seg_paths.origins, seg_paths.directions, seg_paths.lengths
         seg_t, s_t, _ = time_strata(l0, o, d, y, zeros, t_seg, h, lambda m: rng.random(m), settings.max_strata)
         frame = EquiangularFrame(o, d, y, zeros, t_seg)  # once per segment and target
@@ -234,9 +246,9 @@ def segment_points(ctx, seg_paths, t_seg, rng, order: int, direction_mis: bool =
             continue
         seg, pp, points, s, sigma_s = found
         y_p, end = y.take(seg, axis=1), t_seg.take(seg)
-        density = (time_density(pp.lengths, pp.origins, pp.directions, y_p, np.zeros(len(s)), end, s, h,
-                                settings.max_strata)
-                   + (frame.density(s, n_eq, seg) if n_eq else 0.0))
+        density = time_density(
+            pp.lengths, pp.origins, pp.directions, y_p, np.zeros(len(s)), end, s, h, settings.max_strata
+        ) + (frame.density(s, n_eq, seg) if n_eq else 0.0)
         # throughput of a point: w T(o -> p) sigma_s(p) / (n_T + n_E), the balance heuristic of the time
         # strata and the equiangular points in Veach's multi-sample form (segments.py)
         tau = medium.optical_depth(pp.origins.T, pp.directions.T, s)
@@ -251,8 +263,17 @@ def segment_points(ctx, seg_paths, t_seg, rng, order: int, direction_mis: bool =
         if weight_fn is not None:
             share = weight_fn(j, pp, points, s, density)
             mis = share if mis is None else mis * share
-        ctx.connect(points, points, throughput, pp, in_dirs=pp.directions, mis=mis, target=j,
-                    scatter_order=np.full(len(pp), order, np.int64), extra_length=s)
+        ctx.connect(
+            points,
+            points,
+            throughput,
+            pp,
+            in_dirs=pp.directions,
+            mis=mis,
+            target=j,
+            scatter_order=np.full(len(pp), order, np.int64),
+            extra_length=s,
+        )
 
 
 def _scattering_points(paths, seg, s, medium):
@@ -293,8 +314,9 @@ def _direction_mis(ctx, j: int, pp, points, s, density):
     to_p = points - o[:, None]
     r = np.sqrt(_dot3(to_p, to_p))
     w_dir = to_p / r
-    q_other = dst_set.response(np.full(n, j), _dot3(w_dir, dst_set.normals[j][:, None]), w_dir.T) \
-        / dst_set.total_response(j)
+    q_other = dst_set.response(
+        np.full(n, j), _dot3(w_dir, dst_set.normals[j][:, None]), w_dir.T
+    ) / dst_set.total_response(j)
     live = np.flatnonzero(q_other > 0)
     if len(live):
         origins = np.repeat(o[:, None], len(live), axis=1)
@@ -303,9 +325,9 @@ def _direction_mis(ctx, j: int, pp, points, s, density):
         t_hit = np.where(np.isfinite(t_hit), t_hit, scene.medium_far_distance)
         src = np.repeat(src_set.positions[i][:, None], len(live), axis=1)
         zeros, rl = np.zeros(len(live)), r.take(live)
-        other = (time_density(zeros, origins, dirs, src, zeros, t_hit, rl, settings.strata_length,
-                              settings.max_strata)
-                 + equiangular_density(origins, dirs, src, zeros, t_hit, rl, settings.equiangular_points))
+        other = time_density(
+            zeros, origins, dirs, src, zeros, t_hit, rl, settings.strata_length, settings.max_strata
+        ) + equiangular_density(origins, dirs, src, zeros, t_hit, rl, settings.equiangular_points)
         q_other[live] = q_other.take(live) / (rl * rl) * other
     total = q_self + q_other
     return np.where(total > 0, q_self / np.where(total > 0, total, 1.0), 1.0)

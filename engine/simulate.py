@@ -10,6 +10,7 @@ number of workers. In accuracy mode batches are issued in rounds (one batch per 
 the run stops after the first round at which every link's relative standard error of H0 is
 at or below the target, or when the time budget is spent (the result says which).
 """
+
 from __future__ import annotations
 
 import itertools
@@ -26,7 +27,7 @@ from owcsim.schemas import SceneSpec, SimulationSpec
 from owcsim.schemas.algorithms import Direction, TwoSided, algorithm
 from owcsim.schemas.results import DirectionChoicePublic, ModeledPublic, SimulationResultPublic, StopReason
 
-from . import auto
+from . import auto, spectra
 from .constants import SPEED_OF_LIGHT
 from .estimates import may_stop, reported_rel_stderr
 from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
@@ -34,7 +35,6 @@ from .kernel import KernelSettings, WorkItem
 from .los import line_of_sight, los_geometry
 from .medium_nee import two_sided_settings
 from .result import build_result
-from . import spectra
 from .scene import Scene, build_scene
 from .tally import Accumulator, TallyPlan, TimeBins
 
@@ -93,9 +93,15 @@ def tally_plan(spec: SceneSpec, scene: Scene) -> TallyPlan:
     def rank(flags: np.ndarray) -> np.ndarray:
         return np.where(flags, np.cumsum(flags) - 1, -1).astype(np.int64)
 
-    return TallyPlan(bins=TimeBins(sim.t_min_s, sim.time_bin_s, sim.n_bins), n_orders=sim.max_reflections + 1,
-                     n_scatter=sim.scattering_orders + 1, n_rx=len(scene.receivers), cir_rank=rank(cir),
-                     order_rank=rank(orders), group_weights=group_weights(spec, scene))
+    return TallyPlan(
+        bins=TimeBins(sim.t_min_s, sim.time_bin_s, sim.n_bins),
+        n_orders=sim.max_reflections + 1,
+        n_scatter=sim.scattering_orders + 1,
+        n_rx=len(scene.receivers),
+        cir_rank=rank(cir),
+        order_rank=rank(orders),
+        group_weights=group_weights(spec, scene),
+    )
 
 
 def group_weights(spec: SceneSpec, scene: Scene) -> np.ndarray:
@@ -114,8 +120,9 @@ def two_sided(spec: SceneSpec, scene: Scene) -> bool:
     medium, algorithms 2-4 always, algorithm 5 unless a direction is requested (bounded weights near point
     devices); the registry's `two_sided` says which (schemas/algorithms.py)."""
     rule = algorithm(spec.simulation.algorithm).two_sided
-    return scene.medium is not None and (rule is TwoSided.ALWAYS or (
-        rule is TwoSided.AUTO_DIRECTION and spec.simulation.direction == "auto"))
+    return scene.medium is not None and (
+        rule is TwoSided.ALWAYS or (rule is TwoSided.AUTO_DIRECTION and spec.simulation.direction == "auto")
+    )
 
 
 def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = None) -> KernelSettings:
@@ -126,10 +133,17 @@ def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = N
     alg = algorithm(sim.algorithm)
     step = sim.segment_time_step_s if sim.segment_time_step_s is not None else sim.time_bin_s
     settings = KernelSettings(
-        max_reflections=sim.max_reflections, russian_roulette=sim.russian_roulette,
-        rr_start_depth=sim.rr_start_depth, tally=tally_plan(spec, scene), max_scattering=sim.scattering_orders,
-        strata_length=step * SPEED_OF_LIGHT, max_strata=sim.max_strata, equiangular_points=sim.equiangular_points,
-        tally_channels=1 + (scene.spectra.n_channels if scene.spectra is not None else 0), **alg.kernel)
+        max_reflections=sim.max_reflections,
+        russian_roulette=sim.russian_roulette,
+        rr_start_depth=sim.rr_start_depth,
+        tally=tally_plan(spec, scene),
+        max_scattering=sim.scattering_orders,
+        strata_length=step * SPEED_OF_LIGHT,
+        max_strata=sim.max_strata,
+        equiangular_points=sim.equiangular_points,
+        tally_channels=1 + (scene.spectra.n_channels if scene.spectra is not None else 0),
+        **alg.kernel,
+    )
     both = two_sided(spec, scene) if both_devices is None else both_devices
     return two_sided_settings(settings, alg.number, scene.medium is not None) if both else settings
 
@@ -147,9 +161,16 @@ def _executor(executor: Executor | None, workers: int) -> Iterator[Executor]:
         own.close()
 
 
-def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: int = 1,
-             progress: ProgressFn | None = None, should_stop: Callable[[], bool] | None = None,
-             scene: Scene | None = None, executor: Executor | None = None) -> SimulationResultPublic:
+def simulate(
+    spec: SceneSpec,
+    *,
+    base_dir: str | Path | None = None,
+    workers: int = 1,
+    progress: ProgressFn | None = None,
+    should_stop: Callable[[], bool] | None = None,
+    scene: Scene | None = None,
+    executor: Executor | None = None,
+) -> SimulationResultPublic:
     """Simulate the scene document; return its typed result (schemas.results.SimulationResultPublic).
 
     The scene is built once (`scene`: one already built from `spec`, e.g. by a pre-flight) and every
@@ -163,12 +184,12 @@ def simulate(spec: SceneSpec, *, base_dir: str | Path | None = None, workers: in
     scene = scene if scene is not None else build_scene(spec, base_dir)
     with _executor(executor, workers) as ex:
         resolved, scene, modeled = _resolve(spec, scene, ex, base_dir)
-        return _run_job(resolved, scene, ex, base_dir, progress, should_stop, t_start, original=spec,
-                        modeled=modeled)
+        return _run_job(resolved, scene, ex, base_dir, progress, should_stop, t_start, original=spec, modeled=modeled)
 
 
-def _resolve(spec: SceneSpec, scene: Scene, executor: Executor, base_dir: str | Path | None
-             ) -> tuple[SceneSpec, Scene, ModeledPublic | None]:
+def _resolve(
+    spec: SceneSpec, scene: Scene, executor: Executor, base_dir: str | Path | None
+) -> tuple[SceneSpec, Scene, ModeledPublic | None]:
     """Explicit settings for the "auto" ones (engine/auto.py), on the built scene: (spec, scene, modeled)."""
     if spec.simulation.is_resolved:
         return spec, scene, None
@@ -179,9 +200,17 @@ def _resolve(spec: SceneSpec, scene: Scene, executor: Executor, base_dir: str | 
     return step.spec, step.scene, step.modeled
 
 
-def _run_job(spec: SceneSpec, scene: Scene, executor: Executor, base_dir: str | Path | None,
-             progress: ProgressFn | None, should_stop: Callable[[], bool] | None, t_start: float,
-             original: SceneSpec | None = None, modeled: ModeledPublic | None = None) -> SimulationResultPublic:
+def _run_job(
+    spec: SceneSpec,
+    scene: Scene,
+    executor: Executor,
+    base_dir: str | Path | None,
+    progress: ProgressFn | None,
+    should_stop: Callable[[], bool] | None,
+    t_start: float,
+    original: SceneSpec | None = None,
+    modeled: ModeledPublic | None = None,
+) -> SimulationResultPublic:
     """Run a resolved job on its built scene."""
     settings = kernel_settings(spec, scene)
     geometry = los_geometry(scene)
@@ -190,8 +219,11 @@ def _run_job(spec: SceneSpec, scene: Scene, executor: Executor, base_dir: str | 
     masked = np.flatnonzero(scene.masked != "")
     blocked = auto.unreachable_receivers(scene, seen | (scene.masked != ""))  # a direct view proves reachability
     info = RunInfo(workers=executor.workers)
-    job = JobRef(scene, "", "", None) if isinstance(executor, SerialExecutor) else \
-        job_ref(scene, str(base_dir) if base_dir is not None else None)
+    job = (
+        JobRef(scene, "", "", None)
+        if isinstance(executor, SerialExecutor)
+        else job_ref(scene, str(base_dir) if base_dir is not None else None)
+    )
     directions = _choose_directions(scene, spec, settings, executor, job, los_gain, info)
     rx_of_link = np.arange(scene.n_links) % len(scene.receivers)
     directions[np.isin(rx_of_link, np.concatenate([blocked, masked]).astype(np.int64))] = SKIP
@@ -199,11 +231,24 @@ def _run_job(spec: SceneSpec, scene: Scene, executor: Executor, base_dir: str | 
         directions[:] = SKIP
         info.stop_reason = StopReason.EXACT
         info.pilot = DirectionChoicePublic(
-            rule="max_reflections = 0 without scattering: line of sight only, in closed form")
+            rule="max_reflections = 0 without scattering: line of sight only, in closed form"
+        )
     accs = _run(scene, spec, settings, executor, job, directions, los_gain, info, progress, should_stop, t_start)
     info.wall_time_s = time.perf_counter() - t_start
-    return build_result(spec, scene, accs, settings, los_gain, los_delay, directions, info,
-                        original=original, modeled=modeled, unreachable=blocked, geometry=geometry)
+    return build_result(
+        spec,
+        scene,
+        accs,
+        settings,
+        los_gain,
+        los_delay,
+        directions,
+        info,
+        original=original,
+        modeled=modeled,
+        unreachable=blocked,
+        geometry=geometry,
+    )
 
 
 def exact_los_only(scene: Scene, settings: KernelSettings) -> bool:
@@ -223,8 +268,7 @@ def batch_size(sim: SimulationSpec, settings: KernelSettings, n_targets: int) ->
         per_segment += settings.equiangular_points
     n_targets = max(1, n_targets)
     n_targets *= settings.tally_channels  # spectral scenes tally 1 + V channels per target (engine/spectra.py)
-    return max(1, min(sim.batch_size, PATH_TARGET_BUDGET // n_targets,
-                      ESTIMATE_BUDGET // (n_targets * per_segment)))
+    return max(1, min(sim.batch_size, PATH_TARGET_BUDGET // n_targets, ESTIMATE_BUDGET // (n_targets * per_segment)))
 
 
 #: A run of batches: (direction, source device, target devices).
@@ -236,10 +280,8 @@ def _sources(scene: Scene, directions: np.ndarray) -> list[Run]:
     n_rx = len(scene.receivers)
     codes = directions.reshape(len(scene.transmitters), n_rx)
     fwd, bwd = (codes == FORWARD) | (codes == BOTH), (codes == BACKWARD) | (codes == BOTH)
-    runs = [(Direction.FORWARD, i, tuple(np.flatnonzero(fwd[i]).tolist())) for i in range(fwd.shape[0])
-            if fwd[i].any()]
-    runs += [(Direction.BACKWARD, j, tuple(np.flatnonzero(bwd[:, j]).tolist())) for j in range(n_rx)
-             if bwd[:, j].any()]
+    runs = [(Direction.FORWARD, i, tuple(np.flatnonzero(fwd[i]).tolist())) for i in range(fwd.shape[0]) if fwd[i].any()]
+    runs += [(Direction.BACKWARD, j, tuple(np.flatnonzero(bwd[:, j]).tolist())) for j in range(n_rx) if bwd[:, j].any()]
     return runs
 
 
@@ -247,14 +289,17 @@ def _sources(scene: Scene, directions: np.ndarray) -> list[Run]:
 MAIN_PHASE, PILOT_PHASE = 0, 1
 
 
-def _items(runs: list[Run], sim: SimulationSpec, settings: KernelSettings, phase: int,
-           n_paths: int | None) -> Iterator[WorkItem]:
+def _items(
+    runs: list[Run], sim: SimulationSpec, settings: KernelSettings, phase: int, n_paths: int | None
+) -> Iterator[WorkItem]:
     """Batches in rounds (one per run per round); endless when n_paths is None.
 
     Every run of a direction has the same batch size (capped by its largest target count), so the
     plan, and with it the random streams, depends on the scene document only."""
-    sizes = {d: batch_size(sim, settings, max((len(t) for dd, _, t in runs if dd == d), default=1))
-             for d in (Direction.FORWARD, Direction.BACKWARD)}
+    sizes = {
+        d: batch_size(sim, settings, max((len(t) for dd, _, t in runs if dd == d), default=1))
+        for d in (Direction.FORWARD, Direction.BACKWARD)
+    }
     bs = min(sizes[d] for d in {r[0] for r in runs}) if runs else sim.batch_size
     if n_paths is None:  # accuracy mode: a round of many sources checks the target sooner: first batches of a
         # quarter (or 1 / sources) of batch_size, growing to the largest batch the memory caps allow
@@ -270,14 +315,22 @@ def _items(runs: list[Run], sim: SimulationSpec, settings: KernelSettings, phase
 
 
 def _new_accumulators(scene: Scene, settings: KernelSettings) -> dict[Direction, Accumulator]:
-    accs = {d: Accumulator(scene.n_links, settings.tally, backward=d is Direction.BACKWARD)
-            for d in (Direction.FORWARD, Direction.BACKWARD)}
+    accs = {
+        d: Accumulator(scene.n_links, settings.tally, backward=d is Direction.BACKWARD)
+        for d in (Direction.FORWARD, Direction.BACKWARD)
+    }
     spectra.new_accumulators(accs, scene, settings)  # spectral scenes: per-band channel tallies
     return accs
 
 
-def _merge(accs: dict[Direction, Accumulator], executor: Executor, job: JobRef, items: Iterable[WorkItem],
-           settings: KernelSettings, on_batch: Callable[[WorkItem], bool] | None = None) -> None:
+def _merge(
+    accs: dict[Direction, Accumulator],
+    executor: Executor,
+    job: JobRef,
+    items: Iterable[WorkItem],
+    settings: KernelSettings,
+    on_batch: Callable[[WorkItem], bool] | None = None,
+) -> None:
     """Feed items to the executor and merge their tallies in order; `on_batch` may stop the run."""
     pulled: deque[WorkItem] = deque()
 
@@ -298,16 +351,25 @@ def _merge(accs: dict[Direction, Accumulator], executor: Executor, job: JobRef, 
         results.close()
 
 
-def _choose_directions(scene: Scene, spec: SceneSpec, settings: KernelSettings, executor: Executor, job: JobRef,
-                       los_gain: np.ndarray, info: RunInfo) -> np.ndarray:
+def _choose_directions(
+    scene: Scene,
+    spec: SceneSpec,
+    settings: KernelSettings,
+    executor: Executor,
+    job: JobRef,
+    los_gain: np.ndarray,
+    info: RunInfo,
+) -> np.ndarray:
     """Per link: the Direction.code its paths run in (SKIP is set later for links not simulated)."""
     sim = spec.simulation
     alg = algorithm(sim.algorithm)
     n_tx, n_rx = len(scene.transmitters), len(scene.receivers)
     if two_sided(spec, scene):
-        info.pilot = DirectionChoicePublic(rule=f"algorithm {sim.algorithm} in a medium: every link from both devices, "
-                                           "each path weighted by its share (medium_nee.py: bounded weights near "
-                                           "point devices)")
+        info.pilot = DirectionChoicePublic(
+            rule=f"algorithm {sim.algorithm} in a medium: every link from both devices, "
+            "each path weighted by its share (medium_nee.py: bounded weights near "
+            "point devices)"
+        )
         return np.full(scene.n_links, BOTH)
     if alg.direction is not None:
         info.pilot = DirectionChoicePublic(rule=alg.direction_reason)
@@ -322,12 +384,16 @@ def _choose_directions(scene: Scene, spec: SceneSpec, settings: KernelSettings, 
         # A map: forward paths serve every receiver at once, but their next-event estimates from wall points
         # a few cm from a receiver are heavy-tailed, so the map's worst points converge slowly; paths from each
         # receiver to the few luminaires do not (benchmarks/map_scale.py measures both).
-        info.pilot = DirectionChoicePublic(rule=f"{n_tx} transmitters x {n_rx} receivers (a map): paths from each "
-                                           "receiver to the few transmitters; no pilot")
+        info.pilot = DirectionChoicePublic(
+            rule=f"{n_tx} transmitters x {n_rx} receivers (a map): paths from each "
+            "receiver to the few transmitters; no pilot"
+        )
         return np.full(scene.n_links, BACKWARD)
     if n_tx >= AMORTIZATION_RATIO * n_rx:
-        info.pilot = DirectionChoicePublic(rule=f"{n_tx} transmitters x {n_rx} receivers: the receiver side "
-                                           "amortizes its paths over the transmitters, no pilot")
+        info.pilot = DirectionChoicePublic(
+            rule=f"{n_tx} transmitters x {n_rx} receivers: the receiver side "
+            "amortizes its paths over the transmitters, no pilot"
+        )
         return np.full(scene.n_links, BACKWARD)
     # Pilot: a short run each way; efficiency = 1 / (relative variance per path x rays per path),
     # rays shared by the links a source serves. Ray counts (not times) keep the choice deterministic.
@@ -350,9 +416,13 @@ def _choose_directions(scene: Scene, spec: SceneSpec, settings: KernelSettings, 
             cost_eff.append((rel_var * rays_per_path / links_per_source, np.sqrt(rel_var), rays_per_path))
     choice = np.where(cost_eff[1][0] < cost_eff[0][0], BACKWARD, FORWARD)
     info.pilot = DirectionChoicePublic(
-        rule="pilot: lower relative variance x rays per path, per link", paths_per_direction=sim.pilot_paths,
-        rel_std_per_path_forward=_finite_list(cost_eff[0][1]), rel_std_per_path_backward=_finite_list(cost_eff[1][1]),
-        rays_per_path_forward=float(cost_eff[0][2]), rays_per_path_backward=float(cost_eff[1][2]))
+        rule="pilot: lower relative variance x rays per path, per link",
+        paths_per_direction=sim.pilot_paths,
+        rel_std_per_path_forward=_finite_list(cost_eff[0][1]),
+        rel_std_per_path_backward=_finite_list(cost_eff[1][1]),
+        rays_per_path_forward=float(cost_eff[0][2]),
+        rays_per_path_backward=float(cost_eff[1][2]),
+    )
     return choice
 
 
@@ -360,9 +430,19 @@ def _finite_list(x: np.ndarray) -> list[float | None]:
     return [float(v) if np.isfinite(v) else None for v in x]
 
 
-def _run(scene: Scene, spec: SceneSpec, settings: KernelSettings, executor: Executor, job: JobRef,
-         directions: np.ndarray, los_gain: np.ndarray, info: RunInfo, progress: ProgressFn | None,
-         should_stop: Callable[[], bool] | None, t_start: float) -> dict[Direction, Accumulator]:
+def _run(
+    scene: Scene,
+    spec: SceneSpec,
+    settings: KernelSettings,
+    executor: Executor,
+    job: JobRef,
+    directions: np.ndarray,
+    los_gain: np.ndarray,
+    info: RunInfo,
+    progress: ProgressFn | None,
+    should_stop: Callable[[], bool] | None,
+    t_start: float,
+) -> dict[Direction, Accumulator]:
     """Run the batches of every link in its direction(s), merging as they come; stop by the job's rule."""
     sim = spec.simulation
     runs = _sources(scene, directions)
@@ -382,8 +462,9 @@ def _run(scene: Scene, spec: SceneSpec, settings: KernelSettings, executor: Exec
         last = total_batches is not None and state["done"] == total_batches
         # The error of every link costs O(links): computed where the stopping rule needs it (end of a round in
         # accuracy mode) and for progress at most every PROGRESS_INTERVAL_S, not after each of a map's batches.
-        if (total_batches is None and end_of_round) or (progress is not None and (
-                last or elapsed - state["rel_at"] >= PROGRESS_INTERVAL_S)):
+        if (total_batches is None and end_of_round) or (
+            progress is not None and (last or elapsed - state["rel_at"] >= PROGRESS_INTERVAL_S)
+        ):
             rel = reported_rel_stderr(accs, los_gain, scene, settings.tally)
             state["worst"] = float(np.max(rel)) if len(rel) else 0.0
             state["rel_at"] = elapsed
@@ -392,20 +473,33 @@ def _run(scene: Scene, spec: SceneSpec, settings: KernelSettings, executor: Exec
             frac = state["done"] / total_batches
         else:
             target = sim.target_rel_error
-            frac = min(1.0, max(elapsed / sim.time_budget_s,
-                                0.0 if not np.isfinite(worst) else (target / worst) ** 2 if worst > 0 else 1.0))
+            frac = min(
+                1.0,
+                max(
+                    elapsed / sim.time_budget_s,
+                    0.0 if not np.isfinite(worst) else (target / worst) ** 2 if worst > 0 else 1.0,
+                ),
+            )
         if progress is not None:
-            progress(Progress(fraction=frac, paths=int(max(a.n_paths.max() for a in accs.values())),
-                              batches=int(state["done"]), dc_gain_rel_stderr=worst if np.isfinite(worst) else None,
-                              elapsed_s=elapsed))
+            progress(
+                Progress(
+                    fraction=frac,
+                    paths=int(max(a.n_paths.max() for a in accs.values())),
+                    batches=int(state["done"]),
+                    dc_gain_rel_stderr=worst if np.isfinite(worst) else None,
+                    elapsed_s=elapsed,
+                )
+            )
         if should_stop is not None and should_stop():
             info.stop_reason = StopReason.CANCELLED
             return True
         if total_batches is None and end_of_round:
             served = np.sum([a.n_paths for a in accs.values()], axis=0)[directions != SKIP]
-            if (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP \
-                    and worst <= sim.target_rel_error \
-                    and may_stop(accs, los_gain, scene, settings.tally, sim.target_rel_error, directions != SKIP):
+            if (
+                (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP
+                and worst <= sim.target_rel_error
+                and may_stop(accs, los_gain, scene, settings.tally, sim.target_rel_error, directions != SKIP)
+            ):
                 info.stop_reason = StopReason.TARGET_REACHED
                 return True
             if elapsed >= sim.time_budget_s:

@@ -33,6 +33,7 @@ the band's ratio by sigma_s,b / sigma_s,c and its depth factor, and the directio
 connection, or the branch's sampled direction) by p_b(cos) / p_c(cos). Algorithm 5 with spectral
 surfaces in grey smoke; in smoke that varies per band, a SceneError says what to run.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -209,7 +210,7 @@ class SceneSpectra:
             return ratio
         out = ratio.copy()
         if self.scatter_scale is not None:  # None: the carrier does not scatter (algorithm 1 only)
-            out[:self.n_bands] *= self.scatter_scale[:, None]
+            out[: self.n_bands] *= self.scatter_scale[:, None]
         out[-1] += tau
         return out
 
@@ -218,7 +219,7 @@ class SceneSpectra:
         if self.phase_bands is None or not self.carry:
             return ratio
         out = ratio.copy()
-        out[:self.n_bands] *= self.phase_ratio(cos)
+        out[: self.n_bands] *= self.phase_ratio(cos)
         return out
 
     def phase_ratio(self, cos: np.ndarray) -> np.ndarray:
@@ -227,15 +228,19 @@ class SceneSpectra:
         c = self.phase_bands[self.carrier_band].eval(cos)
         ok = c > 0
         inv = np.where(ok, 1.0 / np.where(ok, c, 1.0), 0.0)
-        return np.stack([np.where(ok, p.eval(cos) * inv, 1.0) if b != self.carrier_band else np.ones(len(cos))
-                         for b, p in enumerate(self.phase_bands)])
+        return np.stack(
+            [
+                np.where(ok, p.eval(cos) * inv, 1.0) if b != self.carrier_band else np.ones(len(cos))
+                for b, p in enumerate(self.phase_bands)
+            ]
+        )
 
     def estimate_ratio(self, ratio: np.ndarray, tau: np.ndarray | None = None) -> np.ndarray:
         """(B, m) band ratios of estimates from path states `ratio`, their connections adding carrier depth `tau`."""
         if not self.carry or self.tau_scale is None:
             return ratio
         depth = ratio[-1] if tau is None else ratio[-1] + tau
-        return ratio[:self.n_bands] * np.exp(-self.tau_scale[:, None] * depth[None, :])
+        return ratio[: self.n_bands] * np.exp(-self.tau_scale[:, None] * depth[None, :])
 
     def channel_power(self, power, ratio, tx, rx) -> tuple[np.ndarray, np.ndarray]:
         """(optical power (m,), channel powers (V, m)) of estimates of carrier power `power` (m,), band ratios
@@ -268,7 +273,6 @@ class SceneSpectra:
     def builder(self, item, tgt: np.ndarray, links: np.ndarray) -> "ChannelBuilder":
         """The channel tally of a batch (kernel.WorkItem) whose targets `tgt` are the global `links`."""
         return ChannelBuilder(self, item.direction, item.source, tgt, links, item.n_paths)
-
 
 
 def surface_bands(surface, spectral) -> np.ndarray:
@@ -365,21 +369,33 @@ def attach(scene) -> None:
             e = band_average(r.responsivity, spectral)
             if r.filter_transmission is not None:
                 e = e * band_average(r.filter_transmission, spectral)
-            electrical[start:start + count] = e
-            responsive[start:start + count] = True
+            electrical[start : start + count] = e
+            responsive[start : start + count] = True
         start += count
-    out = SceneSpectra(edges=np.asarray(spectral.edges(), float), centres=np.asarray(spectral.centres(), float),
-                       face_rho=face_rho, face_ratio=face_ratio, tx_fraction=frac, tx_luminous=lum,
-                       rx_electrical=electrical, rx_responsive=responsive, n_links=scene.n_links)
+    out = SceneSpectra(
+        edges=np.asarray(spectral.edges(), float),
+        centres=np.asarray(spectral.centres(), float),
+        face_rho=face_rho,
+        face_ratio=face_ratio,
+        tx_fraction=frac,
+        tx_luminous=lum,
+        rx_electrical=electrical,
+        rx_responsive=responsive,
+        n_links=scene.n_links,
+    )
     if out.n_channels * scene.n_links > MAX_CHANNEL_LINKS:
-        raise SceneError(f"spectral: {B} bands over {scene.n_links} links need {out.n_channels * scene.n_links} "
-                         f"tally channels, more than {MAX_CHANNEL_LINKS}: use fewer bands or fewer receivers")
+        raise SceneError(
+            f"spectral: {B} bands over {scene.n_links} links need {out.n_channels * scene.n_links} "
+            f"tally channels, more than {MAX_CHANNEL_LINKS}: use fewer bands or fewer receivers"
+        )
     med = _medium_bands(spec, spectral)
     if med is not None:
         _carrier_medium(scene, out, *med)
     if spec.medium is not None and spec.medium.type == "particles":
-        out.warnings.append(f"medium.particles.wavelength ({spec.medium.particles.wavelength:.4g} m) is not used: a "
-                            "spectral scene computes the Mie optics at each band centre (spectral.medium_bands)")
+        out.warnings.append(
+            f"medium.particles.wavelength ({spec.medium.particles.wavelength:.4g} m) is not used: a "
+            "spectral scene computes the Mie optics at each band centre (spectral.medium_bands)"
+        )
     out.carry = B >= 2 and (spectral_surfaces or out.tau_scale is not None)
     scene.spectra = out
     _check_supported(scene, out)
@@ -393,17 +409,26 @@ def _carrier_medium(scene, out: SceneSpectra, sigma_a, sigma_s, phases) -> None:
     sigma_t = sigma_a + sigma_s
     c = int(np.argmin(sigma_t))
     out.sigma_a, out.sigma_s, out.carrier_band = sigma_a, sigma_s, c
-    out.medium_bands = [{"band": b, "centre_m": float(out.centres[b]), "sigma_a": float(sigma_a[b]),
-                         "sigma_s": float(sigma_s[b]), "sigma_t": float(sigma_t[b]),
-                         "albedo": float(sigma_s[b] / sigma_t[b]) if sigma_t[b] > 0 else 0.0,
-                         "visibility_m": float(3.912 / sigma_t[b]) if sigma_t[b] > 0 else None}
-                        for b in range(len(sigma_t))]
+    out.medium_bands = [
+        {
+            "band": b,
+            "centre_m": float(out.centres[b]),
+            "sigma_a": float(sigma_a[b]),
+            "sigma_s": float(sigma_s[b]),
+            "sigma_t": float(sigma_t[b]),
+            "albedo": float(sigma_s[b] / sigma_t[b]) if sigma_t[b] > 0 else 0.0,
+            "visibility_m": float(3.912 / sigma_t[b]) if sigma_t[b] > 0 else None,
+        }
+        for b in range(len(sigma_t))
+    ]
     if sigma_t.max() == 0:
         scene.medium, scene.phase, scene.medium_far_distance = None, None, float("inf")
         return
     if sigma_t[c] == 0:
-        raise SceneError(f"spectral.medium: band {c} has sigma_t = 0 while others attenuate: give every band a "
-                         "positive extinction (e.g. 1e-9 1/m) or no medium")
+        raise SceneError(
+            f"spectral.medium: band {c} has sigma_t = 0 while others attenuate: give every band a "
+            "positive extinction (e.g. 1e-9 1/m) or no medium"
+        )
     spec_m = scene.spec.medium
     box = region = None
     if spec_m.region.type == "box":
@@ -437,20 +462,26 @@ def _check_supported(scene, out: SceneSpectra, algorithm=None) -> None:
     if not out.carry:
         return
     if scene.mirror_planes:
-        raise SceneError("spectral: perfect-mirror surfaces are not supported with spectral surfaces or smoke yet "
-                         "(use a Phong material with a large exponent, or run one job per band)")
+        raise SceneError(
+            "spectral: perfect-mirror surfaces are not supported with spectral surfaces or smoke yet "
+            "(use a Phong material with a large exponent, or run one job per band)"
+        )
     a = scene.spec.simulation.algorithm if algorithm is None else algorithm
     if scene.medium is None or out.tau_scale is None or a in (1, "auto"):
         return
     if a == 5:
-        raise SceneError(f"spectral: algorithm 5 with smoke that varies over the {out.n_bands} bands is not "
-                         "supported (free-flight tracking would need a per-band ratio at every collision): use "
-                         "algorithms 1-4, or run one job per band (`spectral` with one band each, any algorithm), or "
-                         "give grey smoke (spectral surfaces work with every algorithm in grey smoke)")
+        raise SceneError(
+            f"spectral: algorithm 5 with smoke that varies over the {out.n_bands} bands is not "
+            "supported (free-flight tracking would need a per-band ratio at every collision): use "
+            "algorithms 1-4, or run one job per band (`spectral` with one band each, any algorithm), or "
+            "give grey smoke (spectral surfaces work with every algorithm in grey smoke)"
+        )
     if out.scatter_scale is None and out.sigma_s is not None and np.any(out.sigma_s > 0):
-        raise SceneError(f"spectral.medium: band {out.carrier_band} (the least attenuated) does not scatter while "
-                         "others do: algorithms 2-4 sample scattering points in that band; give it a positive "
-                         "sigma_s (e.g. 1e-9 1/m), or use algorithm 1")
+        raise SceneError(
+            f"spectral.medium: band {out.carrier_band} (the least attenuated) does not scatter while "
+            "others do: algorithms 2-4 sample scattering points in that band; give it a positive "
+            "sigma_s (e.g. 1e-9 1/m), or use algorithm 1"
+        )
 
 
 # --- channel tallies --------------------------------------------------------------------------------------------------
@@ -479,8 +510,9 @@ class ChannelBuilder:
     per-path second moments: per-path sums would cost a scatter per band and estimate, these stay
     small. The whole-spectrum optical gain also has the main tally's per-path error bars (dc_gain)."""
 
-    def __init__(self, sp: "SceneSpectra", item_direction: str, source: int, tgt: np.ndarray, links: np.ndarray,
-                 n_paths: int):
+    def __init__(
+        self, sp: "SceneSpectra", item_direction: str, source: int, tgt: np.ndarray, links: np.ndarray, n_paths: int
+    ):
         self.B, self.T, self.n_paths, self.links = sp.n_bands, len(tgt), n_paths, np.asarray(links, np.int64)
         own = np.full(self.T, source, np.int64)
         tx, rx = (own, tgt) if item_direction == "forward" else (tgt, own)
@@ -520,8 +552,9 @@ class ChannelBuilder:
 
     def finish(self) -> ChannelBatch:
         paths = np.bincount(np.arange(self.n_paths) % N_GROUPS, minlength=N_GROUPS)
-        return ChannelBatch(self.links, self.n_paths, self.sums.reshape(self.B + 9, self.T, N_GROUPS),
-                            self.band_bc, paths)
+        return ChannelBatch(
+            self.links, self.n_paths, self.sums.reshape(self.B + 9, self.T, N_GROUPS), self.band_bc, paths
+        )
 
 
 def _group_moments(sums: np.ndarray, paths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -595,8 +628,7 @@ def result_block(spec, scene, accs, los_geometry, los_grey, los_delay) -> dict |
     from .result_parts import column
 
     V, B, L = sp.n_channels, sp.n_bands, scene.n_links
-    los = sp.los_channels(scene, los_geometry, los_grey) if los_geometry is not None \
-        else np.zeros((V, L))
+    los = sp.los_channels(scene, los_geometry, los_grey) if los_geometry is not None else np.zeros((V, L))
     los_abc = los_moments(los.ravel(), np.tile(los_delay, V))
     chan = {d: a.spectral for d, a in accs.items() if hasattr(a, "spectral")}
     mean, cov = link_moments(chan, los_abc)
@@ -618,40 +650,69 @@ def result_block(spec, scene, accs, los_geometry, los_grey, los_delay) -> dict |
     lux_ok = sp.has_luminous
     links = []
     for k in range(L):  # rows of the document
-        row = {"transmitter": scene.transmitters.ids[ti[k]], "receiver": scene.receivers.ids[ri[k]],
-               "dc_gain_by_band": column(h[:B, k]), "dc_gain_by_band_stderr": column(h_se[:B, k]),
-               "mean_delay_s_by_band": column(mean_d[:B, k]), "rms_delay_spread_s_by_band": column(rms[:B, k]),
-               "optical_gain": column(h[ob, k:k + 1])[0], "optical_gain_stderr": column(h_se[ob, k:k + 1])[0],
-               "electrical_gain_a_per_w": column(h[el, k:k + 1])[0] if has_e[k] else None,
-               "electrical_gain_a_per_w_stderr": column(h_se[el, k:k + 1])[0] if has_e[k] else None,
-               "electrical_rms_delay_spread_s": column(rms[el, k:k + 1])[0] if has_e[k] else None,
-               "electrical_rms_delay_spread_s_stderr": column(rms_se[el, k:k + 1])[0]
-               if has_e[k] else None,
-               "photocurrent_a": column(h[el, k:k + 1] * power[k])[0] if has_e[k] else None,
-               "electrical_gain_by_band_a_per_w": column(sp.tx_fraction[ti[k]] * sp.rx_electrical[ri[k]] * h[:B, k])
-               if has_e[k] else None,
-               "illuminance_by_band_lx": column(power[k] / gain[k] * sp.tx_fraction[ti[k]] * sp.tx_luminous[ti[k]]
-                                                * h[:B, k]) if lux_ok else None,
-               "illuminance_lx": column(h[lu, k:k + 1] * power[k] / gain[k])[0] if lux_ok else None,
-               "illuminance_lx_stderr": column(h_se[lu, k:k + 1] * power[k] / gain[k])[0] if lux_ok else None,
-               "illuminance_direct_lx": float(los[lu, k] * power[k] / gain[k]) if lux_ok and not masked[k] else None}
+        row = {
+            "transmitter": scene.transmitters.ids[ti[k]],
+            "receiver": scene.receivers.ids[ri[k]],
+            "dc_gain_by_band": column(h[:B, k]),
+            "dc_gain_by_band_stderr": column(h_se[:B, k]),
+            "mean_delay_s_by_band": column(mean_d[:B, k]),
+            "rms_delay_spread_s_by_band": column(rms[:B, k]),
+            "optical_gain": column(h[ob, k : k + 1])[0],
+            "optical_gain_stderr": column(h_se[ob, k : k + 1])[0],
+            "electrical_gain_a_per_w": column(h[el, k : k + 1])[0] if has_e[k] else None,
+            "electrical_gain_a_per_w_stderr": column(h_se[el, k : k + 1])[0] if has_e[k] else None,
+            "electrical_rms_delay_spread_s": column(rms[el, k : k + 1])[0] if has_e[k] else None,
+            "electrical_rms_delay_spread_s_stderr": column(rms_se[el, k : k + 1])[0] if has_e[k] else None,
+            "photocurrent_a": column(h[el, k : k + 1] * power[k])[0] if has_e[k] else None,
+            "electrical_gain_by_band_a_per_w": column(sp.tx_fraction[ti[k]] * sp.rx_electrical[ri[k]] * h[:B, k])
+            if has_e[k]
+            else None,
+            "illuminance_by_band_lx": column(
+                power[k] / gain[k] * sp.tx_fraction[ti[k]] * sp.tx_luminous[ti[k]] * h[:B, k]
+            )
+            if lux_ok
+            else None,
+            "illuminance_lx": column(h[lu, k : k + 1] * power[k] / gain[k])[0] if lux_ok else None,
+            "illuminance_lx_stderr": column(h_se[lu, k : k + 1] * power[k] / gain[k])[0] if lux_ok else None,
+            "illuminance_direct_lx": float(los[lu, k] * power[k] / gain[k]) if lux_ok and not masked[k] else None,
+        }
         links.append(row)
-    bands = [{"index": b, "lower_m": float(sp.edges[b]), "upper_m": float(sp.edges[b + 1]),
-              "centre_m": float(sp.centres[b]), "reflectance_range": [float(sp.face_rho[b].min()),
-                                                                      float(sp.face_rho[b].max())]
-              if sp.face_rho.shape[1] else None} for b in range(B)]
-    transmitters = [{"id": scene.transmitters.ids[i], "band_power_fraction": sp.tx_fraction[i].tolist(),
-                     "luminous_efficacy_by_band_lm_per_w": sp.tx_luminous[i].tolist(),
-                     "luminous_efficacy_lm_per_w": float(sp.tx_luminous[i] @ sp.tx_fraction[i]),
-                     "luminous_flux_lm": float(scene.transmitters.power[i] * sp.tx_luminous[i] @ sp.tx_fraction[i])}
-                    for i in range(len(scene.transmitters))]
+    bands = [
+        {
+            "index": b,
+            "lower_m": float(sp.edges[b]),
+            "upper_m": float(sp.edges[b + 1]),
+            "centre_m": float(sp.centres[b]),
+            "reflectance_range": [float(sp.face_rho[b].min()), float(sp.face_rho[b].max())]
+            if sp.face_rho.shape[1]
+            else None,
+        }
+        for b in range(B)
+    ]
+    transmitters = [
+        {
+            "id": scene.transmitters.ids[i],
+            "band_power_fraction": sp.tx_fraction[i].tolist(),
+            "luminous_efficacy_by_band_lm_per_w": sp.tx_luminous[i].tolist(),
+            "luminous_efficacy_lm_per_w": float(sp.tx_luminous[i] @ sp.tx_fraction[i]),
+            "luminous_flux_lm": float(scene.transmitters.power[i] * sp.tx_luminous[i] @ sp.tx_fraction[i]),
+        }
+        for i in range(len(scene.transmitters))
+    ]
     rx_rows = [(r.id or f"rx{j}", j) for j, r in enumerate(spec.receivers)]
     for g, (start, _shape) in zip(spec.receiver_grids, scene.grid_slices or []):
         rx_rows.append((g.id_prefix, start))
-    receivers = [{"id": name, "electrical_weight_a_per_w": sp.rx_electrical[j].tolist()
-                  if sp.rx_responsive[j] else None} for name, j in rx_rows]
-    return {"bands": bands, "carried_ratios": sp.carry, "transmitters": transmitters, "receivers": receivers,
-            "medium_bands": sp.medium_bands or None, "links": links,
-            "model": "bands traced together: carrier = largest reflectance / least-attenuated band, per-band ratios "
-                     "(engine/spectra.py); curves averaged over each band"}
-
+    receivers = [
+        {"id": name, "electrical_weight_a_per_w": sp.rx_electrical[j].tolist() if sp.rx_responsive[j] else None}
+        for name, j in rx_rows
+    ]
+    return {
+        "bands": bands,
+        "carried_ratios": sp.carry,
+        "transmitters": transmitters,
+        "receivers": receivers,
+        "medium_bands": sp.medium_bands or None,
+        "links": links,
+        "model": "bands traced together: carrier = largest reflectance / least-attenuated band, per-band ratios "
+        "(engine/spectra.py); curves averaged over each band",
+    }

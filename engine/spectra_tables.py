@@ -18,6 +18,7 @@ V(lambda): the CIE 1924 photopic luminous efficiency function at 1 nm from 360 t
 outside), read from colour-science (`colour.colorimetry.SDS_LEFS_PHOTOPIC`), imported only
 when a spectral job asks for illuminance.
 """
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -74,8 +75,9 @@ def photopic() -> tuple[np.ndarray, np.ndarray]:
     except ImportError as err:  # pragma: no cover - the engine extra installs it
         from .errors import SceneError
 
-        raise SceneError("illuminance of a spectral scene needs the `colour-science` package "
-                         "(pip install 'owcsim[engine]')") from err
+        raise SceneError(
+            "illuminance of a spectral scene needs the `colour-science` package (pip install 'owcsim[engine]')"
+        ) from err
     sd = SDS_LEFS_PHOTOPIC["CIE 1924 Photopic Standard Observer"]
     return np.asarray(sd.wavelengths, float) * NM, np.asarray(sd.values, float)
 

@@ -6,6 +6,7 @@ and SNR over the work plane, as PNG heatmaps, from the Python API.
 
 Prints the min / mean / max / uniformity of each map.
 """
+
 from __future__ import annotations
 
 import argparse

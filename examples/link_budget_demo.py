@@ -8,6 +8,7 @@ The tests (tests/engine/test_link_budget.py) run this script and check each line
 
 Run: .venv/bin/python examples/link_budget_demo.py
 """
+
 from __future__ import annotations
 
 import math
@@ -47,7 +48,7 @@ def geometry(points):
 def dc_gain(cos_phi, cos_psi, d):
     """LOS DC gain (m+1) A / (2 pi d^2) cos^m(phi) cos(psi), psi <= FOV (no filter, no concentrator)."""
     inside = cos_psi >= math.cos(math.radians(FOV_DEG))
-    return np.where(inside, (M + 1) * AREA / (2 * math.pi * d ** 2) * cos_phi ** M * cos_psi, 0.0)
+    return np.where(inside, (M + 1) * AREA / (2 * math.pi * d**2) * cos_phi**M * cos_psi, 0.0)
 
 
 def show(name, value, unit=""):

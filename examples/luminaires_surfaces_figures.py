@@ -12,6 +12,7 @@
 Run: .venv/bin/python examples/luminaires_surfaces_figures.py --out out/luminaires [--paths 200000]
 Writes one PNG per case and the result documents (JSON) next to them.
 """
+
 from __future__ import annotations
 
 import argparse

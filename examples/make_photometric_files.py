@@ -11,6 +11,7 @@
 
 Run: .venv/bin/python examples/make_photometric_files.py  (rewrites the two files here)
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -22,7 +23,7 @@ HERE = Path(__file__).resolve().parent
 
 def _rows(values, per_line=10):
     values = [f"{v:.1f}" for v in values]
-    return "\n".join(" ".join(values[k:k + per_line]) for k in range(0, len(values), per_line))
+    return "\n".join(" ".join(values[k : k + per_line]) for k in range(0, len(values), per_line))
 
 
 def batwing_candela(gamma_deg: np.ndarray, c_deg: np.ndarray) -> np.ndarray:
@@ -39,14 +40,23 @@ def write_ies(path: Path) -> None:
     gamma = np.arange(0.0, 90.01, 2.5)
     c = np.arange(0.0, 90.01, 15.0)
     cd = batwing_candela(gamma, c)
-    lines = ["IESNA:LM-63-2002", "[TEST] OWCSIM-EX-001 (synthetic)", "[TESTLAB] owcsim examples",
-             "[ISSUEDATE] 2026-12-01", "[MANUFAC] owcsim (fictitious luminaire)",
-             "[LUMCAT] OW-DL-600-BW", "[LUMINAIRE] recessed LED downlight 600 x 600, batwing optic",
-             "[LAMP] LED module 3600 lm", "[OTHER] written by examples/make_photometric_files.py", "TILT=NONE",
-             # lamps, lm/lamp, multiplier, n vertical, n horizontal, type C, metres, width, length, height
-             f"1 3600 1.0 {len(gamma)} {len(c)} 1 2 0.6 0.6 0.08",
-             "1.0 1.0 34",  # ballast factor, file generation type (2019) / future use, input watts
-             _rows(gamma), _rows(c)]
+    lines = [
+        "IESNA:LM-63-2002",
+        "[TEST] OWCSIM-EX-001 (synthetic)",
+        "[TESTLAB] owcsim examples",
+        "[ISSUEDATE] 2026-12-01",
+        "[MANUFAC] owcsim (fictitious luminaire)",
+        "[LUMCAT] OW-DL-600-BW",
+        "[LUMINAIRE] recessed LED downlight 600 x 600, batwing optic",
+        "[LAMP] LED module 3600 lm",
+        "[OTHER] written by examples/make_photometric_files.py",
+        "TILT=NONE",
+        # lamps, lm/lamp, multiplier, n vertical, n horizontal, type C, metres, width, length, height
+        f"1 3600 1.0 {len(gamma)} {len(c)} 1 2 0.6 0.6 0.08",
+        "1.0 1.0 34",  # ballast factor, file generation type (2019) / future use, input watts
+        _rows(gamma),
+        _rows(c),
+    ]
     lines += [_rows(row) for row in cd]
     path.write_text("\r\n".join(lines) + "\r\n", encoding="ascii")
 
@@ -65,12 +75,40 @@ def write_ldt(path: Path) -> None:
     c_all = np.arange(mc) * dc
     gamma = np.arange(ng) * dg
     stored = pendant_cd_per_klm(gamma, c_all[: mc // 2 + 1])  # Isym 2: C0 .. C180
-    lines = ["owcsim examples (fictitious manufacturer)", "2", "2", str(mc), f"{dc:g}", str(ng), f"{dg:g}",
-             "OWCSIM-EX-002 (synthetic)", "Linear pendant, direct/indirect", "OW-PD-1500-DI",
-             "pendant_direct_indirect.ldt", "2026-12-01 / owcsim",
-             "1500", "60", "50", "1480", "50", "0", "0", "0", "0",
-             "70", "92", "1.0", "0", "1",
-             "2", "LED 2 x 2200 lm", "4400", "4000 K", "1B", "38"]
+    lines = [
+        "owcsim examples (fictitious manufacturer)",
+        "2",
+        "2",
+        str(mc),
+        f"{dc:g}",
+        str(ng),
+        f"{dg:g}",
+        "OWCSIM-EX-002 (synthetic)",
+        "Linear pendant, direct/indirect",
+        "OW-PD-1500-DI",
+        "pendant_direct_indirect.ldt",
+        "2026-12-01 / owcsim",
+        "1500",
+        "60",
+        "50",
+        "1480",
+        "50",
+        "0",
+        "0",
+        "0",
+        "0",
+        "70",
+        "92",
+        "1.0",
+        "0",
+        "1",
+        "2",
+        "LED 2 x 2200 lm",
+        "4400",
+        "4000 K",
+        "1B",
+        "38",
+    ]
     lines += ["0.45", "0.52", "0.58", "0.63", "0.69", "0.73", "0.77", "0.80", "0.84", "0.86"]  # direct ratios
     lines += [f"{c:g}" for c in c_all] + [f"{g:g}" for g in gamma]
     lines += [f"{v:.1f}" for v in stored.ravel()]

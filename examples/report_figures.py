@@ -9,6 +9,7 @@ result documents are written next to the plots.
 
 Run: .venv/bin/python examples/report_figures.py --out out/report [--paths 200000] [--algorithm 3]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -62,8 +63,10 @@ def main() -> None:
             t = (tb.t_min_s + tb.time_bin_s * (np.arange(tb.n_bins) + 0.5)) * 1e9
             h = np.asarray(link.cir.total) / tb.time_bin_s
             ax.plot(t, h, colour, lw=0.9, label=f"{param} = {value:g}: H0 = {link.dc_gain:.3e}")
-            print(f"{name}: {param} = {value:+.1f}  H0 = {link.dc_gain:.4e} ± {link.dc_gain_stderr:.1e}  "
-                  f"(scattered part {sum(link.dc_gain_by_scattering_order[1:]):.3e})")
+            print(
+                f"{name}: {param} = {value:+.1f}  H0 = {link.dc_gain:.4e} ± {link.dc_gain_stderr:.1e}  "
+                f"(scattered part {sum(link.dc_gain_by_scattering_order[1:]):.3e})"
+            )
         ax.set_yscale("log")
         ax.set_xlim(10, 60)
         ax.set_ylim(1e-2, None)

@@ -14,6 +14,7 @@ and prints H0, the scattered part and the rms delay spread of each, and plots th
 
 Run: .venv/bin/python examples/soot_room.py --out out/soot [--paths 200000]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -54,8 +55,9 @@ def two_hg_fit(cos_theta: np.ndarray, phase: np.ndarray) -> tuple[float, float, 
 def run(doc: dict, medium: dict, paths: int) -> dict:
     d = copy.deepcopy(doc)
     d["medium"] = medium
-    d["simulation"].update(algorithm=5, direction="auto", max_reflections=6, max_scattering=20, paths=paths,
-                           time_bin_s=5e-10, t_max_s=6e-8)
+    d["simulation"].update(
+        algorithm=5, direction="auto", max_reflections=6, max_scattering=20, paths=paths, time_bin_s=5e-10, t_max_s=6e-8
+    )
     return simulate(SceneSpec.model_validate(d)).links[0]
 
 
@@ -74,26 +76,39 @@ def main() -> None:
         optics = mie.particle_optics(spec.medium.particles)
         w, g1, g2 = two_hg_fit(optics.cos_theta, optics.phase)
         print(f"\n{doc['name']}")
-        print(f"  N = {info['number_concentration_per_m3']:.4g} /m^3, sigma_a = {info['sigma_a']:.4g} /m, "
-              f"sigma_s = {info['sigma_s']:.4g} /m, albedo = {info['albedo']:.4f}, g = {info['g']:.4f}, "
-              f"visibility = {info['visibility_m']:.3g} m")
-        print(f"  Mie table: {info['phase']['points']} points, normalisation {info['phase']['normalisation']:.7f}, "
-              f"mean cosine {info['phase']['mean_cosine']:.6f}")
+        print(
+            f"  N = {info['number_concentration_per_m3']:.4g} /m^3, sigma_a = {info['sigma_a']:.4g} /m, "
+            f"sigma_s = {info['sigma_s']:.4g} /m, albedo = {info['albedo']:.4f}, g = {info['g']:.4f}, "
+            f"visibility = {info['visibility_m']:.3g} m"
+        )
+        print(
+            f"  Mie table: {info['phase']['points']} points, normalisation {info['phase']['normalisation']:.7f}, "
+            f"mean cosine {info['phase']['mean_cosine']:.6f}"
+        )
         print(f"  two-HG fit: {w:.3f} HG({g1:.3f}) + {1 - w:.3f} HG({g2:.3f}), mean cosine {w * g1 + (1 - w) * g2:.4f}")
         hom = {"type": "homogeneous", "sigma_a": info["sigma_a"], "sigma_s": info["sigma_s"]}
         cases = {
             "Mie (particles)": doc["medium"],
             f"HG, g = {info['g']:.3f}": {**hom, "phase": {"type": "hg", "g": info["g"]}},
-            "two-HG fit": {**hom, "phase": {"type": "mixture", "components": [
-                {"weight": w, "phase": {"type": "hg", "g": g1}},
-                {"weight": 1 - w, "phase": {"type": "hg", "g": g2}}]}},
+            "two-HG fit": {
+                **hom,
+                "phase": {
+                    "type": "mixture",
+                    "components": [
+                        {"weight": w, "phase": {"type": "hg", "g": g1}},
+                        {"weight": 1 - w, "phase": {"type": "hg", "g": g2}},
+                    ],
+                },
+            },
         }
         for label, medium in cases.items():
             link = run(doc, medium, args.paths)
             scattered = sum(link.dc_gain_by_scattering_order[1:])
-            print(f"  {label:16s} H0 = {link.dc_gain:.5g} +- {link.dc_gain_stderr:.2g}  "
-                  f"(LOS {link.los_gain:.4g}, scattered {scattered:.4g}), "
-                  f"tau_rms = {link.rms_delay_spread_s * 1e9:.3f} ns")
+            print(
+                f"  {label:16s} H0 = {link.dc_gain:.5g} +- {link.dc_gain_stderr:.2g}  "
+                f"(LOS {link.los_gain:.4g}, scattered {scattered:.4g}), "
+                f"tau_rms = {link.rms_delay_spread_s * 1e9:.3f} ns"
+            )
             cir = np.asarray(link.cir.total, float)
             t = (np.arange(len(cir)) + 0.5) * 5e-10
             ax.semilogy(t * 1e9, np.where(cir > 0, cir, np.nan), label=label, lw=1)

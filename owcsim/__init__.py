@@ -9,6 +9,7 @@ The installed package holds the layers as subpackages: `owcsim.schemas` (wire mo
 (HTTP client) and this package's command line. Heavy modules load on first use, so
 `import owcsim` and `owcsim --version` stay fast.
 """
+
 from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError

@@ -4,6 +4,7 @@
 the same `Result` type the HTTP client returns (owcsim.clients.result): the engine's typed
 result (schemas.results.SimulationResultPublic) with numpy arrays, tables, maps and plots.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -36,8 +37,13 @@ def load(scene: dict | str | Path | SceneSpec) -> tuple[SceneSpec, Path | None]:
     raise TypeError(f"a scene is a dict, a JSON file path or a SceneSpec, not {type(scene).__name__}")
 
 
-def simulate(scene: dict | str | Path | SceneSpec, *, workers: int = 1, base_dir: str | Path | None = None,
-             progress: Callable[[Progress], None] | None = None) -> Result:
+def simulate(
+    scene: dict | str | Path | SceneSpec,
+    *,
+    workers: int = 1,
+    base_dir: str | Path | None = None,
+    progress: Callable[[Progress], None] | None = None,
+) -> Result:
     """Simulate a scene in this process and return its Result (see the module docstring).
 
     `workers` > 1 runs batches in that many processes (same result bits); `progress(p)` is called

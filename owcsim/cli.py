@@ -1,5 +1,6 @@
 """owcsim command line: `owcsim run SCENE --out DIR`, `owcsim validate SCENE`, and the HTTP service:
 `owcsim serve` (run the server) and `owcsim submit SCENE --server URL` (run a scene on one)."""
+
 from __future__ import annotations
 
 import argparse
@@ -40,9 +41,11 @@ def _cmd_validate(args) -> int:
     sim = spec.simulation
     window = f"{sim.n_bins} time bins" if sim.t_max_s is not None else "time window chosen when it runs"
     masked = int((scene.masked != "").sum())
-    print(f"{args.scene}: valid — {len(scene.geometry.faces)} triangles, {len(scene.transmitters)} transmitters, "
-          f"{len(scene.receivers)} receivers{f' ({masked} grid points masked)' if masked else ''}, "
-          f"algorithm {sim.algorithm}, {window}")
+    print(
+        f"{args.scene}: valid — {len(scene.geometry.faces)} triangles, {len(scene.transmitters)} transmitters, "
+        f"{len(scene.receivers)} receivers{f' ({masked} grid points masked)' if masked else ''}, "
+        f"algorithm {sim.algorithm}, {window}"
+    )
     return 0
 
 
@@ -62,29 +65,47 @@ def _print_links(result: SimulationResultPublic) -> None:
         if maps:
             print(format_summary(maps))
         worst = result.run.max_dc_gain_rel_stderr
-        error = "exact (line of sight in closed form)" if result.run.stop_reason == StopReason.EXACT else \
-            f"largest relative standard error of H0: {worst:.2e}" if worst is not None else "no error estimate"
-        print(f"{len(result.links):,d} links" + (f", {len(result.channels):,d} group channels"
-              if result.channels else "") + f"; {error}; all in result.json, links.csv")
+        error = (
+            "exact (line of sight in closed form)"
+            if result.run.stop_reason == StopReason.EXACT
+            else f"largest relative standard error of H0: {worst:.2e}"
+            if worst is not None
+            else "no error estimate"
+        )
+        print(
+            f"{len(result.links):,d} links"
+            + (f", {len(result.channels):,d} group channels" if result.channels else "")
+            + f"; {error}; all in result.json, links.csv"
+        )
         return
     nan = float("nan")  # a missing figure (None in the JSON), never a 0 taken for missing
     for link in result.links:
         err, rms, loss = link.dc_gain_stderr, link.rms_delay_spread_s, link.path_loss_db
-        print(f"{link.transmitter} -> {link.receiver} ({link.direction}): "
-              f"H0 = {nan if link.dc_gain is None else link.dc_gain:.6e} ± {nan if err is None else err:.1e}, "
-              f"path loss {nan if loss is None else loss:.2f} dB, "
-              f"tau_rms = {(nan if rms is None else rms) * 1e9:.3f} ns")
+        print(
+            f"{link.transmitter} -> {link.receiver} ({link.direction}): "
+            f"H0 = {nan if link.dc_gain is None else link.dc_gain:.6e} ± {nan if err is None else err:.1e}, "
+            f"path loss {nan if loss is None else loss:.2f} dB, "
+            f"tau_rms = {(nan if rms is None else rms) * 1e9:.3f} ns"
+        )
     for ch in result.channels:  # transmitter groups: their summed channel
         err, rms, loss = ch.dc_gain_stderr, ch.rms_delay_spread_s, ch.path_loss_db
-        print(f"group {ch.group} -> {ch.receiver}: H0 = {nan if ch.dc_gain is None else ch.dc_gain:.6e} "
-              f"± {nan if err is None else err:.1e}, path loss {nan if loss is None else loss:.2f} dB, "
-              f"tau_rms = {(nan if rms is None else rms) * 1e9:.3f} ns")
+        print(
+            f"group {ch.group} -> {ch.receiver}: H0 = {nan if ch.dc_gain is None else ch.dc_gain:.6e} "
+            f"± {nan if err is None else err:.1e}, path loss {nan if loss is None else loss:.2f} dB, "
+            f"tau_rms = {(nan if rms is None else rms) * 1e9:.3f} ns"
+        )
 
 
 def _scene_overrides(args) -> list[tuple[str, object]]:
     """The simulation flags of `run` and `submit` as (dotted path, value) overrides."""
-    flags = {"paths": args.paths, "seed": args.seed, "max_reflections": args.max_reflections,
-             "algorithm": args.algorithm, "target_rel_error": args.target_rel_error, "direction": args.direction}
+    flags = {
+        "paths": args.paths,
+        "seed": args.seed,
+        "max_reflections": args.max_reflections,
+        "algorithm": args.algorithm,
+        "target_rel_error": args.target_rel_error,
+        "direction": args.direction,
+    }
     overrides = [(f"simulation.{k}", v) for k, v in flags.items() if v is not None]
     if args.paths is not None:  # the two stopping rules exclude each other: the flag given wins
         overrides.append(("simulation.target_rel_error", None))
@@ -117,8 +138,9 @@ def _cmd_run(args) -> int:
         executor = executor_from_scheduler(args.scheduler)
     update, close = _progress_bar()
     try:
-        result = simulate(spec, base_dir=Path(args.scene).resolve().parent, workers=args.workers, progress=update,
-                          executor=executor)
+        result = simulate(
+            spec, base_dir=Path(args.scene).resolve().parent, workers=args.workers, progress=update, executor=executor
+        )
     finally:
         close()
         if executor is not None:
@@ -126,8 +148,11 @@ def _cmd_run(args) -> int:
     paths = write_outputs(result, out, plot=not args.no_plot)
     _print_links(result)
     run = result.run
-    wrote = ", ".join(str(p) for p in paths) if len(paths) <= 4 else \
-        f"{len(paths)} files in {out} ({', '.join(p.name for p in paths[:3])}, ...)"
+    wrote = (
+        ", ".join(str(p) for p in paths)
+        if len(paths) <= 4
+        else f"{len(paths)} files in {out} ({', '.join(p.name for p in paths[:3])}, ...)"
+    )
     print(f"{run.paths_total:,d} paths in {run.wall_time_s:.2f} s ({run.stop_reason}); wrote {wrote}")
     return 0
 
@@ -137,18 +162,25 @@ def _cmd_serve(args) -> int:
         from owcsim.server.serve import serve
         from owcsim.server.settings import Settings
     except ImportError as exc:
-        raise InputError(f"`owcsim serve` needs the server extra ({exc.name} is missing): "
-                         "pip install 'owcsim[server]'") from None
+        raise InputError(
+            f"`owcsim serve` needs the server extra ({exc.name} is missing): pip install 'owcsim[server]'"
+        ) from None
     from pydantic import ValidationError
 
-    given = {"db": args.db, "max_concurrent_jobs": args.max_concurrent_jobs, "workers_per_job": args.workers_per_job,
-             "api_keys_file": args.api_keys_file, "scheduler": args.scheduler}
+    given = {
+        "db": args.db,
+        "max_concurrent_jobs": args.max_concurrent_jobs,
+        "workers_per_job": args.workers_per_job,
+        "api_keys_file": args.api_keys_file,
+        "scheduler": args.scheduler,
+    }
     try:
         settings = Settings(**{k: v for k, v in given.items() if v is not None})
         settings.key_owners()  # an unreadable key file is an error now, not at the first request
     except ValidationError as err:
-        raise InputError("invalid setting: " + "; ".join(
-            f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in err.errors())) from None
+        raise InputError(
+            "invalid setting: " + "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in err.errors())
+        ) from None
     except ValueError as exc:
         raise InputError(str(exc)) from None
     from owcsim.server.store import StoreError
@@ -166,8 +198,9 @@ def _cmd_submit(args) -> int:
         from owcsim.clients.errors import ApiError, ConnectionFailed, InvalidRequest, JobFailed
         from owcsim.clients.scene import MeshFileError
     except ImportError as exc:
-        raise InputError(f"`owcsim submit` needs the client extra ({exc.name} is missing): "
-                         "pip install 'owcsim[client]'") from None
+        raise InputError(
+            f"`owcsim submit` needs the client extra ({exc.name} is missing): pip install 'owcsim[client]'"
+        ) from None
     _, doc = load_scene(args.scene, _scene_overrides(args), args.set or [])
     if args.out:
         _output_folder(args.out)  # a bad --out is said now, not after the job ran
@@ -214,12 +247,20 @@ def _add_simulation_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--paths", type=int, help="paths per source device (replaces target_rel_error)")
     p.add_argument("--seed", type=int)
     p.add_argument("--max-reflections", type=int)
-    p.add_argument("--algorithm", type=_algorithm, metavar="{1,2,3,4,5,auto}",
-                   help="estimator (schemas/algorithms.py); auto: chosen from the scene")
+    p.add_argument(
+        "--algorithm",
+        type=_algorithm,
+        metavar="{1,2,3,4,5,auto}",
+        help="estimator (schemas/algorithms.py); auto: chosen from the scene",
+    )
     p.add_argument("--direction", choices=("auto", "forward", "backward"))
     p.add_argument("--target-rel-error", type=float, help="stop when stderr(H0)/H0 reaches this, every link")
-    p.add_argument("--set", action="append", metavar="PATH=VALUE",
-                   help="override any field, e.g. --set receivers.0.fov_deg=60 (VALUE is JSON)")
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="PATH=VALUE",
+        help="override any field, e.g. --set receivers.0.fov_deg=60 (VALUE is JSON)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -231,14 +272,19 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="simulate a scene; write result.json, cir.csv and cir.png")
     run.add_argument("scene", help="scene document (JSON)")
     run.add_argument("--out", required=True, help="output folder (created if needed)")
-    run.add_argument("--no-plot", action="store_true",
-                     help="do not draw cir.png (saves matplotlib's start-up, ~0.3-0.5 s: for sweeps)")
+    run.add_argument(
+        "--no-plot",
+        action="store_true",
+        help="do not draw cir.png (saves matplotlib's start-up, ~0.3-0.5 s: for sweeps)",
+    )
     _add_simulation_options(run)
     where = run.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=1, help="worker processes on this machine (default 1)")
-    where.add_argument("--scheduler", metavar="ADDRESS",
-                       help="run the batches on the Dask cluster of this scheduler, e.g. tcp://host:8786 "
-                            "(needs owcsim[cluster])")
+    where.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run the batches on the Dask cluster of this scheduler, e.g. tcp://host:8786 (needs owcsim[cluster])",
+    )
     run.set_defaults(func=_cmd_run)
     val = sub.add_parser("validate", help="check a scene without running it")
     val.add_argument("scene")
@@ -250,15 +296,23 @@ def build_parser() -> argparse.ArgumentParser:
     srv.add_argument("--db", help="job store file (default $OWCSIM_DB or ./owcsim-jobs.sqlite)")
     srv.add_argument("--max-concurrent-jobs", type=int, help="jobs running at once (default 2)")
     srv.add_argument("--workers-per-job", type=int, help="engine worker processes per job (default 1)")
-    srv.add_argument("--api-keys-file", help="file of bearer tokens, one per line (# comments): turns API keys on; "
-                     "a file with no token is an error")
-    srv.add_argument("--scheduler", metavar="ADDRESS",
-                     help="run every job's batches on this Dask scheduler's cluster (default $OWCSIM_SCHEDULER)")
+    srv.add_argument(
+        "--api-keys-file",
+        help="file of bearer tokens, one per line (# comments): turns API keys on; a file with no token is an error",
+    )
+    srv.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run every job's batches on this Dask scheduler's cluster (default $OWCSIM_SCHEDULER)",
+    )
     srv.set_defaults(func=_cmd_serve)
     sbm = sub.add_parser("submit", help="run a scene on an owcsim server; write its results like `run`")
     sbm.add_argument("scene", help="scene document (JSON); mesh files are sent inline")
-    sbm.add_argument("--server", default=os.environ.get("OWCSIM_SERVER", "http://127.0.0.1:8000"),
-                     help="server URL (default $OWCSIM_SERVER or http://127.0.0.1:8000)")
+    sbm.add_argument(
+        "--server",
+        default=os.environ.get("OWCSIM_SERVER", "http://127.0.0.1:8000"),
+        help="server URL (default $OWCSIM_SERVER or http://127.0.0.1:8000)",
+    )
     sbm.add_argument("--api-key", help="bearer token (default $OWCSIM_API_KEY)")
     sbm.add_argument("--out", help="output folder for result.json, cir.csv, cir.png (optional)")
     sbm.add_argument("--no-wait", action="store_true", help="print the job id and return at once")

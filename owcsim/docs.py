@@ -1,4 +1,5 @@
 """Load a scene document from disk with overrides, and format validation errors for people."""
+
 from __future__ import annotations
 
 import json
@@ -26,8 +27,10 @@ def set_path(doc: dict, dotted: str, value) -> None:
                 idx = int(key)
                 node[idx]
             except (ValueError, IndexError):
-                raise InputError(f"--set {dotted}: {'.'.join(keys[:depth]) or 'document'} is a list "
-                                 f"of {len(node)}; {key!r} is not an index in it") from None
+                raise InputError(
+                    f"--set {dotted}: {'.'.join(keys[:depth]) or 'document'} is a list "
+                    f"of {len(node)}; {key!r} is not an index in it"
+                ) from None
             if last:
                 node[idx] = value
             else:
@@ -61,8 +64,9 @@ def format_validation_error(err: ValidationError) -> str:
     return "\n".join(lines)
 
 
-def load_scene(path: str | Path, overrides: Sequence[tuple[str, object]] = (),
-               assignments: Sequence[str] = ()) -> tuple[SceneSpec, dict]:
+def load_scene(
+    path: str | Path, overrides: Sequence[tuple[str, object]] = (), assignments: Sequence[str] = ()
+) -> tuple[SceneSpec, dict]:
     """Read, override and validate a scene document; returns (spec, raw document).
 
     `overrides` are (dotted path, value) pairs applied first, then the `--set`

@@ -3,6 +3,7 @@
 Everything is SI (metres, seconds, watts, 1/m); the only unit suffix is `_deg`
 for angles, which JSON users think of in degrees.
 """
+
 from __future__ import annotations
 
 import math

@@ -1,4 +1,5 @@
 """Transmitters and receivers (physics.md section 2)."""
+
 from __future__ import annotations
 
 import math
@@ -11,8 +12,16 @@ from .link_budget import LuminousOutputSpec
 from .photometry import PhotometrySpec
 from .spectra import Curve
 
-Fov = Annotated[float, Field(ge=1e-6, le=90.0, description=(
-    "field of view, half-angle [deg], in (0, 90] (at least 1e-6 deg: below it a concentrator's gain overflows)"))]
+Fov = Annotated[
+    float,
+    Field(
+        ge=1e-6,
+        le=90.0,
+        description=(
+            "field of view, half-angle [deg], in (0, 90] (at least 1e-6 deg: below it a concentrator's gain overflows)"
+        ),
+    ),
+]
 
 
 class TransmitterSpec(SpecModel):
@@ -30,26 +39,35 @@ class TransmitterSpec(SpecModel):
     lambertian_order: float | None = Field(None, ge=0.0, le=1e4, description="Lambertian order m")
     half_power_semi_angle_deg: float | None = Field(None, gt=0.0, lt=90.0, description="Phi_1/2 [deg]")
     luminous_output: LuminousOutputSpec | None = Field(
-        None, description="luminous flux [lm] or centre luminous intensity [cd] of the source: gives the "
-                          "illuminance on the receivers (the optical power stays `power`)")
+        None,
+        description="luminous flux [lm] or centre luminous intensity [cd] of the source: gives the "
+        "illuminance on the receivers (the optical power stays `power`)",
+    )
     photometry: PhotometrySpec | None = Field(None, description="tabulated emission from an IES / EULUMDAT file")
-    spectrum: Curve | None = Field(None, description="relative spectral power distribution over the scene's bands "
-                                   "(a spectral curve, any scale; default flat); `power` is the total")
+    spectrum: Curve | None = Field(
+        None,
+        description="relative spectral power distribution over the scene's bands "
+        "(a spectral curve, any scale; default flat); `power` is the total",
+    )
 
     @model_validator(mode="after")
     def _one_pattern(self) -> "TransmitterSpec":
         if self.photometry is not None:
             if self.lambertian_order is not None or self.half_power_semi_angle_deg is not None:
-                raise ValueError("give `photometry` or a Lambertian pattern (`lambertian_order` / "
-                                 "`half_power_semi_angle_deg`), not both")
+                raise ValueError(
+                    "give `photometry` or a Lambertian pattern (`lambertian_order` / "
+                    "`half_power_semi_angle_deg`), not both"
+                )
             return self
         if (self.lambertian_order is None) == (self.half_power_semi_angle_deg is None):
             raise ValueError("give exactly one of `lambertian_order` and `half_power_semi_angle_deg`")
         if self.half_power_semi_angle_deg is not None:
             log_cos = math.log(math.cos(math.radians(self.half_power_semi_angle_deg)))
             if log_cos == 0.0 or -math.log(2.0) / log_cos > 1e4:
-                raise ValueError(f"half_power_semi_angle_deg = {self.half_power_semi_angle_deg:g} means a Lambertian "
-                                 "order above 10000: give at least 0.68 deg")
+                raise ValueError(
+                    f"half_power_semi_angle_deg = {self.half_power_semi_angle_deg:g} means a Lambertian "
+                    "order above 10000: give at least 0.68 deg"
+                )
         return self
 
     @property
@@ -78,10 +96,16 @@ class ReceiverSpec(SpecModel):
     fov_deg: Fov = 90.0
     filter_gain: float = Field(1.0, gt=0.0, le=1.0, description="optical filter gain T_s")
     concentrator_index: float | None = Field(None, ge=1.0, le=4.0, description="concentrator refractive index n_c")
-    responsivity: Curve | None = Field(None, description="photodiode responsivity per band [A/W] (a spectral curve): "
-                                       "gives the electrical gain of spectral scenes")
-    filter_transmission: Curve | None = Field(None, description="optical filter transmission per band, in [0, 1] "
-                                              "(a spectral curve; applies to the electrical gain)")
+    responsivity: Curve | None = Field(
+        None,
+        description="photodiode responsivity per band [A/W] (a spectral curve): "
+        "gives the electrical gain of spectral scenes",
+    )
+    filter_transmission: Curve | None = Field(
+        None,
+        description="optical filter transmission per band, in [0, 1] "
+        "(a spectral curve; applies to the electrical gain)",
+    )
 
 
 def _unit(d: tuple[float, float, float]) -> tuple[float, float, float]:
@@ -121,8 +145,9 @@ class ReceiverGridSpec(SpecModel):
             raise ValueError("grid size must be two non-negative lengths [m]")
         steps = [s / self.spacing for s in self.size]
         if any(not math.isfinite(x) or x > 1e6 for x in steps) or (steps[0] + 1) * (steps[1] + 1) > 200_000:
-            raise ValueError(f"a spacing of {self.spacing:g} m over {self.size} m gives more than the 100000 "
-                             "receivers allowed")
+            raise ValueError(
+                f"a spacing of {self.spacing:g} m over {self.size} m gives more than the 100000 receivers allowed"
+            )
         if self.count > 100_000:
             raise ValueError(f"grid has {self.count} receivers, more than the 100000 allowed")
         return self
@@ -145,10 +170,17 @@ class ReceiverGridSpec(SpecModel):
         """The receiver at grid index (i, j) (u and v normalised here: the document keeps them as given)."""
         u, v = _unit(self.u), _unit(self.v)
         p = tuple(o + self.spacing * (i * a + j * b) for o, a, b in zip(self.origin, u, v))
-        return ReceiverSpec(id=f"{self.id_prefix}[{i},{j}]", position=p, normal=self.normal, area=self.area,
-                            fov_deg=self.fov_deg, filter_gain=self.filter_gain,
-                            concentrator_index=self.concentrator_index, responsivity=self.responsivity,
-                            filter_transmission=self.filter_transmission)
+        return ReceiverSpec(
+            id=f"{self.id_prefix}[{i},{j}]",
+            position=p,
+            normal=self.normal,
+            area=self.area,
+            fov_deg=self.fov_deg,
+            filter_gain=self.filter_gain,
+            concentrator_index=self.concentrator_index,
+            responsivity=self.responsivity,
+            filter_transmission=self.filter_transmission,
+        )
 
     def expand(self) -> list[ReceiverSpec]:
         """The grid as individual receivers, row-major in (i along u, j along v)."""

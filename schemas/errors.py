@@ -3,6 +3,7 @@
 Served as `application/problem+json`. `errors` locates each wrong field of a document
 by its dotted path (e.g. `receivers.0.fov_deg`), the same paths `owcsim validate` prints.
 """
+
 from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -16,8 +17,10 @@ class ProblemField(BaseModel):
 
     model_config = ConfigDict(extra="allow")
 
-    loc: str = Field(description="dotted path of the field in the request, e.g. `receivers.0.fov_deg`; "
-                                 "`body` for the whole document, `query.limit` for a query parameter")
+    loc: str = Field(
+        description="dotted path of the field in the request, e.g. `receivers.0.fov_deg`; "
+        "`body` for the whole document, `query.limit` for a query parameter"
+    )
     msg: str = Field(description="what is wrong, in words")
     type: str = Field("value_error", description="machine-readable kind of error")
 
@@ -37,5 +40,10 @@ class Problem(BaseModel):
 
 def located(errors: list[dict], prefix: tuple = ()) -> list[tuple[str, str]]:
     """pydantic error dicts -> (dotted location, message without pydantic's "Value error, " prefix)."""
-    return [(".".join(str(part) for part in prefix + tuple(e["loc"])),
-             e["msg"].removeprefix("Value error, ").removeprefix("Assertion failed, ")) for e in errors]
+    return [
+        (
+            ".".join(str(part) for part in prefix + tuple(e["loc"])),
+            e["msg"].removeprefix("Value error, ").removeprefix("Assertion failed, "),
+        )
+        for e in errors
+    ]

@@ -5,6 +5,7 @@ physics.md section 2) unless its `reflectance` is a material (surfaces.py: Phong
 mirror). The room's faces have inward normals; furniture and meshes reflect on
 whichever side a ray arrives from.
 """
+
 from __future__ import annotations
 
 import math
@@ -106,8 +107,11 @@ class MeshSpec(SpecModel):
 
     @model_validator(mode="after")
     def _one_source(self) -> "MeshSpec":
-        sources = [self.vertices is not None or self.faces is not None, self.file is not None,
-                   self.data_base64 is not None]
+        sources = [
+            self.vertices is not None or self.faces is not None,
+            self.file is not None,
+            self.data_base64 is not None,
+        ]
         if sum(sources) != 1:
             raise ValueError("give exactly one of `vertices`+`faces`, `file`, `data_base64`+`format`")
         if sources[0]:

@@ -4,6 +4,7 @@ A job goes queued -> running -> succeeded | failed | cancelled (a queued job may
 cancelled directly). The scene document a job runs is the one `owcsim run` reads
 (schemas.SceneSpec); its result is schemas.results.SimulationResultPublic.
 """
+
 from __future__ import annotations
 
 from datetime import datetime

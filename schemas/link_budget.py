@@ -19,6 +19,7 @@ with A the receiver's `area` [m^2] and B the noise bandwidth [Hz]. Komine takes 
 bit rate (I2 and I3 are the noise-bandwidth factors of an NRZ receiver, so I2 * R_b is the
 equivalent noise bandwidth); here B = `bandwidth` when given, else `bit_rate`.
 """
+
 from __future__ import annotations
 
 import math
@@ -44,10 +45,10 @@ class LuminousOutputSpec(SpecModel):
     Komine's luminaire: 60 x 60 LEDs of 0.73 cd, i.e. `center_luminous_intensity` = 2628 cd.
     """
 
-    luminous_flux: float | None = Field(None, gt=0.0, le=MAX_PHOTOMETRIC,
-                                        description="total luminous flux Phi_v [lm]")
-    center_luminous_intensity: float | None = Field(None, gt=0.0, le=MAX_PHOTOMETRIC,
-                                                    description="luminous intensity on the axis I_v(0) [cd]")
+    luminous_flux: float | None = Field(None, gt=0.0, le=MAX_PHOTOMETRIC, description="total luminous flux Phi_v [lm]")
+    center_luminous_intensity: float | None = Field(
+        None, gt=0.0, le=MAX_PHOTOMETRIC, description="luminous intensity on the axis I_v(0) [cd]"
+    )
 
     @model_validator(mode="after")
     def _one_of(self) -> "LuminousOutputSpec":
@@ -93,30 +94,48 @@ class LinkBudgetSpec(SpecModel):
     Defaults are the values of Komine & Nakagawa 2004.
     """
 
-    responsivity: float = Field(0.53, gt=0.0, le=10.0,
-                                description="photodiode responsivity gamma [A/W] (Komine: 0.53 A/W); "
-                                            "above 10 A/W would need an internal gain this model lacks")
-    bit_rate: float | None = Field(None, gt=0.0, le=MAX_RATE,
-                                   description="OOK-NRZ bit rate R_b [bit/s]; bit period T = 1/R_b")
-    bandwidth: float | None = Field(None, gt=0.0, le=MAX_RATE,
-                                    description="noise bandwidth B [Hz]; default: the bit rate (Komine)")
-    background_current: float = Field(5.1e-3, ge=0.0, le=1.0,
-                                      description="photocurrent of the ambient light I_bg [A] "
-                                                  "(Komine: 5100 uA, after Moreira et al. 1997)")
+    responsivity: float = Field(
+        0.53,
+        gt=0.0,
+        le=10.0,
+        description="photodiode responsivity gamma [A/W] (Komine: 0.53 A/W); "
+        "above 10 A/W would need an internal gain this model lacks",
+    )
+    bit_rate: float | None = Field(
+        None, gt=0.0, le=MAX_RATE, description="OOK-NRZ bit rate R_b [bit/s]; bit period T = 1/R_b"
+    )
+    bandwidth: float | None = Field(
+        None, gt=0.0, le=MAX_RATE, description="noise bandwidth B [Hz]; default: the bit rate (Komine)"
+    )
+    background_current: float = Field(
+        5.1e-3,
+        ge=0.0,
+        le=1.0,
+        description="photocurrent of the ambient light I_bg [A] (Komine: 5100 uA, after Moreira et al. 1997)",
+    )
     temperature: float = Field(295.0, gt=0.0, le=1000.0, description="absolute temperature T_k [K] (Komine: 295 K)")
     open_loop_gain: float = Field(10.0, gt=0.0, le=1e6, description="open-loop voltage gain G [-] (Komine: 10)")
-    capacitance_per_area: float = Field(1.12e-6, gt=0.0, le=1.0,
-                                        description="fixed capacitance of the photodiode per unit area eta [F/m^2] "
-                                                    "(Komine: 112 pF/cm^2 = 1.12e-6 F/m^2)")
-    channel_noise_factor: float = Field(1.5, gt=0.0, le=10.0,
-                                        description="FET channel noise factor Gamma [-] (Komine: 1.5)")
+    capacitance_per_area: float = Field(
+        1.12e-6,
+        gt=0.0,
+        le=1.0,
+        description="fixed capacitance of the photodiode per unit area eta [F/m^2] "
+        "(Komine: 112 pF/cm^2 = 1.12e-6 F/m^2)",
+    )
+    channel_noise_factor: float = Field(
+        1.5, gt=0.0, le=10.0, description="FET channel noise factor Gamma [-] (Komine: 1.5)"
+    )
     transconductance: float = Field(0.03, gt=0.0, le=10.0, description="FET transconductance g_m [S] (Komine: 30 mS)")
-    noise_bandwidth_factor_i2: float = Field(0.562, gt=0.0, le=10.0,
-                                             description="noise-bandwidth factor I2 [-] (Komine: 0.562)")
-    noise_bandwidth_factor_i3: float = Field(0.0868, gt=0.0, le=10.0,
-                                             description="noise-bandwidth factor I3 [-] (Komine: 0.0868)")
-    isi_split: IsiSplit = Field(IsiSplit.NRZ, description="how a CIR splits into signal and ISI power: `nrz` "
-                                                          "(Komine's rectangular-pulse form) or `window`")
+    noise_bandwidth_factor_i2: float = Field(
+        0.562, gt=0.0, le=10.0, description="noise-bandwidth factor I2 [-] (Komine: 0.562)"
+    )
+    noise_bandwidth_factor_i3: float = Field(
+        0.0868, gt=0.0, le=10.0, description="noise-bandwidth factor I3 [-] (Komine: 0.0868)"
+    )
+    isi_split: IsiSplit = Field(
+        IsiSplit.NRZ,
+        description="how a CIR splits into signal and ISI power: `nrz` (Komine's rectangular-pulse form) or `window`",
+    )
 
     @model_validator(mode="after")
     def _rate_or_bandwidth(self) -> "LinkBudgetSpec":

@@ -11,6 +11,7 @@ scipy is already an engine dependency; a map of 1e5 points x a few quantities is
 any netCDF3 limit, and netCDF3 files open in every netCDF reader (xarray, MATLAB `ncread`, ncview,
 Panoply). Pass `engine="h5netcdf"` to `to_netcdf` for netCDF4 if that package is installed.
 """
+
 from __future__ import annotations
 
 import math
@@ -28,8 +29,19 @@ if TYPE_CHECKING:  # pragma: no cover
     from .results import SimulationResultPublic
     from .scene import SceneSpec
 
-__all__ = ["GridMap", "MapDecor", "format_summary", "from_xarray", "heatmap_png", "masked_points", "summary",
-           "to_dataframe", "to_netcdf", "to_xarray", "write_map_files"]
+__all__ = [
+    "GridMap",
+    "MapDecor",
+    "format_summary",
+    "from_xarray",
+    "heatmap_png",
+    "masked_points",
+    "summary",
+    "to_dataframe",
+    "to_netcdf",
+    "to_xarray",
+    "write_map_files",
+]
 
 _QUANTITY_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,55}\Z")
 #: Names a quantity may not take: they are the coordinates and companions of the Dataset.
@@ -69,8 +81,10 @@ class MapDecor:
 
     def __post_init__(self) -> None:
         room = None if self.room is None else (_vec3(self.room[0], "room lo"), _vec3(self.room[1], "room hi"))
-        furniture = [(str(n), _vec3(lo, f"furniture {n!r} min"), _vec3(hi, f"furniture {n!r} max"))
-                     for n, lo, hi in self.furniture]
+        furniture = [
+            (str(n), _vec3(lo, f"furniture {n!r} min"), _vec3(hi, f"furniture {n!r} max"))
+            for n, lo, hi in self.furniture
+        ]
         luminaires = [(str(n), _vec3(p, f"luminaire {n!r} position")) for n, p in self.luminaires]
         object.__setattr__(self, "room", room)
         object.__setattr__(self, "furniture", furniture)
@@ -80,8 +94,9 @@ class MapDecor:
     def from_scene(cls, scene: SceneSpec) -> MapDecor:
         """The room box, the furniture boxes (named as the engine names them) and the transmitters of a scene."""
         room = (np.array(scene.room.lo), np.array(scene.room.hi)) if scene.room is not None else None
-        furniture = [(b.name or f"furniture[{k}]", np.array(b.min), np.array(b.max))
-                     for k, b in enumerate(scene.furniture)]
+        furniture = [
+            (b.name or f"furniture[{k}]", np.array(b.min), np.array(b.max)) for k, b in enumerate(scene.furniture)
+        ]
         luminaires = [(tid, np.array(t.position)) for tid, t in zip(scene.transmitter_ids(), scene.transmitters)]
         return cls(room=room, furniture=furniture, luminaires=luminaires)
 
@@ -127,8 +142,10 @@ class GridMap:
         values = {}
         for q, a in self.values.items():
             if not _QUANTITY_NAME.match(q) or q in _RESERVED or q.endswith("_stderr"):
-                raise ValueError(f"{where}: {q!r} is not a usable quantity name (an identifier of at most 56 "
-                                 f"characters, not ending in _stderr, none of {sorted(_RESERVED)})")
+                raise ValueError(
+                    f"{where}: {q!r} is not a usable quantity name (an identifier of at most 56 "
+                    f"characters, not ending in _stderr, none of {sorted(_RESERVED)})"
+                )
             values[q] = self._shaped(a, shape, f"{where}: values[{q!r}]")
         extra = sorted(set(self.stderr) - set(values))
         if extra:
@@ -183,12 +200,15 @@ class GridMap:
     def quantity(self, name: str) -> np.ndarray:
         """values[name]; KeyError naming the available quantities if there is none."""
         if name not in self.values:
-            raise KeyError(f"no quantity {name!r} in map {self.grid!r} / {self.channel!r}; "
-                           f"available: {', '.join(sorted(self.values)) or 'none'}")
+            raise KeyError(
+                f"no quantity {name!r} in map {self.grid!r} / {self.channel!r}; "
+                f"available: {', '.join(sorted(self.values)) or 'none'}"
+            )
         return self.values[name]
 
 
 # ---------------------------------------------------------------- summary
+
 
 def masked_points(m: GridMap) -> dict[str, np.ndarray]:
     """Masked points by reason: reason -> (k, 2) int array of (i, j)."""
@@ -214,16 +234,30 @@ def summary(m: GridMap) -> dict[str, dict]:
     for q, a in m.values.items():
         ok = keep & np.isfinite(a)
         n = int(ok.sum())
-        row: dict[str, Any] = {"unit": m.units[q], "count": n, "masked": int(m.masked.sum()),
-                               "missing": int((keep & ~np.isfinite(a)).sum()), "min": None, "mean": None,
-                               "max": None, "uniformity": None, "min_index": None, "max_index": None}
+        row: dict[str, Any] = {
+            "unit": m.units[q],
+            "count": n,
+            "masked": int(m.masked.sum()),
+            "missing": int((keep & ~np.isfinite(a)).sum()),
+            "min": None,
+            "mean": None,
+            "max": None,
+            "uniformity": None,
+            "min_index": None,
+            "max_index": None,
+        }
         if n:
             lo = np.where(ok, a, np.inf)
             hi = np.where(ok, a, -np.inf)
             imin, imax = np.unravel_index(np.argmin(lo), a.shape), np.unravel_index(np.argmax(hi), a.shape)
             mean = float(a[ok].mean())
-            row.update(min=float(a[imin]), mean=mean, max=float(a[imax]),
-                       min_index=(int(imin[0]), int(imin[1])), max_index=(int(imax[0]), int(imax[1])))
+            row.update(
+                min=float(a[imin]),
+                mean=mean,
+                max=float(a[imax]),
+                min_index=(int(imin[0]), int(imin[1])),
+                max_index=(int(imax[0]), int(imax[1])),
+            )
             if m.units[q] not in _LOG_UNITS and mean > 0 and row["min"] >= 0:
                 row["uniformity"] = row["min"] / mean
         if q in m.stderr:
@@ -269,32 +303,55 @@ def format_summary(maps: GridMap | Sequence[GridMap]) -> str:
             factor, unit = _display(s["unit"], m.values[q][~m.masked])
             scaled = [None if s[k] is None else s[k] * factor for k in ("min", "mean", "max")]
             pts = f"{s['count']}" + (f" ({s['missing']} n/a)" if s["missing"] else "")
-            rows.append((f"{m.grid}/{m.channel}", q, *(_fmt(x, unit) for x in scaled), unit,
-                         "-" if s["uniformity"] is None else f"{s['uniformity']:.3f}", pts))
+            rows.append(
+                (
+                    f"{m.grid}/{m.channel}",
+                    q,
+                    *(_fmt(x, unit) for x in scaled),
+                    unit,
+                    "-" if s["uniformity"] is None else f"{s['uniformity']:.3f}",
+                    pts,
+                )
+            )
         reasons = {r: len(ij) for r, ij in masked_points(m).items()}
         if reasons:
-            notes.append(f"{m.grid}/{m.channel}: {sum(reasons.values())} masked points: "
-                         + "; ".join(f"{n} {r}" for r, n in reasons.items()))
+            notes.append(
+                f"{m.grid}/{m.channel}: {sum(reasons.values())} masked points: "
+                + "; ".join(f"{n} {r}" for r, n in reasons.items())
+            )
     widths = [max(len(str(r[c])) for r in [header, *rows]) for c in range(len(header))]
     right = {2, 3, 4, 6, 7}
-    lines = ["  ".join(str(c).rjust(w) if k in right else str(c).ljust(w) for k, (c, w) in
-                       enumerate(zip(r, widths))).rstrip() for r in [header, *rows]]
+    lines = [
+        "  ".join(
+            str(c).rjust(w) if k in right else str(c).ljust(w) for k, (c, w) in enumerate(zip(r, widths))
+        ).rstrip()
+        for r in [header, *rows]
+    ]
     return "\n".join([lines[0], "-" * len(lines[0]), *lines[1:], *dict.fromkeys(notes)])
 
 
 # ---------------------------------------------------------------- xarray / netCDF / MATLAB
+
 
 def _one_grid(maps: Sequence[GridMap]) -> GridMap:
     if not maps:
         raise ValueError("no maps given")
     first = maps[0]
     for m in maps[1:]:
-        same = (m.grid == first.grid and m.shape == first.shape and np.allclose(m.origin, first.origin)
-                and np.allclose(m.u, first.u) and np.allclose(m.v, first.v)
-                and np.allclose(m.x, first.x) and np.allclose(m.y, first.y))
+        same = (
+            m.grid == first.grid
+            and m.shape == first.shape
+            and np.allclose(m.origin, first.origin)
+            and np.allclose(m.u, first.u)
+            and np.allclose(m.v, first.v)
+            and np.allclose(m.x, first.x)
+            and np.allclose(m.y, first.y)
+        )
         if not same:
-            raise ValueError(f"maps of different grids ({first.grid!r} and {m.grid!r}, or the same name with "
-                             "other points): give one grid's maps, or use write_map_files")
+            raise ValueError(
+                f"maps of different grids ({first.grid!r} and {m.grid!r}, or the same name with "
+                "other points): give one grid's maps, or use write_map_files"
+            )
     channels = [m.channel for m in maps]
     dup = sorted({c for c in channels if channels.count(c) > 1})
     if dup:
@@ -337,15 +394,26 @@ def to_xarray(maps: Sequence[GridMap]) -> xarray.Dataset:
             data[f"{q}_stderr"] = (dims, stderr[q], {"units": units[q], "long_name": f"standard error of {q}"})
     reasons = np.stack([m.reasons for m in maps]).astype(str)
     same = bool(np.all(reasons == reasons[:1]))
-    data["mask_reason"] = (dims[1:] if same else dims, reasons[0] if same else reasons,
-                           {"long_name": "why the point is masked; empty for a simulated point"})
-    coords = {"channel": ("channel", [m.channel for m in maps]),
-              "x": ("i", first.x, {"units": "m", "long_name": "offset along u"}),
-              "y": ("j", first.y, {"units": "m", "long_name": "offset along v"}),
-              **{f"position_{c}": (("i", "j"), pos[..., k], {"units": "m"}) for k, c in enumerate("xyz")}}
-    attrs = {"grid": first.grid, "origin": first.origin, "u": first.u, "v": first.v, "normal": first.normal,
-             "title": f"owcsim coverage map of grid {first.grid}",
-             "comment": "point (i, j) = origin + x[i] u + y[j] v; NaN where masked or not available"}
+    data["mask_reason"] = (
+        dims[1:] if same else dims,
+        reasons[0] if same else reasons,
+        {"long_name": "why the point is masked; empty for a simulated point"},
+    )
+    coords = {
+        "channel": ("channel", [m.channel for m in maps]),
+        "x": ("i", first.x, {"units": "m", "long_name": "offset along u"}),
+        "y": ("j", first.y, {"units": "m", "long_name": "offset along v"}),
+        **{f"position_{c}": (("i", "j"), pos[..., k], {"units": "m"}) for k, c in enumerate("xyz")},
+    }
+    attrs = {
+        "grid": first.grid,
+        "origin": first.origin,
+        "u": first.u,
+        "v": first.v,
+        "normal": first.normal,
+        "title": f"owcsim coverage map of grid {first.grid}",
+        "comment": "point (i, j) = origin + x[i] u + y[j] v; NaN where masked or not available",
+    }
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
@@ -355,18 +423,27 @@ def from_xarray(ds: xarray.Dataset) -> list[GridMap]:
     out = []
     r = ds["mask_reason"].values
     for c in range(ds.sizes["channel"]):
-        out.append(GridMap(
-            grid=str(ds.attrs["grid"]), channel=str(ds["channel"].values[c]), origin=ds.attrs["origin"],
-            u=ds.attrs["u"], v=ds.attrs["v"], x=ds["x"].values, y=ds["y"].values,
-            values={str(q): ds[q].values[c] for q in quantities},
-            stderr={str(q): ds[f"{q}_stderr"].values[c] for q in quantities if f"{q}_stderr" in ds},
-            units={str(q): str(ds[q].attrs.get("units", "")) for q in quantities},
-            mask_reason=(r if r.ndim == 2 else r[c]).astype(str)))
+        out.append(
+            GridMap(
+                grid=str(ds.attrs["grid"]),
+                channel=str(ds["channel"].values[c]),
+                origin=ds.attrs["origin"],
+                u=ds.attrs["u"],
+                v=ds.attrs["v"],
+                x=ds["x"].values,
+                y=ds["y"].values,
+                values={str(q): ds[q].values[c] for q in quantities},
+                stderr={str(q): ds[f"{q}_stderr"].values[c] for q in quantities if f"{q}_stderr" in ds},
+                units={str(q): str(ds[q].attrs.get("units", "")) for q in quantities},
+                mask_reason=(r if r.ndim == 2 else r[c]).astype(str),
+            )
+        )
     return out
 
 
-def to_netcdf(maps: Sequence[GridMap], path: str | Path, *,
-              engine: Literal["netcdf4", "scipy", "h5netcdf"] = "scipy") -> Path:
+def to_netcdf(
+    maps: Sequence[GridMap], path: str | Path, *, engine: Literal["netcdf4", "scipy", "h5netcdf"] = "scipy"
+) -> Path:
     """Write the maps of one grid as a netCDF file (netCDF3 through scipy by default); returns the path."""
     path = Path(path)
     to_xarray(maps).to_netcdf(path, engine=engine)
@@ -411,14 +488,32 @@ def _mat_struct(maps: list[GridMap]) -> dict[str, Any]:
         code = code + 1
     reasons = np.empty(len(names), dtype=object)
     reasons[:] = [str(n) for n in names]
-    return {"grid": first.grid, "channels": cell, "origin": first.origin, "u": first.u, "v": first.v,
-            "normal": first.normal, "x": first.x, "y": first.y, "position": first.positions,
-            "values": values, "stderr": stderr, "units": units,
-            "mask_code": code.astype(np.int32), "mask_reasons": reasons}
+    return {
+        "grid": first.grid,
+        "channels": cell,
+        "origin": first.origin,
+        "u": first.u,
+        "v": first.v,
+        "normal": first.normal,
+        "x": first.x,
+        "y": first.y,
+        "position": first.positions,
+        "values": values,
+        "stderr": stderr,
+        "units": units,
+        "mask_code": code.astype(np.int32),
+        "mask_reasons": reasons,
+    }
 
 
-def write_map_files(maps: Sequence[GridMap], folder: str | Path, *, decor: MapDecor | None = None,
-                    heatmaps: bool | Iterable[str] = True, log: bool | None = None) -> list[Path]:
+def write_map_files(
+    maps: Sequence[GridMap],
+    folder: str | Path,
+    *,
+    decor: MapDecor | None = None,
+    heatmaps: bool | Iterable[str] = True,
+    log: bool | None = None,
+) -> list[Path]:
     """Write `map_<grid>.nc` per grid, one `maps.mat` and the heatmaps `map_<grid>_<channel>_<quantity>.png`.
 
     In maps.mat each grid is a struct `map_<grid>` with grid, channels (cell), origin, u, v, normal,
@@ -459,10 +554,18 @@ def to_dataframe(maps: GridMap | Sequence[GridMap]):
     for m in [maps] if isinstance(maps, GridMap) else maps:
         ii, jj = np.meshgrid(np.arange(m.shape[0]), np.arange(m.shape[1]), indexing="ij")
         pos = m.positions.reshape(-1, 3)
-        cols: dict[str, Any] = {"grid": m.grid, "channel": m.channel, "i": ii.ravel(), "j": jj.ravel(),
-                                "x": m.x[ii.ravel()], "y": m.y[jj.ravel()], "position_x": pos[:, 0],
-                                "position_y": pos[:, 1], "position_z": pos[:, 2],
-                                "mask_reason": m.reasons.ravel()}
+        cols: dict[str, Any] = {
+            "grid": m.grid,
+            "channel": m.channel,
+            "i": ii.ravel(),
+            "j": jj.ravel(),
+            "x": m.x[ii.ravel()],
+            "y": m.y[jj.ravel()],
+            "position_x": pos[:, 0],
+            "position_y": pos[:, 1],
+            "position_z": pos[:, 2],
+            "mask_reason": m.reasons.ravel(),
+        }
         for q, a in m.values.items():
             cols[q] = a.ravel()
             if q in m.stderr:
@@ -472,6 +575,7 @@ def to_dataframe(maps: GridMap | Sequence[GridMap]):
 
 
 # ---------------------------------------------------------------- heatmap
+
 
 def _edges(c: np.ndarray, fallback: float) -> np.ndarray:
     """Cell edges around the point offsets c (midpoints; half a step beyond the ends)."""
@@ -494,8 +598,14 @@ def _hull(p: np.ndarray) -> np.ndarray:
     def half(points):
         chain: list[tuple[float, float]] = []
         for q in points:
-            while len(chain) >= 2 and ((chain[-1][0] - chain[-2][0]) * (q[1] - chain[-2][1])
-                                       - (chain[-1][1] - chain[-2][1]) * (q[0] - chain[-2][0])) <= 0:
+            while (
+                len(chain) >= 2
+                and (
+                    (chain[-1][0] - chain[-2][0]) * (q[1] - chain[-2][1])
+                    - (chain[-1][1] - chain[-2][1]) * (q[0] - chain[-2][0])
+                )
+                <= 0
+            ):
                 chain.pop()
             chain.append(q)
         return chain
@@ -523,8 +633,16 @@ def _vec_text(a: np.ndarray) -> str:
     return "(" + ", ".join(f"{c:.3g}" if abs(c) > 1e-12 else "0" for c in a) + ")"
 
 
-def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | Path, *, log: bool | None = None,
-                dpi: int = 100, cmap: str = "viridis") -> Path:
+def heatmap_png(
+    m: GridMap,
+    quantity: str,
+    decor: MapDecor | None,
+    path: str | Path,
+    *,
+    log: bool | None = None,
+    dpi: int = 100,
+    cmap: str = "viridis",
+) -> Path:
     """Draw one quantity of a map as a PNG in the grid's own (u, v) coordinates [m]; returns the path.
 
     Masked points are grey and hatched (legend gives the reasons), points without a value white.
@@ -577,22 +695,30 @@ def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | P
     lim = [lim[0] - pad, lim[1] + pad, lim[2] - pad, lim[3] + pad]
 
     width, height = lim[1] - lim[0], lim[3] - lim[2]
-    wide = height < 0.5 * width            # a strip: colour bar below, else beside
+    wide = height < 0.5 * width  # a strip: colour bar below, else beside
     fig_h = min(8.0, max(2.8, (5.2 if wide else 4.6) * height / width + (2.1 if wide else 1.4)))
     fig = Figure(figsize=(6.4, fig_h), dpi=dpi, layout="compressed")
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
     cm = matplotlib.colormaps[cmap].with_extremes(bad="white")
     mesh = ax.pcolormesh(xe, ye, shown.T, cmap=cm, norm=norm, shading="flat")
-    if s["count"]:                         # no colour bar for a map without a single value
-        bar = fig.colorbar(mesh, ax=ax, location="bottom" if wide else "right", shrink=0.8 if wide else 1.0,
-                           aspect=30 if wide else 20)
+    if s["count"]:  # no colour bar for a map without a single value
+        bar = fig.colorbar(
+            mesh, ax=ax, location="bottom" if wide else "right", shrink=0.8 if wide else 1.0, aspect=30 if wide else 20
+        )
         bar.set_label(f"{quantity} [{shown_unit}]" + (" (log scale)" if isinstance(norm, colors.LogNorm) else ""))
 
     handles = []
     if masked.any():
-        ax.pcolor(xe, ye, np.ma.masked_where(~masked.T, np.ones(masked.T.shape)), cmap=colors.ListedColormap(
-            ["0.75"]), hatch="///", edgecolor="0.45", linewidth=0.0)
+        ax.pcolor(
+            xe,
+            ye,
+            np.ma.masked_where(~masked.T, np.ones(masked.T.shape)),
+            cmap=colors.ListedColormap(["0.75"]),
+            hatch="///",
+            edgecolor="0.45",
+            linewidth=0.0,
+        )
         for r, ij in masked_points(m).items():
             handles.append(Patch(facecolor="0.75", edgecolor="0.45", hatch="///", label=f"masked: {r} ({len(ij)})"))
     if room is not None:
@@ -605,16 +731,39 @@ def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | P
                 # name at the centre of the visible part of the footprint's bounding box
                 cx = (max(poly[:, 0].min(), lim[0]) + min(poly[:, 0].max(), lim[1])) / 2
                 cy = (max(poly[:, 1].min(), lim[2]) + min(poly[:, 1].max(), lim[3])) / 2
-                ax.text(cx, cy, name, ha="center", va="center", fontsize=8, clip_on=True,
-                        bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "alpha": 0.7, "linewidth": 0})
+                ax.text(
+                    cx,
+                    cy,
+                    name,
+                    ha="center",
+                    va="center",
+                    fontsize=8,
+                    clip_on=True,
+                    bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "alpha": 0.7, "linewidth": 0},
+                )
         if decor.luminaires:
             lp = _project(m, np.array([p for _, p in decor.luminaires]))
             inside = (lp[:, 0] >= lim[0]) & (lp[:, 0] <= lim[1]) & (lp[:, 1] >= lim[2]) & (lp[:, 1] <= lim[3])
-            ax.scatter(lp[inside, 0], lp[inside, 1], marker="*", s=160, facecolor="white", edgecolor="black",
-                       linewidth=1.0, zorder=5)
+            ax.scatter(
+                lp[inside, 0],
+                lp[inside, 1],
+                marker="*",
+                s=160,
+                facecolor="white",
+                edgecolor="black",
+                linewidth=1.0,
+                zorder=5,
+            )
             for (lid, _), (px, py) in zip([lu for lu, k in zip(decor.luminaires, inside) if k], lp[inside]):
-                ax.annotate(lid, (px, py), xytext=(6, 6), textcoords="offset points", fontsize=8, zorder=6,
-                            bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "alpha": 0.8, "linewidth": 0})
+                ax.annotate(
+                    lid,
+                    (px, py),
+                    xytext=(6, 6),
+                    textcoords="offset points",
+                    fontsize=8,
+                    zorder=6,
+                    bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "alpha": 0.8, "linewidth": 0},
+                )
     if handles:
         fig.legend(handles=handles, loc="outside lower center", fontsize=8, frameon=False, ncols=min(2, len(handles)))
 
@@ -628,8 +777,13 @@ def heatmap_png(m: GridMap, quantity: str, decor: MapDecor | None, path: str | P
         axis.set_major_locator(ticker.MaxNLocator(nbins=bins, steps=[1, 2, 2.5, 5, 10]))
     ax.set_xlabel(f"u [m]     (u = {_vec_text(m.u)}, v = {_vec_text(m.v)})")
     ax.set_ylabel("v [m]")
-    stats = "no simulated point with a value" if not s["count"] else "  ".join(
-        f"{k} {_fmt(None if s[k] is None else s[k] * factor, shown_unit)}" for k in ("min", "mean", "max"))
+    stats = (
+        "no simulated point with a value"
+        if not s["count"]
+        else "  ".join(
+            f"{k} {_fmt(None if s[k] is None else s[k] * factor, shown_unit)}" for k in ("min", "mean", "max")
+        )
+    )
     stats += "" if shown_unit == "1" or not s["count"] else f" {shown_unit}"
     u0 = "" if s["uniformity"] is None else f",  U0 = min/mean = {s['uniformity']:.3f}"
     fig.suptitle(f"{m.grid}: {quantity} from {m.channel}\n{stats}{u0}", fontsize=10)
@@ -651,11 +805,19 @@ def maps_of_result(result: "SimulationResultPublic") -> tuple[list[GridMap], Map
     maps = []
     for m in result.maps:
         nu, nv = m.shape
-        maps.append(GridMap(
-            grid=m.grid, channel=m.channel, origin=np.asarray(m.origin, float),
-            u=np.asarray(m.u, float), v=np.asarray(m.v, float),
-            x=m.spacing * np.arange(nu), y=m.spacing * np.arange(nv),
-            values={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m.values.items()},
-            stderr={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m.stderr.items()},
-            units=dict(m.units), mask_reason=reasons[m.grid]))
+        maps.append(
+            GridMap(
+                grid=m.grid,
+                channel=m.channel,
+                origin=np.asarray(m.origin, float),
+                u=np.asarray(m.u, float),
+                v=np.asarray(m.v, float),
+                x=m.spacing * np.arange(nu),
+                y=m.spacing * np.arange(nv),
+                values={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m.values.items()},
+                stderr={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m.stderr.items()},
+                units=dict(m.units),
+                mask_reason=reasons[m.grid],
+            )
+        )
     return maps, MapDecor.from_scene(result.scene)

@@ -1,4 +1,5 @@
 """Participating medium (smoke): coefficients, phase function, region (physics.md section 3)."""
+
 from __future__ import annotations
 
 import math
@@ -55,8 +56,10 @@ class RayleighPhaseSpec(SpecModel):
 
 class MixtureComponent(SpecModel):
     weight: float = Field(gt=0.0)
-    phase: Annotated[IsotropicPhaseSpec | HenyeyGreensteinPhaseSpec | SchlickPhaseSpec | RayleighPhaseSpec,
-                     Field(discriminator="type")]
+    phase: Annotated[
+        IsotropicPhaseSpec | HenyeyGreensteinPhaseSpec | SchlickPhaseSpec | RayleighPhaseSpec,
+        Field(discriminator="type"),
+    ]
 
 
 class MixturePhaseSpec(SpecModel):
@@ -88,33 +91,45 @@ class TabulatedPhaseSpec(SpecModel):
     type: Literal["tabulated"] = "tabulated"
     cos_theta: list[float] | None = Field(None, description="cos(theta), increasing from -1 to 1")
     angle_deg: list[float] | None = Field(None, description="scattering angle [deg], increasing from 0 to 180")
-    values: list[float] = Field(min_length=2, max_length=MAX_PHASE_TABLE_POINTS,
-                                description="phase function at the points [1/sr, up to a common factor]")
+    values: list[float] = Field(
+        min_length=2,
+        max_length=MAX_PHASE_TABLE_POINTS,
+        description="phase function at the points [1/sr, up to a common factor]",
+    )
 
     @model_validator(mode="after")
     def _table(self) -> "TabulatedPhaseSpec":
         if (self.cos_theta is None) == (self.angle_deg is None):
             raise ValueError("give exactly one of `cos_theta` and `angle_deg`")
         grid: list[float]
-        name, grid, ends = (("cos_theta", self.cos_theta, (-1.0, 1.0)) if self.cos_theta is not None
-                            else ("angle_deg", self.angle_deg or [], (0.0, 180.0)))
+        name, grid, ends = (
+            ("cos_theta", self.cos_theta, (-1.0, 1.0))
+            if self.cos_theta is not None
+            else ("angle_deg", self.angle_deg or [], (0.0, 180.0))
+        )
         if len(grid) != len(self.values):
-            raise ValueError(f"`{name}` has {len(grid)} points but `values` has {len(self.values)}: "
-                             "give one value per point")
+            raise ValueError(
+                f"`{name}` has {len(grid)} points but `values` has {len(self.values)}: give one value per point"
+            )
         if grid[0] != ends[0] or grid[-1] != ends[1]:
-            raise ValueError(f"`{name}` must run from exactly {ends[0]:g} to exactly {ends[1]:g}, "
-                             f"got {grid[0]!r} .. {grid[-1]!r}")
+            raise ValueError(
+                f"`{name}` must run from exactly {ends[0]:g} to exactly {ends[1]:g}, got {grid[0]!r} .. {grid[-1]!r}"
+            )
         bad = next((i for i in range(1, len(grid)) if not grid[i] > grid[i - 1]), None)
         if bad is not None:
-            raise ValueError(f"`{name}` must be strictly increasing: entry {bad} ({grid[bad]!r}) does not exceed "
-                             f"entry {bad - 1} ({grid[bad - 1]!r})")
+            raise ValueError(
+                f"`{name}` must be strictly increasing: entry {bad} ({grid[bad]!r}) does not exceed "
+                f"entry {bad - 1} ({grid[bad - 1]!r})"
+            )
         if self.angle_deg is not None:
             cos = [math.cos(math.radians(a)) for a in self.angle_deg[1:-1]]
             cos = [1.0] + cos + [-1.0]
             bad = next((i for i in range(1, len(cos)) if not cos[i] < cos[i - 1]), None)
             if bad is not None:
-                raise ValueError(f"`angle_deg` entries {bad - 1} and {bad} ({self.angle_deg[bad - 1]!r}, "
-                                 f"{self.angle_deg[bad]!r}) give the same cos(theta) in double precision")
+                raise ValueError(
+                    f"`angle_deg` entries {bad - 1} and {bad} ({self.angle_deg[bad - 1]!r}, "
+                    f"{self.angle_deg[bad]!r}) give the same cos(theta) in double precision"
+                )
         bad = _first_bad(self.values, lambda v: v >= 0.0)
         if bad is not None:
             raise ValueError(f"`values` must be >= 0: entry {bad} is {self.values[bad]!r}")
@@ -158,10 +173,12 @@ class ParticlesSpec(SpecModel):
         d_max = self.geometric_mean_diameter * math.exp(2 * s * s + SIZE_WINDOW_SIGMAS * s)
         x = math.pi * d_max * self.medium_index / self.wavelength
         if x > MAX_SIZE_PARAMETER:
-            raise ValueError(f"the size distribution reaches size parameter pi D n / wavelength = {x:.4g} (at D = "
-                             f"{d_max:.3g} m, where its cross-section-weighted tail ends), above the limit of "
-                             f"{MAX_SIZE_PARAMETER:g}: smaller particles, a narrower distribution or a longer "
-                             "wavelength")
+            raise ValueError(
+                f"the size distribution reaches size parameter pi D n / wavelength = {x:.4g} (at D = "
+                f"{d_max:.3g} m, where its cross-section-weighted tail ends), above the limit of "
+                f"{MAX_SIZE_PARAMETER:g}: smaller particles, a narrower distribution or a longer "
+                "wavelength"
+            )
         return self
 
 
@@ -173,8 +190,13 @@ class MiePhaseSpec(SpecModel):
 
 
 PhaseSpec = Annotated[
-    IsotropicPhaseSpec | HenyeyGreensteinPhaseSpec | SchlickPhaseSpec | RayleighPhaseSpec | MixturePhaseSpec
-    | TabulatedPhaseSpec | MiePhaseSpec,
+    IsotropicPhaseSpec
+    | HenyeyGreensteinPhaseSpec
+    | SchlickPhaseSpec
+    | RayleighPhaseSpec
+    | MixturePhaseSpec
+    | TabulatedPhaseSpec
+    | MiePhaseSpec,
     Field(discriminator="type"),
 ]
 
@@ -226,8 +248,10 @@ class MeshRegionSpec(SpecModel):
         edges = Counter(frozenset(e) for a, b, c in faces for e in ((a, b), (b, c), (c, a)))
         open_edges = [tuple(e) for e, k in edges.items() if k != 2]
         if open_edges:
-            raise ValueError(f"the mesh region is not closed: {len(open_edges)} edges are not shared by exactly "
-                             f"two triangles, e.g. between {list(open_edges[0])}")
+            raise ValueError(
+                f"the mesh region is not closed: {len(open_edges)} edges are not shared by exactly "
+                f"two triangles, e.g. between {list(open_edges[0])}"
+            )
         return self
 
 
@@ -307,8 +331,10 @@ class GridMediumSpec(SpecModel):
         if math.prod(v) > MAX_GRID_CELLS:
             raise ValueError(f"{math.prod(v)} cells exceed the limit of {MAX_GRID_CELLS}")
         if max(v) > MAX_GRID_CELLS_PER_AXIS:
-            raise ValueError(f"{max(v)} cells along one axis exceed the limit of {MAX_GRID_CELLS_PER_AXIS} "
-                             "(the exact traversal costs one step per cell plane a segment crosses)")
+            raise ValueError(
+                f"{max(v)} cells along one axis exceed the limit of {MAX_GRID_CELLS_PER_AXIS} "
+                "(the exact traversal costs one step per cell plane a segment crosses)"
+            )
         return v
 
     @field_validator("sigma_a", "sigma_s")
@@ -317,8 +343,7 @@ class GridMediumSpec(SpecModel):
         values = [v] if isinstance(v, (int, float)) else v
         shape = info.data.get("shape")
         if not isinstance(v, (int, float)) and shape is not None and len(v) != math.prod(shape):
-            raise ValueError(f"expected 1 or nx*ny*nz = {math.prod(shape)} values (C order, x slowest), "
-                             f"got {len(v)}")
+            raise ValueError(f"expected 1 or nx*ny*nz = {math.prod(shape)} values (C order, x slowest), got {len(v)}")
         bad = next((i for i, x in enumerate(values) if not (0.0 <= x <= MAX_COEFFICIENT)), None)
         if bad is not None:
             where = "" if isinstance(v, (int, float)) else f" at flat index {bad}"
@@ -355,8 +380,9 @@ class ParticleMediumSpec(SpecModel):
     @model_validator(mode="after")
     def _one_concentration(self) -> "ParticleMediumSpec":
         if (self.mass_concentration is None) == (self.number_concentration is None):
-            raise ValueError("give exactly one of `mass_concentration` (with `particle_density`) and "
-                             "`number_concentration`")
+            raise ValueError(
+                "give exactly one of `mass_concentration` (with `particle_density`) and `number_concentration`"
+            )
         if self.mass_concentration is not None and self.particle_density is None:
             raise ValueError("`mass_concentration` needs `particle_density` [kg/m^3] (soot: about 1800)")
         if self.number_concentration is not None and self.particle_density is not None:

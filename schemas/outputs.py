@@ -12,6 +12,7 @@ explicit `receivers` (a handful of links whose CIR a user plots) and not for `re
 (maps of thousands of points, where the map quantities are what is read). `true` or `false`
 applies to every receiver.
 """
+
 from __future__ import annotations
 
 from pydantic import Field
@@ -22,15 +23,21 @@ from .base import SpecModel
 class OutputsSpec(SpecModel):
     """Which optional quantities to compute: null = the default by receiver kind (see the module docstring)."""
 
-    cir: bool | None = Field(None, description="binned impulse response per link (default: for explicit "
-                                               "receivers, not for grid receivers)")
-    orders: bool | None = Field(None, description="H0 (and CIR) split by reflection and scattering order "
-                                                  "(default: for explicit receivers, not for grid receivers)")
+    cir: bool | None = Field(
+        None, description="binned impulse response per link (default: for explicit receivers, not for grid receivers)"
+    )
+    orders: bool | None = Field(
+        None,
+        description="H0 (and CIR) split by reflection and scattering order "
+        "(default: for explicit receivers, not for grid receivers)",
+    )
 
     def per_receiver(self, explicit: int, gridded: int) -> tuple[list[bool], list[bool]]:
         """(cir, orders) flags for `explicit` receivers followed by `gridded` grid receivers."""
+
         def flags(choice: bool | None) -> list[bool]:
             if choice is None:
                 return [True] * explicit + [False] * gridded
             return [choice] * (explicit + gridded)
+
         return flags(self.cir), flags(self.orders)

@@ -7,6 +7,7 @@ contains `c0_direction` (default world +x, or +y for a luminaire aimed along x),
 by `rotation_deg` about the aiming axis (C = 90 deg lies counter-clockwise seen from
 behind the luminaire: from above a downlight).
 """
+
 from __future__ import annotations
 
 import base64
@@ -24,14 +25,17 @@ PHOTOMETRY_FORMATS = ("ies", "ldt")
 class PhotometrySpec(SpecModel):
     """Photometric file of a luminaire and its orientation (type-C photometry)."""
 
-    file: str | None = Field(None, description="path to a .ies or .ldt file, relative to the scene document "
-                                               "(command line only)")
+    file: str | None = Field(
+        None, description="path to a .ies or .ldt file, relative to the scene document (command line only)"
+    )
     data_base64: str | None = Field(None, description="the file's content, base64")
     format: Literal["ies", "ldt"] | None = Field(None, description="file format; from the file suffix if omitted")
-    c0_direction: Direction | None = Field(None, description="world direction of the C = 0 half-plane, made "
-                                                            "perpendicular to the aiming direction")
-    rotation_deg: float = Field(0.0, ge=-360.0, le=360.0, description="rotation of the C-planes about the "
-                                                                     "aiming direction [deg]")
+    c0_direction: Direction | None = Field(
+        None, description="world direction of the C = 0 half-plane, made perpendicular to the aiming direction"
+    )
+    rotation_deg: float = Field(
+        0.0, ge=-360.0, le=360.0, description="rotation of the C-planes about the aiming direction [deg]"
+    )
 
     @model_validator(mode="after")
     def _one_source(self) -> "PhotometrySpec":

@@ -6,6 +6,7 @@ gives the offset for a LOS-relative view. Figures that do not exist (an unreacha
 link's delays, a bandwidth above the binning's Nyquist frequency, an error bar
 from fewer than two batch groups) are null.
 """
+
 from __future__ import annotations
 
 from enum import StrEnum
@@ -40,20 +41,24 @@ class CirPublic(PublicModel):
     total: list[float]
     total_stderr: list[float | None]
     by_reflection_order: list[list[float]] | None = Field(
-        None, description="[k][bin], k = 0..max_reflections (when the order split is asked)")
+        None, description="[k][bin], k = 0..max_reflections (when the order split is asked)"
+    )
     by_scattering_order: list[list[float]] | None = Field(
-        None, description="[s][bin], s = 0..S of the algorithm (when the order split is asked)")
+        None, description="[s][bin], s = 0..S of the algorithm (when the order split is asked)"
+    )
 
 
 class LightingPublic(PublicModel):
     """Illuminance and link-budget figures of a link or a group's channel (null when not asked)."""
 
-    illuminance_lx: float | None = Field(None, description="direct illuminance on the receiver plane [lx] (when "
-                                         "the transmitters give a luminous output)")
+    illuminance_lx: float | None = Field(
+        None, description="direct illuminance on the receiver plane [lx] (when the transmitters give a luminous output)"
+    )
     snr_db: float | None = Field(None, description="electrical SNR [dB] (with `link_budget`)")
     ber: float | None = Field(None, description="bit-error rate of OOK-NRZ (with `link_budget`)")
-    max_bit_rate_bps: float | None = Field(None, description="bit rate the delay spread allows, 1/(10 tau_rms) "
-                                           "[bit/s] (with `link_budget`)")
+    max_bit_rate_bps: float | None = Field(
+        None, description="bit rate the delay spread allows, 1/(10 tau_rms) [bit/s] (with `link_budget`)"
+    )
 
 
 class LinkPublic(LightingPublic):
@@ -82,8 +87,10 @@ class LinkPublic(LightingPublic):
     bandwidth_3db_hz: float | None
     bandwidth_3db_hz_stderr: float | None
     truncated_gain_estimate: float | None = Field(
-        None, description="estimated power per watt of the reflection (and scattering) orders beyond K (and S), "
-                          "not in dc_gain: the last order's gain times rho_max / (1 - rho_max) (albedo for S)")
+        None,
+        description="estimated power per watt of the reflection (and scattering) orders beyond K (and S), "
+        "not in dc_gain: the last order's gain times rho_max / (1 - rho_max) (albedo for S)",
+    )
     los_gain: float | None
     los_delay_s: float
     dc_gain_by_reflection_order: list[float] | None = None
@@ -139,8 +146,9 @@ class MapPublic(PublicModel):
     spacing: float = Field(description="distance between neighbouring points [m]")
     units: dict[str, str] = Field(description="unit of each quantity")
     values: dict[str, list[list[float | None]]] = Field(description="quantity -> [i][j] values, null where masked")
-    stderr: dict[str, list[list[float | None]]] = Field(default_factory=dict,
-                                                        description="quantity -> [i][j] standard errors")
+    stderr: dict[str, list[list[float | None]]] = Field(
+        default_factory=dict, description="quantity -> [i][j] standard errors"
+    )
 
 
 class TimeBinsPublic(PublicModel):
@@ -158,9 +166,11 @@ class DirectionChoicePublic(PublicModel):
     rule: str = Field(description="the rule that chose the directions")
     paths_per_direction: int | None = Field(None, description="paths per source of the direction pilot, each way")
     rel_std_per_path_forward: list[float | None] | None = Field(
-        None, description="per link: relative standard deviation of H0 per forward path (pilot)")
+        None, description="per link: relative standard deviation of H0 per forward path (pilot)"
+    )
     rel_std_per_path_backward: list[float | None] | None = Field(
-        None, description="per link: relative standard deviation of H0 per backward path (pilot)")
+        None, description="per link: relative standard deviation of H0 per backward path (pilot)"
+    )
     rays_per_path_forward: float | None = Field(None, description="rays cast per forward path (pilot)")
     rays_per_path_backward: float | None = Field(None, description="rays cast per backward path (pilot)")
 
@@ -216,21 +226,25 @@ class ModeledPublic(PublicModel):
     algorithm_reason: str | None = Field(None, description="why this algorithm (requested, or the rule that chose it)")
     families: str | None = Field(None, description="the path families estimated")
     left_out: list[str] = Field(default_factory=list, description="what the estimate leaves out")
-    medium: dict | None = Field(None, description="the medium's derived figures: coefficients, phase function, "
-                                "visibility (particle smoke: its Mie optics)")
+    medium: dict | None = Field(
+        None,
+        description="the medium's derived figures: coefficients, phase function, "
+        "visibility (particle smoke: its Mie optics)",
+    )
     max_reflections: int | None = Field(None, description="K, the highest reflection order")
     max_reflections_reason: str | None = Field(None, description="why K (when chosen automatically)")
     max_scattering: int | None = Field(None, description="S, the highest scattering order (0 without a medium)")
     max_scattering_reason: str | None = Field(None, description="why S (when chosen automatically)")
     time_window_s: tuple[float, float] | None = Field(None, description="the binned CIR's window [s]")
-    time_window_reason: str | None = Field(None, description="why the window ends there (when chosen "
-                                           "automatically)")
+    time_window_reason: str | None = Field(None, description="why the window ends there (when chosen automatically)")
     pilot: PilotPublic | None = Field(None, description="the truncation pilot, when one ran")
-    truncation_estimate_per_watt: float | None = Field(None, description="estimated power per watt of the orders "
-                                                       "left out (from the pilot)")
+    truncation_estimate_per_watt: float | None = Field(
+        None, description="estimated power per watt of the orders left out (from the pilot)"
+    )
     truncation_note: str | None = Field(None, description="how the truncation estimate was made")
-    unreachable_receivers: list[UnreachablePublic] = Field(default_factory=list,
-                                                           description="receivers no light can reach, not simulated")
+    unreachable_receivers: list[UnreachablePublic] = Field(
+        default_factory=list, description="receivers no light can reach, not simulated"
+    )
 
 
 class SimulationResultPublic(PublicModel):
@@ -245,8 +259,10 @@ class SimulationResultPublic(PublicModel):
     run: RunPublic
     diagnostics: DiagnosticsPublic
     warnings: list[str] = Field(default_factory=list, description="what a careful reader of these numbers should know")
-    modeled: ModeledPublic = Field(default_factory=ModeledPublic,
-                                   description="what was simulated, what was left out, and why")
-    spectral: SpectralResultPublic | None = Field(None, description="per wavelength band and combined (scenes "
-                                                  "with `spectral`; docs/spectra.md)")
+    modeled: ModeledPublic = Field(
+        default_factory=ModeledPublic, description="what was simulated, what was left out, and why"
+    )
+    spectral: SpectralResultPublic | None = Field(
+        None, description="per wavelength band and combined (scenes with `spectral`; docs/spectra.md)"
+    )
     scene: SceneSpec

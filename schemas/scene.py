@@ -1,4 +1,5 @@
 """The scene document: what `owcsim run` reads and `POST /v1/jobs` takes."""
+
 from __future__ import annotations
 
 from collections import Counter
@@ -26,8 +27,10 @@ class TransmitterGroupSpec(SpecModel):
     """
 
     name: str = Field(min_length=1, max_length=200)
-    transmitters: list[str] = Field(min_length=1, description="ids of the member transmitters (default ids tx0, "
-                                                              "tx1, ... when a transmitter has none)")
+    transmitters: list[str] = Field(
+        min_length=1,
+        description="ids of the member transmitters (default ids tx0, tx1, ... when a transmitter has none)",
+    )
 
 
 class SceneSpec(SpecModel):
@@ -43,16 +46,25 @@ class SceneSpec(SpecModel):
     receiver_grids: list[ReceiverGridSpec] = Field(default_factory=list)
     medium: MediumSpec | None = None
     transmitter_groups: list[TransmitterGroupSpec] = Field(
-        default_factory=list, description="transmitters that carry one signal: each group's channel (their "
-        "summed response) is reported beside the links, and maps are drawn per group")
-    outputs: OutputsSpec = Field(default_factory=OutputsSpec, description="optional quantities to compute: the "
-                                 "binned CIR and the order split (default: for explicit receivers, not grids)")
+        default_factory=list,
+        description="transmitters that carry one signal: each group's channel (their "
+        "summed response) is reported beside the links, and maps are drawn per group",
+    )
+    outputs: OutputsSpec = Field(
+        default_factory=OutputsSpec,
+        description="optional quantities to compute: the "
+        "binned CIR and the order split (default: for explicit receivers, not grids)",
+    )
     link_budget: LinkBudgetSpec | None = Field(
-        None, description="photodiode and receiver electronics: adds SNR, BER of OOK and the bit rate the delay "
-                          "spread allows to links, channels and maps (Komine & Nakagawa 2004 noise model)")
+        None,
+        description="photodiode and receiver electronics: adds SNR, BER of OOK and the bit rate the delay "
+        "spread allows to links, channels and maps (Komine & Nakagawa 2004 noise model)",
+    )
     spectral: SpectralSpec | None = Field(
-        None, description="wavelength bands: per-band spectra of sources, surfaces, detectors and smoke "
-                          "(docs/spectra.md); without it the scene is grey")
+        None,
+        description="wavelength bands: per-band spectra of sources, surfaces, detectors and smoke "
+        "(docs/spectra.md); without it the scene is grey",
+    )
     simulation: SimulationSpec = Field(default_factory=SimulationSpec)
 
     @model_validator(mode="after")
@@ -60,8 +72,7 @@ class SceneSpec(SpecModel):
         check_scene(self)
         if not self.receivers and not self.receiver_grids:
             raise ValueError("the scene has no receiver: give `receivers` or `receiver_grids`")
-        rx_ids = [r.id for r in self.receivers if r.id is not None] + [
-            i for g in self.receiver_grids for i in g.ids()]
+        rx_ids = [r.id for r in self.receivers if r.id is not None] + [i for g in self.receiver_grids for i in g.ids()]
         tx_given = [d.id for d in self.transmitters if d.id is not None]
         for kind, ids in (("transmitters", tx_given), ("receivers", rx_ids)):
             dup = sorted(i for i, n in Counter(ids).items() if n > 1)  # linear: grids hold 1e5 receivers
@@ -69,7 +80,8 @@ class SceneSpec(SpecModel):
                 raise ValueError(f"{kind}: duplicate ids {dup[:20]}")
         # Explicit devices must be placed sensibly; grid points that are not are masked by the engine.
         devices: list[tuple[str, int, TransmitterSpec | ReceiverSpec]] = [
-            ("transmitters", i, d) for i, d in enumerate(self.transmitters)]
+            ("transmitters", i, d) for i, d in enumerate(self.transmitters)
+        ]
         devices += [("receivers", i, d) for i, d in enumerate(self.receivers)]
         for kind, i, d in devices:
             problem = placement_problem(self, d.position, d.normal)
@@ -84,8 +96,10 @@ class SceneSpec(SpecModel):
         for gi, g in enumerate(self.transmitter_groups):
             missing = [t for t in g.transmitters if t not in known]
             if missing:
-                raise ValueError(f"transmitter_groups[{gi}] ({g.name}): no transmitter with id {missing}; "
-                                 f"the ids are {tx_ids[:10]}{' ...' if len(tx_ids) > 10 else ''}")
+                raise ValueError(
+                    f"transmitter_groups[{gi}] ({g.name}): no transmitter with id {missing}; "
+                    f"the ids are {tx_ids[:10]}{' ...' if len(tx_ids) > 10 else ''}"
+                )
             if len(set(g.transmitters)) != len(g.transmitters):
                 raise ValueError(f"transmitter_groups[{gi}] ({g.name}): a transmitter is listed twice")
         if self.simulation.is_resolved:  # the engine checks the budget once it has chosen K, S and the window
@@ -101,7 +115,8 @@ class SceneSpec(SpecModel):
             raise ValueError(
                 f"the binned CIR and order split asked for need {cells} tally cells (links x orders x bins), more "
                 f"than the budget of {MAX_TALLY_CELLS}: widen `time_bin_s`, shorten the window, lower "
-                "`max_reflections` / `max_scattering`, or ask for them on fewer receivers (`outputs`)")
+                "`max_reflections` / `max_scattering`, or ask for them on fewer receivers (`outputs`)"
+            )
 
     def tally_cells(self, max_reflections: int, max_scattering: int, n_bins: int) -> int:
         """Tally cells the asked outputs hold: CIR bins (per order when the split is asked) and order cells."""
@@ -129,7 +144,8 @@ class SceneSpec(SpecModel):
     def receiver_ids(self) -> list[str]:
         """Ids of the explicit receivers (rx<i> when not given), then of every grid point."""
         return [r.id or f"rx{i}" for i, r in enumerate(self.receivers)] + [
-            i for g in self.receiver_grids for i in g.ids()]
+            i for g in self.receiver_grids for i in g.ids()
+        ]
 
     def receiver_at(self, index: int) -> ReceiverSpec:
         """The receiver of global index `index` (explicit receivers first, then the grids' points in order)."""

@@ -1,4 +1,5 @@
 """Simulation settings: algorithm, depth, time binning, path budget or target accuracy."""
+
 from __future__ import annotations
 
 import math
@@ -19,8 +20,10 @@ def check_bin_budget(t_min_s: float, t_max_s: float, time_bin_s: float, automati
     if ratio - 1e-9 > MAX_BINS:
         where = "the automatic time window" if automatic else "time window"
         fix = "widen `time_bin_s` or give a shorter `t_max_s`" if automatic else "widen `time_bin_s`"
-        raise ValueError(f"{where} {t_min_s:g}..{t_max_s:g} s at {time_bin_s:g} s per bin needs {ratio:.4g} bins, "
-                         f"more than the budget of {MAX_BINS:,}: {fix}")
+        raise ValueError(
+            f"{where} {t_min_s:g}..{t_max_s:g} s at {time_bin_s:g} s per bin needs {ratio:.4g} bins, "
+            f"more than the budget of {MAX_BINS:,}: {fix}"
+        )
 
 
 #: Paths used when neither `paths` nor `target_rel_error` is given.
@@ -39,35 +42,56 @@ class SimulationSpec(SpecModel):
 
     algorithm: Literal[1, 2, 3, 4, 5, "auto"] = "auto"
     direction: Literal["auto", "forward", "backward"] = "auto"
-    max_reflections: int | None = Field(None, ge=0, le=1000,
-                                        description="highest reflection order K (default: from the accuracy asked)")
-    max_scattering: int | None = Field(None, ge=1, le=1000, description="highest scattering order S of algorithm 5 "
-                                       "(algorithms 2-3: 1, 4: 2, 1: 0; default: from the accuracy asked)")
+    max_reflections: int | None = Field(
+        None, ge=0, le=1000, description="highest reflection order K (default: from the accuracy asked)"
+    )
+    max_scattering: int | None = Field(
+        None,
+        ge=1,
+        le=1000,
+        description="highest scattering order S of algorithm 5 "
+        "(algorithms 2-3: 1, 4: 2, 1: 0; default: from the accuracy asked)",
+    )
     segment_time_step_s: float | None = Field(
-        None, ge=1e-15,
-        description="time strata of the points along segments, algorithms 2-4 [s] (default: time_bin_s)")
+        None, ge=1e-15, description="time strata of the points along segments, algorithms 2-4 [s] (default: time_bin_s)"
+    )
     max_strata: int = Field(64, ge=1, le=4096, description="most time strata per segment and target, algorithms 2-4")
     equiangular_points: int = Field(
-        2, ge=0, le=256, description="equiangular points per segment and target (algorithms 2-5), combined with "
-                                     "the time strata (2-4) or the free-flight collisions (5) by the balance heuristic")
-    time_bin_s: float = Field(0.25e-9, ge=1e-15, description="CIR bin width dt [s] (at least 1 fs: light travels "
-                              "0.3 um in it)")
-    t_min_s: float = Field(0.0, ge=0.0, le=1.0, description="start of the time window [s] (at most 1 s: light "
-                           "travels 300,000 km in it)")
+        2,
+        ge=0,
+        le=256,
+        description="equiangular points per segment and target (algorithms 2-5), combined with "
+        "the time strata (2-4) or the free-flight collisions (5) by the balance heuristic",
+    )
+    time_bin_s: float = Field(
+        0.25e-9, ge=1e-15, description="CIR bin width dt [s] (at least 1 fs: light travels 0.3 um in it)"
+    )
+    t_min_s: float = Field(
+        0.0, ge=0.0, le=1.0, description="start of the time window [s] (at most 1 s: light travels 300,000 km in it)"
+    )
     t_max_s: float | None = Field(None, gt=0.0, description="end of the time window [s] (default: from the accuracy)")
     truncation_tolerance: float | None = Field(
-        None, gt=0.0, lt=1.0, description="largest truncated power (reflection and scattering orders beyond K and S, "
+        None,
+        gt=0.0,
+        lt=1.0,
+        description="largest truncated power (reflection and scattering orders beyond K and S, "
         "arrivals after t_max_s) relative to H0 when K, S or t_max_s are chosen automatically (default: 0.1 x "
-        "target_rel_error in an accuracy run, 1e-4 otherwise)")
+        "target_rel_error in an accuracy run, 1e-4 otherwise)",
+    )
     paths: int | None = Field(None, ge=1, le=10**12, description="paths per source device")
-    target_rel_error: float | None = Field(None, gt=0.0, lt=1.0,
-                                           description="stop when stderr(H0)/H0 <= this, every link")
+    target_rel_error: float | None = Field(
+        None, gt=0.0, lt=1.0, description="stop when stderr(H0)/H0 <= this, every link"
+    )
     time_budget_s: float = Field(600.0, gt=0.0, description="wall-time limit of an accuracy run [s]")
     seed: int = Field(0, ge=0, lt=2**63)
     batch_size: int = Field(16384, ge=64, le=1_048_576, description="paths per batch (memory bound)")
     russian_roulette: bool = True
-    rr_start_depth: int = Field(3, ge=1, le=1000, description="first event count k + s (reflections plus "
-                                "scattering events) at which roulette may end a path")
+    rr_start_depth: int = Field(
+        3,
+        ge=1,
+        le=1000,
+        description="first event count k + s (reflections plus scattering events) at which roulette may end a path",
+    )
     pilot_paths: int = Field(4096, ge=256, le=1_000_000, description="paths per direction of the auto pilot")
 
     @model_validator(mode="after")

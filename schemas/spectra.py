@@ -17,9 +17,10 @@ range must cover the bands), or a table shipped with owcsim `{"type": "named", "
 curves are averaged over each band (the SPD is integrated); with `wavelengths`, they are
 taken at each wavelength (the SPD at a wavelength times the width between the midpoints).
 """
+
 from __future__ import annotations
 
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, Discriminator, Field, Tag, model_validator
 
@@ -50,8 +51,20 @@ NAMED_CURVES: dict[str, tuple[str, float, float]] = {
     "silicon_pin": ("responsivity", 350e-9, 1100e-9),
     "daylight_filter_ir": ("filter", 350e-9, 1100e-9),
 }
-NamedCurve = Literal["white_led_cool", "white_led_warm", "ir_led_850", "ir_led_940", "white_paint", "plaster",
-                     "light_wood", "red_brick", "blue_paint", "grey_carpet", "silicon_pin", "daylight_filter_ir"]
+NamedCurve = Literal[
+    "white_led_cool",
+    "white_led_warm",
+    "ir_led_850",
+    "ir_led_940",
+    "white_paint",
+    "plaster",
+    "light_wood",
+    "red_brick",
+    "blue_paint",
+    "grey_carpet",
+    "silicon_pin",
+    "daylight_filter_ir",
+]
 
 
 class TableCurveSpec(SpecModel):
@@ -68,8 +81,10 @@ class TableCurveSpec(SpecModel):
         w = self.wavelengths
         bad = next((i for i in range(1, len(w)) if not w[i] > w[i - 1]), None)
         if bad is not None:
-            raise ValueError(f"`wavelengths` must be strictly increasing: entry {bad} ({w[bad]!r}) does not exceed "
-                             f"entry {bad - 1} ({w[bad - 1]!r})")
+            raise ValueError(
+                f"`wavelengths` must be strictly increasing: entry {bad} ({w[bad]!r}) does not exceed "
+                f"entry {bad - 1} ({w[bad - 1]!r})"
+            )
         if not w[0] > 0:
             raise ValueError(f"`wavelengths` must be positive [m], got {w[0]!r}")
         return self
@@ -92,14 +107,19 @@ def _curve_kind(value) -> str | None:
     return "number"
 
 
-_CURVE_HELP = ("a spectral curve is a number (flat), a list of one value per band, {\"type\": \"table\", "
-               "\"wavelengths\": [...], \"values\": [...]} or {\"type\": \"named\", \"name\": ...}")
+_CURVE_HELP = (
+    'a spectral curve is a number (flat), a list of one value per band, {"type": "table", '
+    '"wavelengths": [...], "values": [...]} or {"type": "named", "name": ...}'
+)
 
 #: A spectral curve: flat number, per-band list, table, or named table (checked against the bands by SceneSpec).
 Curve = Annotated[
-    Union[Annotated[float, Tag("number")], Annotated[list[float], Tag("bands")],
-          Annotated[TableCurveSpec, Tag("table")], Annotated[NamedCurveSpec, Tag("named")]],
-    Discriminator(_curve_kind, custom_error_type="invalid_curve", custom_error_message=_CURVE_HELP)]
+    Annotated[float, Tag("number")]
+    | Annotated[list[float], Tag("bands")]
+    | Annotated[TableCurveSpec, Tag("table")]
+    | Annotated[NamedCurveSpec, Tag("named")],
+    Discriminator(_curve_kind, custom_error_type="invalid_curve", custom_error_message=_CURVE_HELP),
+]
 
 
 class SpectralSurfaceSpec(SpecModel):
@@ -119,7 +139,8 @@ class BandMediumSpec(SpecModel):
     sigma_a: list[float] | None = Field(None, description="absorption coefficient per band [1/m]")
     sigma_s: list[float] | None = Field(None, description="scattering coefficient per band [1/m]")
     refractive_index: list[ComplexIndexSpec] | None = Field(
-        None, description="particle refractive index per band (particle media)")
+        None, description="particle refractive index per band (particle media)"
+    )
 
     @model_validator(mode="after")
     def _one(self) -> "BandMediumSpec":
@@ -143,10 +164,12 @@ class SpectralSpec(SpecModel):
     symmetric about their wavelength; a single wavelength has the width `band_width`).
     """
 
-    band_edges: list[float] | None = Field(None, min_length=2, max_length=MAX_BANDS + 1,
-                                           description="band edges [m], strictly increasing")
-    wavelengths: list[float] | None = Field(None, min_length=1, max_length=MAX_BANDS,
-                                            description="band wavelengths [m], strictly increasing")
+    band_edges: list[float] | None = Field(
+        None, min_length=2, max_length=MAX_BANDS + 1, description="band edges [m], strictly increasing"
+    )
+    wavelengths: list[float] | None = Field(
+        None, min_length=1, max_length=MAX_BANDS, description="band wavelengths [m], strictly increasing"
+    )
     band_width: float = Field(10e-9, gt=0.0, le=1e-6, description="width of a single-wavelength band [m]")
     medium: BandMediumSpec | None = Field(None, description="the medium per band (default: grey)")
 
@@ -158,12 +181,16 @@ class SpectralSpec(SpecModel):
         w: list[float] = self.band_edges if self.band_edges is not None else (self.wavelengths or [])
         bad = next((i for i, x in enumerate(w) if not MIN_WAVELENGTH <= x <= MAX_WAVELENGTH), None)
         if bad is not None:
-            raise ValueError(f"`{name}` entry {bad} is {w[bad]!r} m: wavelengths are in metres, between "
-                             f"{MIN_WAVELENGTH:g} and {MAX_WAVELENGTH:g} (e.g. 550e-9 for 550 nm)")
+            raise ValueError(
+                f"`{name}` entry {bad} is {w[bad]!r} m: wavelengths are in metres, between "
+                f"{MIN_WAVELENGTH:g} and {MAX_WAVELENGTH:g} (e.g. 550e-9 for 550 nm)"
+            )
         bad = next((i for i in range(1, len(w)) if not w[i] > w[i - 1]), None)
         if bad is not None:
-            raise ValueError(f"`{name}` must be strictly increasing: entry {bad} ({w[bad]!r}) does not exceed "
-                             f"entry {bad - 1} ({w[bad - 1]!r})")
+            raise ValueError(
+                f"`{name}` must be strictly increasing: entry {bad} ({w[bad]!r}) does not exceed "
+                f"entry {bad - 1} ({w[bad - 1]!r})"
+            )
         return self
 
     @property
@@ -188,8 +215,9 @@ class SpectralSpec(SpecModel):
         return [(a + b) / 2 for a, b in zip(e[:-1], e[1:])]  # type: ignore[index]
 
 
-def check_curve(curve, spectral: SpectralSpec, where: str, kind: str, lo: float | None = 0.0,
-                hi: float | None = None) -> None:
+def check_curve(
+    curve, spectral: SpectralSpec, where: str, kind: str, lo: float | None = 0.0, hi: float | None = None
+) -> None:
     """ValueError naming `where` when `curve` does not fit the bands (length, coverage, range, kind of table)."""
     n = spectral.n_bands
     if isinstance(curve, (int, float)):
@@ -201,21 +229,26 @@ def check_curve(curve, spectral: SpectralSpec, where: str, kind: str, lo: float 
     elif curve.type == "table":
         edges = spectral.edges() if spectral.band_edges is not None else spectral.centres()
         if curve.wavelengths[0] > edges[0] * (1 + 1e-12) or curve.wavelengths[-1] < edges[-1] * (1 - 1e-12):
-            raise ValueError(f"{where}: the table covers {curve.wavelengths[0]:.6g}..{curve.wavelengths[-1]:.6g} m "
-                             f"but the bands span {edges[0]:.6g}..{edges[-1]:.6g} m: extend the table")
+            raise ValueError(
+                f"{where}: the table covers {curve.wavelengths[0]:.6g}..{curve.wavelengths[-1]:.6g} m "
+                f"but the bands span {edges[0]:.6g}..{edges[-1]:.6g} m: extend the table"
+            )
         values = list(curve.values)
     else:
         k, a, b = NAMED_CURVES[curve.name]
         if k != kind:
-            raise ValueError(f"{where}: {curve.name!r} is a {k} table, not a {kind}; the {kind} tables are "
-                             f"{sorted(n for n, v in NAMED_CURVES.items() if v[0] == kind)}")
+            raise ValueError(
+                f"{where}: {curve.name!r} is a {k} table, not a {kind}; the {kind} tables are "
+                f"{sorted(n for n, v in NAMED_CURVES.items() if v[0] == kind)}"
+            )
         edges = spectral.edges()
         if edges[0] < a or edges[-1] > b:
-            raise ValueError(f"{where}: {curve.name!r} covers {a:.4g}..{b:.4g} m but the bands span "
-                             f"{edges[0]:.4g}..{edges[-1]:.4g} m")
+            raise ValueError(
+                f"{where}: {curve.name!r} covers {a:.4g}..{b:.4g} m but the bands span "
+                f"{edges[0]:.4g}..{edges[-1]:.4g} m"
+            )
         return
-    bad = next((i for i, v in enumerate(values)
-                if (lo is not None and v < lo) or (hi is not None and v > hi)), None)
+    bad = next((i for i, v in enumerate(values) if (lo is not None and v < lo) or (hi is not None and v > hi)), None)
     if bad is not None:
         rng = f"[{lo:g}, {hi:g}]" if hi is not None else f">= {lo:g}"
         at = "" if len(values) == 1 else f" entry {bad}"
@@ -230,8 +263,10 @@ def check_scene(scene) -> None:
     fields = list(_spectral_fields(scene))
     if spectral is None:
         if fields:
-            raise ValueError(f"{fields[0][0]}: a spectral curve needs the scene's wavelength bands: add `spectral` "
-                             "with `band_edges` or `wavelengths` [m]")
+            raise ValueError(
+                f"{fields[0][0]}: a spectral curve needs the scene's wavelength bands: add `spectral` "
+                "with `band_edges` or `wavelengths` [m]"
+            )
         return
     for where, curve, kind, lo, hi in fields:
         check_curve(curve, spectral, where, kind, lo, hi)
@@ -243,15 +278,19 @@ def check_scene(scene) -> None:
             raise ValueError("spectral.medium: the scene has no medium")
         if bm.refractive_index is not None:
             if med.type != "particles":
-                raise ValueError("spectral.medium.refractive_index: only a particle medium takes a refractive index "
-                                 "per band (give `sigma_a` and `sigma_s` per band)")
+                raise ValueError(
+                    "spectral.medium.refractive_index: only a particle medium takes a refractive index "
+                    "per band (give `sigma_a` and `sigma_s` per band)"
+                )
             if len(bm.refractive_index) != n:
                 raise ValueError(f"spectral.medium.refractive_index: {len(bm.refractive_index)} values for {n} bands")
         else:
             if med.type != "homogeneous":
-                raise ValueError(f"spectral.medium: `sigma_a` / `sigma_s` per band apply to a homogeneous medium, not "
-                                 f"a {med.type} one" + (" (particle media take `refractive_index` per band)"
-                                                        if med.type == "particles" else ""))
+                raise ValueError(
+                    f"spectral.medium: `sigma_a` / `sigma_s` per band apply to a homogeneous medium, not "
+                    f"a {med.type} one"
+                    + (" (particle media take `refractive_index` per band)" if med.type == "particles" else "")
+                )
             for name in ("sigma_a", "sigma_s"):
                 if len(getattr(bm, name)) != n:
                     raise ValueError(f"spectral.medium.{name}: {len(getattr(bm, name))} values for {n} bands")
@@ -265,8 +304,10 @@ def check_scene(scene) -> None:
         d_max = p.geometric_mean_diameter * math.exp(2 * s * s + SIZE_WINDOW_SIGMAS * s)
         x = math.pi * d_max * p.medium_index / min(spectral.centres())
         if x > MAX_SIZE_PARAMETER:
-            raise ValueError(f"medium.particles: at the shortest band ({min(spectral.centres()):.4g} m) the size "
-                             f"distribution reaches size parameter {x:.4g}, above {MAX_SIZE_PARAMETER:g}")
+            raise ValueError(
+                f"medium.particles: at the shortest band ({min(spectral.centres()):.4g} m) the size "
+                f"distribution reaches size parameter {x:.4g}, above {MAX_SIZE_PARAMETER:g}"
+            )
 
 
 def _spectral_fields(scene):
@@ -347,8 +388,9 @@ class SpectralLinkPublic(_Out):
     electrical_rms_delay_spread_s: float | None = None
     electrical_rms_delay_spread_s_stderr: float | None = None
     photocurrent_a: float | None = Field(None, description="P_t x the electrical gain [A]")
-    illuminance_lx: float | None = Field(None, description="P_t sum_b f_b K_m Vbar_b H_b / (A T_s g) [lx], "
-                                                           "all reflection orders")
+    illuminance_lx: float | None = Field(
+        None, description="P_t sum_b f_b K_m Vbar_b H_b / (A T_s g) [lx], all reflection orders"
+    )
     illuminance_lx_stderr: float | None = None
     illuminance_by_band_lx: list[float | None] | None = None
     illuminance_direct_lx: float | None = Field(None, description="the line of sight's part [lx]")
@@ -361,7 +403,8 @@ class SpectralResultPublic(_Out):
     carried_ratios: bool = Field(description="whether paths carried per-band ratios (spectral surfaces or smoke)")
     transmitters: list[SpectralTransmitterPublic]
     receivers: list[SpectralReceiverPublic]
-    medium_bands: list[dict] | None = Field(None, description="per band: sigma_a, sigma_s, sigma_t [1/m], albedo, "
-                                                              "visibility [m] (and g for particles)")
+    medium_bands: list[dict] | None = Field(
+        None, description="per band: sigma_a, sigma_s, sigma_t [1/m], albedo, visibility [m] (and g for particles)"
+    )
     links: list[SpectralLinkPublic]
     model: str

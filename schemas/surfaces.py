@@ -15,6 +15,7 @@ one of these materials. Each states its split of the total reflectance rho:
 - `spectral`: Lambertian with a reflectance per wavelength band (schemas/spectra.py); the scene
   must define its bands (`spectral`).
 """
+
 from __future__ import annotations
 
 from typing import Annotated, Literal
@@ -54,8 +55,10 @@ class MirrorSurfaceSpec(SpecModel):
 
 SurfaceSpec = Annotated[LambertianSurfaceSpec | PhongSurfaceSpec | MirrorSurfaceSpec, Field(discriminator="type")]
 
-_SURFACE_HELP = ("a reflectance is a number in [0, 1] or a material with `type` lambertian, phong or mirror (or "
-                 "spectral, with the scene's bands)")
+_SURFACE_HELP = (
+    "a reflectance is a number in [0, 1] or a material with `type` lambertian, phong or mirror (or "
+    "spectral, with the scene's bands)"
+)
 
 
 def _surface_kind(value) -> str | None:
@@ -75,11 +78,14 @@ def _number_first(value, handler):
 
 #: A Lambertian reflectance (a number) or a material: what a surface's `reflectance` takes.
 Surface = Annotated[
-    Annotated[Rho, Tag("number")] | Annotated[LambertianSurfaceSpec, Tag("lambertian")]
-    | Annotated[PhongSurfaceSpec, Tag("phong")] | Annotated[MirrorSurfaceSpec, Tag("mirror")]
+    Annotated[Rho, Tag("number")]
+    | Annotated[LambertianSurfaceSpec, Tag("lambertian")]
+    | Annotated[PhongSurfaceSpec, Tag("phong")]
+    | Annotated[MirrorSurfaceSpec, Tag("mirror")]
     | Annotated[SpectralSurfaceSpec, Tag("spectral")],
     Discriminator(_surface_kind, custom_error_type="invalid_surface", custom_error_message=_SURFACE_HELP),
-    WrapValidator(_number_first)]
+    WrapValidator(_number_first),
+]
 
 
 def split(surface) -> tuple[float, float, float, float]:

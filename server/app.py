@@ -3,6 +3,7 @@
 `create_app(settings)` builds it; the dispatcher thread runs between the app's startup
 and shutdown (uvicorn's lifespan). The OpenAPI document is generated from schemas/.
 """
+
 from __future__ import annotations
 
 import logging
@@ -42,9 +43,13 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
     owners = settings.key_owners()
     store = JobStore(settings.db, server=True)
     dispatcher = Dispatcher(store, settings)
-    preflighter = Preflighter(concurrency=settings.preflight_concurrency, timeout_s=settings.preflight_timeout_s,
-                              memory_bytes=settings.preflight_memory_bytes, max_triangles=settings.max_triangles,
-                              workers=settings.workers_per_job)
+    preflighter = Preflighter(
+        concurrency=settings.preflight_concurrency,
+        timeout_s=settings.preflight_timeout_s,
+        memory_bytes=settings.preflight_memory_bytes,
+        max_triangles=settings.max_triangles,
+        workers=settings.workers_per_job,
+    )
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
@@ -57,8 +62,12 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
         await run_in_threadpool(start_forkserver)  # pre-flights and workers start from it, engine imported
         if run_jobs:
             await run_in_threadpool(dispatcher.start)
-        log.info("owcsim service: job store %s, %d job(s) at once, API keys %s", settings.db,
-                 settings.max_concurrent_jobs, "on" if owners else "off")
+        log.info(
+            "owcsim service: job store %s, %d job(s) at once, API keys %s",
+            settings.db,
+            settings.max_concurrent_jobs,
+            "on" if owners else "off",
+        )
         try:
             yield
         finally:
@@ -66,8 +75,15 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
                 await run_in_threadpool(dispatcher.stop)
             store.close()  # checkpoint: the store is one self-contained file again
 
-    app = FastAPI(title="owcsim", version=owcsim_version, description=DESCRIPTION, lifespan=lifespan,
-                  docs_url=None, redoc_url=None, openapi_url=f"{API_PREFIX}/openapi.json")  # docs: routes/docs.py
+    app = FastAPI(
+        title="owcsim",
+        version=owcsim_version,
+        description=DESCRIPTION,
+        lifespan=lifespan,
+        docs_url=None,
+        redoc_url=None,
+        openapi_url=f"{API_PREFIX}/openapi.json",
+    )  # docs: routes/docs.py
     app.state.settings, app.state.store, app.state.dispatcher, app.state.owners = settings, store, dispatcher, owners
     app.state.preflighter = preflighter
     app.state.heavy = app.state.submissions = None  # set at startup (they belong to the running event loop)

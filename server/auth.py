@@ -3,6 +3,7 @@
 Tokens are compared by their SHA-256 digest; the owner id stored with a job is a prefix
 of that digest, never the token. With keys off every caller is the same owner.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -25,10 +26,18 @@ def current_owner(request: Request, credentials: HTTPAuthorizationCredentials | 
         return None
     challenge = 'Bearer realm="owcsim"'
     if credentials is None or not credentials.credentials.strip():
-        raise ProblemError(401, "unauthorized", "this server needs an API key: send `Authorization: Bearer <key>`",
-                           headers={"WWW-Authenticate": challenge})
+        raise ProblemError(
+            401,
+            "unauthorized",
+            "this server needs an API key: send `Authorization: Bearer <key>`",
+            headers={"WWW-Authenticate": challenge},
+        )
     owner = owners.get(hashlib.sha256(credentials.credentials.strip().encode()).hexdigest())
     if owner is None:
-        raise ProblemError(401, "unauthorized", "the API key is not valid on this server",
-                           headers={"WWW-Authenticate": challenge + ', error="invalid_token"'})
+        raise ProblemError(
+            401,
+            "unauthorized",
+            "the API key is not valid on this server",
+            headers={"WWW-Authenticate": challenge + ', error="invalid_token"'},
+        )
     return owner

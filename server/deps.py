@@ -1,4 +1,5 @@
 """Request dependencies: the app's store, settings and dispatcher, and the caller's job."""
+
 from __future__ import annotations
 
 from fastapi import Depends, Path, Request
@@ -22,8 +23,11 @@ def get_dispatcher(request: Request) -> Dispatcher:
     return request.app.state.dispatcher
 
 
-def owned_job(job_id: str = Path(description="the job's id"), owner: str | None = Depends(current_owner),
-              store: JobStore = Depends(get_store)) -> JobRow:
+def owned_job(
+    job_id: str = Path(description="the job's id"),
+    owner: str | None = Depends(current_owner),
+    store: JobStore = Depends(get_store),
+) -> JobRow:
     """The job, if it exists and the caller may see it (another key's job is 'not found')."""
     job = store.get(job_id, owner)
     if job is None:

@@ -18,6 +18,7 @@ threads is ever forked. The dispatcher also watches its workers:
 - a store error (disk full, a lock held too long) is logged at most once a minute and
   retried with a growing pause (no busy loop); `state()` tells health about it.
 """
+
 from __future__ import annotations
 
 import logging
@@ -63,8 +64,10 @@ def describe_exit(code: int | None, memory_bytes: int = 0) -> str:
             name = f"signal {-code}"
         hint = " (e.g. out of memory)" if -code == signal.SIGKILL else ""
         if memory_bytes and -code in (signal.SIGKILL, signal.SIGABRT, signal.SIGSEGV):
-            hint = (f" (e.g. out of memory: its memory budget was {memory_bytes / 2**30:.3g} GB, estimated "
-                    "from its settings)")
+            hint = (
+                f" (e.g. out of memory: its memory budget was {memory_bytes / 2**30:.3g} GB, estimated "
+                "from its settings)"
+            )
         return f"the worker process was killed by {name}{hint}"
     if code == 0:
         return "the worker process ended without recording a result"
@@ -79,8 +82,14 @@ def start_forkserver() -> None:
     # "__main__" too: each child would import the main module again otherwise (0.1-0.3 s per job and
     # per pre-flight); a script that builds the app keeps its top level under `if __name__ == "__main__":`.
     mp.get_context("forkserver").set_forkserver_preload(
-        ["__main__", "owcsim.server.worker", "owcsim.server.preflight", "owcsim.engine.simulate",
-         "owcsim.engine.budget"])
+        [
+            "__main__",
+            "owcsim.server.worker",
+            "owcsim.server.preflight",
+            "owcsim.engine.simulate",
+            "owcsim.engine.budget",
+        ]
+    )
     forkserver.ensure_running()
     warm = mp.get_context("forkserver").Process(target=_noop, name="owcsim-warm-up")
     warm.start()  # returns once the forkserver has imported the engine: the first job does not wait for it
@@ -95,9 +104,13 @@ def _noop() -> None:
 class Dispatcher:
     def __init__(self, store: JobStore, settings: Settings):
         self.store, self.settings = store, settings
-        self.limits = WorkerLimits(workers=settings.workers_per_job, max_wall_time_s=settings.max_wall_time_s,
-                                   progress_interval_s=settings.progress_interval_s, scheduler=settings.scheduler,
-                                   memory_headroom_bytes=settings.worker_memory_headroom_bytes)
+        self.limits = WorkerLimits(
+            workers=settings.workers_per_job,
+            max_wall_time_s=settings.max_wall_time_s,
+            progress_interval_s=settings.progress_interval_s,
+            scheduler=settings.scheduler,
+            memory_headroom_bytes=settings.worker_memory_headroom_bytes,
+        )
         self._ctx = mp.get_context("forkserver")
         self._runs: dict[str, _Run] = {}
         self._wake_r, self._wake_w = os.pipe()  # wake() writes a byte: the loop looks again at once
@@ -130,8 +143,9 @@ class Dispatcher:
         return {job_id: run.process.pid for job_id, run in list(self._runs.items())}
 
     def start(self) -> None:
-        taken = self.store.take_back_running("requeued: the server restarted while the job was running",
-                                             self.settings.max_attempts)
+        taken = self.store.take_back_running(
+            "requeued: the server restarted while the job was running", self.settings.max_attempts
+        )
         if taken:
             log.warning("requeued %d job(s) left running by the previous server process", len(taken))
         start_forkserver()  # pay the engine's imports now, not with the first job
@@ -160,8 +174,9 @@ class Dispatcher:
                 self._wake_r = self._wake_w = None
         if not self._runs:
             return
-        self.store.take_back_running("requeued: the server stopped while the job was running",
-                                     self.settings.max_attempts)
+        self.store.take_back_running(
+            "requeued: the server stopped while the job was running", self.settings.max_attempts
+        )
         for run in self._runs.values():
             run.lifeline.close()
         deadline = time.monotonic() + self.settings.cancel_grace_s
@@ -190,8 +205,11 @@ class Dispatcher:
                 now = time.monotonic()
                 if now - self._error_logged > 60.0:
                     self._error_logged = now
-                    log.error("dispatcher: %s (retrying every few seconds; logged once a minute)", self._error,
-                              exc_info=not is_disk_full(exc))
+                    log.error(
+                        "dispatcher: %s (retrying every few seconds; logged once a minute)",
+                        self._error,
+                        exc_info=not is_disk_full(exc),
+                    )
                 pause = min(5.0, pause * 2)
             ready = wait([run.process.sentinel for run in self._runs.values()] + [self._wake_r], pause)
             if self._wake_r in ready:
@@ -202,8 +220,11 @@ class Dispatcher:
         while len(self._runs) < self.settings.max_concurrent_jobs and not self._stop.is_set():
             head = self.store.next_queued()
             if head is not None and head[1] > cap:  # e.g. the budget was lowered since it was accepted
-                self.store.fail_queued(head[0], f"its memory estimate of {head[1] / 2**30:.3g} GB is more than this "
-                                       f"server's limit of {cap / 2**30:.3g} GB per job (setting max_job_memory_bytes)")
+                self.store.fail_queued(
+                    head[0],
+                    f"its memory estimate of {head[1] / 2**30:.3g} GB is more than this "
+                    f"server's limit of {cap / 2**30:.3g} GB per job (setting max_job_memory_bytes)",
+                )
                 continue
             claimed = self.store.claim_next(free_memory=self.settings.memory_budget_bytes - self.memory_in_use)
             if claimed is None:
@@ -212,8 +233,11 @@ class Dispatcher:
             row = self.store.get(job_id)
             memory = row.memory_bytes if row is not None else 0
             lifeline_r, lifeline_w = self._ctx.Pipe(duplex=False)
-            process = self._ctx.Process(target=run_job, name=f"owcsim-job-{job_id[:8]}",
-                                        args=(str(self.store.path), job_id, token, self.limits, lifeline_r, memory))
+            process = self._ctx.Process(
+                target=run_job,
+                name=f"owcsim-job-{job_id[:8]}",
+                args=(str(self.store.path), job_id, token, self.limits, lifeline_r, memory),
+            )
             try:
                 process.start()
             except Exception as exc:
@@ -235,8 +259,9 @@ class Dispatcher:
             if not run.process.is_alive():
                 run.process.join()
                 reason = run.kill_reason or describe_exit(run.process.exitcode, run.memory_bytes)
-                status = self.store.settle(job_id, run.token, reason, retries=self.settings.crash_retries,
-                                           retry=run.kill_reason is None)
+                status = self.store.settle(
+                    job_id, run.token, reason, retries=self.settings.crash_retries, retry=run.kill_reason is None
+                )
                 if status is not None:
                     log.warning("job %s: %s; the job is now %s", job_id, reason, status)
                 run.end()
@@ -251,10 +276,14 @@ class Dispatcher:
                 run.kill_reason = run.kill_reason or "the worker did not stop in time and was killed"
                 run.process.kill()
             elif self.settings.stall_timeout_s and now - run.progress_seen > self.settings.stall_timeout_s:
-                run.kill_reason = (f"the worker wrote no progress for {self.settings.stall_timeout_s:g} s and was "
-                                   "killed (setting stall_timeout_s)")
+                run.kill_reason = (
+                    f"the worker wrote no progress for {self.settings.stall_timeout_s:g} s and was "
+                    "killed (setting stall_timeout_s)"
+                )
                 run.process.kill()
             elif now - run.started > self.settings.max_wall_time_s + grace:
-                run.kill_reason = (f"killed at the server's wall-time limit of {self.settings.max_wall_time_s:g} s "
-                                   "(the worker did not stop by itself)")
+                run.kill_reason = (
+                    f"killed at the server's wall-time limit of {self.settings.max_wall_time_s:g} s "
+                    "(the worker did not stop by itself)"
+                )
                 run.process.kill()

@@ -12,6 +12,7 @@ Plots use matplotlib's object API, never pyplot, and are drawn one at a time (`_
 matplotlib's mathtext parser (log-axis tick labels) is not thread-safe, and concurrent
 drawing failed under load.
 """
+
 from __future__ import annotations
 
 import gzip
@@ -25,13 +26,26 @@ import numpy as np
 from owcsim.schemas.plots import MAX_PANELS, CirPanel, cir_figure, panels_of
 from owcsim.schemas.result_tables import CSV_ROWS_PER_CHUNK, cir_arrays, cir_csv_chunks, csv_cell
 
-__all__ = ["CSV_ROWS_PER_CHUNK", "cir_arrays", "cir_csv", "cir_csv_chunks", "cir_npz", "cir_png", "csv_cell",
-           "npz_png", "render_all"]
+__all__ = [
+    "CSV_ROWS_PER_CHUNK",
+    "cir_arrays",
+    "cir_csv",
+    "cir_csv_chunks",
+    "cir_npz",
+    "cir_png",
+    "csv_cell",
+    "npz_png",
+    "render_all",
+]
 from owcsim.schemas.results import SimulationResultPublic
 
 #: Renders the worker stores: name -> (media type, gzip-compressed as stored?).
-RENDERS = {"result.json.gz": ("application/json", True), "result.csv.gz": ("text/csv; charset=utf-8", True),
-           "result.npz": ("application/octet-stream", False), "plot.png": ("image/png", False)}
+RENDERS = {
+    "result.json.gz": ("application/json", True),
+    "result.csv.gz": ("text/csv; charset=utf-8", True),
+    "result.npz": ("application/octet-stream", False),
+    "plot.png": ("image/png", False),
+}
 #: Renders made when the job ends (the plot is drawn at its first request).
 AT_JOB_END = ("result.json.gz", "result.csv.gz", "result.npz")
 #: Links drawn in the default plot.
@@ -113,11 +127,19 @@ def npz_png(npz_file, link: int | None = None) -> bytes:
         per_link = {}
         for name in ("dc_gain", "dc_gain_stderr", "transmitter", "receiver"):
             with archive.open(name + ".npy") as f:
-                per_link[name] = np.lib.format.read_array(f)[cir_link[first:first + count]]
+                per_link[name] = np.lib.format.read_array(f)[cir_link[first : first + count]]
     se = per_link["dc_gain_stderr"]
-    panels = [CirPanel(str(per_link["transmitter"][i]), str(per_link["receiver"][i]), float(per_link["dc_gain"][i]),
-                       None if np.isnan(se[i]) else float(se[i]), rows["cir"][i], rows["by_reflection_order"][i])
-              for i in range(count)]
+    panels = [
+        CirPanel(
+            str(per_link["transmitter"][i]),
+            str(per_link["receiver"][i]),
+            float(per_link["dc_gain"][i]),
+            None if np.isnan(se[i]) else float(se[i]),
+            rows["cir"][i],
+            rows["by_reflection_order"][i],
+        )
+        for i in range(count)
+    ]
     return _png(float(edges[0]), float(edges[1] - edges[0]), n_bins, panels)
 
 

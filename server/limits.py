@@ -11,6 +11,7 @@
   (`timeout_keep_alive`), open connections (`limit_concurrency`: 503 beyond) and the size
   of an incomplete request head (`h11_max_incomplete_event_size`).
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -28,11 +29,20 @@ class BodyTimeout(Exception):
 
 
 async def _problem(send, status: int, kind: str, title: str, detail: str, path: str) -> None:
-    body = json.dumps({"type": URN + kind, "title": title, "status": status, "detail": detail,
-                       "instance": path}).encode()
-    await send({"type": "http.response.start", "status": status,
-                "headers": [(b"content-type", PROBLEM), (b"content-length", str(len(body)).encode()),
-                            (b"connection", b"close")]})
+    body = json.dumps(
+        {"type": URN + kind, "title": title, "status": status, "detail": detail, "instance": path}
+    ).encode()
+    await send(
+        {
+            "type": "http.response.start",
+            "status": status,
+            "headers": [
+                (b"content-type", PROBLEM),
+                (b"content-length", str(len(body)).encode()),
+                (b"connection", b"close"),
+            ],
+        }
+    )
     await send({"type": "http.response.body", "body": body})
 
 
@@ -48,8 +58,14 @@ class RequestLimits:
         names = [k for k, _ in scope["headers"]]
         lengths = [v for k, v in scope["headers"] if k == b"content-length"]
         if b"transfer-encoding" in names and lengths:
-            return await _problem(send, 400, "bad-request", "Bad Request", "a request may not carry both "
-                                  "Content-Length and Transfer-Encoding", scope["path"])
+            return await _problem(
+                send,
+                400,
+                "bad-request",
+                "Bad Request",
+                "a request may not carry both Content-Length and Transfer-Encoding",
+                scope["path"],
+            )
         if len(lengths) > 1 or (lengths and not lengths[0].strip().isdigit()):
             return await _problem(send, 400, "bad-request", "Bad Request", "malformed Content-Length", scope["path"])
         loop = asyncio.get_running_loop()
@@ -80,9 +96,14 @@ class RequestLimits:
             await self.app(scope, limited_receive, tracked_send)
         except BodyTimeout:
             if not started:
-                await _problem(send, 408, "body-timeout", "Request Timeout",
-                               f"the request body did not arrive within {self.body_timeout_s:g} s "
-                               "(setting body_timeout_s)", scope["path"])
+                await _problem(
+                    send,
+                    408,
+                    "body-timeout",
+                    "Request Timeout",
+                    f"the request body did not arrive within {self.body_timeout_s:g} s (setting body_timeout_s)",
+                    scope["path"],
+                )
 
 
 class HeaderTimeoutH11Protocol(H11Protocol):

@@ -20,6 +20,7 @@ thread, which saves the process start. The steps:
    with the engine's message, instead of a job that fails after waiting in the queue;
 3. the job's memory estimate (engine.budget) is made with the scene's triangles and extent.
 """
+
 from __future__ import annotations
 
 import multiprocessing as mp
@@ -40,9 +41,13 @@ SMALL_TRIANGLES = 10_000
 def is_small(spec: SceneSpec) -> bool:
     receivers = len(spec.receivers) + sum(g.count for g in spec.receiver_grids)
     triangles = sum(len(m.faces or ()) for m in spec.meshes)
-    return (receivers <= SMALL_RECEIVERS and len(spec.transmitters) <= SMALL_RECEIVERS
-            and triangles <= SMALL_TRIANGLES and all(m.vertices is not None for m in spec.meshes)
-            and spec.medium is None)  # (a grid medium may be large)
+    return (
+        receivers <= SMALL_RECEIVERS
+        and len(spec.transmitters) <= SMALL_RECEIVERS
+        and triangles <= SMALL_TRIANGLES
+        and all(m.vertices is not None for m in spec.meshes)
+        and spec.medium is None
+    )  # (a grid medium may be large)
 
 
 @dataclass(frozen=True)
@@ -70,15 +75,28 @@ def _run(spec: SceneSpec, max_triangles: int, workers: int) -> tuple:
         for i, mesh in enumerate(spec.meshes):
             counted += _load_mesh(i, mesh, None, count_only=True)
             if counted > max_triangles:
-                return _problem("limit-exceeded", f"body.meshes.{i}",
-                                f"the scene has at least {counted:,d} triangles (meshes counted with every instance "
-                                f"of their nodes); this server accepts at most {max_triangles:,d} (setting "
-                                "max_triangles)", "limit_exceeded")
+                return _problem(
+                    "limit-exceeded",
+                    f"body.meshes.{i}",
+                    f"the scene has at least {counted:,d} triangles (meshes counted with every instance "
+                    f"of their nodes); this server accepts at most {max_triangles:,d} (setting "
+                    "max_triangles)",
+                    "limit_exceeded",
+                )
         sim = spec.simulation
-        tiny = sim.model_copy(update={
-            "max_reflections": 0, "t_min_s": 0.0, "t_max_s": sim.time_bin_s, "paths": 1, "target_rel_error": None,
-            "batch_size": 64, "direction": "forward", "pilot_paths": 256,
-            "max_scattering": sim.max_scattering or 1})  # every setting explicit but the algorithm: no pilot
+        tiny = sim.model_copy(
+            update={
+                "max_reflections": 0,
+                "t_min_s": 0.0,
+                "t_max_s": sim.time_bin_s,
+                "paths": 1,
+                "target_rel_error": None,
+                "batch_size": 64,
+                "direction": "forward",
+                "pilot_paths": 256,
+                "max_scattering": sim.max_scattering or 1,
+            }
+        )  # every setting explicit but the algorithm: no pilot
         scene = build_scene(spec, None)
         simulate(spec.model_copy(update={"simulation": tiny}), scene=scene, should_stop=lambda: True)
     except EngineError as exc:
@@ -104,9 +122,14 @@ def _child(conn, scene_json: str, max_triangles: int, workers: int, memory_bytes
             warnings.simplefilter("ignore")  # the job's run records them
             out = _run(SceneSpec.model_validate_json(scene_json), max_triangles, workers)
     except MemoryError:
-        out = _problem("limit-exceeded", "body", f"the pre-flight of this scene needs more than this server's "
-                       f"{memory_bytes / 2**30:.3g} GB (setting preflight_memory_bytes): a smaller mesh or fewer "
-                       "receivers", "limit_exceeded")
+        out = _problem(
+            "limit-exceeded",
+            "body",
+            f"the pre-flight of this scene needs more than this server's "
+            f"{memory_bytes / 2**30:.3g} GB (setting preflight_memory_bytes): a smaller mesh or fewer "
+            "receivers",
+            "limit_exceeded",
+        )
     conn.send(out)
     conn.close()
 
@@ -129,8 +152,12 @@ class Preflighter:
             return Preflight(triangles=out[1], memory_bytes=out[2])
         with self._slots:
             receive, send = self._ctx.Pipe(duplex=False)
-            proc = self._ctx.Process(target=_child, name="owcsim-preflight", daemon=True,
-                                     args=(send, scene_json, self.max_triangles, self.workers, self.memory_bytes))
+            proc = self._ctx.Process(
+                target=_child,
+                name="owcsim-preflight",
+                daemon=True,
+                args=(send, scene_json, self.max_triangles, self.workers, self.memory_bytes),
+            )
             proc.start()
             send.close()
             try:
@@ -144,12 +171,25 @@ class Preflighter:
                 proc.join()
                 proc.close()
         if out is None:
-            raise _error(_problem("limit-exceeded", "body", f"the pre-flight of this scene took longer than this "
-                                  f"server's {self.timeout_s:g} s (setting preflight_timeout_s)", "limit_exceeded"))
+            raise _error(
+                _problem(
+                    "limit-exceeded",
+                    "body",
+                    f"the pre-flight of this scene took longer than this "
+                    f"server's {self.timeout_s:g} s (setting preflight_timeout_s)",
+                    "limit_exceeded",
+                )
+            )
         if not out:
-            raise _error(_problem("limit-exceeded", "body", "the pre-flight of this scene ended without an answer "
-                                  f"(more memory than this server's {self.memory_bytes / 2**30:.3g} GB for it?)",
-                                  "limit_exceeded"))
+            raise _error(
+                _problem(
+                    "limit-exceeded",
+                    "body",
+                    "the pre-flight of this scene ended without an answer "
+                    f"(more memory than this server's {self.memory_bytes / 2**30:.3g} GB for it?)",
+                    "limit_exceeded",
+                )
+            )
         if out[0] != "ok":
             raise _error(out)
         return Preflight(triangles=out[1], memory_bytes=out[2])
@@ -166,4 +206,3 @@ def preflight(spec: SceneSpec) -> int:
     if out[0] != "ok":
         raise _error(out)
     return out[1]
-

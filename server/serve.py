@@ -1,4 +1,5 @@
 """Run the service with uvicorn (what `owcsim serve` does)."""
+
 from __future__ import annotations
 
 import logging
@@ -16,11 +17,18 @@ def uvicorn_config(settings: Settings, host: str, port: int, log_level: str = "i
     from .app import create_app
     from .limits import protocol_with_header_timeout
 
-    return uvicorn.Config(create_app(settings), host=host, port=port, log_level=log_level,
-                          timeout_graceful_shutdown=10, server_header=False,
-                          http=protocol_with_header_timeout(settings.header_timeout_s),
-                          timeout_keep_alive=settings.keep_alive_s, limit_concurrency=settings.max_connections,
-                          h11_max_incomplete_event_size=MAX_HEAD_BYTES)
+    return uvicorn.Config(
+        create_app(settings),
+        host=host,
+        port=port,
+        log_level=log_level,
+        timeout_graceful_shutdown=10,
+        server_header=False,
+        http=protocol_with_header_timeout(settings.header_timeout_s),
+        timeout_keep_alive=settings.keep_alive_s,
+        limit_concurrency=settings.max_connections,
+        h11_max_incomplete_event_size=MAX_HEAD_BYTES,
+    )
 
 
 def serve(settings: Settings, host: str = "127.0.0.1", port: int = 8000, log_level: str = "info") -> None:

@@ -2,6 +2,7 @@
 
 Every limit has a default that suits one machine; the README lists them all.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -29,33 +30,58 @@ class Settings(BaseSettings):
     api_keys_file: Path | None = Field(None, description="file with one bearer token per line (# comments)")
     crash_retries: int = Field(1, ge=0, le=10, description="times a job whose worker process died is requeued")
     cancel_grace_s: float = Field(5.0, gt=0, description="a stopped job's worker still alive after this is killed")
-    stall_timeout_s: float = Field(900.0, ge=0, description="a running job's worker that writes no progress for "
-                                   "this long is killed and the job failed [s] (0: never)")
+    stall_timeout_s: float = Field(
+        900.0,
+        ge=0,
+        description="a running job's worker that writes no progress for "
+        "this long is killed and the job failed [s] (0: never)",
+    )
     progress_interval_s: float = Field(0.5, gt=0, description="least time between progress writes of a job [s]")
-    max_queued_per_key: int = Field(200, ge=1, description="queued jobs of one API key (one owner without keys); "
-                                    "beyond this that key gets 429, the others are not affected")
-    max_attempts: int = Field(5, ge=1, le=100, description="starts of a job (restarts and crash retries) before "
-                              "it is failed")
-    memory_budget_bytes: int = Field(default_factory=lambda: _default_memory_budget(), ge=2**26,
-                                     description="memory of all running jobs together [bytes] (estimated from "
-                                                 "their settings); default 3/4 of the machine's RAM")
-    max_job_memory_bytes: int | None = Field(None, ge=2**26, description="memory estimate of one job [bytes]; "
-                                             "more is refused at submission (default: memory_budget_bytes)")
-    worker_memory_headroom_bytes: int = Field(1 << 30, ge=0, description="address space a worker may map beyond "
-                                              "its job's estimate (thread stacks, allocator arenas) [bytes]")
-    preflight_memory_bytes: int = Field(2 << 30, ge=2**26, description="memory of one submission's pre-flight "
-                                        "(mesh decoding, scene build) [bytes]")
+    max_queued_per_key: int = Field(
+        200,
+        ge=1,
+        description="queued jobs of one API key (one owner without keys); "
+        "beyond this that key gets 429, the others are not affected",
+    )
+    max_attempts: int = Field(
+        5, ge=1, le=100, description="starts of a job (restarts and crash retries) before it is failed"
+    )
+    memory_budget_bytes: int = Field(
+        default_factory=lambda: _default_memory_budget(),
+        ge=2**26,
+        description="memory of all running jobs together [bytes] (estimated from "
+        "their settings); default 3/4 of the machine's RAM",
+    )
+    max_job_memory_bytes: int | None = Field(
+        None,
+        ge=2**26,
+        description="memory estimate of one job [bytes]; more is refused at submission (default: memory_budget_bytes)",
+    )
+    worker_memory_headroom_bytes: int = Field(
+        1 << 30,
+        ge=0,
+        description="address space a worker may map beyond "
+        "its job's estimate (thread stacks, allocator arenas) [bytes]",
+    )
+    preflight_memory_bytes: int = Field(
+        2 << 30, ge=2**26, description="memory of one submission's pre-flight (mesh decoding, scene build) [bytes]"
+    )
     preflight_timeout_s: float = Field(60.0, gt=0, description="longest pre-flight of one submission [s]")
-    preflight_concurrency: int = Field(2, ge=1, le=64, description="pre-flights at once (one process each); "
-                                       "submissions beyond wait")
-    max_text_chars: int = Field(256, ge=16, le=65536, description="longest text field or id of a document "
-                                "(mesh data excepted) [characters]")
+    preflight_concurrency: int = Field(
+        2, ge=1, le=64, description="pre-flights at once (one process each); submissions beyond wait"
+    )
+    max_text_chars: int = Field(
+        256, ge=16, le=65536, description="longest text field or id of a document (mesh data excepted) [characters]"
+    )
     header_timeout_s: float = Field(10.0, gt=0, description="time a client has to send a request's headers [s]")
     body_timeout_s: float = Field(30.0, gt=0, description="time a client has to send a request's body [s]")
     keep_alive_s: float = Field(5.0, gt=0, description="idle keep-alive connections are closed after this [s]")
     max_connections: int = Field(200, ge=1, description="open connections; a request beyond gets 503")
-    scheduler: str | None = Field(None, description="Dask scheduler address (tcp://host:8786): jobs run their "
-                                  "batches on its cluster instead of workers_per_job local processes")
+    scheduler: str | None = Field(
+        None,
+        description="Dask scheduler address (tcp://host:8786): jobs run their "
+        "batches on its cluster instead of workers_per_job local processes",
+    )
 
     @field_validator("scheduler", mode="after")
     @classmethod

@@ -13,6 +13,7 @@ main file when it stops. Files are created 0600. Dispatch is fair between owners
 the next job is the oldest of the owner with the fewest running jobs, ties broken by whose
 turn came longest ago; each owner has its own queue quota.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -85,9 +86,11 @@ CREATE TABLE IF NOT EXISTS owner_turns (
 #: Bytes read from a stored render at a time.
 CHUNK_BYTES = 256 * 1024
 
-_COLUMNS = ("seq, id, owner, name, status, created_at, started_at, finished_at, fraction, paths, batches, "
-            "rel_stderr, elapsed_s, cancel_requested, attempts, crashes, run_token, worker_pid, error, warnings, "
-            "has_result, idempotency_key, request_hash, memory_bytes")
+_COLUMNS = (
+    "seq, id, owner, name, status, created_at, started_at, finished_at, fraction, paths, batches, "
+    "rel_stderr, elapsed_s, cancel_requested, attempts, crashes, run_token, worker_pid, error, warnings, "
+    "has_result, idempotency_key, request_hash, memory_bytes"
+)
 
 
 class QueueFull(Exception):
@@ -193,12 +196,16 @@ class JobStore:
                         tx.execute(stmt)
                     tx.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
             elif version > SCHEMA_VERSION:
-                raise StoreError(f"job store {str(self.path)!r} was written by a newer owcsim (schema {version}, "
-                                 f"this one reads up to {SCHEMA_VERSION})")
+                raise StoreError(
+                    f"job store {str(self.path)!r} was written by a newer owcsim (schema {version}, "
+                    f"this one reads up to {SCHEMA_VERSION})"
+                )
         except sqlite3.DatabaseError as exc:
             self.close(checkpoint=False)
-            raise StoreError(f"job store {str(self.path)!r} cannot be used: {exc} (restore it from a backup, "
-                             "or move it away to start with an empty store)") from None
+            raise StoreError(
+                f"job store {str(self.path)!r} cannot be used: {exc} (restore it from a backup, "
+                "or move it away to start with an empty store)"
+            ) from None
         except BaseException:
             self.close(checkpoint=False)
             raise
@@ -210,15 +217,19 @@ class JobStore:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            raise StoreError(f"job store {str(self.path)!r} is in use by another owcsim server (lock file "
-                             f"{str(lock_path)!r}): run one server per store file") from None
+            raise StoreError(
+                f"job store {str(self.path)!r} is in use by another owcsim server (lock file "
+                f"{str(lock_path)!r}): run one server per store file"
+            ) from None
         self._lock_fd = fd
 
     def _check_integrity(self, con: sqlite3.Connection) -> None:
         rows = [r[0] for r in con.execute("PRAGMA quick_check").fetchall()]
         if rows != ["ok"]:
-            raise StoreError(f"job store {str(self.path)!r} is damaged (SQLite quick_check: {'; '.join(rows[:3])})"
-                             ": restore it from a backup, or move it away to start with an empty store")
+            raise StoreError(
+                f"job store {str(self.path)!r} is damaged (SQLite quick_check: {'; '.join(rows[:3])})"
+                ": restore it from a backup, or move it away to start with an empty store"
+            )
 
     def _con(self) -> sqlite3.Connection:
         con = getattr(self._local, "con", None)
@@ -252,9 +263,18 @@ class JobStore:
 
     # -- submission -------------------------------------------------------------------------
 
-    def submit(self, *, owner: str, scene_json: str, name: str | None, request_hash: str,
-               idempotency_key: str | None, max_queued: int, max_queued_per_owner: int | None = None,
-               memory_bytes: int = 0) -> tuple[JobRow, bool]:
+    def submit(
+        self,
+        *,
+        owner: str,
+        scene_json: str,
+        name: str | None,
+        request_hash: str,
+        idempotency_key: str | None,
+        max_queued: int,
+        max_queued_per_owner: int | None = None,
+        memory_bytes: int = 0,
+    ) -> tuple[JobRow, bool]:
         """Queue a job; returns (job, created). With a known Idempotency-Key: the first job, not created."""
         packed = _pack(scene_json)
         with self._tx() as con:
@@ -266,22 +286,26 @@ class JobStore:
             if queued >= max_queued:
                 raise QueueFull()
             if max_queued_per_owner is not None:
-                mine = con.execute("SELECT COUNT(*) FROM jobs WHERE status = 'queued' AND owner = ?",
-                                   (owner,)).fetchone()[0]
+                mine = con.execute(
+                    "SELECT COUNT(*) FROM jobs WHERE status = 'queued' AND owner = ?", (owner,)
+                ).fetchone()[0]
                 if mine >= max_queued_per_owner:
                     raise QueueFull(per_owner=True)
             job_id = uuid.uuid4().hex
-            con.execute("INSERT INTO jobs (id, owner, idempotency_key, request_hash, name, status, created_at, "
-                        "memory_bytes) VALUES (?, ?, ?, ?, ?, 'queued', ?, ?)",
-                        (job_id, owner, idempotency_key, request_hash, name, time.time(), memory_bytes))
+            con.execute(
+                "INSERT INTO jobs (id, owner, idempotency_key, request_hash, name, status, created_at, "
+                "memory_bytes) VALUES (?, ?, ?, ?, ?, 'queued', ?, ?)",
+                (job_id, owner, idempotency_key, request_hash, name, time.time(), memory_bytes),
+            )
             con.execute("INSERT INTO job_documents (job_id, scene) VALUES (?, ?)", (job_id, packed))
             row = con.execute(f"SELECT {_COLUMNS} FROM jobs WHERE id = ?", (job_id,)).fetchone()
         return JobRow.from_db(row), True
 
     @staticmethod
     def _idempotent(con, owner: str, key: str, request_hash: str) -> JobRow | None:
-        row = con.execute(f"SELECT {_COLUMNS} FROM jobs WHERE owner = ? AND idempotency_key = ?",
-                          (owner, key)).fetchone()
+        row = con.execute(
+            f"SELECT {_COLUMNS} FROM jobs WHERE owner = ? AND idempotency_key = ?", (owner, key)
+        ).fetchone()
         if row is None:
             return None
         job = JobRow.from_db(row)
@@ -304,8 +328,9 @@ class JobStore:
         row = self._con().execute(sql, args).fetchone()
         return JobRow.from_db(row) if row else None
 
-    def list(self, owner: str | None, statuses: list[str] | None, limit: int,
-             after: str | None) -> tuple[list[JobRow], str | None]:
+    def list(
+        self, owner: str | None, statuses: list[str] | None, limit: int, after: str | None
+    ) -> tuple[list[JobRow], str | None]:
         """Newest first; returns (page, the id to pass as `after` for the next page or None).
 
         `after` is the last job id of the previous page: opaque (ids are random) and checked
@@ -365,6 +390,7 @@ class JobStore:
                         yield chunk
             finally:
                 con.close()
+
         return chunks()
 
     def put_renders(self, job_id: str, renders: dict[str, Path | bytes]) -> None:
@@ -390,14 +416,18 @@ class JobStore:
         """Keep a job's renders: {name: file (copied in chunks) or bytes}."""
         for name, path in renders.items():
             if isinstance(path, bytes):
-                con.execute("INSERT OR REPLACE INTO job_renders (job_id, name, data) VALUES (?, ?, ?)",
-                            (job_id, name, path))
+                con.execute(
+                    "INSERT OR REPLACE INTO job_renders (job_id, name, data) VALUES (?, ?, ?)", (job_id, name, path)
+                )
                 continue
             size = path.stat().st_size
-            con.execute("INSERT OR REPLACE INTO job_renders (job_id, name, data) VALUES (?, ?, zeroblob(?))",
-                        (job_id, name, size))
-            rowid = con.execute("SELECT rowid FROM job_renders WHERE job_id = ? AND name = ?",
-                                (job_id, name)).fetchone()[0]
+            con.execute(
+                "INSERT OR REPLACE INTO job_renders (job_id, name, data) VALUES (?, ?, zeroblob(?))",
+                (job_id, name, size),
+            )
+            rowid = con.execute(
+                "SELECT rowid FROM job_renders WHERE job_id = ? AND name = ?", (job_id, name)
+            ).fetchone()[0]
             with con.blobopen("job_renders", "data", rowid) as blob, open(path, "rb") as src:
                 while chunk := src.read(CHUNK_BYTES):
                     blob.write(chunk)
@@ -422,9 +452,12 @@ class JobStore:
             row = con.execute(self._NEXT).fetchone()
             if row is None or (free_memory is not None and row[1] > free_memory):
                 return None
-            con.execute("UPDATE jobs SET status = 'running', started_at = ?, run_token = run_token + 1, "
-                        "attempts = attempts + 1, fraction = 0, paths = 0, batches = 0, rel_stderr = NULL, "
-                        "elapsed_s = 0, worker_pid = NULL WHERE id = ?", (time.time(), row[0]))
+            con.execute(
+                "UPDATE jobs SET status = 'running', started_at = ?, run_token = run_token + 1, "
+                "attempts = attempts + 1, fraction = 0, paths = 0, batches = 0, rel_stderr = NULL, "
+                "elapsed_s = 0, worker_pid = NULL WHERE id = ?",
+                (time.time(), row[0]),
+            )
             token, owner = con.execute("SELECT run_token, owner FROM jobs WHERE id = ?", (row[0],)).fetchone()
             turn = con.execute("SELECT COALESCE(MAX(last_turn), 0) + 1 FROM owner_turns").fetchone()[0]
             con.execute("INSERT OR REPLACE INTO owner_turns (owner, last_turn) VALUES (?, ?)", (owner, turn))
@@ -437,16 +470,20 @@ class JobStore:
 
     def fail_queued(self, job_id: str, reason: str) -> None:
         """Fail a queued job that can never start (e.g. larger than the server's memory budget)."""
-        self._con().execute("UPDATE jobs SET status = 'failed', finished_at = ?, error = ?, run_token = run_token + 1 "
-                            "WHERE id = ? AND status = 'queued'", (time.time(), reason, job_id))
+        self._con().execute(
+            "UPDATE jobs SET status = 'failed', finished_at = ?, error = ?, run_token = run_token + 1 "
+            "WHERE id = ? AND status = 'queued'",
+            (time.time(), reason, job_id),
+        )
 
     def set_worker_pid(self, job_id: str, token: int, pid: int | None) -> None:
         self._con().execute("UPDATE jobs SET worker_pid = ? WHERE id = ? AND run_token = ?", (pid, job_id, token))
 
     def running_flags(self) -> dict[str, tuple[int, bool, float]]:
         """{job id: (run token, cancel requested, elapsed_s of its last progress write)} of running jobs."""
-        rows = self._con().execute("SELECT id, run_token, cancel_requested, elapsed_s FROM jobs "
-                                   "WHERE status = 'running'")
+        rows = self._con().execute(
+            "SELECT id, run_token, cancel_requested, elapsed_s FROM jobs WHERE status = 'running'"
+        )
         return {r[0]: (r[1], bool(r[2]), r[3]) for r in rows.fetchall()}
 
     def take_back_running(self, note: str, max_attempts: int | None = None) -> list[str]:
@@ -455,16 +492,27 @@ class JobStore:
         now = time.time()
         with self._tx() as con:
             ids = [r[0] for r in con.execute("SELECT id FROM jobs WHERE status = 'running'").fetchall()]
-            con.execute("UPDATE jobs SET status = 'cancelled', finished_at = ?, run_token = run_token + 1 "
-                        "WHERE status = 'running' AND cancel_requested = 1", (now,))
+            con.execute(
+                "UPDATE jobs SET status = 'cancelled', finished_at = ?, run_token = run_token + 1 "
+                "WHERE status = 'running' AND cancel_requested = 1",
+                (now,),
+            )
             if max_attempts is not None:
-                con.execute("UPDATE jobs SET status = 'failed', finished_at = ?, run_token = run_token + 1, error = ? "
-                            "WHERE status = 'running' AND attempts >= ?",
-                            (now, f"{note}; it was started {max_attempts} times without finishing (setting "
-                                  "max_attempts)", max_attempts))
-            con.execute("UPDATE jobs SET status = 'queued', run_token = run_token + 1, started_at = NULL, "
-                        "fraction = 0, paths = 0, batches = 0, rel_stderr = NULL, elapsed_s = 0, worker_pid = NULL, "
-                        "error = ? WHERE status = 'running'", (note,))
+                con.execute(
+                    "UPDATE jobs SET status = 'failed', finished_at = ?, run_token = run_token + 1, error = ? "
+                    "WHERE status = 'running' AND attempts >= ?",
+                    (
+                        now,
+                        f"{note}; it was started {max_attempts} times without finishing (setting max_attempts)",
+                        max_attempts,
+                    ),
+                )
+            con.execute(
+                "UPDATE jobs SET status = 'queued', run_token = run_token + 1, started_at = NULL, "
+                "fraction = 0, paths = 0, batches = 0, rel_stderr = NULL, elapsed_s = 0, worker_pid = NULL, "
+                "error = ? WHERE status = 'running'",
+                (note,),
+            )
         return ids
 
     def settle(self, job_id: str, token: int, reason: str, *, retries: int, retry: bool = True) -> str | None:
@@ -474,16 +522,19 @@ class JobStore:
         """
         now = time.time()
         with self._tx() as con:
-            row = con.execute("SELECT status, run_token, cancel_requested, crashes FROM jobs WHERE id = ?",
-                              (job_id,)).fetchone()
+            row = con.execute(
+                "SELECT status, run_token, cancel_requested, crashes FROM jobs WHERE id = ?", (job_id,)
+            ).fetchone()
             if row is None or row[0] != "running" or row[1] != token:
                 return None
             if row[2]:
                 status, sql, args = "cancelled", "status = 'cancelled', finished_at = ?", [now]
             elif retry and row[3] < retries:
                 status = "queued"
-                sql, args = ("status = 'queued', crashes = crashes + 1, started_at = NULL, worker_pid = NULL, "
-                             "error = ?"), [f"retried after a worker failure: {reason}"]
+                sql, args = (
+                    ("status = 'queued', crashes = crashes + 1, started_at = NULL, worker_pid = NULL, error = ?"),
+                    [f"retried after a worker failure: {reason}"],
+                )
             else:
                 status, sql, args = "failed", "status = 'failed', finished_at = ?, error = ?", [now, reason]
             con.execute(f"UPDATE jobs SET {sql}, run_token = run_token + 1 WHERE id = ?", args + [job_id])
@@ -494,8 +545,11 @@ class JobStore:
         with self._tx() as con:
             args = (job_id,) if owner is None else (job_id, owner)
             own = "" if owner is None else " AND owner = ?"
-            con.execute(f"UPDATE jobs SET status = 'cancelled', finished_at = ?, cancel_requested = 1 "
-                        f"WHERE id = ? AND status = 'queued'{own}", (time.time(), *args))
+            con.execute(
+                f"UPDATE jobs SET status = 'cancelled', finished_at = ?, cancel_requested = 1 "
+                f"WHERE id = ? AND status = 'queued'{own}",
+                (time.time(), *args),
+            )
             con.execute(f"UPDATE jobs SET cancel_requested = 1 WHERE id = ? AND status = 'running'{own}", args)
         return self.get(job_id, owner)
 
@@ -503,22 +557,43 @@ class JobStore:
 
     def run_state(self, job_id: str, token: int) -> tuple[bool, bool]:
         """(still this run's job, cancel requested)."""
-        row = self._con().execute("SELECT status, run_token, cancel_requested FROM jobs WHERE id = ?",
-                                  (job_id,)).fetchone()
+        row = (
+            self._con()
+            .execute("SELECT status, run_token, cancel_requested FROM jobs WHERE id = ?", (job_id,))
+            .fetchone()
+        )
         mine = row is not None and row[0] == "running" and row[1] == token
         return mine, bool(row and row[2])
 
-    def progress(self, job_id: str, token: int, fraction: float, paths: int, batches: int,
-                 rel_stderr: float | None, elapsed_s: float) -> bool:
+    def progress(
+        self,
+        job_id: str,
+        token: int,
+        fraction: float,
+        paths: int,
+        batches: int,
+        rel_stderr: float | None,
+        elapsed_s: float,
+    ) -> bool:
         """Write progress; False if the job is no longer this run's."""
         cur = self._con().execute(
             "UPDATE jobs SET fraction = ?, paths = ?, batches = ?, rel_stderr = ?, elapsed_s = ? "
             "WHERE id = ? AND run_token = ? AND status = 'running'",
-            (min(max(fraction, 0.0), 1.0), paths, batches, rel_stderr, elapsed_s, job_id, token))
+            (min(max(fraction, 0.0), 1.0), paths, batches, rel_stderr, elapsed_s, job_id, token),
+        )
         return cur.rowcount == 1
 
-    def finish(self, job_id: str, token: int, status: str, *, result_json: str | None = None,
-               error: str | None = None, warnings: list[str] = (), renders: dict[str, Path] | None = None) -> bool:
+    def finish(
+        self,
+        job_id: str,
+        token: int,
+        status: str,
+        *,
+        result_json: str | None = None,
+        error: str | None = None,
+        warnings: list[str] = (),
+        renders: dict[str, Path] | None = None,
+    ) -> bool:
         """Record a run's outcome and its renders ({name: file of gzip bytes}) in one transaction;
         False (nothing written) if the job is no longer this run's."""
         packed = _pack(result_json) if result_json is not None else None
@@ -528,7 +603,8 @@ class JobStore:
                 "has_result = ?, "
                 "fraction = CASE WHEN ? = 'succeeded' THEN 1.0 ELSE fraction END "
                 "WHERE id = ? AND run_token = ? AND status = 'running'",
-                (status, time.time(), error, json.dumps(list(warnings)), packed is not None, status, job_id, token))
+                (status, time.time(), error, json.dumps(list(warnings)), packed is not None, status, job_id, token),
+            )
             if cur.rowcount != 1:
                 return False
             if packed is not None:
@@ -552,7 +628,7 @@ class _BlobFile(io.RawIOBase):
 
     def readinto(self, b) -> int:
         data = self.blob.read(len(b))
-        b[:len(data)] = data
+        b[: len(data)] = data
         return len(data)
 
     def seek(self, offset: int, whence: int = 0) -> int:

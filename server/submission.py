@@ -4,6 +4,7 @@ engine pre-flight (in its own process, see preflight.py) and the job's memory es
 Every refusal is a ProblemError that names the wrong field. Runs in a worker thread of
 the server's limiter for heavy work (never the one health and status requests use).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -26,10 +27,15 @@ async def read_body(request: Request, max_bytes: int) -> bytes:
     """The request body, refused with 413 past `max_bytes` (declared or streamed) and 415 if not JSON."""
     ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if ctype and ctype not in JSON_TYPES and not ctype.endswith("+json"):
-        raise ProblemError(415, "unsupported-media-type",
-                           f"the scene document must be sent as application/json, not {ctype}")
-    too_big = ProblemError(413, "body-too-large", f"the request body is larger than this server's limit of "
-                           f"{max_bytes:,d} bytes (setting max_body_bytes)", max_body_bytes=max_bytes)
+        raise ProblemError(
+            415, "unsupported-media-type", f"the scene document must be sent as application/json, not {ctype}"
+        )
+    too_big = ProblemError(
+        413,
+        "body-too-large",
+        f"the request body is larger than this server's limit of {max_bytes:,d} bytes (setting max_body_bytes)",
+        max_body_bytes=max_bytes,
+    )
     declared = request.headers.get("content-length")
     if declared is not None and declared.isdigit() and int(declared) > max_bytes:
         raise too_big
@@ -56,14 +62,17 @@ def parse_scene(body: bytes, settings: Settings) -> SceneSpec:
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         where = f" (line {exc.lineno}, column {exc.colno})" if isinstance(exc, json.JSONDecodeError) else ""
         msg = exc.msg if isinstance(exc, json.JSONDecodeError) else "not UTF-8 text"
-        raise _invalid([ProblemField(loc="body", msg=f"not valid JSON{where}: {msg}", type="json_invalid")],
-                       "malformed-json", 400) from None
+        raise _invalid(
+            [ProblemField(loc="body", msg=f"not valid JSON{where}: {msg}", type="json_invalid")], "malformed-json", 400
+        ) from None
     except RecursionError:
-        raise _invalid([ProblemField(loc="body", msg="JSON nested too deeply", type="json_invalid")],
-                       "malformed-json", 400) from None
+        raise _invalid(
+            [ProblemField(loc="body", msg="JSON nested too deeply", type="json_invalid")], "malformed-json", 400
+        ) from None
     except ValueError as exc:  # e.g. an integer of more than 4300 digits
-        raise _invalid([ProblemField(loc="body", msg=f"not valid JSON: {exc}", type="json_invalid")],
-                       "malformed-json", 400) from None
+        raise _invalid(
+            [ProblemField(loc="body", msg=f"not valid JSON: {exc}", type="json_invalid")], "malformed-json", 400
+        ) from None
     if not isinstance(doc, dict):
         raise _invalid([ProblemField(loc="body", msg="a scene document is a JSON object", type="dict_type")])
     _check_text_lengths(doc, settings.max_text_chars)
@@ -79,8 +88,9 @@ def parse_scene(body: bytes, settings: Settings) -> SceneSpec:
 
 
 def _out_of_range(loc: str, exc: ArithmeticError) -> ProblemField:
-    return ProblemField(loc=loc, type="value_error",
-                        msg=f"a number is out of the range the simulator can compute with ({exc})")
+    return ProblemField(
+        loc=loc, type="value_error", msg=f"a number is out of the range the simulator can compute with ({exc})"
+    )
 
 
 #: Fields whose text may be long: file content.
@@ -96,18 +106,27 @@ def _check_text_lengths(doc, max_chars: int) -> None:
         if isinstance(node, dict):
             for k, v in node.items():
                 if len(k) > max_chars:
-                    errors.append(ProblemField(loc=loc, type="string_too_long",
-                                               msg=f"a key of {len(k):,d} characters; at most {max_chars:,d} "
-                                                   "(setting max_text_chars)"))
+                    errors.append(
+                        ProblemField(
+                            loc=loc,
+                            type="string_too_long",
+                            msg=f"a key of {len(k):,d} characters; at most {max_chars:,d} (setting max_text_chars)",
+                        )
+                    )
                     continue
                 if k not in _LONG_TEXT:
                     stack.append((v, f"{loc}.{k}"))
         elif isinstance(node, list):
             stack.extend((v, f"{loc}.{i}") for i, v in enumerate(node))
         elif isinstance(node, str) and len(node) > max_chars:
-            errors.append(ProblemField(loc=loc, type="string_too_long",
-                                       msg=f"text of {len(node):,d} characters; this server accepts at most "
-                                           f"{max_chars:,d} (setting max_text_chars)"))
+            errors.append(
+                ProblemField(
+                    loc=loc,
+                    type="string_too_long",
+                    msg=f"text of {len(node):,d} characters; this server accepts at most "
+                    f"{max_chars:,d} (setting max_text_chars)",
+                )
+            )
     if errors:
         raise _invalid(errors, "limit-exceeded")
 
@@ -125,8 +144,11 @@ def _check_receiver_count(doc: dict, settings: Settings) -> None:
         except (ValidationError, ValueError, TypeError):
             pass  # reported by the full validation
     if count > settings.max_receivers:
-        raise _limit("body.receiver_grids", f"the scene has {count:,d} receivers; this server accepts at most "
-                     f"{settings.max_receivers:,d} (setting max_receivers)")
+        raise _limit(
+            "body.receiver_grids",
+            f"the scene has {count:,d} receivers; this server accepts at most "
+            f"{settings.max_receivers:,d} (setting max_receivers)",
+        )
 
 
 def _limit(loc: str, msg: str) -> ProblemError:
@@ -135,33 +157,52 @@ def _limit(loc: str, msg: str) -> ProblemError:
 
 def check_limits(spec: SceneSpec, settings: Settings) -> None:
     """Server rules on a valid document: no mesh paths, triangles, paths, wall time."""
-    errors = [ProblemField(loc=f"body.meshes.{i}.file", type="path_not_allowed",
-                           msg="a mesh cannot be a path on the server: send it inline (`vertices` + `faces`) "
-                               "or as `data_base64` + `format` (`owcsim submit` does this for you)")
-              for i, m in enumerate(spec.meshes) if m.file is not None]
-    errors += [ProblemField(loc=f"body.transmitters.{i}.photometry.file", type="path_not_allowed",
-                            msg="a photometric file cannot be a path on the server: send it as `data_base64` + "
-                                "`format` (`owcsim submit` does this for you)")
-               for i, t in enumerate(spec.transmitters) if t.photometry is not None and t.photometry.file is not None]
+    errors = [
+        ProblemField(
+            loc=f"body.meshes.{i}.file",
+            type="path_not_allowed",
+            msg="a mesh cannot be a path on the server: send it inline (`vertices` + `faces`) "
+            "or as `data_base64` + `format` (`owcsim submit` does this for you)",
+        )
+        for i, m in enumerate(spec.meshes)
+        if m.file is not None
+    ]
+    errors += [
+        ProblemField(
+            loc=f"body.transmitters.{i}.photometry.file",
+            type="path_not_allowed",
+            msg="a photometric file cannot be a path on the server: send it as `data_base64` + "
+            "`format` (`owcsim submit` does this for you)",
+        )
+        for i, t in enumerate(spec.transmitters)
+        if t.photometry is not None and t.photometry.file is not None
+    ]
     if errors:
         raise _invalid(errors)
     triangles = (12 if spec.room else 0) + 12 * len(spec.furniture) + sum(len(m.faces or ()) for m in spec.meshes)
     if triangles > settings.max_triangles:
-        raise _limit("body.meshes", f"the scene has {triangles:,d} triangles; this server accepts at most "
-                     f"{settings.max_triangles:,d} (setting max_triangles)")
+        raise _limit(
+            "body.meshes",
+            f"the scene has {triangles:,d} triangles; this server accepts at most "
+            f"{settings.max_triangles:,d} (setting max_triangles)",
+        )
     sim = spec.simulation
     if sim.n_paths is not None:
         n_tx, n_rx = len(spec.transmitters), len(spec.receivers) + sum(g.count for g in spec.receiver_grids)
         # source devices: exact for a fixed direction; for auto the fewest the engine can use
         sources = {"forward": n_tx, "backward": n_rx}.get(sim.direction, min(n_tx, n_rx))
         if sim.n_paths * sources > settings.max_paths_per_job:
-            raise _limit("body.simulation.paths",
-                         f"{sim.n_paths:,d} paths x {sources} source devices is more than this server's limit of "
-                         f"{settings.max_paths_per_job:,d} paths per job (setting max_paths_per_job)")
+            raise _limit(
+                "body.simulation.paths",
+                f"{sim.n_paths:,d} paths x {sources} source devices is more than this server's limit of "
+                f"{settings.max_paths_per_job:,d} paths per job (setting max_paths_per_job)",
+            )
     elif sim.time_budget_s > settings.max_wall_time_s:
-        raise _limit("body.simulation.time_budget_s",
-                     f"{sim.time_budget_s:g} s is longer than this server's limit of {settings.max_wall_time_s:g} s "
-                     "per job (setting max_wall_time_s)")
+        raise _limit(
+            "body.simulation.time_budget_s",
+            f"{sim.time_budget_s:g} s is longer than this server's limit of {settings.max_wall_time_s:g} s "
+            "per job (setting max_wall_time_s)",
+        )
 
 
 def check_runnable(spec: SceneSpec, scene_json: str, settings: Settings, preflighter: Preflighter) -> Preflight:
@@ -170,15 +211,21 @@ def check_runnable(spec: SceneSpec, scene_json: str, settings: Settings, preflig
     check_limits(spec, settings)
     out = preflighter(spec, scene_json)
     if out.triangles > settings.max_triangles:
-        raise _limit("body.meshes", f"the scene has {out.triangles:,d} triangles; this server accepts at most "
-                     f"{settings.max_triangles:,d} (setting max_triangles)")
+        raise _limit(
+            "body.meshes",
+            f"the scene has {out.triangles:,d} triangles; this server accepts at most "
+            f"{settings.max_triangles:,d} (setting max_triangles)",
+        )
     cap = settings.job_memory_cap
     if out.memory_bytes > cap:
-        raise _limit("body.simulation", f"this job would need about {out.memory_bytes / 2**30:.3g} GB of memory "
-                     f"(estimated from its links, orders, time bins, batch_size and triangles); this server allows "
-                     f"{cap / 2**30:.3g} GB per job (setting max_job_memory_bytes): ask for fewer receivers, "
-                     "orders or time bins (give max_reflections and t_max_s: automatic ones are counted at the "
-                     "most the engine may choose), or a smaller batch_size")
+        raise _limit(
+            "body.simulation",
+            f"this job would need about {out.memory_bytes / 2**30:.3g} GB of memory "
+            f"(estimated from its links, orders, time bins, batch_size and triangles); this server allows "
+            f"{cap / 2**30:.3g} GB per job (setting max_job_memory_bytes): ask for fewer receivers, "
+            "orders or time bins (give max_reflections and t_max_s: automatic ones are counted at the "
+            "most the engine may choose), or a smaller batch_size",
+        )
     return out
 
 

@@ -1,4 +1,5 @@
 """How a stored job looks on the wire (schemas.jobs.JobPublic), and its URLs."""
+
 from __future__ import annotations
 
 from datetime import UTC, datetime
@@ -21,11 +22,30 @@ def _time(t: float | None) -> datetime | None:
 def job_public(row: JobRow) -> JobPublic:
     url = job_url(row.id)
     return JobPublic(
-        id=row.id, url=url, status=row.status, name=row.name,
-        progress=JobProgress(fraction=row.fraction, paths=row.paths, batches=row.batches,
-                             dc_gain_rel_stderr=row.rel_stderr, elapsed_s=row.elapsed_s),
-        cancel_requested=row.cancel_requested, error=row.error, warnings=row.warnings, attempts=row.attempts,
-        created_at=_time(row.created_at), started_at=_time(row.started_at), finished_at=_time(row.finished_at),
-        urls=JobUrls(self=url, result=f"{url}/result", result_csv=f"{url}/result.csv",
-                     result_npz=f"{url}/result.npz", plot=f"{url}/plot.png", cancel=f"{url}/cancel"),
+        id=row.id,
+        url=url,
+        status=row.status,
+        name=row.name,
+        progress=JobProgress(
+            fraction=row.fraction,
+            paths=row.paths,
+            batches=row.batches,
+            dc_gain_rel_stderr=row.rel_stderr,
+            elapsed_s=row.elapsed_s,
+        ),
+        cancel_requested=row.cancel_requested,
+        error=row.error,
+        warnings=row.warnings,
+        attempts=row.attempts,
+        created_at=_time(row.created_at),
+        started_at=_time(row.started_at),
+        finished_at=_time(row.finished_at),
+        urls=JobUrls(
+            self=url,
+            result=f"{url}/result",
+            result_csv=f"{url}/result.csv",
+            result_npz=f"{url}/result.npz",
+            plot=f"{url}/plot.png",
+            cancel=f"{url}/cancel",
+        ),
     )

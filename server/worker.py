@@ -14,6 +14,7 @@ At the end it renders the result once (server.formats.render_all: JSON, CSV, NPZ
 compressed) and stores the renders with the outcome: serving a result never re-renders it
 (plots are drawn from the stored NPZ at their first request, so no job pays matplotlib's time).
 """
+
 from __future__ import annotations
 
 import ctypes
@@ -70,9 +71,11 @@ def cap_address_space(budget_bytes: int, headroom_bytes: int) -> int:
 
 
 def out_of_memory_reason(budget_bytes: int) -> str:
-    return (f"the job ran out of its memory budget of {budget_bytes / 2**30:.3g} GB (estimated from its settings: "
-            "links x reflection and scattering orders x time bins, receivers, batch_size, triangles): ask for "
-            "fewer receivers, orders or time bins, or a smaller batch_size")
+    return (
+        f"the job ran out of its memory budget of {budget_bytes / 2**30:.3g} GB (estimated from its settings: "
+        "links x reflection and scattering orders x time bins, receivers, batch_size, triangles): ask for "
+        "fewer receivers, orders or time bins, or a smaller batch_size"
+    )
 
 
 class _Watch:
@@ -134,8 +137,14 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
                 from owcsim.engine.execution_dask import executor_from_scheduler
 
                 executor = executor_from_scheduler(limits.scheduler)
-            result = simulate(spec, base_dir=None, workers=limits.workers, progress=watch.progress,
-                              should_stop=watch.should_stop, executor=executor)
+            result = simulate(
+                spec,
+                base_dir=None,
+                workers=limits.workers,
+                progress=watch.progress,
+                should_stop=watch.should_stop,
+                executor=executor,
+            )
         notes = list(dict.fromkeys(str(w.message) for w in caught))
     except EngineError as exc:
         store.finish(job_id, token, "failed", error=str(exc))
@@ -158,10 +167,15 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
     if watch.reason == "abandoned":
         return
     if watch.reason == "time_limit":
-        store.finish(job_id, token, "failed", warnings=notes,
-                     error=f"stopped at the server's wall-time limit of {limits.max_wall_time_s:g} s after "
-                           f"{result.run.paths_total:,d} paths: ask for fewer paths or a larger "
-                           "target_rel_error")
+        store.finish(
+            job_id,
+            token,
+            "failed",
+            warnings=notes,
+            error=f"stopped at the server's wall-time limit of {limits.max_wall_time_s:g} s after "
+            f"{result.run.paths_total:,d} paths: ask for fewer paths or a larger "
+            "target_rel_error",
+        )
         return
     watch.flush()
     status = "cancelled" if watch.reason == "cancelled" else "succeeded"
@@ -172,6 +186,10 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
             store.finish(job_id, token, status, result_json=text, warnings=notes, renders=renders)
     except MemoryError:
         result = text = None
-        store.finish(job_id, token, "failed", warnings=notes, error=out_of_memory_reason(memory_bytes)
-                     + " (while storing the result)")
-
+        store.finish(
+            job_id,
+            token,
+            "failed",
+            warnings=notes,
+            error=out_of_memory_reason(memory_bytes) + " (while storing the result)",
+        )

@@ -89,16 +89,21 @@ def _cut_fraction(delta, p, q):
     return np.where(delta >= p + q, 1.0, np.where(delta <= -(p + q), 0.0, f))
 
 
-def los_gain(tx_pos, tx_normal, m, rx_pos, rx_normal, area, fov, *,
-             filter_gain=1.0, concentrator_index=None, sigma_t=0.0):
+def los_gain(
+    tx_pos, tx_normal, m, rx_pos, rx_normal, area, fov, *, filter_gain=1.0, concentrator_index=None, sigma_t=0.0
+):
     """Return (H_los, delay_s): H_los = R(phi) A_eff(psi) / d^2 exp(-sigma_t d), delay = d / c."""
     v = np.asarray(rx_pos, float) - np.asarray(tx_pos, float)
     d = float(np.linalg.norm(v))
     u = v / d
     cos_phi = u @ _unit(tx_normal)
     cos_psi = -u @ _unit(rx_normal)
-    h = (_tx_intensity(cos_phi, m) * _rx_area(cos_psi, area, fov, filter_gain, concentrator_index)
-         / d**2 * np.exp(-sigma_t * d))
+    h = (
+        _tx_intensity(cos_phi, m)
+        * _rx_area(cos_psi, area, fov, filter_gain, concentrator_index)
+        / d**2
+        * np.exp(-sigma_t * d)
+    )
     return float(h), d / SPEED_OF_LIGHT
 
 
@@ -107,17 +112,35 @@ def _faces(origin, size):
     o = np.asarray(origin, float)
     L, W, H = size
     ex, ey, ez = np.eye(3)
-    return [("floor", o, L * ex, W * ey, ez),
-            ("ceiling", o + H * ez, L * ex, W * ey, -ez),
-            ("wall_x_min", o, W * ey, H * ez, ex),
-            ("wall_x_max", o + L * ex, W * ey, H * ez, -ex),
-            ("wall_y_min", o, L * ex, H * ez, ey),
-            ("wall_y_max", o + W * ey, L * ex, H * ez, -ey)]
+    return [
+        ("floor", o, L * ex, W * ey, ez),
+        ("ceiling", o + H * ez, L * ex, W * ey, -ez),
+        ("wall_x_min", o, W * ey, H * ez, ex),
+        ("wall_x_max", o + L * ex, W * ey, H * ez, -ex),
+        ("wall_y_min", o, L * ex, H * ez, ey),
+        ("wall_y_max", o + W * ey, L * ex, H * ez, -ey),
+    ]
 
 
-def _first_bounce(room_size, reflectance, tx_pos, tx_normal, m, rx_pos, rx_normal, area, fov,
-                  origin, filter_gain, concentrator_index, sigma_t, t_edges, patch_size,
-                  refine_depth, level):
+def _first_bounce(
+    room_size,
+    reflectance,
+    tx_pos,
+    tx_normal,
+    m,
+    rx_pos,
+    rx_normal,
+    area,
+    fov,
+    origin,
+    filter_gain,
+    concentrator_index,
+    sigma_t,
+    t_edges,
+    patch_size,
+    refine_depth,
+    level,
+):
     """Midpoint rule with ceil(edge / patch_size) * 2**level patches along each face edge."""
     unknown = set(reflectance) - set(FACES)
     if unknown:
@@ -142,10 +165,17 @@ def _first_bounce(room_size, reflectance, tx_pos, tx_normal, m, rx_pos, rx_norma
                 p, q = np.abs(grad @ du) / 2, np.abs(grad @ dv) / 2
                 inside = _cut_fraction(delta, p, q)
                 hard |= np.abs(delta) < 2 * (p + q)  # patches the FOV edge (nearly) crosses
-            f = (_tx_intensity(cos_phi, m) * np.clip(cos_in, 0, None) / d1**2 * rho / np.pi
-                 * np.clip(cos_out, 0, None)
-                 * _rx_area(cos_psi, area, fov, filter_gain, concentrator_index, inside) / d2**2
-                 * np.exp(-sigma_t * (d1 + d2)))
+            f = (
+                _tx_intensity(cos_phi, m)
+                * np.clip(cos_in, 0, None)
+                / d1**2
+                * rho
+                / np.pi
+                * np.clip(cos_out, 0, None)
+                * _rx_area(cos_psi, area, fov, filter_gain, concentrator_index, inside)
+                / d2**2
+                * np.exp(-sigma_t * (d1 + d2))
+            )
         return np.where(np.isfinite(f), f, 0.0), (d1 + d2) / SPEED_OF_LIGHT, hard
 
     def integrate(P, du, dv, n, rho, depth, near):
@@ -156,8 +186,7 @@ def _first_bounce(room_size, reflectance, tx_pos, tx_normal, m, rx_pos, rx_norma
             off = (s[:, None, None] * du + s[None, :, None] * dv).reshape(-1, 3)
             sub = (P[hard][:, None, :] + off[None]).reshape(-1, 3)
             for i in range(0, len(sub), _CHUNK):
-                integrate(sub[i:i + _CHUNK], du / _SPLIT, dv / _SPLIT, n, rho, depth - 1,
-                          near / _SPLIT)
+                integrate(sub[i : i + _CHUNK], du / _SPLIT, dv / _SPLIT, n, rho, depth - 1, near / _SPLIT)
             f, t = f[~hard], t[~hard]
         w = f * np.linalg.norm(np.cross(du, dv))
         total += float(w.sum())
@@ -179,9 +208,25 @@ def _first_bounce(room_size, reflectance, tx_pos, tx_normal, m, rx_pos, rx_norma
     return total, hist
 
 
-def first_bounce_box(room_size, reflectance, tx_pos, tx_normal, m, rx_pos, rx_normal, area, fov,
-                     *, origin=(0.0, 0.0, 0.0), filter_gain=1.0, concentrator_index=None,
-                     sigma_t=0.0, t_edges=None, patch_size=0.02, refine_depth=3):
+def first_bounce_box(
+    room_size,
+    reflectance,
+    tx_pos,
+    tx_normal,
+    m,
+    rx_pos,
+    rx_normal,
+    area,
+    fov,
+    *,
+    origin=(0.0, 0.0, 0.0),
+    filter_gain=1.0,
+    concentrator_index=None,
+    sigma_t=0.0,
+    t_edges=None,
+    patch_size=0.02,
+    refine_depth=3,
+):
     """First-bounce DC gain and optional delay histogram of an empty box room.
 
     reflectance: {face name: rho}, missing faces do not reflect.  Midpoint patches of side
@@ -190,15 +235,48 @@ def first_bounce_box(room_size, reflectance, tx_pos, tx_normal, m, rx_pos, rx_no
     over the bin edges t_edges [s] (None if t_edges is None); hist.sum() == H1 when the bins
     cover all delays.
     """
-    return _first_bounce(room_size, reflectance, tx_pos, tx_normal, m, rx_pos, rx_normal, area,
-                         fov, origin, filter_gain, concentrator_index, sigma_t, t_edges,
-                         patch_size, refine_depth, 0)
+    return _first_bounce(
+        room_size,
+        reflectance,
+        tx_pos,
+        tx_normal,
+        m,
+        rx_pos,
+        rx_normal,
+        area,
+        fov,
+        origin,
+        filter_gain,
+        concentrator_index,
+        sigma_t,
+        t_edges,
+        patch_size,
+        refine_depth,
+        0,
+    )
 
 
-def first_bounce_box_dc_gain(room_size, reflectance, tx_pos, tx_normal, m, rx_pos, rx_normal,
-                             area, fov, *, origin=(0.0, 0.0, 0.0), filter_gain=1.0,
-                             concentrator_index=None, sigma_t=0.0, patch_size=0.1,
-                             refine_depth=3, rel_tol=1e-4, max_halvings=6, full_output=False):
+def first_bounce_box_dc_gain(
+    room_size,
+    reflectance,
+    tx_pos,
+    tx_normal,
+    m,
+    rx_pos,
+    rx_normal,
+    area,
+    fov,
+    *,
+    origin=(0.0, 0.0, 0.0),
+    filter_gain=1.0,
+    concentrator_index=None,
+    sigma_t=0.0,
+    patch_size=0.1,
+    refine_depth=3,
+    rel_tol=1e-4,
+    max_halvings=6,
+    full_output=False,
+):
     """Converged first-bounce DC gain by Richardson extrapolation of the midpoint rule.
 
     I_k = first_bounce_box with patches patch_size / 2^k (exact halving on every face),
@@ -206,8 +284,24 @@ def first_bounce_box_dc_gain(room_size, reflectance, tx_pos, tx_normal, m, rx_po
     |R_k - R_{k-1}| <= rel_tol |R_k|, or raises RuntimeError after max_halvings.
     full_output=True returns (R_k, [I_0..I_k], [R_1..R_k]).
     """
-    args = (room_size, reflectance, tx_pos, tx_normal, m, rx_pos, rx_normal, area, fov, origin,
-            filter_gain, concentrator_index, sigma_t, None, patch_size, refine_depth)
+    args = (
+        room_size,
+        reflectance,
+        tx_pos,
+        tx_normal,
+        m,
+        rx_pos,
+        rx_normal,
+        area,
+        fov,
+        origin,
+        filter_gain,
+        concentrator_index,
+        sigma_t,
+        None,
+        patch_size,
+        refine_depth,
+    )
     plain, rich = [], []
     for k in range(max_halvings + 1):
         plain.append(_first_bounce(*args, k)[0])

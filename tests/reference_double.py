@@ -20,6 +20,7 @@ since r1 + r12 + r2 >= D, one of the three densities always matches the integran
 singular factor, so every sample is bounded: the estimate has finite variance and an
 honest standard error.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -73,8 +74,7 @@ def double_scattering(D, m, area, sigma_s, sigma_t, g, n=200_000, seed=0, t_edge
         e1, e12, e2 = np.exp(-sigma_t * r1), np.exp(-sigma_t * r12), np.exp(-sigma_t * r2)
         c1 = (v1 * v12).sum(0) / (r1 * r12)
         c2 = (v12 * v2).sum(0) / (r12 * r2)
-        f = (r_tx / r1**2 * e1 * sigma_s * hg(c1, g) * e12 / r12**2 * sigma_s * hg(c2, g)
-             * area * r_rx / r2**2 * e2)
+        f = r_tx / r1**2 * e1 * sigma_s * hg(c1, g) * e12 / r12**2 * sigma_s * hg(c2, g) * area * r_rx / r2**2 * e2
         q_tx = r_tx / r1**2 * sigma_t * e1
         q_rx = r_rx / np.pi / r2**2 * sigma_t * e2
         q_link = sigma_t * e12 / (4 * np.pi * r12**2)

@@ -13,6 +13,7 @@ centred on its own device (dV = r^2 dr dOmega cancels that device's 1/r^2; the o
 device is at least D/2 away), with Gauss-Legendre nodes in cos(alpha), the radius and
 the azimuth. Every node carries a delay (r1 + r2)/c, so the same nodes give the CIR.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -44,16 +45,24 @@ def _half(D, m, area, sigma_s, sigma_t, g, n, from_tx: bool):
     else:
         p = np.stack([D - local[0], local[1], local[2]])
     v1 = p
-    r1 = np.sqrt((v1 ** 2).sum(0))
+    r1 = np.sqrt((v1**2).sum(0))
     v2 = np.array([D, 0, 0])[:, None, None, None] - p
-    r2 = np.sqrt((v2 ** 2).sum(0))
+    r2 = np.sqrt((v2**2).sum(0))
     cos_tx = v1[0] / r1
     cos_rx = v2[0] / r2
     cos_th = (v1 * v2).sum(0) / (r1 * r2)
-    f = ((m + 1) / (2 * np.pi) * np.clip(cos_tx, 0, None) ** m * np.exp(-sigma_t * (r1 + r2)) * sigma_s
-         * hg(cos_th, g) * area * np.clip(cos_rx, 0, None))
+    f = (
+        (m + 1)
+        / (2 * np.pi)
+        * np.clip(cos_tx, 0, None) ** m
+        * np.exp(-sigma_t * (r1 + r2))
+        * sigma_s
+        * hg(cos_th, g)
+        * area
+        * np.clip(cos_rx, 0, None)
+    )
     # dV = r^2 dr dOmega about the chosen device; its own 1/r^2 cancels.
-    f = f / (r2 ** 2) if from_tx else f / (r1 ** 2)
+    f = f / (r2**2) if from_tx else f / (r1**2)
     return (f * W).ravel(), ((r1 + r2) / SPEED_OF_LIGHT).ravel()
 
 

@@ -1,4 +1,5 @@
 """Small scene factories for the tests (documents as plain dicts, validated by the caller)."""
+
 from __future__ import annotations
 
 import copy
@@ -17,18 +18,34 @@ def barry_doc(**simulation) -> dict:
     return doc
 
 
-def room_doc(rho_walls=0.8, rho_floor=0.3, rho_ceiling=0.8, *, tx=(2.5, 2.5, 3.0), tx_normal=(0, 0, -1), m=1.0,
-             rx=(1.0, 1.0, 0.0), rx_normal=(0, 0, 1), area=1e-4, fov_deg=90.0, size=(5.0, 5.0, 3.0),
-             origin=(0.0, 0.0, 0.0), medium=None, **simulation) -> dict:
+def room_doc(
+    rho_walls=0.8,
+    rho_floor=0.3,
+    rho_ceiling=0.8,
+    *,
+    tx=(2.5, 2.5, 3.0),
+    tx_normal=(0, 0, -1),
+    m=1.0,
+    rx=(1.0, 1.0, 0.0),
+    rx_normal=(0, 0, 1),
+    area=1e-4,
+    fov_deg=90.0,
+    size=(5.0, 5.0, 3.0),
+    origin=(0.0, 0.0, 0.0),
+    medium=None,
+    **simulation,
+) -> dict:
     """A 5 x 5 x 3 m room with one transmitter and one receiver."""
     sim = {"algorithm": 1, "max_reflections": 3, "time_bin_s": 1e-9, "t_max_s": 2e-7, "paths": 20_000, "seed": 7}
     sim.update(simulation)
     doc = {
-        "room": {"size": list(size), "origin": list(origin),
-                 "reflectance": {"floor": rho_floor, "ceiling": rho_ceiling, "walls": rho_walls}},
+        "room": {
+            "size": list(size),
+            "origin": list(origin),
+            "reflectance": {"floor": rho_floor, "ceiling": rho_ceiling, "walls": rho_walls},
+        },
         "transmitters": [{"id": "tx", "position": list(tx), "normal": list(tx_normal), "lambertian_order": m}],
-        "receivers": [{"id": "rx", "position": list(rx), "normal": list(rx_normal), "area": area,
-                       "fov_deg": fov_deg}],
+        "receivers": [{"id": "rx", "position": list(rx), "normal": list(rx_normal), "area": area, "fov_deg": fov_deg}],
         "simulation": sim,
     }
     if medium is not None:
@@ -47,7 +64,8 @@ def open_doc(D=3.0, medium=SMOKE, **simulation) -> dict:
     return {
         "transmitters": [{"id": "tx", "position": [0, 0, 0], "normal": [1, 0, 0], "lambertian_order": 1}],
         "receivers": [{"id": "rx", "position": [D, 0, 0], "normal": [-1, 0, 0], "area": 1e-4, "fov_deg": 90}],
-        "medium": medium, "simulation": sim,
+        "medium": medium,
+        "simulation": sim,
     }
 
 

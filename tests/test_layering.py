@@ -1,12 +1,17 @@
 """Import direction: schemas <- engine <- server; schemas <- clients; clients never import engine or server."""
+
 import ast
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-FORBIDDEN = {"schemas": {"engine", "server", "clients", "cli"}, "engine": {"server", "clients", "cli"},
-             "clients": {"engine", "server"}, "server": {"clients", "cli"}}
+FORBIDDEN = {
+    "schemas": {"engine", "server", "clients", "cli"},
+    "engine": {"server", "clients", "cli"},
+    "clients": {"engine", "server"},
+    "server": {"clients", "cli"},
+}
 
 
 def _layers(path: Path) -> set[str]:

@@ -6,6 +6,7 @@ they work on a machine without internet access. The assets are the ones the fast
 ships (a registry package that bundles Swagger UI and ReDoc for exactly this); only its files are
 used, not its FastAPI wrapper, so the app keeps its own constructor.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -34,27 +35,38 @@ EXAMPLE_SCENE = {
 SCENE_BODY = {
     "required": True,
     "description": "the scene document `owcsim run` takes (scene + medium + simulation settings); meshes inline "
-                   "or as base64 file content, never as a path",
-    "content": {"application/json": {"schema": {"$ref": "#/components/schemas/SceneSpec"},
-                                     "example": EXAMPLE_SCENE}},
+    "or as base64 file content, never as a path",
+    "content": {"application/json": {"schema": {"$ref": "#/components/schemas/SceneSpec"}, "example": EXAMPLE_SCENE}},
 }
 
 #: Where the job a submission answers leads (OpenAPI links: clients and fuzzers can follow them).
-JOB_LINKS = {name: {"operationId": op, "parameters": {"job_id": "$response.body#/id"}}
-             for name, op in (("GetJob", "get_job"), ("CancelJob", "cancel_job"), ("GetResult", "get_result"),
-                              ("GetResultCsv", "get_result_csv"), ("GetResultNpz", "get_result_npz"),
-                              ("GetPlot", "get_plot"))}
+JOB_LINKS = {
+    name: {"operationId": op, "parameters": {"job_id": "$response.body#/id"}}
+    for name, op in (
+        ("GetJob", "get_job"),
+        ("CancelJob", "cancel_job"),
+        ("GetResult", "get_result"),
+        ("GetResultCsv", "get_result_csv"),
+        ("GetResultNpz", "get_result_npz"),
+        ("GetPlot", "get_plot"),
+    )
+}
 
 
 def problems(*codes: int) -> dict:
     """`responses=` entries: these statuses answer a problem document."""
-    return {c: {"description": HTTPStatus(c).phrase, "model": Problem,
-                "content": {PROBLEM_MEDIA_TYPE: {}}} for c in codes}
+    return {
+        c: {"description": HTTPStatus(c).phrase, "model": Problem, "content": {PROBLEM_MEDIA_TYPE: {}}} for c in codes
+    }
 
 
 #: The files the pages load, served from the app: {name: media type}.
-ASSETS = {"swagger-ui-bundle.js": "text/javascript", "swagger-ui.css": "text/css",
-          "redoc.standalone.js": "text/javascript", "favicon.png": "image/png"}
+ASSETS = {
+    "swagger-ui-bundle.js": "text/javascript",
+    "swagger-ui.css": "text/css",
+    "redoc.standalone.js": "text/javascript",
+    "favicon.png": "image/png",
+}
 
 router = APIRouter(include_in_schema=False)
 
@@ -106,5 +118,6 @@ def redoc(request: Request) -> HTMLResponse:
 def docs_asset(request: Request, name: str):
     if name not in ASSETS:  # a fixed list: no path from the request ever reaches the file system
         return problem_response(request, 404, "not-found", f"no documentation asset {name!r}")
-    return FileResponse(assets_folder() / name, media_type=ASSETS[name],
-                        headers={"Cache-Control": "public, max-age=86400"})
+    return FileResponse(
+        assets_folder() / name, media_type=ASSETS[name], headers={"Cache-Control": "public, max-age=86400"}
+    )

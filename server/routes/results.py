@@ -10,6 +10,7 @@ accepts it, decompressed on the way otherwise), so serving any result takes boun
 A plot is drawn from the rows of its links in the stored .npz (at most 6), in the threads
 for heavy work; the default plot is stored once drawn.
 """
+
 from __future__ import annotations
 
 import zlib
@@ -32,8 +33,12 @@ router = APIRouter(prefix="/jobs/{job_id}", tags=["results"])
 
 
 def _not_ready(job: JobRow) -> ProblemError:
-    why = {"queued": "is queued", "running": "is running", "failed": f"failed: {job.error}",
-           "cancelled": "was cancelled before it produced a result"}.get(job.status, f"is {job.status}")
+    why = {
+        "queued": "is queued",
+        "running": "is running",
+        "failed": f"failed: {job.error}",
+        "cancelled": "was cancelled before it produced a result",
+    }.get(job.status, f"is {job.status}")
     return ProblemError(409, "result-not-ready", f"job {job.id} has no result: it {why}", job_status=job.status)
 
 
@@ -90,31 +95,50 @@ def _download(name: str) -> dict:
     return {"Content-Disposition": f'attachment; filename="{name}"'}
 
 
-@router.get("/result", operation_id="get_result", summary="The result document (the command line's result.json)",
-            responses={200: {"model": SimulationResultPublic, "description": "the result document"},
-                       **problems(401, 404, 409)})
-async def get_result(request: Request, job: JobRow = Depends(owned_job),
-                     store: JobStore = Depends(get_store)) -> Response:
+@router.get(
+    "/result",
+    operation_id="get_result",
+    summary="The result document (the command line's result.json)",
+    responses={200: {"model": SimulationResultPublic, "description": "the result document"}, **problems(401, 404, 409)},
+)
+async def get_result(
+    request: Request, job: JobRow = Depends(owned_job), store: JobStore = Depends(get_store)
+) -> Response:
     return await _send(request, job, store, "result.json.gz")
 
 
-@router.get("/result.csv", operation_id="get_result_csv",
-            summary="Binned CIR of every link, long format (the columns of cir.csv)",
-            response_class=Response, responses={200: {"content": {"text/csv": {"schema": {"type": "string"}}},
-                                                       "description": "CSV"}, **problems(401, 404, 409)})
-async def get_result_csv(request: Request, job: JobRow = Depends(owned_job),
-                         store: JobStore = Depends(get_store)) -> Response:
+@router.get(
+    "/result.csv",
+    operation_id="get_result_csv",
+    summary="Binned CIR of every link, long format (the columns of cir.csv)",
+    response_class=Response,
+    responses={
+        200: {"content": {"text/csv": {"schema": {"type": "string"}}}, "description": "CSV"},
+        **problems(401, 404, 409),
+    },
+)
+async def get_result_csv(
+    request: Request, job: JobRow = Depends(owned_job), store: JobStore = Depends(get_store)
+) -> Response:
     return await _send(request, job, store, "result.csv.gz", _download(f"{job.id}-cir.csv"))
 
 
-@router.get("/result.npz", operation_id="get_result_npz",
-            summary="numpy arrays: t_edges_s, cir, cir_stderr, by_reflection_order, dc_gain, ...",
-            response_class=Response,
-            responses={200: {"content": {"application/octet-stream": {"schema": {"type": "string",
-                                                                                 "format": "binary"}}},
-                             "description": "numpy .npz archive (numpy.load)"}, **problems(401, 404, 409)})
-async def get_result_npz(request: Request, job: JobRow = Depends(owned_job),
-                         store: JobStore = Depends(get_store)) -> Response:
+@router.get(
+    "/result.npz",
+    operation_id="get_result_npz",
+    summary="numpy arrays: t_edges_s, cir, cir_stderr, by_reflection_order, dc_gain, ...",
+    response_class=Response,
+    responses={
+        200: {
+            "content": {"application/octet-stream": {"schema": {"type": "string", "format": "binary"}}},
+            "description": "numpy .npz archive (numpy.load)",
+        },
+        **problems(401, 404, 409),
+    },
+)
+async def get_result_npz(
+    request: Request, job: JobRow = Depends(owned_job), store: JobStore = Depends(get_store)
+) -> Response:
     return await _send(request, job, store, "result.npz", _download(f"{job.id}-cir.npz"))
 
 
@@ -122,28 +146,43 @@ def _plot(store: JobStore, job_id: str, link: int | None) -> bytes:
     with store.open_render(job_id, "result.npz") as npz:
         n = npz_link_count(npz)
         if link is not None and link >= n:
-            raise ProblemError(422, "invalid-parameter", f"link {link} does not exist: the result has {n} links",
-                               errors=[ProblemField(loc="query.link", msg="no such link", type="value_error")])
+            raise ProblemError(
+                422,
+                "invalid-parameter",
+                f"link {link} does not exist: the result has {n} links",
+                errors=[ProblemField(loc="query.link", msg="no such link", type="value_error")],
+            )
         npz.seek(0)
         try:
             png = npz_png(npz, link)
         except KeyError as exc:  # the link exists but asked for no binned CIR (a grid point, by default)
-            raise ProblemError(422, "invalid-parameter", str(exc.args[0]),
-                               errors=[ProblemField(loc="query.link", msg="no binned CIR for this link",
-                                                    type="value_error")]) from None
+            raise ProblemError(
+                422,
+                "invalid-parameter",
+                str(exc.args[0]),
+                errors=[ProblemField(loc="query.link", msg="no binned CIR for this link", type="value_error")],
+            ) from None
     if link is None:
         store.put_renders(job_id, {"plot.png": png})
     return png
 
 
-@router.get("/plot.png", operation_id="get_plot",
-            summary="h(t) per reflection order and total (up to 6 links, or the one asked)",
-            response_class=Response,
-            responses={200: {"content": {"image/png": {"schema": {"type": "string", "format": "binary"}}},
-                             "description": "PNG"}, **problems(401, 404, 409, 422)})
-async def get_plot(request: Request,
-                   link: Annotated[int | None, Query(ge=0, description="index in the result's `links`")] = None,
-                   job: JobRow = Depends(owned_job), store: JobStore = Depends(get_store)) -> Response:
+@router.get(
+    "/plot.png",
+    operation_id="get_plot",
+    summary="h(t) per reflection order and total (up to 6 links, or the one asked)",
+    response_class=Response,
+    responses={
+        200: {"content": {"image/png": {"schema": {"type": "string", "format": "binary"}}}, "description": "PNG"},
+        **problems(401, 404, 409, 422),
+    },
+)
+async def get_plot(
+    request: Request,
+    link: Annotated[int | None, Query(ge=0, description="index in the result's `links`")] = None,
+    job: JobRow = Depends(owned_job),
+    store: JobStore = Depends(get_store),
+) -> Response:
     await _ensure_renders(request, job, store)
     if link is None and "plot.png" in await anyio.to_thread.run_sync(store.render_names, job.id):
         return await _send(request, job, store, "plot.png")

@@ -1,4 +1,5 @@
 """The service itself: health (can it take and run jobs?) and version. Open without an API key."""
+
 from __future__ import annotations
 
 from fastapi import APIRouter, Depends
@@ -19,11 +20,18 @@ router = APIRouter(tags=["service"])
 STALE_S = 15.0
 
 
-@router.get("/health", operation_id="health", response_model=HealthPublic,
-            summary="Health: the store answers, the dispatcher runs",
-            responses={503: {"model": HealthPublic, "description": "the service cannot run jobs now"}})
-async def health(store: JobStore = Depends(get_store), dispatcher: Dispatcher = Depends(get_dispatcher),
-                 settings: Settings = Depends(get_settings)):
+@router.get(
+    "/health",
+    operation_id="health",
+    response_model=HealthPublic,
+    summary="Health: the store answers, the dispatcher runs",
+    responses={503: {"model": HealthPublic, "description": "the service cannot run jobs now"}},
+)
+async def health(
+    store: JobStore = Depends(get_store),
+    dispatcher: Dispatcher = Depends(get_dispatcher),
+    settings: Settings = Depends(get_settings),
+):
     """Answered on the event loop from what the dispatcher last read (it reads the store every
     0.2 s): never queued behind pre-flights or downloads. A store error the dispatcher met (disk
     full) or a dispatcher that stopped reading for STALE_S makes it 503, with the `reason`."""
@@ -39,15 +47,22 @@ async def health(store: JobStore = Depends(get_store), dispatcher: Dispatcher = 
             counts, store_ok, reason = {}, False, f"store error: {exc}"
         reason = reason or "the dispatcher is not running"
     ok = store_ok and dispatcher.alive
-    body = HealthPublic(status="ok" if ok else "unavailable", store=store_ok, dispatcher=dispatcher.alive,
-                        queued=counts.get("queued", 0), running=counts.get("running", 0),
-                        max_concurrent_jobs=settings.max_concurrent_jobs, max_queued_jobs=settings.max_queued_jobs)
+    body = HealthPublic(
+        status="ok" if ok else "unavailable",
+        store=store_ok,
+        dispatcher=dispatcher.alive,
+        queued=counts.get("queued", 0),
+        running=counts.get("running", 0),
+        max_concurrent_jobs=settings.max_concurrent_jobs,
+        max_queued_jobs=settings.max_queued_jobs,
+    )
     if ok:
         return body
     return JSONResponse({**body.model_dump(), "reason": reason}, status_code=503, headers={"Retry-After": "5"})
 
 
-@router.get("/version", operation_id="version", response_model=VersionPublic,
-            summary="Version of owcsim and of the API")
+@router.get(
+    "/version", operation_id="version", response_model=VersionPublic, summary="Version of owcsim and of the API"
+)
 def get_version() -> VersionPublic:
     return VersionPublic(owcsim_version=owcsim_version)

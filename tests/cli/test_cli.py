@@ -1,4 +1,5 @@
 """The command line: outputs, overrides, located errors, exit codes."""
+
 import json
 import subprocess
 import sys
@@ -14,12 +15,38 @@ BARRY = str(EXAMPLES / "barry_config_a.json")
 
 def test_run_writes_result_csv_png(tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["run", BARRY, "--out", str(out), "--paths", "4000", "--seed", "3", "--max-reflections", "2",
-                 "--set", "receivers.0.fov_deg=60", "--set", "simulation.direction=\"forward\""]) == 0
+    assert (
+        main(
+            [
+                "run",
+                BARRY,
+                "--out",
+                str(out),
+                "--paths",
+                "4000",
+                "--seed",
+                "3",
+                "--max-reflections",
+                "2",
+                "--set",
+                "receivers.0.fov_deg=60",
+                "--set",
+                'simulation.direction="forward"',
+            ]
+        )
+        == 0
+    )
     res = json.loads((out / "result.json").read_text())
     link = res["links"][0]
-    for key in ("transmitter", "receiver", "dc_gain", "dc_gain_stderr", "mean_delay_s", "rms_delay_spread_s",
-                "dc_gain_by_reflection_order"):
+    for key in (
+        "transmitter",
+        "receiver",
+        "dc_gain",
+        "dc_gain_stderr",
+        "mean_delay_s",
+        "rms_delay_spread_s",
+        "dc_gain_by_reflection_order",
+    ):
         assert key in link
     assert len(link["dc_gain_by_reflection_order"]) == 3
     assert res["scene"]["receivers"][0]["fov_deg"] == 60  # the exact inputs are echoed
@@ -52,11 +79,14 @@ def test_validate_reports_located_errors(tmp_path, capsys):
     assert main(["validate", BARRY]) == 0
 
 
-@pytest.mark.parametrize("args,message", [
-    (["--set", "receivers.5.fov_deg=60"], "not an index"),
-    (["--set", "nonsense"], "PATH=VALUE"),
-    (["--algorithm", "7"], "simulation.algorithm"),
-])
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--set", "receivers.5.fov_deg=60"], "not an index"),
+        (["--set", "nonsense"], "PATH=VALUE"),
+        (["--algorithm", "7"], "simulation.algorithm"),
+    ],
+)
 def test_bad_overrides_are_errors(tmp_path, capsys, args, message):
     assert main(["run", BARRY, "--out", str(tmp_path), "--paths", "100", *args]) == 2
     assert message in capsys.readouterr().err
@@ -78,10 +108,12 @@ def test_unreadable_scene_and_unusable_out_folder_are_errors(tmp_path, capsys):
     (tmp_path / "folder.json").mkdir()
     (tmp_path / "binary.json").write_bytes(b"\xff\xfe{}")
     (tmp_path / "afile").write_text("")
-    cases = [(["validate", str(tmp_path / "folder.json")], "cannot read it"),
-             (["validate", str(tmp_path / "binary.json")], "not a UTF-8 text file"),
-             (["run", BARRY, "--out", str(tmp_path / "afile"), "--paths", "64"], "cannot use it as the output folder"),
-             (["run", BARRY, "--out", str(tmp_path / "afile" / "sub"), "--paths", "64"], "cannot use it as the output")]
+    cases = [
+        (["validate", str(tmp_path / "folder.json")], "cannot read it"),
+        (["validate", str(tmp_path / "binary.json")], "not a UTF-8 text file"),
+        (["run", BARRY, "--out", str(tmp_path / "afile"), "--paths", "64"], "cannot use it as the output folder"),
+        (["run", BARRY, "--out", str(tmp_path / "afile" / "sub"), "--paths", "64"], "cannot use it as the output"),
+    ]
     for argv, message in cases:
         assert main(argv) == 2, argv
         assert message in capsys.readouterr().err
@@ -123,8 +155,9 @@ def test_version_flag(capsys):
 
 def test_algorithm_flag_takes_auto(tmp_path, capsys):
     out = tmp_path / "o"
-    assert main(["run", BARRY, "--out", str(out), "--paths", "2000", "--max-reflections", "1",
-                 "--algorithm", "auto"]) == 0
+    assert (
+        main(["run", BARRY, "--out", str(out), "--paths", "2000", "--max-reflections", "1", "--algorithm", "auto"]) == 0
+    )
     res = json.loads((out / "result.json").read_text())
     assert res["scene"]["simulation"]["algorithm"] == "auto" and res["algorithm"] == 1  # no medium: vacuum paths
 
@@ -132,9 +165,11 @@ def test_algorithm_flag_takes_auto(tmp_path, capsys):
 def test_no_plot_skips_the_png_and_matplotlib(tmp_path):
     """--no-plot writes every file but cir.png, and the command never imports matplotlib (nor trimesh, scipy)."""
     out = tmp_path / "o"
-    code = ("import sys; from owcsim.cli import main; "
-            f"assert main(['run', {BARRY!r}, '--out', {str(out)!r}, '--paths', '2000', '--no-plot']) == 0; "
-            "print(sorted(m for m in ('matplotlib', 'trimesh', 'scipy') if m in sys.modules))")
+    code = (
+        "import sys; from owcsim.cli import main; "
+        f"assert main(['run', {BARRY!r}, '--out', {str(out)!r}, '--paths', '2000', '--no-plot']) == 0; "
+        "print(sorted(m for m in ('matplotlib', 'trimesh', 'scipy') if m in sys.modules))"
+    )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=tmp_path)
     assert proc.stdout.strip().splitlines()[-1] == "[]"
     assert sorted(p.name for p in out.iterdir()) == ["cir.csv", "links.csv", "result.json"]
@@ -155,5 +190,14 @@ def test_progress_bar_draws_the_engines_progress_on_a_terminal_only():
         update(Progress(fraction=1.0, paths=2048, batches=2, dc_gain_rel_stderr=0.01, elapsed_s=0.5))
         close()
         text = stream.getvalue()
-        assert (text.startswith("\r[") and "100.0%" in text and "2,048 paths" in text
-                and "rel.err(H0) 1.00e-02" in text and text.endswith("0.5 s\n")) if drawn else text == ""
+        assert (
+            (
+                text.startswith("\r[")
+                and "100.0%" in text
+                and "2,048 paths" in text
+                and "rel.err(H0) 1.00e-02" in text
+                and text.endswith("0.5 s\n")
+            )
+            if drawn
+            else text == ""
+        )

@@ -1,4 +1,5 @@
 """The Python client on its own: retries and backoff, problem exceptions, scenes, results, async twin."""
+
 import asyncio
 import base64
 import io
@@ -8,28 +9,57 @@ import httpx
 import numpy as np
 import pytest
 
-from owcsim.clients import (AsyncClient, Client, Conflict, ConnectionFailed, InvalidRequest, JobFailed, NotFound,
-                     QueueFull, Result, RetryPolicy, ServerError)
+from owcsim.clients import (
+    AsyncClient,
+    Client,
+    Conflict,
+    ConnectionFailed,
+    InvalidRequest,
+    JobFailed,
+    NotFound,
+    QueueFull,
+    Result,
+    RetryPolicy,
+    ServerError,
+)
 from owcsim.clients.http import retry_after
 from owcsim.clients.progress import ProgressBar
 from owcsim.clients.scene import scene_document
-from tests.results import simulate_document as simulate
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.jobs import JobPublic
 from owcsim.schemas.results import SimulationResultPublic
+from tests.results import simulate_document as simulate
 from tests.scenes import room_doc
 
 FAST = RetryPolicy(retries=3, backoff_s=0.0, max_backoff_s=0.0)
-JOB = {"id": "j1", "url": "/v1/jobs/j1", "status": "queued", "created_at": "2026-01-01T00:00:00Z",
-       "urls": {"self": "/v1/jobs/j1", "result": "/v1/jobs/j1/result", "result_csv": "/v1/jobs/j1/result.csv",
-                "result_npz": "/v1/jobs/j1/result.npz", "plot": "/v1/jobs/j1/plot.png",
-                "cancel": "/v1/jobs/j1/cancel"}}
+JOB = {
+    "id": "j1",
+    "url": "/v1/jobs/j1",
+    "status": "queued",
+    "created_at": "2026-01-01T00:00:00Z",
+    "urls": {
+        "self": "/v1/jobs/j1",
+        "result": "/v1/jobs/j1/result",
+        "result_csv": "/v1/jobs/j1/result.csv",
+        "result_npz": "/v1/jobs/j1/result.npz",
+        "plot": "/v1/jobs/j1/plot.png",
+        "cancel": "/v1/jobs/j1/cancel",
+    },
+}
 
 
 def problem(status, kind, detail, errors=()):
-    return httpx.Response(status, headers={"content-type": "application/problem+json"},
-                          json={"type": f"urn:owcsim:problem:{kind}", "title": kind, "status": status,
-                                "detail": detail, "errors": list(errors)})
+    return httpx.Response(
+        status,
+        headers={"content-type": "application/problem+json"},
+        json={
+            "type": f"urn:owcsim:problem:{kind}",
+            "title": kind,
+            "status": status,
+            "detail": detail,
+            "errors": list(errors),
+        },
+    )
 
 
 def scripted(*answers, seen=None):
@@ -59,8 +89,13 @@ def result_doc():
 
 def test_connection_errors_and_503_are_retried_with_one_idempotency_key():
     seen = []
-    owc = client(httpx.ConnectError("refused"), httpx.ReadTimeout("slow"), httpx.Response(503),
-                 httpx.Response(202, json=JOB), seen=seen)
+    owc = client(
+        httpx.ConnectError("refused"),
+        httpx.ReadTimeout("slow"),
+        httpx.Response(503),
+        httpx.Response(202, json=JOB),
+        seen=seen,
+    )
     job = owc.submit(room_doc())
     assert job.id == "j1" and job.status == "queued" and len(seen) == 4
     keys = {r.headers["idempotency-key"] for r in seen}
@@ -87,9 +122,19 @@ def test_retry_after_is_honoured():
 
 
 def test_problem_answers_become_exceptions_with_the_fields():
-    bad = problem(422, "invalid-scene", "body.receivers.0.fov_deg: too wide",
-                  [{"loc": "body.receivers.0.fov_deg", "msg": "Input should be less than or equal to 90",
-                    "type": "less_than_equal"}, {"loc": "body.room", "msg": "missing", "type": "missing"}])
+    bad = problem(
+        422,
+        "invalid-scene",
+        "body.receivers.0.fov_deg: too wide",
+        [
+            {
+                "loc": "body.receivers.0.fov_deg",
+                "msg": "Input should be less than or equal to 90",
+                "type": "less_than_equal",
+            },
+            {"loc": "body.room", "msg": "missing", "type": "missing"},
+        ],
+    )
     with pytest.raises(InvalidRequest) as err:
         client(bad).submit(room_doc())
     e = err.value
@@ -99,19 +144,23 @@ def test_problem_answers_become_exceptions_with_the_fields():
     with pytest.raises(NotFound):
         client(problem(404, "job-not-found", "no job 'x'")).job("x")
     with pytest.raises(Conflict):
-        client(httpx.Response(200, json=JOB | {"status": "running"}),
-               problem(409, "result-not-ready", "running")).job("j1").result(wait=False)
+        client(httpx.Response(200, json=JOB | {"status": "running"}), problem(409, "result-not-ready", "running")).job(
+            "j1"
+        ).result(wait=False)
     with pytest.raises(ServerError) as err:  # not a problem document (a proxy's page)
         client(httpx.Response(500, text="<html>oops</html>")).health()
     assert err.value.problem.detail == "<html>oops</html>"
 
 
 def test_wait_polls_until_done_and_draws_progress(result_doc):
-    running = JOB | {"status": "running", "progress": {"fraction": 0.5, "paths": 1500, "batches": 1,
-                                                       "dc_gain_rel_stderr": 0.01, "elapsed_s": 0.1}}
+    running = JOB | {
+        "status": "running",
+        "progress": {"fraction": 0.5, "paths": 1500, "batches": 1, "dc_gain_rel_stderr": 0.01, "elapsed_s": 0.1},
+    }
     done = JOB | {"status": "succeeded", "progress": {"fraction": 1.0, "paths": 3000, "batches": 2}}
-    owc = client(httpx.Response(200, json=running), httpx.Response(200, json=done),
-                 httpx.Response(200, json=result_doc))
+    owc = client(
+        httpx.Response(200, json=running), httpx.Response(200, json=done), httpx.Response(200, json=result_doc)
+    )
     job = owc.job("j1")
     bar = io.StringIO()
     assert job.wait(progress=True, stream=bar) is job and job.status == "succeeded"
@@ -166,8 +215,11 @@ def test_listing_follows_pages():
     page1 = {"items": [JOB], "next_cursor": "7", "next": "/v1/jobs?cursor=7"}
     page2 = {"items": [JOB | {"id": "j0"}], "next_cursor": None, "next": None}
     seen = []
-    jobs = list(client(httpx.Response(200, json=page1), httpx.Response(200, json=page2), seen=seen)
-                .jobs(status="queued", page_size=1))
+    jobs = list(
+        client(httpx.Response(200, json=page1), httpx.Response(200, json=page2), seen=seen).jobs(
+            status="queued", page_size=1
+        )
+    )
     assert [j.id for j in jobs] == ["j1", "j0"] and "cursor=7" in str(seen[1].url)
     assert "status=queued" in str(seen[0].url)
 
@@ -182,9 +234,14 @@ def test_progress_bar_line():
 
 def test_async_twin(result_doc):
     done = JOB | {"status": "succeeded"}
-    answers = [httpx.ConnectError("refused"), httpx.Response(202, json=JOB), httpx.Response(200, json=done),
-               httpx.Response(200, json=result_doc), httpx.Response(200, json=JOB | {"status": "cancelled"}),
-               httpx.Response(200, json={"items": [done], "next_cursor": None, "next": None})]
+    answers = [
+        httpx.ConnectError("refused"),
+        httpx.Response(202, json=JOB),
+        httpx.Response(200, json=done),
+        httpx.Response(200, json=result_doc),
+        httpx.Response(200, json=JOB | {"status": "cancelled"}),
+        httpx.Response(200, json={"items": [done], "next_cursor": None, "next": None}),
+    ]
     seen = []
 
     async def main():
@@ -229,8 +286,15 @@ def test_async_client_against_the_app(tmp_path):
 
 
 def test_health_reports_unavailable_without_retrying():
-    body = {"status": "unavailable", "store": True, "dispatcher": False, "queued": 0, "running": 0,
-            "max_concurrent_jobs": 2, "max_queued_jobs": 10}
+    body = {
+        "status": "unavailable",
+        "store": True,
+        "dispatcher": False,
+        "queued": 0,
+        "running": 0,
+        "max_concurrent_jobs": 2,
+        "max_queued_jobs": 10,
+    }
     seen = []
     assert client(httpx.Response(503, json=body), seen=seen).health().status == "unavailable" and len(seen) == 1
 
@@ -255,10 +319,14 @@ def test_wait_polls_at_its_deadline_and_honours_its_timeout():
     # done 0.9 s into a 1 s wait: the last poll lands on the deadline and sees it (it used to give up early)
     t0 = time.monotonic()
     http = httpx.Client(base_url="http://owcsim.test", transport=_timed_transport(t0 + 0.9))
-    job = Job(Client("http://owcsim.test", retry=FAST, http=http), JobPublic.model_validate({**JOB, "status": "running"}))
+    job = Job(
+        Client("http://owcsim.test", retry=FAST, http=http), JobPublic.model_validate({**JOB, "status": "running"})
+    )
     assert job.wait(timeout=1.0).info.status == "succeeded"
     http = httpx.Client(base_url="http://owcsim.test", transport=_timed_transport(t0 + 60))
-    job = Job(Client("http://owcsim.test", retry=FAST, http=http), JobPublic.model_validate({**JOB, "status": "running"}))
+    job = Job(
+        Client("http://owcsim.test", retry=FAST, http=http), JobPublic.model_validate({**JOB, "status": "running"})
+    )
     t = time.monotonic()
     with pytest.raises(TimeoutError, match="still running after 0.5 s"):
         job.wait(timeout=0.5)
@@ -278,8 +346,9 @@ def test_wait_polls_at_its_deadline_and_honours_its_timeout():
 
 
 def test_a_submission_without_answer_names_its_idempotency_key():
-    owc = client(httpx.ReadTimeout("no answer"), httpx.ReadTimeout("no answer"), retry=RetryPolicy(retries=1,
-                                                                                                   backoff_s=0.0))
+    owc = client(
+        httpx.ReadTimeout("no answer"), httpx.ReadTimeout("no answer"), retry=RetryPolicy(retries=1, backoff_s=0.0)
+    )
     with pytest.raises(ConnectionFailed, match="idempotency_key=") as err:
         owc.submit(room_doc(paths=100), idempotency_key="k-123")
     assert err.value.idempotency_key == "k-123" and "k-123" in str(err.value)
@@ -297,8 +366,10 @@ def test_async_wait_polls_at_its_deadline():
         job = AsyncJob(owc, JobPublic.model_validate({**JOB, "status": "running"}))
         assert (await job.wait(timeout=1.0)).info.status == "succeeded"
         http = httpx.AsyncClient(base_url="http://owcsim.test", transport=_timed_transport(t0 + 60))
-        job = AsyncJob(AsyncClient("http://owcsim.test", retry=FAST, http=http),
-                       JobPublic.model_validate({**JOB, "status": "running"}))
+        job = AsyncJob(
+            AsyncClient("http://owcsim.test", retry=FAST, http=http),
+            JobPublic.model_validate({**JOB, "status": "running"}),
+        )
         with pytest.raises(TimeoutError, match="still running"):
             await job.wait(timeout=0.3)
 

@@ -1,4 +1,5 @@
 """Algorithm 1 against references derived independently of the engine (physics.md section 6)."""
+
 import math
 
 import numpy as np
@@ -8,21 +9,24 @@ from tests import reference as ref
 from tests.results import simulate_document as simulate
 from tests.scenes import room_doc, spec, within
 
-BARRY_RHO = {"floor": 0.3, "ceiling": 0.8, "wall_x_min": 0.8, "wall_x_max": 0.8, "wall_y_min": 0.8,
-             "wall_y_max": 0.8}
+BARRY_RHO = {"floor": 0.3, "ceiling": 0.8, "wall_x_min": 0.8, "wall_x_max": 0.8, "wall_y_min": 0.8, "wall_y_max": 0.8}
 
 
 def _link(doc, **kw):
     return simulate(spec(doc), **kw)["links"][0]
 
 
-@pytest.mark.parametrize("medium,sigma_t", [
-    (None, 0.0),
-    ({"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2}, 0.25),
-    ({"type": "homogeneous", "visibility_m": 5.0, "albedo": 0.6}, 3.912 / 5.0),
-])
-@pytest.mark.parametrize("rx,normal,fov", [((0.5, 1.0, 0.0), (0, 0, 1), 85.0),
-                                           ((4.0, 1.5, 1.0), (-0.3, 0.2, 1.0), 60.0)])
+@pytest.mark.parametrize(
+    "medium,sigma_t",
+    [
+        (None, 0.0),
+        ({"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2}, 0.25),
+        ({"type": "homogeneous", "visibility_m": 5.0, "albedo": 0.6}, 3.912 / 5.0),
+    ],
+)
+@pytest.mark.parametrize(
+    "rx,normal,fov", [((0.5, 1.0, 0.0), (0, 0, 1), 85.0), ((4.0, 1.5, 1.0), (-0.3, 0.2, 1.0), 60.0)]
+)
 def test_los_closed_form(medium, sigma_t, rx, normal, fov):
     doc = room_doc(rx=rx, rx_normal=normal, fov_deg=fov, m=2.0, medium=medium, max_reflections=0, paths=64)
     link = _link(doc)
@@ -57,8 +61,12 @@ def test_smoke_box_region_containing_everything_equals_whole_scene():
 
 def test_smoke_layer_only_attenuates_inside_it():
     """A smoke layer above z = 2.9 m: the LOS from the ceiling Tx crosses 0.1 m of it, no more."""
-    layer = {"type": "homogeneous", "sigma_a": 2.0, "sigma_s": 0.0,
-             "region": {"type": "box", "min": [0, 0, 2.9], "max": [5, 5, 3]}}
+    layer = {
+        "type": "homogeneous",
+        "sigma_a": 2.0,
+        "sigma_s": 0.0,
+        "region": {"type": "box", "min": [0, 0, 2.9], "max": [5, 5, 3]},
+    }
     clear = _link(room_doc(max_reflections=0, paths=64))
     smoky = _link(room_doc(max_reflections=0, paths=64, medium=layer))
     d_in = 0.1 * math.dist((2.5, 2.5, 3.0), (1.0, 1.0, 0.0)) / 3.0
@@ -69,8 +77,17 @@ def test_smoke_layer_only_attenuates_inside_it():
 def test_first_bounce_dc_gain_and_cir(direction):
     """k = 1 against deterministic patch integration of the box room (Barry et al. 1993)."""
     rx, fov = (0.5, 1.0, 0.0), 85.0
-    doc = room_doc(rx=rx, fov_deg=fov, max_reflections=1, paths=150_000, batch_size=8192, direction=direction,
-                   time_bin_s=2e-9, t_max_s=6e-8, seed=11)
+    doc = room_doc(
+        rx=rx,
+        fov_deg=fov,
+        max_reflections=1,
+        paths=150_000,
+        batch_size=8192,
+        direction=direction,
+        time_bin_s=2e-9,
+        t_max_s=6e-8,
+        seed=11,
+    )
     link = _link(doc)
     args = ((5.0, 5.0, 3.0), BARRY_RHO, (2.5, 2.5, 3.0), (0, 0, -1), 1.0, rx, (0, 0, 1), 1e-4, math.radians(fov))
     h1 = ref.first_bounce_box_dc_gain(*args, rel_tol=1e-4)
@@ -96,8 +113,11 @@ def test_forward_and_backward_agree_all_orders():
     for k in range(1, 7):
         ek = math.hypot(f["dc_gain_by_reflection_order_stderr"][k], b["dc_gain_by_reflection_order_stderr"][k])
         assert within(f["dc_gain_by_reflection_order"][k], b["dc_gain_by_reflection_order"][k], ek)
-    assert within(f["rms_delay_spread_s"], b["rms_delay_spread_s"],
-                  math.hypot(f["rms_delay_spread_s_stderr"], b["rms_delay_spread_s_stderr"]))
+    assert within(
+        f["rms_delay_spread_s"],
+        b["rms_delay_spread_s"],
+        math.hypot(f["rms_delay_spread_s_stderr"], b["rms_delay_spread_s_stderr"]),
+    )
 
 
 def test_reciprocity_swapping_devices():
@@ -115,8 +135,17 @@ def test_reciprocity_swapping_devices():
 def test_energy_closed_room(rho):
     """Power reaching the surfaces of a closed room with reflectance rho: P (1 - rho^K) / (1 - rho)."""
     K = 60 if rho == 0.5 else 120
-    doc = room_doc(rho, rho, rho, max_reflections=K, paths=20_000, direction="forward", t_max_s=2e-6,
-                   time_bin_s=1e-8, russian_roulette=False)
+    doc = room_doc(
+        rho,
+        rho,
+        rho,
+        max_reflections=K,
+        paths=20_000,
+        direction="forward",
+        t_max_s=2e-6,
+        time_bin_s=1e-8,
+        russian_roulette=False,
+    )
     res = simulate(spec(doc))
     expected = (1 - rho**K) / (1 - rho)
     assert res["diagnostics"]["escaped_power"]["tx"] == 0.0
@@ -125,8 +154,15 @@ def test_energy_closed_room(rho):
 
 
 def test_russian_roulette_is_unbiased():
-    base = dict(rx=(0.5, 1.0, 0.0), fov_deg=85.0, max_reflections=12, paths=40_000, seed=9,
-                direction="backward", rr_start_depth=1)
+    base = dict(
+        rx=(0.5, 1.0, 0.0),
+        fov_deg=85.0,
+        max_reflections=12,
+        paths=40_000,
+        seed=9,
+        direction="backward",
+        rr_start_depth=1,
+    )
     on = _link(room_doc(russian_roulette=True, **base))
     off = _link(room_doc(russian_roulette=False, **base))
     assert within(on["dc_gain"], off["dc_gain"], math.hypot(on["dc_gain_stderr"], off["dc_gain_stderr"]))
@@ -144,8 +180,7 @@ def test_scene_far_from_origin():
 
 
 def test_receiver_near_wall_is_finite():
-    link = _link(room_doc(rx=(0.001, 2.5, 1.5), rx_normal=(1, 0, 0), fov_deg=90.0, paths=20_000,
-                          direction="forward"))
+    link = _link(room_doc(rx=(0.001, 2.5, 1.5), rx_normal=(1, 0, 0), fov_deg=90.0, paths=20_000, direction="forward"))
     assert np.isfinite(link["dc_gain"]) and link["dc_gain"] > 0 and np.isfinite(link["dc_gain_stderr"])
 
 

@@ -19,12 +19,15 @@ def _auto_doc(medium=None, **simulation):
     return doc
 
 
-@pytest.mark.parametrize("medium,algorithm,reason,keeps_medium", [
-    (None, 1, "no medium", False),
-    ({"type": "homogeneous", "sigma_a": 0.0, "sigma_s": 0.0}, 1, "sigma_t = 0", False),
-    ({"type": "homogeneous", "sigma_a": 0.2, "sigma_s": 0.0}, 1, "sigma_s = 0", True),
-    (SMOKE, 5, "scattering medium", True),
-])
+@pytest.mark.parametrize(
+    "medium,algorithm,reason,keeps_medium",
+    [
+        (None, 1, "no medium", False),
+        ({"type": "homogeneous", "sigma_a": 0.0, "sigma_s": 0.0}, 1, "sigma_t = 0", False),
+        ({"type": "homogeneous", "sigma_a": 0.2, "sigma_s": 0.0}, 1, "sigma_s = 0", True),
+        (SMOKE, 5, "scattering medium", True),
+    ],
+)
 def test_auto_algorithm_per_scene_type(medium, algorithm, reason, keeps_medium):
     res = simulate(spec(_auto_doc(medium, max_reflections=3, t_max_s=2e-7)))
     assert res["algorithm"] == algorithm
@@ -85,7 +88,8 @@ def test_auto_window_keeps_late_power_under_its_bound(medium):
     link = res["links"][0]
     assert link["late_gain"] <= allowed / 2
     assert res["time_bins"]["n_bins"] * res["time_bins"]["time_bin_s"] == pytest.approx(
-        res["modeled"]["time_window_s"][1])
+        res["modeled"]["time_window_s"][1]
+    )
     assert "window ends at" in res["modeled"]["time_window_reason"]
 
 
@@ -109,8 +113,7 @@ def test_unreachable_receiver_is_reported_not_simulated():
     assert res["links"][0]["paths"] == 4096 and res["links"][0]["dc_gain"] > 0
 
 
-@pytest.mark.parametrize("stopping", [{"paths": 4096}, {"paths": None, "target_rel_error": 0.05,
-                                                      "time_budget_s": 5.0}])
+@pytest.mark.parametrize("stopping", [{"paths": 4096}, {"paths": None, "target_rel_error": 0.05, "time_budget_s": 5.0}])
 def test_every_receiver_unreachable_ends_at_once_with_zero_gain(stopping):
     # Used to crash (no tally to combine) with a fixed budget and loop forever in accuracy mode.
     doc = room_doc(**stopping)

@@ -4,6 +4,7 @@ References: closed forms (Lambertian, mirror), hemisphere quadrature written her
 albedo and moments of the BRDF, swapped arguments for reciprocity, and chi-square tests of
 sampled directions against the pdf integrated by quadrature.
 """
+
 from __future__ import annotations
 
 import math

@@ -108,8 +108,12 @@ def test_a_worker_builds_a_job_and_its_pilot_once(monkeypatch, tmp_path):
     monkeypatch.setattr(execution, "_BUILT", {})
     builds = _count(monkeypatch, execution, "build_scene")
     job = _smoky(algorithm=5, max_reflections=2, max_scattering=2, t_max_s=1e-7)
-    pilot = job.model_copy(update={"receivers": [job.receivers[0].model_copy(update={"position": (1.0, 2.0, 0.0)})],
-                                   "simulation": job.simulation.model_copy(update={"max_reflections": 9})})
+    pilot = job.model_copy(
+        update={
+            "receivers": [job.receivers[0].model_copy(update={"position": (1.0, 2.0, 0.0)})],
+            "simulation": job.simulation.model_copy(update={"max_reflections": 9}),
+        }
+    )
     other = job.model_copy(update={"medium": None})
     refs = [execution.job_ref(scene_module.build_scene(s), None, str(tmp_path)) for s in (job, pilot, other)]
     scenes = [execution._worker_scene(r.key, r.spec_path, None) for r in refs]

@@ -5,6 +5,7 @@ per job; a worker killed mid-job and a task that fails are retried and the resul
 still exact; stopping a run cancels its tasks on the cluster; clear errors without
 Dask or without a scheduler.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -27,7 +28,13 @@ from dask import config as dask_config  # noqa: E402
 from owcsim.engine.errors import EngineError, SceneError  # noqa: E402
 from owcsim.engine.execution import JobRef  # noqa: E402
 from owcsim.engine.execution_dask import (  # noqa: E402
-    ClusterError, DaskExecutor, DaskUnavailableError, executor_from_scheduler, portable_spec, worker_cache_info)
+    ClusterError,
+    DaskExecutor,
+    DaskUnavailableError,
+    executor_from_scheduler,
+    portable_spec,
+    worker_cache_info,
+)
 from owcsim.engine.kernel import WorkItem  # noqa: E402
 from owcsim.engine.scene import build_scene  # noqa: E402
 from owcsim.engine.simulate import kernel_settings  # noqa: E402
@@ -50,8 +57,9 @@ def _doc(**simulation):
     sim.update(simulation)
     doc = room_doc(**sim)
     doc["furniture"] = [{"min": [3.0, 3.0, 0.0], "max": [4.0, 4.5, 1.0], "reflectance": 0.6}]
-    doc["receivers"].append({"id": "rx2", "position": [4.5, 0.5, 0.8], "normal": [0, 0, 1], "area": 1e-4,
-                             "fov_deg": 70})
+    doc["receivers"].append(
+        {"id": "rx2", "position": [4.5, 0.5, 0.8], "normal": [0, 0, 1], "area": 1e-4, "fov_deg": 70}
+    )
     return doc
 
 
@@ -60,8 +68,14 @@ def client():
     # The tests read the scheduler's transition log, a deque of 1000 entries by default: keep more,
     # so that one test's reading never depends on how many transitions earlier tests made.
     with dask_config.set({"distributed.admin.low-level-log-length": 100_000}):
-        cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                           dashboard_address="127.0.0.1:0", silence_logs=logging.CRITICAL)
+        cluster = distributed.LocalCluster(
+            n_workers=2,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address="127.0.0.1:0",
+            silence_logs=logging.CRITICAL,
+        )
     client = distributed.Client(cluster, set_as_default=False)
     try:
         yield client
@@ -105,8 +119,15 @@ def test_same_bits_as_local_pool_and_serial(dask):
 
 def test_accuracy_mode_and_tilted_devices_same_bits_as_serial(dask):
     # Tilted normals: the worker must get the validated document itself, not re-normalised JSON.
-    doc = room_doc(max_reflections=3, paths=None, target_rel_error=0.03, batch_size=512, direction="backward",
-                   rx_normal=(0.31, -0.17, 0.93), tx_normal=(0.12, 0.27, -0.95))
+    doc = room_doc(
+        max_reflections=3,
+        paths=None,
+        target_rel_error=0.03,
+        batch_size=512,
+        direction="backward",
+        rx_normal=(0.31, -0.17, 0.93),
+        tx_normal=(0.12, 0.27, -0.95),
+    )
     serial = simulate(spec(doc))
     on_dask = simulate(spec(doc), executor=dask)
     assert serial["run"]["stop_reason"] == on_dask["run"]["stop_reason"] == "target_reached"
@@ -147,17 +168,20 @@ def test_worker_builds_a_different_scene_is_an_error(dask):
 
 def test_cancel_reaches_the_cluster(client, dask):
     # An accuracy run that would go on for minutes, stopped after 6 batches.
-    doc = room_doc(max_reflections=6, paths=None, target_rel_error=1e-5, time_budget_s=600, batch_size=4096,
-                   direction="forward")
+    doc = room_doc(
+        max_reflections=6, paths=None, target_rel_error=1e-5, time_budget_s=600, batch_size=4096, direction="forward"
+    )
     seen, serial_seen = [], []
-    res = simulate(spec(doc), executor=dask, progress=lambda p: seen.append(p.paths),
-                   should_stop=lambda: len(seen) >= 6)
+    res = simulate(
+        spec(doc), executor=dask, progress=lambda p: seen.append(p.paths), should_stop=lambda: len(seen) >= 6
+    )
     assert res["run"]["stop_reason"] == "cancelled"
     # accuracy runs start with batches of a quarter of batch_size, at least 2048 paths, and double them every
     # GROWTH_ROUNDS (4) rounds up to batch_size (simulate._items)
     assert seen == [2048, 4096, 6144, 8192, 12288, 16384]  # progress flows back, batch by batch
-    serial = simulate(spec(doc), progress=lambda p: serial_seen.append(p.paths),
-                      should_stop=lambda: len(serial_seen) >= 6)
+    serial = simulate(
+        spec(doc), progress=lambda p: serial_seen.append(p.paths), should_stop=lambda: len(serial_seen) >= 6
+    )
     assert _strip(res) == _strip(serial)
     assert _no_batch_tasks_left(client)
 
@@ -228,8 +252,7 @@ def test_worker_killed_mid_job_still_exact(client, dask):
 
     def kill_one_busy_worker(p):
         if p.batches == 4 and not killed:
-            busy = [w for w, keys in client.processing().items() if any(str(k).startswith(BATCH_PREFIX)
-                                                                         for k in keys)]
+            busy = [w for w, keys in client.processing().items() if any(str(k).startswith(BATCH_PREFIX) for k in keys)]
             victim = busy[0] if busy else next(iter(pids))
             os.kill(pids[victim], signal.SIGKILL)
             killed.append(victim)
@@ -245,12 +268,19 @@ def test_worker_killed_mid_job_still_exact(client, dask):
 
 def test_errors_without_dask_or_without_a_scheduler(monkeypatch):
     # The engine imports without Dask, and says how to install it.
-    code = ("import sys; sys.modules['distributed'] = sys.modules['dask'] = None\n"
-            "import owcsim.engine.simulate, owcsim.engine.execution_dask as ed\n"
-            "try:\n    ed.executor_from_scheduler('tcp://127.0.0.1:8786')\n"
-            "except ed.DaskUnavailableError as e:\n    print(e)\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                         cwd=os.path.dirname(os.path.dirname(os.path.dirname(__file__)))).stdout
+    code = (
+        "import sys; sys.modules['distributed'] = sys.modules['dask'] = None\n"
+        "import owcsim.engine.simulate, owcsim.engine.execution_dask as ed\n"
+        "try:\n    ed.executor_from_scheduler('tcp://127.0.0.1:8786')\n"
+        "except ed.DaskUnavailableError as e:\n    print(e)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=os.path.dirname(os.path.dirname(os.path.dirname(__file__))),
+    ).stdout
     assert "pip install 'owcsim[cluster]'" in out
     monkeypatch.setitem(sys.modules, "distributed", None)
     with pytest.raises(ImportError, match=r"owcsim\[cluster\]") as err:
@@ -307,8 +337,13 @@ def test_command_line_scheduler_flag(client, tmp_path, capsys, monkeypatch):
 
 def _batch_keys_done(dask_scheduler):
     """Keys of the batch tasks whose results reached memory, among the scheduler's recent transitions."""
-    return sorted({str(t[0]) for t in list(dask_scheduler.transition_log)
-                   if str(t[0]).startswith(BATCH_PREFIX) and t[2] == "memory"})
+    return sorted(
+        {
+            str(t[0])
+            for t in list(dask_scheduler.transition_log)
+            if str(t[0]).startswith(BATCH_PREFIX) and t[2] == "memory"
+        }
+    )
 
 
 def test_service_sends_its_jobs_to_the_scheduler(client, tmp_path):

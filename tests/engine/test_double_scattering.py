@@ -1,5 +1,6 @@
 """Algorithm 4's double-scattering family (report section 9) and algorithm 5 from both devices,
 against independent references (tests/reference_double.py, tests/reference_volume.py)."""
+
 import math
 
 import pytest
@@ -50,8 +51,7 @@ def test_algorithm_4_s2_equals_algorithm_5_s2_unbounded():
 
 def test_algorithm_4_s2_equals_algorithm_5_s2_black_room():
     """Black room (rho = 0): only volume paths; algorithm 4's s = 2 against algorithm 5's (S = 2)."""
-    base = dict(rho_walls=0.0, rho_floor=0.0, rho_ceiling=0.0, medium=SMOKE, max_reflections=0,
-                rx=(1.5, 1.0, 0.0))
+    base = dict(rho_walls=0.0, rho_floor=0.0, rho_ceiling=0.0, medium=SMOKE, max_reflections=0, rx=(1.5, 1.0, 0.0))
     four = simulate(spec(room_doc(algorithm=4, paths=30_000, seed=8, **COARSE, **base)))["links"][0]
     five = simulate_two_sided(spec(room_doc(algorithm=5, max_scattering=2, paths=60_000, seed=9, **base)))["links"][0]
     (a, ea), (b, eb) = _order(four, 2), _order(five, 2)
@@ -117,15 +117,34 @@ def test_two_sided_single_scattering_families_agree_with_one_sided(algorithm):
 def test_two_sided_with_several_devices_per_link():
     """Two transmitters x two receivers: every link of the two-sided estimators equals the one-sided one."""
     doc = room_doc(medium=SMOKE, max_reflections=2, **COARSE)
-    doc["transmitters"].append({"id": "tx2", "position": [1.0, 4.0, 3.0], "normal": [0, 0, -1],
-                                "lambertian_order": 2})
-    doc["receivers"].append({"id": "rx2", "position": [4.0, 2.0, 0.8], "normal": [0, 0.6, 0.8], "area": 1e-4,
-                             "fov_deg": 70})
+    doc["transmitters"].append({"id": "tx2", "position": [1.0, 4.0, 3.0], "normal": [0, 0, -1], "lambertian_order": 2})
+    doc["receivers"].append(
+        {"id": "rx2", "position": [4.0, 2.0, 0.8], "normal": [0, 0.6, 0.8], "area": 1e-4, "fov_deg": 70}
+    )
     for algorithm, extra in ((5, {"max_scattering": 2}), (3, {})):
-        one = simulate(spec({**doc, "simulation": {**doc["simulation"], "algorithm": algorithm, "paths": 30_000,
-                                                     "seed": 61, "direction": "forward", **extra}}))["links"]
-        two = simulate_two_sided(spec({**doc, "simulation": {**doc["simulation"], "algorithm": algorithm,
-                                                             "paths": 15_000, "seed": 62, **extra}}))["links"]
+        one = simulate(
+            spec(
+                {
+                    **doc,
+                    "simulation": {
+                        **doc["simulation"],
+                        "algorithm": algorithm,
+                        "paths": 30_000,
+                        "seed": 61,
+                        "direction": "forward",
+                        **extra,
+                    },
+                }
+            )
+        )["links"]
+        two = simulate_two_sided(
+            spec(
+                {
+                    **doc,
+                    "simulation": {**doc["simulation"], "algorithm": algorithm, "paths": 15_000, "seed": 62, **extra},
+                }
+            )
+        )["links"]
         assert len(one) == len(two) == 4
         for a, b in zip(one, two):
             assert (a["transmitter"], a["receiver"]) == (b["transmitter"], b["receiver"])

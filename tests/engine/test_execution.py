@@ -1,4 +1,5 @@
 """Determinism: the same seed gives bit-identical results with 1 or 2 worker processes."""
+
 import json
 
 from tests.results import simulate_document as simulate
@@ -15,8 +16,9 @@ def _strip(res):
 def test_one_and_two_workers_bit_identical():
     doc = room_doc(max_reflections=4, paths=12_000, batch_size=1024, direction="auto", pilot_paths=512)
     doc["furniture"] = [{"min": [3.0, 3.0, 0.0], "max": [4.0, 4.5, 1.0], "reflectance": 0.6}]
-    doc["receivers"].append({"id": "rx2", "position": [4.5, 0.5, 0.8], "normal": [0, 0, 1], "area": 1e-4,
-                             "fov_deg": 70})
+    doc["receivers"].append(
+        {"id": "rx2", "position": [4.5, 0.5, 0.8], "normal": [0, 0, 1], "area": 1e-4, "fov_deg": 70}
+    )
     one = simulate(spec(doc), workers=1)
     two = simulate(spec(doc), workers=2)
     assert _strip(one) == _strip(two)
@@ -46,8 +48,7 @@ def test_accuracy_mode_bit_identical_across_workers():
 def test_progress_is_reported_and_cancel_stops():
     seen = []
     doc = room_doc(paths=20_000, batch_size=1024, direction="forward")
-    res = simulate(spec(doc), progress=lambda p: seen.append((p.fraction, p.paths)),
-                   should_stop=lambda: len(seen) >= 5)
+    res = simulate(spec(doc), progress=lambda p: seen.append((p.fraction, p.paths)), should_stop=lambda: len(seen) >= 5)
     assert res["run"]["stop_reason"] == "cancelled"
     assert [p for _, p in seen] == [1024 * (i + 1) for i in range(5)]
     assert res["links"][0]["paths"] == 5 * 1024
@@ -60,8 +61,10 @@ def test_warm_pool_serves_several_jobs():
     """One long-lived pool, two different scenes: each equals its serial run (scenes cached per job)."""
     from owcsim.engine.execution import ProcessExecutor
 
-    docs = [room_doc(paths=4096, batch_size=1024, direction="forward"),
-            room_doc(rx=(4.0, 1.0, 0.0), paths=4096, batch_size=1024, direction="backward")]
+    docs = [
+        room_doc(paths=4096, batch_size=1024, direction="forward"),
+        room_doc(rx=(4.0, 1.0, 0.0), paths=4096, batch_size=1024, direction="backward"),
+    ]
     pool = ProcessExecutor(2)
     try:
         pooled = [simulate(spec(d), executor=pool) for d in docs + docs[:1]]

@@ -1,4 +1,5 @@
 """Meshes, furniture and shadow rays: the same physics whatever way the surfaces are given."""
+
 import base64
 import math
 import warnings
@@ -27,8 +28,9 @@ def _link(doc):
 
 def test_mesh_room_equals_parametric_room():
     """Same room, once as a box (shadow rays skipped: convex) and once as a mesh (shadow rays cast)."""
-    base = dict(rho_walls=0.8, rho_floor=0.8, rho_ceiling=0.8, max_reflections=4, paths=40_000, seed=21,
-                direction="forward")
+    base = dict(
+        rho_walls=0.8, rho_floor=0.8, rho_ceiling=0.8, max_reflections=4, paths=40_000, seed=21, direction="forward"
+    )
     box = _link(room_doc(**base))
     doc = room_doc(**base)
     del doc["room"]
@@ -43,8 +45,10 @@ def test_furniture_forward_backward_agree():
     base = dict(rx=(1.0, 1.0, 0.0), max_reflections=4, paths=60_000, seed=8)
     docs = {d: room_doc(direction=d, **base) for d in ("forward", "backward")}
     for doc in docs.values():
-        doc["furniture"] = [{"name": "cabinet", "min": [1.2, 0.0, 0.0], "max": [2.0, 2.5, 2.0], "reflectance": 0.9},
-                            {"name": "desk", "min": [0.0, 1.5, 0.0], "max": [1.0, 2.5, 0.8], "reflectance": 0.6}]
+        doc["furniture"] = [
+            {"name": "cabinet", "min": [1.2, 0.0, 0.0], "max": [2.0, 2.5, 2.0], "reflectance": 0.9},
+            {"name": "desk", "min": [0.0, 1.5, 0.0], "max": [1.0, 2.5, 0.8], "reflectance": 0.6},
+        ]
     f, b = _link(docs["forward"]), _link(docs["backward"])
     assert f["los_gain"] == 0.0  # the cabinet blocks the line of sight
     clear = _link(room_doc(direction="backward", **base))
@@ -71,8 +75,14 @@ def test_obj_file_groups_get_their_reflectance(tmp_path):
     assert np.all(rho[np.char.endswith(names.astype(str), ".lamp")] == 0.2)
     assert len(geo.faces) == 12 + 24
     # the same file as base64 content gives the same triangles
-    doc["meshes"] = [{"data_base64": base64.b64encode((tmp_path / "furniture.obj").read_bytes()).decode(),
-                      "format": "obj", "reflectance": 0.2, "group_reflectance": {"desk": 0.7}}]
+    doc["meshes"] = [
+        {
+            "data_base64": base64.b64encode((tmp_path / "furniture.obj").read_bytes()).decode(),
+            "format": "obj",
+            "reflectance": 0.2,
+            "group_reflectance": {"desk": 0.7},
+        }
+    ]
     geo2 = build_geometry(spec(doc), None)
     assert np.array_equal(geo2.reflectance, geo.reflectance)
 
@@ -95,8 +105,14 @@ def test_unknown_group_and_missing_file_are_errors(tmp_path):
 
 def test_degenerate_triangles_dropped_with_warning():
     doc = room_doc()
-    doc["meshes"] = [{"vertices": [[1, 1, 1], [2, 1, 1], [3, 1, 1], [1, 2, 1]], "faces": [[0, 1, 2], [0, 1, 3]],
-                      "reflectance": 0.5, "name": "shelf"}]
+    doc["meshes"] = [
+        {
+            "vertices": [[1, 1, 1], [2, 1, 1], [3, 1, 1], [1, 2, 1]],
+            "faces": [[0, 1, 2], [0, 1, 3]],
+            "reflectance": 0.5,
+            "name": "shelf",
+        }
+    ]
     with pytest.warns(UserWarning, match="dropped 1 degenerate"):
         geo = build_geometry(spec(doc))
     assert len(geo.faces) == 13
@@ -124,12 +140,23 @@ def test_open_scene_no_surfaces_is_los_only():
     assert res["diagnostics"]["escaped_power"]["tx"] == pytest.approx(1.0)  # every emitted watt leaves
 
 
-@pytest.mark.parametrize("change", [
-    {"room": {"size": [1e6, 1e6, 3.0]}},
-    {"room": {"size": [5.0, 5.0, 3e5]}},
-    {"meshes": [{"vertices": [[1e300, 0, 0], [0, 1e300, 0], [0, 0, 1e300]], "faces": [[0, 1, 2]], "reflectance": 0.5}]},
-    {"meshes": [{"vertices": [[1e30, 0, 0], [0, 1e30, 0], [1e30, 1e30, 1e30]], "faces": [[0, 1, 2]], "reflectance": 0.5}]},
-])
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"room": {"size": [1e6, 1e6, 3.0]}},
+        {"room": {"size": [5.0, 5.0, 3e5]}},
+        {
+            "meshes": [
+                {"vertices": [[1e300, 0, 0], [0, 1e300, 0], [0, 0, 1e300]], "faces": [[0, 1, 2]], "reflectance": 0.5}
+            ]
+        },
+        {
+            "meshes": [
+                {"vertices": [[1e30, 0, 0], [0, 1e30, 0], [1e30, 1e30, 1e30]], "faces": [[0, 1, 2]], "reflectance": 0.5}
+            ]
+        },
+    ],
+)
 def test_scene_too_large_for_float32_tracing_is_refused(change):
     # A distant mesh used to shrink the room into float32 noise (H0 = 0, silently); now a located error.
     doc = room_doc()

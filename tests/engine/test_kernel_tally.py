@@ -1,5 +1,6 @@
 """The kernel hands the tally one depth k + s at a time, and the per-(path, cell) squared sums of the order
 split (tally.BatchBuilder._add_squared_path_sums, no sorting) match a plain computation over the whole batch."""
+
 import numpy as np
 import pytest
 
@@ -20,8 +21,9 @@ def _mirror_floor(**sim):
 CASES = {
     "mirror floor, algorithm 1": lambda: _mirror_floor(),
     "smoke, algorithm 4 (both devices)": lambda: room_doc(medium=SMOKE, algorithm=4, max_reflections=3, paths=512),
-    "smoke, algorithm 5 (both devices)": lambda: room_doc(medium=SMOKE, algorithm=5, max_reflections=4,
-                                                          max_scattering=3, paths=512),
+    "smoke, algorithm 5 (both devices)": lambda: room_doc(
+        medium=SMOKE, algorithm=5, max_reflections=4, max_scattering=3, paths=512
+    ),
 }
 
 
@@ -49,10 +51,10 @@ def test_one_depth_per_step_and_order_sums_of_squares(case, direction, monkeypat
     cells = k * n_s + s
     keys, inverse = np.unique(path * (settings.tally.n_orders * n_s) + cells, return_inverse=True)
     per_path = np.bincount(inverse, p, len(keys))
-    want = np.bincount(keys % (settings.tally.n_orders * n_s), per_path ** 2, settings.tally.n_orders * n_s)
+    want = np.bincount(keys % (settings.tally.n_orders * n_s), per_path**2, settings.tally.n_orders * n_s)
     got = tally.order_sumsq[0].reshape(-1)
     several = np.bincount(inverse).max()
     assert several >= 2 or case.startswith("mirror")  # the case has several estimates per (path, cell)
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=0.0)
     # power check: squaring each estimate alone (the error this guards against) differs
-    assert not np.allclose(np.bincount(cells, p ** 2, len(want)), want, rtol=1e-6, atol=0.0) or several == 1
+    assert not np.allclose(np.bincount(cells, p**2, len(want)), want, rtol=1e-6, atol=0.0) or several == 1

@@ -4,6 +4,7 @@ Each expected value is written out from the formula and the paper's parameters, 
 independent reference (plain loops, numerical convolution, numerical Gaussian tail), never
 from the code under test.
 """
+
 import math
 import subprocess
 import sys
@@ -13,10 +14,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from owcsim.engine.link_budget import (IsiSplit, LinkBudget, ber_ook, illuminance_los, isi_split,
-                                       link_budget_from_spec, luminous_flux_from_intensity,
-                                       luminous_intensity_center, max_bit_rate, noise_variances, power_dbm,
-                                       received_power, snr, to_db)
+from owcsim.engine.link_budget import (
+    IsiSplit,
+    LinkBudget,
+    ber_ook,
+    illuminance_los,
+    isi_split,
+    link_budget_from_spec,
+    luminous_flux_from_intensity,
+    luminous_intensity_center,
+    max_bit_rate,
+    noise_variances,
+    power_dbm,
+    received_power,
+    snr,
+    to_db,
+)
 from owcsim.schemas.link_budget import IsiSplit as IsiSplitSpec
 from owcsim.schemas.link_budget import LinkBudgetSpec
 
@@ -33,7 +46,7 @@ def komine_geometry(points):
     pts = np.asarray(points, float)
     dx = pts[None, :, 0] - np.array(LEDS)[:, 0, None]
     dy = pts[None, :, 1] - np.array(LEDS)[:, 1, None]
-    d = np.sqrt(dx ** 2 + dy ** 2 + H ** 2)
+    d = np.sqrt(dx**2 + dy**2 + H**2)
     return H / d, H / d, d
 
 
@@ -45,6 +58,7 @@ def _no_warnings():
 
 
 # --- photometry ----------------------------------------------------------------------------------
+
 
 def test_lambertian_m1_flux_is_pi_times_intensity():
     # A Lambertian (m = 1) source: Phi = pi I0 (Lambert's cosine law).
@@ -62,12 +76,11 @@ def test_komine_luminaire_intensity_flux_round_trip():
 
 def test_illuminance_hand_values_komine_room():
     # Centre (2.5, 2.5): all 4 luminaires at d^2 = 2 * 1.25^2 + 2.15^2 = 7.7475 m^2, cos = 2.15 / d.
-    d2 = 2 * 1.25 ** 2 + H ** 2
+    d2 = 2 * 1.25**2 + H**2
     centre = 4 * I0 * (H / math.sqrt(d2)) ** (M70 + 1) / d2
     assert centre == pytest.approx(887.0, abs=0.1)  # the hand figure of docs/link-budget.md
     # Corner (0, 0): distances^2 = 1.25^2 * 2, 1.25^2 + 3.75^2 (twice), 3.75^2 * 2, each + 2.15^2.
-    corner = sum(I0 * (H / math.sqrt(r2 + H ** 2)) ** (M70 + 1) / (r2 + H ** 2)
-                 for r2 in (3.125, 15.625, 15.625, 28.125))
+    corner = sum(I0 * (H / math.sqrt(r2 + H**2)) ** (M70 + 1) / (r2 + H**2) for r2 in (3.125, 15.625, 15.625, 28.125))
     assert corner == pytest.approx(314.7, abs=0.1)
     e = illuminance_los(np.full(4, I0), np.full(4, M70), *komine_geometry([(2.5, 2.5, 0), (0, 0, 0)]))
     np.testing.assert_allclose(e, [centre, corner], rtol=1e-12)
@@ -82,7 +95,7 @@ def test_illuminance_equals_sum_over_leds_at_several_points():
         ref = 0.0
         for (lx, ly), i0, m in zip(LEDS, intensities, orders):
             d = math.dist((x, y, 0.0), (lx, ly, H))
-            ref += i0 * (H / d) ** m * (H / d) / d ** 2
+            ref += i0 * (H / d) ** m * (H / d) / d**2
         assert got[k] == pytest.approx(ref, rel=1e-12)
     # A grid keeps its shape: (n_tx, 5, 5) in, (5, 5) out.
     grid = [a.reshape(4, 5, 5) for a in komine_geometry(pts)]
@@ -104,9 +117,9 @@ def test_illuminance_zero_behind_blocked_or_coincident():
 
 # --- power -------------------------------------------------------------------------------------
 
+
 def test_dbm_conversion():
-    np.testing.assert_allclose(power_dbm([1e-3, 1.0, 1e-6, 2e-3]), [0.0, 30.0, -30.0, 10 * math.log10(2)],
-                               atol=1e-12)
+    np.testing.assert_allclose(power_dbm([1e-3, 1.0, 1e-6, 2e-3]), [0.0, 30.0, -30.0, 10 * math.log10(2)], atol=1e-12)
     out = power_dbm([0.0, -1e-3, np.nan])
     assert np.isnan(out).all()
     assert np.isnan(to_db(0.0)) and to_db(100.0) == pytest.approx(20.0)
@@ -114,7 +127,7 @@ def test_dbm_conversion():
 
 def test_received_power_komine_centre():
     # H = (m+1) A / (2 pi d^2) cos^(m+1)(phi) per luminaire, A = 1 cm^2, P_t = 3600 x 20 mW = 72 W.
-    d2 = 2 * 1.25 ** 2 + H ** 2
+    d2 = 2 * 1.25**2 + H**2
     gain_one = (M70 + 1) * 1e-4 / (2 * math.pi * d2) * (H / math.sqrt(d2)) ** (M70 + 1)
     p_hand = 4 * 72.0 * gain_one  # 6.3665e-4 W
     assert p_hand == pytest.approx(6.3665e-4, rel=1e-4)
@@ -129,15 +142,15 @@ def test_received_power_komine_centre():
 
 # --- noise, SNR, BER ---------------------------------------------------------------------------
 
+
 def test_noise_terms_komine_receiver_by_hand():
     # Komine's receiver at B = R_b = 10 Mbit/s, A = 1 cm^2 (so eta A = 112 pF), P = 1 mW.
     budget = LinkBudget(noise_bandwidth=1e7, bit_rate=1e7)
-    shot_sig = 2 * Q * 0.53 * 1e-3 * 1e7                      # 1.698e-15 A^2
-    shot_bg = 2 * Q * 5.1e-3 * 0.562 * 1e7                    # 9.184e-15 A^2
-    th_fb = 8 * math.pi * K * 295 / 10 * 112e-12 * 0.562 * 1e14              # 6.443e-17 A^2
-    th_fet = 16 * math.pi ** 2 * K * 295 * 1.5 / 0.03 * 112e-12 ** 2 * 0.0868 * 1e21  # 3.502e-17 A^2
-    assert (shot_sig, shot_bg, th_fb, th_fet) == pytest.approx((1.698e-15, 9.184e-15, 6.443e-17, 3.502e-17),
-                                                                rel=1e-3)
+    shot_sig = 2 * Q * 0.53 * 1e-3 * 1e7  # 1.698e-15 A^2
+    shot_bg = 2 * Q * 5.1e-3 * 0.562 * 1e7  # 9.184e-15 A^2
+    th_fb = 8 * math.pi * K * 295 / 10 * 112e-12 * 0.562 * 1e14  # 6.443e-17 A^2
+    th_fet = 16 * math.pi**2 * K * 295 * 1.5 / 0.03 * 112e-12**2 * 0.0868 * 1e21  # 3.502e-17 A^2
+    assert (shot_sig, shot_bg, th_fb, th_fet) == pytest.approx((1.698e-15, 9.184e-15, 6.443e-17, 3.502e-17), rel=1e-3)
     shot, thermal = noise_variances(budget, 1e-4, 1e-3)
     assert shot == pytest.approx(shot_sig + shot_bg, rel=1e-12)
     assert thermal == pytest.approx(th_fb + th_fet, rel=1e-12)
@@ -154,8 +167,10 @@ def test_snr_with_isi_and_area_broadcast():
     for k, a in enumerate(area):  # Komine's SNR written out, I_bg = 0
         c = 1.12e-6 * a
         shot = 2 * Q * 0.53 * (p_sig + p_isi) * 1e8
-        th = (8 * math.pi * K * 295 / 10 * c * 0.562 * 1e16
-              + 16 * math.pi ** 2 * K * 295 * 1.5 / 0.03 * c ** 2 * 0.0868 * 1e24)
+        th = (
+            8 * math.pi * K * 295 / 10 * c * 0.562 * 1e16
+            + 16 * math.pi**2 * K * 295 * 1.5 / 0.03 * c**2 * 0.0868 * 1e24
+        )
         assert got[k] == pytest.approx((0.53 * p_sig) ** 2 / (shot + th + (0.53 * p_isi) ** 2), rel=1e-12)
     # ISI power 1/5 of the signal caps the SNR near 25 (14 dB) however strong the light.
     assert snr(budget, 1e-4, 1.0, 0.2) == pytest.approx(25.0, rel=1e-3)
@@ -180,8 +195,8 @@ def test_ber_ook():
     # Textbook anchor: Q(6) = 9.866e-10, i.e. SNR = 36 (15.6 dB) gives BER ~ 1e-9.
     assert ber_ook(36.0) == pytest.approx(9.866e-10, rel=1e-3)
     # SNR = 10^1.5 (15 dB): Q(sqrt(31.62)) = Q(5.623) = 9.36e-9.
-    assert ber_ook(10 ** 1.5) == pytest.approx(_gaussian_tail(math.sqrt(10 ** 1.5)), rel=1e-6)
-    assert ber_ook(10 ** 1.5) == pytest.approx(9.36e-9, rel=1e-3)
+    assert ber_ook(10**1.5) == pytest.approx(_gaussian_tail(math.sqrt(10**1.5)), rel=1e-6)
+    assert ber_ook(10**1.5) == pytest.approx(9.36e-9, rel=1e-3)
     snrs = np.array([0.0, 1.0, 4.0, 9.0, 16.0])
     np.testing.assert_allclose(ber_ook(snrs), [0.5] + [_gaussian_tail(x) for x in (1, 2, 3, 4)], rtol=1e-6)
 
@@ -193,6 +208,7 @@ def test_max_bit_rate():
 
 
 # --- signal / ISI split --------------------------------------------------------------------------
+
 
 def test_isi_split_by_hand():
     # T = 10 ns, dt = 1 ns; power 1 W in bin 0 ([0, 1) ns), 0.5 W in bin 4, 0.25 W in bin 14.
@@ -213,12 +229,12 @@ def test_isi_split_by_hand():
 def test_isi_split_first_arrival_and_links():
     # Two links in one call, a shifted time axis, an explicit and a default first arrival, an empty link.
     cir = np.zeros((3, 30))
-    cir[0, 5], cir[0, 20] = 2.0, 1.0   # first arrival bin 5 -> second path 15 bins = 7.5 ns later
+    cir[0, 5], cir[0, 20] = 2.0, 1.0  # first arrival bin 5 -> second path 15 bins = 7.5 ns later
     cir[1, 8] = 1.0
     t_min, dt, period = 100e-9, 0.5e-9, 10e-9
     sig, isi = isi_split(cir, dt, period, t_min=t_min)
-    w_first = 1 - 0.25 / 10           # bin 5 relative [0, 0.5) ns
-    w_echo = 1 - 7.75 / 10            # bin 20 relative [7.5, 8) ns
+    w_first = 1 - 0.25 / 10  # bin 5 relative [0, 0.5) ns
+    w_echo = 1 - 7.75 / 10  # bin 20 relative [7.5, 8) ns
     np.testing.assert_allclose(sig, [2 * w_first + w_echo, w_first, 0.0], rtol=1e-12)
     np.testing.assert_allclose(sig + isi, cir.sum(-1), rtol=1e-12)
     # t_first at the end of the first bin: that bin counts wholly as signal.
@@ -231,16 +247,16 @@ def test_nrz_split_equals_numerical_convolution_with_the_pulse():
     # fine grid (0.01 ns), against the bin-exact formula on the same CIR put in 0.5 ns bins.
     rng = np.random.default_rng(4)
     fine_dt, period = 0.01e-9, 10e-9
-    h_fine = np.zeros(4000)                        # 40 ns
-    h_fine[:50] = 1.0 / 50                         # a 0.5 ns-wide first arrival
+    h_fine = np.zeros(4000)  # 40 ns
+    h_fine[:50] = 1.0 / 50  # a 0.5 ns-wide first arrival
     tail = rng.exponential(1.0, 3950) * np.exp(-np.arange(3950) * fine_dt / 6e-9)
     h_fine[50:] = 0.8 * tail / tail.sum()
     pulse = np.ones(int(round(period / fine_dt)))
-    y = np.convolve(h_fine, pulse)                 # received waveform of one bit, per unit amplitude
+    y = np.convolve(h_fine, pulse)  # received waveform of one bit, per unit amplitude
     n_t = pulse.size
     sig_ref = y[:n_t].sum() / n_t
     isi_ref = y[n_t:].sum() / n_t
-    h_bins = h_fine.reshape(80, 50).sum(-1)        # 0.5 ns bins
+    h_bins = h_fine.reshape(80, 50).sum(-1)  # 0.5 ns bins
     sig, isi = isi_split(h_bins, 0.5e-9, period)
     # Measured: 0.12 % and 0.4 %; the bins see the tail as uniform within 0.5 ns, and the reference
     # puts each 0.01 ns sample at its left edge (a 0.05 % shift). A 2-5 % error would fail.
@@ -250,6 +266,7 @@ def test_nrz_split_equals_numerical_convolution_with_the_pulse():
 
 
 # --- spec conversion ---------------------------------------------------------------------------
+
 
 def test_link_budget_from_spec():
     lb = link_budget_from_spec(LinkBudgetSpec(bit_rate=2e7))
@@ -266,21 +283,29 @@ def test_isi_enum_matches_schema():
 
 # --- the worked example ------------------------------------------------------------------------
 
+
 def test_demo_script_prints_the_hand_values():
-    out = subprocess.run([sys.executable, "-W", "error", str(ROOT / "examples" / "link_budget_demo.py")],
-                         capture_output=True, text=True, check=True, timeout=60).stdout
+    out = subprocess.run(
+        [sys.executable, "-W", "error", str(ROOT / "examples" / "link_budget_demo.py")],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=60,
+    ).stdout
     v = {line.split(" = ")[0]: float(line.split(" = ")[1].split()[0]) for line in out.splitlines()}
-    d2c = 2 * 1.25 ** 2 + H ** 2
+    d2c = 2 * 1.25**2 + H**2
     p_centre = 4 * 72.0 * (M70 + 1) * 1e-4 / (2 * math.pi * d2c) * (H / math.sqrt(d2c)) ** (M70 + 1)
     assert v["center_luminous_intensity"] == 2628 and v["luminous_flux"] == pytest.approx(10031.4, abs=0.1)
     assert v["illuminance_center"] == pytest.approx(887.0, abs=0.1)
     assert v["illuminance_corner"] == pytest.approx(314.7, abs=0.1)
-    assert v["illuminance_min"] == pytest.approx(314.7, abs=0.1)     # the corners, on a 5 cm grid
-    assert 880 < v["illuminance_max"] < 950                          # between the luminaires' peaks
+    assert v["illuminance_min"] == pytest.approx(314.7, abs=0.1)  # the corners, on a 5 cm grid
+    assert 880 < v["illuminance_max"] < 950  # between the luminaires' peaks
     assert v["received_power_center"] == pytest.approx(p_centre, rel=1e-5)
     assert v["received_power_center_dbm"] == pytest.approx(-1.961, abs=1e-3)
-    p_corner = 72.0 * sum((M70 + 1) * 1e-4 / (2 * math.pi * (r2 + H ** 2)) * (H / math.sqrt(r2 + H ** 2)) ** (M70 + 1)
-                          for r2 in (3.125, 15.625, 15.625, 28.125))
+    p_corner = 72.0 * sum(
+        (M70 + 1) * 1e-4 / (2 * math.pi * (r2 + H**2)) * (H / math.sqrt(r2 + H**2)) ** (M70 + 1)
+        for r2 in (3.125, 15.625, 15.625, 28.125)
+    )
     assert v["received_power_corner"] == pytest.approx(p_corner, rel=1e-5)
     assert v["received_power_corner_dbm"] == pytest.approx(-6.461, abs=1e-3)
     shot = 2 * Q * 0.53 * p_centre * 1e7 + 2 * Q * 5.1e-3 * 0.562 * 1e7

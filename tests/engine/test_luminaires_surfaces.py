@@ -4,6 +4,7 @@ References are independent of the kernel: tests/reference.py (LOS closed form, B
 patch integration), the plain bilinear interpolation and midpoint quadrature of
 test_photometry, closed forms (energy, image source), and the other estimator direction.
 """
+
 from __future__ import annotations
 
 import base64
@@ -14,14 +15,22 @@ import numpy as np
 import pytest
 
 from owcsim.engine.errors import SceneError
-from tests.results import simulate_document as simulate
 from tests import reference as ref
-from tests.engine.test_photometry import (C_FULL, G180, as_written, bilinear, cos_power_table, ies_text, ldt_text,
-                                          midpoint_masses, tilted_lobe)
+from tests.engine.test_photometry import (
+    C_FULL,
+    G180,
+    as_written,
+    bilinear,
+    cos_power_table,
+    ies_text,
+    ldt_text,
+    midpoint_masses,
+    tilted_lobe,
+)
+from tests.results import simulate_document as simulate
 from tests.scenes import room_doc, spec, within
 
-BARRY_RHO = {"floor": 0.3, "ceiling": 0.8, "wall_x_min": 0.8, "wall_x_max": 0.8, "wall_y_min": 0.8,
-             "wall_y_max": 0.8}
+BARRY_RHO = {"floor": 0.3, "ceiling": 0.8, "wall_x_min": 0.8, "wall_x_max": 0.8, "wall_y_min": 0.8, "wall_y_max": 0.8}
 
 
 def _b64(text: str) -> str:
@@ -30,13 +39,20 @@ def _b64(text: str) -> str:
 
 def luminaire_doc(text: str, fmt="ies", *, tx=(2.5, 2.5, 3.0), aim=(0, 0, -1), rotation_deg=0.0, **kw) -> dict:
     doc = room_doc(tx=tx, tx_normal=aim, **kw)
-    doc["transmitters"] = [{"id": "lum", "position": list(tx), "normal": list(aim),
-                            "photometry": {"data_base64": _b64(text), "format": fmt, "rotation_deg": rotation_deg}}]
+    doc["transmitters"] = [
+        {
+            "id": "lum",
+            "position": list(tx),
+            "normal": list(aim),
+            "photometry": {"data_base64": _b64(text), "format": fmt, "rotation_deg": rotation_deg},
+        }
+    ]
     return doc
 
 
 def _link(doc, **kw):
     return simulate(spec(doc), **kw)["links"][0]
+
 
 def _assert_directions_agree(f, b, orders=range(1, 5)):
     """Forward and backward links agree on H0 (with the power to see a 2 % error) and per reflection order."""
@@ -48,18 +64,19 @@ def _assert_directions_agree(f, b, orders=range(1, 5)):
         assert within(f["dc_gain_by_reflection_order"][k], b["dc_gain_by_reflection_order"][k], ek), k
 
 
-
 G1 = np.arange(0.0, 90.01, 1.0)
 
 
 # ----------------------------------------------------------------------------- cos^m file = generalized Lambertian
-@pytest.mark.parametrize("rx,normal,fov", [((0.5, 1.0, 0.0), (0, 0, 1), 85.0),
-                                           ((4.0, 1.5, 1.0), (-0.3, 0.2, 1.0), 60.0)])
+@pytest.mark.parametrize(
+    "rx,normal,fov", [((0.5, 1.0, 0.0), (0, 0, 1), 85.0), ((4.0, 1.5, 1.0), (-0.3, 0.2, 1.0), 60.0)]
+)
 def test_cos_power_file_los_equals_lambertian_closed_form(rx, normal, fov):
     m = 2.0
     table = cos_power_table(m, G1, [0.0])
-    link = _link(luminaire_doc(ies_text(G1, [0.0], table), rx=rx, rx_normal=normal, fov_deg=fov,
-                               max_reflections=0, paths=64))
+    link = _link(
+        luminaire_doc(ies_text(G1, [0.0], table), rx=rx, rx_normal=normal, fov_deg=fov, max_reflections=0, paths=64)
+    )
     n = np.asarray(normal, float) / np.linalg.norm(normal)
     h, delay = ref.los_gain((2.5, 2.5, 3.0), (0, 0, -1), m, rx, n, 1e-4, math.radians(fov))
     # interpolation error of cos^2 on 1 deg steps: h^2/8 |f''| / f <= 1e-4 relative here (phi < 60 deg)
@@ -72,13 +89,26 @@ def test_cos_power_file_los_equals_lambertian_closed_form(rx, normal, fov):
 def test_cos_power_file_first_bounce_equals_barry_integration(direction):
     rx, fov = (0.5, 1.0, 0.0), 85.0
     text = ies_text(G1, [0.0, 90.0], cos_power_table(1.0, G1, [0.0, 90.0]))  # quadrant-symmetric form
-    link = _link(luminaire_doc(text, rx=rx, fov_deg=fov, max_reflections=1, paths=150_000, batch_size=8192,
-                               direction=direction, seed=11))
-    h1 = ref.first_bounce_box_dc_gain((5.0, 5.0, 3.0), BARRY_RHO, (2.5, 2.5, 3.0), (0, 0, -1), 1.0, rx, (0, 0, 1),
-                                      1e-4, math.radians(fov), rel_tol=1e-4)
+    link = _link(
+        luminaire_doc(
+            text, rx=rx, fov_deg=fov, max_reflections=1, paths=150_000, batch_size=8192, direction=direction, seed=11
+        )
+    )
+    h1 = ref.first_bounce_box_dc_gain(
+        (5.0, 5.0, 3.0),
+        BARRY_RHO,
+        (2.5, 2.5, 3.0),
+        (0, 0, -1),
+        1.0,
+        rx,
+        (0, 0, 1),
+        1e-4,
+        math.radians(fov),
+        rel_tol=1e-4,
+    )
     k1, k1_err = link["dc_gain_by_reflection_order"][1], link["dc_gain_by_reflection_order_stderr"][1]
     assert k1_err < 0.01 * h1
-    # bias budget: reference 1e-4, table interpolation (1 deg, cos: < 4e-5 of R) 
+    # bias budget: reference 1e-4, table interpolation (1 deg, cos: < 4e-5 of R)
     assert within(k1, h1, k1_err, bias=5e-4 * h1), (k1, h1, k1_err)
 
 
@@ -89,17 +119,29 @@ TILTED = as_written(tilted_lobe(G180, C_FULL))
 @pytest.mark.parametrize("rotation", [0.0, 40.0])
 def test_asymmetric_file_los_against_direct_integration(rotation):
     """LOS = I(gamma, C) / Phi * A cos(psi) / d^2, I by plain bilinear interpolation, Phi by midpoint quadrature."""
-    receivers = [((3.5, 3.8, 0.0), (0, 0, 1)), ((1.0, 1.0, 0.0), (0, 0, 1)), ((4.5, 2.0, 1.2), (-1, 0, 0)),
-                 ((2.0, 4.0, 2.9), (0, 0, -1)), ((2.5, 2.5, 0.3), (0, 0, 1))]
+    receivers = [
+        ((3.5, 3.8, 0.0), (0, 0, 1)),
+        ((1.0, 1.0, 0.0), (0, 0, 1)),
+        ((4.5, 2.0, 1.2), (-1, 0, 0)),
+        ((2.0, 4.0, 2.9), (0, 0, -1)),
+        ((2.5, 2.5, 0.3), (0, 0, 1)),
+    ]
     tx = np.array([2.5, 2.5, 1.5])
-    doc = luminaire_doc(ies_text(G180, C_FULL, TILTED), tx=tuple(tx), rotation_deg=rotation, max_reflections=0,
-                        paths=64)
-    doc["receivers"] = [{"id": f"r{k}", "position": list(p), "normal": list(n), "area": 1e-4, "fov_deg": 90.0}
-                        for k, (p, n) in enumerate(receivers)]
+    doc = luminaire_doc(
+        ies_text(G180, C_FULL, TILTED), tx=tuple(tx), rotation_deg=rotation, max_reflections=0, paths=64
+    )
+    doc["receivers"] = [
+        {"id": f"r{k}", "position": list(p), "normal": list(n), "area": 1e-4, "fov_deg": 90.0}
+        for k, (p, n) in enumerate(receivers)
+    ]
     links = simulate(spec(doc))["links"]
     flux = midpoint_masses(G180, C_FULL, TILTED, sub=32).sum()
     r = math.radians(rotation)
-    e0, e90, aim = np.array([math.cos(r), math.sin(r), 0]), np.array([-math.sin(r), math.cos(r), 0]), np.array([0, 0, -1.0])
+    e0, e90, aim = (
+        np.array([math.cos(r), math.sin(r), 0]),
+        np.array([-math.sin(r), math.cos(r), 0]),
+        np.array([0, 0, -1.0]),
+    )
     for link, (p, n) in zip(links, receivers):
         v = np.asarray(p) - tx
         d = np.linalg.norm(v)
@@ -130,9 +172,19 @@ def test_forward_backward_agree_with_a_luminaire_that_also_lights_upward():
 def test_luminaire_energy_closed_room():
     """Every emitted watt reaches the surfaces: P (1 - rho^K) / (1 - rho), exactly (weights are 1)."""
     rho, K = 0.5, 40
-    doc = luminaire_doc(ies_text(G180, C_FULL, TILTED), rho_walls=rho, rho_floor=rho, rho_ceiling=rho,
-                        tx=(2.0, 2.5, 1.8), max_reflections=K, paths=5000, direction="forward",
-                        russian_roulette=False, t_max_s=2e-6, time_bin_s=1e-8)
+    doc = luminaire_doc(
+        ies_text(G180, C_FULL, TILTED),
+        rho_walls=rho,
+        rho_floor=rho,
+        rho_ceiling=rho,
+        tx=(2.0, 2.5, 1.8),
+        max_reflections=K,
+        paths=5000,
+        direction="forward",
+        russian_roulette=False,
+        t_max_s=2e-6,
+        time_bin_s=1e-8,
+    )
     res = simulate(spec(doc))
     assert res["diagnostics"]["power_on_surfaces"]["lum"] == pytest.approx((1 - rho**K) / (1 - rho), rel=1e-9)
 
@@ -214,8 +266,11 @@ def glossy_doc(floor, walls=0.0, ceiling=0.0, **kw):
 @pytest.mark.parametrize("direction", ["forward", "backward"])
 def test_phong_floor_first_bounce_against_quadrature(direction):
     ref_h1 = glossy_floor_first_bounce(0.2, 0.6, 20.0)
-    link = _link(glossy_doc(phong(0.8, 0.25, 20.0), max_reflections=1, paths=200_000, batch_size=8192,
-                            direction=direction, seed=21))
+    link = _link(
+        glossy_doc(
+            phong(0.8, 0.25, 20.0), max_reflections=1, paths=200_000, batch_size=8192, direction=direction, seed=21
+        )
+    )
     k1, se = link["dc_gain_by_reflection_order"][1], link["dc_gain_by_reflection_order_stderr"][1]
     assert se < 0.02 * ref_h1
     assert within(k1, ref_h1, se, bias=1e-3 * ref_h1), (k1, ref_h1, se)
@@ -228,8 +283,9 @@ def test_phong_with_large_exponent_tends_to_the_image_source():
     img = image_source_gain(1.0)
     # the specular point is (1.75, 1.75, 0); for n >= 50 the lobe is < 1e-7 of its peak 1 m away
     window = ((0.75, 2.75), (0.75, 2.75))
-    errs = [abs(glossy_floor_first_bounce(0.0, 1.0, n, grid=1500, window=window) - img) / img
-            for n in (50.0, 500.0, 5000.0)]
+    errs = [
+        abs(glossy_floor_first_bounce(0.0, 1.0, n, grid=1500, window=window) - img) / img for n in (50.0, 500.0, 5000.0)
+    ]
     assert errs[2] < errs[1] < errs[0] and errs[2] < 0.02, errs
 
 
@@ -339,9 +395,18 @@ def test_all_algorithms_agree_without_scattering_with_a_luminaire_and_glossy_sur
     medium = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.0}
     res = {}
     for algorithm in (1, 2, 3, 4, 5):
-        d = luminaire_doc(ies_text(G180, C_FULL, TILTED), tx=(2.0, 2.5, 2.2), rx=(3.5, 3.0, 0.8), fov_deg=80.0,
-                          max_reflections=3, paths=20_000, seed=17, algorithm=algorithm, medium=medium,
-                          direction="forward")
+        d = luminaire_doc(
+            ies_text(G180, C_FULL, TILTED),
+            tx=(2.0, 2.5, 2.2),
+            rx=(3.5, 3.0, 0.8),
+            fov_deg=80.0,
+            max_reflections=3,
+            paths=20_000,
+            seed=17,
+            algorithm=algorithm,
+            medium=medium,
+            direction="forward",
+        )
         if algorithm != 1:
             d["simulation"]["max_scattering"] = 1
         d["room"]["reflectance"] = {"floor": phong(0.6, 0.4, 25.0), "ceiling": 0.8, "walls": phong(0.7, 0.6, 4.0)}
@@ -353,13 +418,16 @@ def test_all_algorithms_agree_without_scattering_with_a_luminaire_and_glossy_sur
 
 
 # ----------------------------------------------------------------------------- schemas and automatic settings
-@pytest.mark.parametrize("change,message", [
-    (lambda t: t.update(lambertian_order=1.0), "give `photometry` or a Lambertian pattern"),
-    (lambda t: t["photometry"].update(data_base64="not base64!"), "`data_base64` is not valid base64"),
-    (lambda t: t["photometry"].pop("format"), "`data_base64` needs `format`"),
-    (lambda t: t.update(photometry={"file": "lamp.xyz"}), "cannot tell the format of 'lamp.xyz'"),
-    (lambda t: t.update(photometry={"file": "a.ies", "data_base64": "AAAA", "format": "ies"}), "exactly one of"),
-])
+@pytest.mark.parametrize(
+    "change,message",
+    [
+        (lambda t: t.update(lambertian_order=1.0), "give `photometry` or a Lambertian pattern"),
+        (lambda t: t["photometry"].update(data_base64="not base64!"), "`data_base64` is not valid base64"),
+        (lambda t: t["photometry"].pop("format"), "`data_base64` needs `format`"),
+        (lambda t: t.update(photometry={"file": "lamp.xyz"}), "cannot tell the format of 'lamp.xyz'"),
+        (lambda t: t.update(photometry={"file": "a.ies", "data_base64": "AAAA", "format": "ies"}), "exactly one of"),
+    ],
+)
 def test_photometry_spec_validation(change, message):
     from pydantic import ValidationError
 
@@ -369,13 +437,16 @@ def test_photometry_spec_validation(change, message):
         spec(doc)
 
 
-@pytest.mark.parametrize("floor,message", [
-    ({"type": "phong", "reflectance": 0.5, "diffuse_fraction": 1.2, "exponent": 10}, "less than or equal to 1"),
-    ({"type": "phong", "reflectance": 0.5, "diffuse_fraction": 0.2}, "exponent"),
-    ({"type": "glass", "reflectance": 0.5}, "a material with `type` lambertian, phong or mirror"),
-    ({"type": "mirror", "reflectance": 1.5}, "less than or equal to 1"),
-    (1.5, "a Lambertian reflectance must lie in [0, 1], found 1.5"),
-])
+@pytest.mark.parametrize(
+    "floor,message",
+    [
+        ({"type": "phong", "reflectance": 0.5, "diffuse_fraction": 1.2, "exponent": 10}, "less than or equal to 1"),
+        ({"type": "phong", "reflectance": 0.5, "diffuse_fraction": 0.2}, "exponent"),
+        ({"type": "glass", "reflectance": 0.5}, "a material with `type` lambertian, phong or mirror"),
+        ({"type": "mirror", "reflectance": 1.5}, "less than or equal to 1"),
+        (1.5, "a Lambertian reflectance must lie in [0, 1], found 1.5"),
+    ],
+)
 def test_surface_spec_validation(floor, message):
     from pydantic import ValidationError
 

@@ -1,4 +1,5 @@
 """Coverage maps: closed-form line of sight, summed transmitter groups, running moments, masks, memory bound."""
+
 from __future__ import annotations
 
 import copy
@@ -36,7 +37,7 @@ def _closed_form_los(points, normal, area, fov_deg, half_angle_deg):
             cos_phi = v[2] / d  # at the LED, its normal is (0, 0, -1)
             cos_psi = float(np.dot(v, normal)) / d
             if cos_psi >= math.cos(math.radians(fov_deg)) and cos_phi > 0:
-                out[k] += (m + 1) / (2 * math.pi) * cos_phi ** m * area * cos_psi / d ** 2
+                out[k] += (m + 1) / (2 * math.pi) * cos_phi**m * area * cos_psi / d**2
     return out
 
 
@@ -47,7 +48,8 @@ def test_los_map_equals_the_closed_form_at_every_point():
     grid = res["maps"][0]
     nu, nv = grid["shape"]
     pts = np.array(grid["origin"]) + grid["spacing"] * (
-        np.arange(nu)[:, None, None] * np.array(grid["u"]) + np.arange(nv)[None, :, None] * np.array(grid["v"]))
+        np.arange(nu)[:, None, None] * np.array(grid["u"]) + np.arange(nv)[None, :, None] * np.array(grid["v"])
+    )
     g = doc["receiver_grids"][0]
     ref = _closed_form_los(pts.reshape(-1, 3), np.array(g["normal"], float), g["area"], g["fov_deg"], 70.0)
     # The group's channel is per watt of the group: the mean of its 4 equal-power members.
@@ -61,7 +63,7 @@ def test_los_map_equals_the_closed_form_at_every_point():
         v = np.array([x, y, 3.0]) - pts.reshape(-1, 3)
         d = np.linalg.norm(v, axis=1)
         cos = v[:, 2] / d  # the same angle at the lamp (facing down) and at the receiver (facing up)
-        e_ref += 2628.0 * cos ** m * cos / d ** 2
+        e_ref += 2628.0 * cos**m * cos / d**2
     np.testing.assert_allclose(e, e_ref, rtol=1e-12)
 
 
@@ -71,7 +73,8 @@ def test_group_channel_equals_the_sum_of_its_members_run_separately():
     base["receivers"].append({"id": "rx2", "position": [3.5, 2.0, 0.8], "normal": [0, 0, 1], "area": 1e-4})
     base["transmitters"] = [
         {"id": "a", "position": [1.5, 1.5, 3.0], "normal": [0, 0, -1], "lambertian_order": 1, "power": 2.0},
-        {"id": "b", "position": [3.5, 3.0, 3.0], "normal": [0, 0, -1], "lambertian_order": 2, "power": 1.0}]
+        {"id": "b", "position": [3.5, 3.0, 3.0], "normal": [0, 0, -1], "lambertian_order": 2, "power": 1.0},
+    ]
     doc = copy.deepcopy(base)
     doc["transmitter_groups"] = [{"name": "ab", "transmitters": ["a", "b"]}]
     for direction in ("forward", "backward"):
@@ -148,7 +151,9 @@ def test_outputs_default_by_receiver_kind_and_tally_budget_ignores_unasked_bins(
 
 
 def test_batches_shrink_with_the_receiver_count():
-    s = spec(komine_doc(spacing=0.05, algorithm=1, max_reflections=3, paths=10, t_max_s=1e-7))  # 99 x 99 = 9801 receivers
+    s = spec(
+        komine_doc(spacing=0.05, algorithm=1, max_reflections=3, paths=10, t_max_s=1e-7)
+    )  # 99 x 99 = 9801 receivers
     scene = build_scene(s)
     settings = kernel_settings(s, scene)
     n_rx = len(scene.receivers)
@@ -207,8 +212,10 @@ def test_memory_estimate_follows_the_batch_cap_and_stays_bounded_for_large_maps(
     a map's estimate grows with receivers only through per-link numbers, not links x bins."""
     from owcsim.engine import budget
 
-    assert (budget.PATH_TARGET_BUDGET, budget.ESTIMATE_BUDGET) == (simulate_module.PATH_TARGET_BUDGET,
-                                                                   simulate_module.ESTIMATE_BUDGET)
+    assert (budget.PATH_TARGET_BUDGET, budget.ESTIMATE_BUDGET) == (
+        simulate_module.PATH_TARGET_BUDGET,
+        simulate_module.ESTIMATE_BUDGET,
+    )
     small = budget.memory_estimate(spec(komine_doc(spacing=0.5, algorithm=1, max_reflections=20, t_max_s=4e-7)))
     large = budget.memory_estimate(spec(komine_doc(spacing=0.0156, algorithm=1, max_reflections=20, t_max_s=4e-7)))
     assert large.batch <= 2 * small.batch + 2**20  # the batch is capped whatever the receiver count
@@ -243,8 +250,10 @@ def test_command_line_summarises_any_map_and_prints_group_channels(tmp_path, cap
     assert main(["run", str(scene), "--out", str(tmp_path / "a")]) == 0
     out = capsys.readouterr().out
     assert "plane/ceiling" in out and "led1 ->" not in out
-    doc["receivers"], doc["receiver_grids"] = [{"id": "desk", "position": [2.5, 2.5, 0.85], "normal": [0, 0, 1],
-                                                "area": 1e-4}], []
+    doc["receivers"], doc["receiver_grids"] = (
+        [{"id": "desk", "position": [2.5, 2.5, 0.85], "normal": [0, 0, 1], "area": 1e-4}],
+        [],
+    )
     scene.write_text(json.dumps(doc))
     assert main(["run", str(scene), "--out", str(tmp_path / "b")]) == 0
     assert "group ceiling -> desk: H0 =" in capsys.readouterr().out

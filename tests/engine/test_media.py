@@ -3,6 +3,7 @@
 References are written here by hand (Beer-Lambert, slab lengths, sphere chords, cell sums)
 or are exact distributions (exponential free flight); statistical checks use fixed seeds.
 """
+
 from __future__ import annotations
 
 import math
@@ -13,16 +14,15 @@ import trimesh
 from pydantic import ValidationError
 from scipy import stats
 
+from conftest import SEED, seeded_rng  # noqa: F401
 from owcsim.engine.errors import SceneError
 from owcsim.engine.grid import GridMedium
 from owcsim.engine.media import HomogeneousMedium, medium_from_spec
 from owcsim.engine.regions import MeshRegion
 from owcsim.schemas import SceneSpec
 from tests.scenes import room_doc
-from conftest import SEED, seeded_rng  # noqa: F401
 
 LO, HI = np.array([1.0, 0.0, -1.0]), np.array([2.0, 3.0, 1.0])  # a box region, not a unit cube
-
 
 
 def _segments(n, rng, lo=-1.0, hi=4.0, max_len=6.0):
@@ -43,31 +43,33 @@ def _box_mesh(lo, hi):
 
 # --- Beer-Lambert and the box region ----------------------------------------------------------
 
+
 def test_beer_lambert_on_known_segments():
     med = HomogeneousMedium(0.3, 0.2)
     o = np.zeros((4, 3))
     d = np.tile([0.0, 0.6, 0.8], (4, 1))
     L = np.array([0.0, 1.0, 2.5, 10.0])
     assert np.allclose(med.optical_depth(o, d, L), [0.0, 0.5, 1.25, 5.0], rtol=1e-15, atol=0)
-    assert np.allclose(med.transmittance(o, d, L), [1.0, math.exp(-0.5), math.exp(-1.25), math.exp(-5.0)],
-                       rtol=1e-15, atol=0)
+    assert np.allclose(
+        med.transmittance(o, d, L), [1.0, math.exp(-0.5), math.exp(-1.25), math.exp(-5.0)], rtol=1e-15, atol=0
+    )
     assert med.bounds is None and med.albedo == pytest.approx(0.4)
 
 
 # (origin, direction, length, expected length inside LO..HI = [1,2] x [0,3] x [-1,1])
 BOX_CASES = [
-    ((1.5, 1.0, 0.0), (1, 0, 0), 0.25, 0.25),   # fully inside
-    ((0.0, 1.0, 0.0), (1, 0, 0), 5.0, 1.0),     # crosses the whole box along x
-    ((0.0, 1.0, 0.0), (1, 0, 0), 1.5, 0.5),     # enters, ends inside
-    ((1.5, 1.0, 0.0), (-1, 0, 0), 5.0, 0.5),    # starts inside, leaves
-    ((0.0, 1.0, 0.0), (1, 0, 0), 0.9, 0.0),     # stops short of the box
-    ((0.0, 5.0, 0.0), (1, 0, 0), 5.0, 0.0),     # misses (y outside the slab)
-    ((3.0, 1.0, 0.0), (1, 0, 0), 5.0, 0.0),     # points away
-    ((1.5, -1.0, 0.5), (0, 1, 0), 10.0, 3.0),   # parallel to the x and z faces, inside those slabs
-    ((2.5, -1.0, 0.5), (0, 1, 0), 10.0, 0.0),   # parallel to the x faces, outside the x slab
-    ((2.0, -1.0, 0.5), (0, 1, 0), 10.0, 3.0),   # in the plane of the face x = 2 (closed box: inside)
-    ((1.0, 1.0, 0.0), (1, 0, 0), 5.0, 1.0),     # starts on the face x = 1, going in
-    ((1.0, 1.0, 0.0), (-1, 0, 0), 5.0, 0.0),    # starts on the face x = 1, going out
+    ((1.5, 1.0, 0.0), (1, 0, 0), 0.25, 0.25),  # fully inside
+    ((0.0, 1.0, 0.0), (1, 0, 0), 5.0, 1.0),  # crosses the whole box along x
+    ((0.0, 1.0, 0.0), (1, 0, 0), 1.5, 0.5),  # enters, ends inside
+    ((1.5, 1.0, 0.0), (-1, 0, 0), 5.0, 0.5),  # starts inside, leaves
+    ((0.0, 1.0, 0.0), (1, 0, 0), 0.9, 0.0),  # stops short of the box
+    ((0.0, 5.0, 0.0), (1, 0, 0), 5.0, 0.0),  # misses (y outside the slab)
+    ((3.0, 1.0, 0.0), (1, 0, 0), 5.0, 0.0),  # points away
+    ((1.5, -1.0, 0.5), (0, 1, 0), 10.0, 3.0),  # parallel to the x and z faces, inside those slabs
+    ((2.5, -1.0, 0.5), (0, 1, 0), 10.0, 0.0),  # parallel to the x faces, outside the x slab
+    ((2.0, -1.0, 0.5), (0, 1, 0), 10.0, 3.0),  # in the plane of the face x = 2 (closed box: inside)
+    ((1.0, 1.0, 0.0), (1, 0, 0), 5.0, 1.0),  # starts on the face x = 1, going in
+    ((1.0, 1.0, 0.0), (-1, 0, 0), 5.0, 0.0),  # starts on the face x = 1, going out
     ((0.0, 0.0, -1.5), tuple(_unit(1, 1, 1)), 10.0, math.sqrt(3) * 1.0),  # diagonal: x from 1 to 2 (z -0.5..0.5)
 ]
 
@@ -77,8 +79,9 @@ def test_box_region_length_inside_by_hand(o, d, L, expected):
     med = HomogeneousMedium(0.5, 0.0, (LO, HI))
     got = med.length_inside(np.array([o]), np.array([d], float), np.array([L]))
     assert got[0] == pytest.approx(expected, abs=1e-12)
-    assert med.transmittance(np.array([o]), np.array([d], float), np.array([L]))[0] == \
-        pytest.approx(math.exp(-0.5 * expected), rel=1e-12)
+    assert med.transmittance(np.array([o]), np.array([d], float), np.array([L]))[0] == pytest.approx(
+        math.exp(-0.5 * expected), rel=1e-12
+    )
 
 
 def test_box_containing_every_segment_equals_whole_scene_exactly():
@@ -101,6 +104,7 @@ def test_any_array_layout():
 
 # --- closed-mesh regions ------------------------------------------------------------------------
 
+
 def _box_probe_segments(rng):
     """Random segments plus axis-aligned ones through face centres (they hit the diagonal edge of each face)."""
     o, d, L = _segments(20_000, rng)
@@ -109,8 +113,11 @@ def _box_probe_segments(rng):
     o2 = c - 2.0 * axes * (HI - LO)  # from outside, through the centre of opposite faces
     o3 = np.array([[LO[0], c[1], c[2]], [c[0], HI[1], c[2]], [c[0], c[1], LO[2]]])  # starting on faces
     d3 = np.array([[1.0, 0, 0], [0, -1.0, 0], [0.0, 0.6, 0.8]])
-    return (np.vstack([o, o2, o3, o3]), np.vstack([d, axes, d3, -d3]),
-            np.concatenate([L, np.full(6, 10.0), np.full(6, 0.7)]))
+    return (
+        np.vstack([o, o2, o3, o3]),
+        np.vstack([d, axes, d3, -d3]),
+        np.concatenate([L, np.full(6, 10.0), np.full(6, 0.7)]),
+    )
 
 
 @pytest.mark.parametrize("shift", [0.0, 5000.0])
@@ -144,8 +151,9 @@ def test_mesh_region_rays_through_edges_and_corners():
     ref = HomogeneousMedium(1.0, 0.0, (LO, HI))
     med = HomogeneousMedium(1.0, 0.0, region=MeshRegion(_box_mesh(LO, HI).vertices, _box_mesh(LO, HI).faces))
     pts = np.stack(np.meshgrid(*[[a, 0.5 * (a + b), b] for a, b in zip(LO, HI)], indexing="ij"), -1).reshape(-1, 3)
-    dirs = np.array([_unit(*v) for v in [(1, 1, 0), (1, 0, 1), (0, 1, 1), (1, 1, 1), (1, -1, 0), (1, 0, 0), (0, 0, 1),
-                                         (1, -1, 1)]])
+    dirs = np.array(
+        [_unit(*v) for v in [(1, 1, 0), (1, 0, 1), (0, 1, 1), (1, 1, 1), (1, -1, 0), (1, 0, 0), (0, 0, 1), (1, -1, 1)]]
+    )
     dirs = np.vstack([dirs, -dirs])
     o = (pts[:, None] - 3.0 * dirs[None]).reshape(-1, 3)
     d = np.broadcast_to(dirs, (len(pts), len(dirs), 3)).reshape(-1, 3)
@@ -204,6 +212,7 @@ def test_open_mesh_region_is_refused_at_build():
 
 # --- the 3-D grid ---------------------------------------------------------------------------------
 
+
 def test_uniform_grid_equals_homogeneous_box():
     rng = seeded_rng()
     o, d, L = _segments(20_000, rng)
@@ -236,8 +245,9 @@ def test_grid_with_two_halves_by_hand():
     # Regular tracking by hand: depth 2 along the x axis from x = -1 is reached 1.25/3 into the second half.
     t, hit = grid.sample_distance(o[1:2], dirs[1:2], L[1:2], np.array([1 - math.exp(-2.0)]))
     assert hit[0] and t[0] == pytest.approx(2.0 + 1.25 / 3.0, rel=1e-12)
-    assert np.allclose(grid.albedo_at(np.array([[0.5, 0.5, 0.5], [1.5, 0.5, 0.5], [3.0, 0.5, 0.5]])),
-                       [1 / 3, 1 / 3, 0.0])
+    assert np.allclose(
+        grid.albedo_at(np.array([[0.5, 0.5, 0.5], [1.5, 0.5, 0.5], [3.0, 0.5, 0.5]])), [1 / 3, 1 / 3, 0.0]
+    )
 
 
 def test_grid_flat_index_is_c_order_x_slowest():
@@ -250,6 +260,7 @@ def test_grid_flat_index_is_c_order_x_slowest():
 
 
 # --- free-flight sampling ---------------------------------------------------------------------------
+
 
 def test_mean_free_path_in_unbounded_medium():
     sigma_t, n = 0.7, 200_000
@@ -266,8 +277,9 @@ def test_probability_of_no_collision(method):
     med = HomogeneousMedium(1.0, 0.3, (np.array([-1.0, -1, -1]), np.array([1.0, 1, 5])))
     o, d = np.zeros((n, 3)), np.tile(_unit(0, 0.6, 0.8), (n, 1))  # inside the box for all of L
     rng = seeded_rng()
-    t, hit = med.sample_distance(o, d, np.full(n, L), rng.random(n) if method == "regular" else None,
-                                 method=method, rng=rng)
+    t, hit = med.sample_distance(
+        o, d, np.full(n, L), rng.random(n) if method == "regular" else None, method=method, rng=rng
+    )
     p = math.exp(-sigma_t * L)
     assert abs((~hit).mean() - p) < 5 * math.sqrt(p * (1 - p) / n)
     assert np.all(t[~hit] == L) and np.all((t[hit] >= 0) & (t[hit] < L))
@@ -281,8 +293,11 @@ def test_regular_and_delta_tracking_agree_on_a_random_grid():
     ss[sa == 0] = 0.0
     grid = GridMedium(LO, HI, shape, sa, ss)
     n = 20_000
-    segs = [(np.array([0.5, 0.3, -0.9]), _unit(1, 1.2, 0.3), 4.0), (np.array([1.5, -0.5, 0.0]), _unit(0, 1, 0.05), 3.0),
-            (np.array([1.1, 0.2, -1.0]), _unit(0.1, 0.3, 1), 2.5)]
+    segs = [
+        (np.array([0.5, 0.3, -0.9]), _unit(1, 1.2, 0.3), 4.0),
+        (np.array([1.5, -0.5, 0.0]), _unit(0, 1, 0.05), 3.0),
+        (np.array([1.1, 0.2, -1.0]), _unit(0.1, 0.3, 1), 2.5),
+    ]
     for o0, d0, L0 in segs:
         o, d, L = np.tile(o0, (n, 1)), np.tile(d0, (n, 1)), np.full(n, L0)
         tr, hr = grid.sample_distance(o, d, L, rng.random(n))
@@ -307,6 +322,7 @@ def test_delta_tracking_in_a_mesh_region():
 
 
 # --- cost and numerical hygiene -------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("kind", ["box", "mesh", "grid"])
 def test_segments_outside_a_region_cost_nothing(kind):
@@ -336,8 +352,11 @@ def test_segments_outside_a_region_cost_nothing(kind):
 def test_tiny_extinction(sigma_t):
     o, d = np.zeros((3, 3)), np.tile([1.0, 0, 0], (3, 1))
     L = np.array([0.0, 1.0, 1e3])
-    for med in (HomogeneousMedium(sigma_t, 0.0), HomogeneousMedium(0.0, sigma_t, (np.full(3, -1e4), np.full(3, 1e4))),
-                GridMedium([-1, -1, -1], [1e3, 1, 1], (4, 1, 1), sigma_t, 0.0)):
+    for med in (
+        HomogeneousMedium(sigma_t, 0.0),
+        HomogeneousMedium(0.0, sigma_t, (np.full(3, -1e4), np.full(3, 1e4))),
+        GridMedium([-1, -1, -1], [1e3, 1, 1], (4, 1, 1), sigma_t, 0.0),
+    ):
         T = med.transmittance(o, d, L)
         assert np.all(np.isfinite(T))
         x = sigma_t * L
@@ -363,6 +382,7 @@ def test_large_optical_depth_is_tiny_not_zero_or_nan():
 
 # --- specs: parsing, medium_from_spec, located errors ---------------------------------------------
 
+
 def _errors(medium) -> str:
     with pytest.raises(ValidationError) as exc:
         SceneSpec.model_validate(room_doc(medium=medium))
@@ -375,32 +395,51 @@ GRID = {"type": "grid", "min": [0, 0, 2], "max": [5, 5, 3], "shape": [2, 3, 1], 
 def test_specs_build_the_right_media():
     grid = medium_from_spec(SceneSpec.model_validate(room_doc(medium=GRID)).medium)
     assert isinstance(grid, GridMedium) and grid.sigma_t_max == pytest.approx(0.3) and grid.bounds[0][2] == 2
-    assert medium_from_spec(SceneSpec.model_validate(room_doc(medium=dict(GRID, sigma_a=0, sigma_s=[0] * 6))).medium) \
+    assert (
+        medium_from_spec(SceneSpec.model_validate(room_doc(medium=dict(GRID, sigma_a=0, sigma_s=[0] * 6))).medium)
         is None
+    )
     box = _box_mesh([1, 1, 1], [2, 2, 2])
     region = {"type": "mesh", "vertices": box.vertices.tolist(), "faces": box.faces.tolist()}
-    spec = SceneSpec.model_validate(room_doc(medium={"type": "homogeneous", "sigma_a": 0.1, "sigma_s": 0.1,
-                                                     "phase": {"type": "hg", "g": 0.7}, "region": region}))
+    spec = SceneSpec.model_validate(
+        room_doc(
+            medium={
+                "type": "homogeneous",
+                "sigma_a": 0.1,
+                "sigma_s": 0.1,
+                "phase": {"type": "hg", "g": 0.7},
+                "region": region,
+            }
+        )
+    )
     med = medium_from_spec(spec.medium)
     assert med.phase_spec.g == 0.7 and med.box is None
-    assert med.length_inside(np.array([[0.0, 1.5, 1.5]]), np.array([[1.0, 0, 0]]), np.array([5.0]))[0] == \
-        pytest.approx(1.0, abs=1e-12)
-    old = {"type": "homogeneous", "visibility_m": 10.0, "albedo": 0.5, "region": {"type": "box", "min": [0, 0, 2],
-                                                                              "max": [5, 5, 3]}}
+    assert med.length_inside(np.array([[0.0, 1.5, 1.5]]), np.array([[1.0, 0, 0]]), np.array([5.0]))[0] == pytest.approx(
+        1.0, abs=1e-12
+    )
+    old = {
+        "type": "homogeneous",
+        "visibility_m": 10.0,
+        "albedo": 0.5,
+        "region": {"type": "box", "min": [0, 0, 2], "max": [5, 5, 3]},
+    }
     med = medium_from_spec(SceneSpec.model_validate(room_doc(medium=old)).medium)
     assert med.sigma_t == pytest.approx(0.3912) and med.box[0][2] == 2.0
 
 
-@pytest.mark.parametrize("change,where,what", [
-    ({"sigma_a": [0.1, 0.1, -0.1, 0.1, 0.1, 0.1]}, "medium.grid.sigma_a", "flat index 2 (cell 0, 2, 0)"),
-    ({"sigma_s": -1.0}, "medium.grid.sigma_s", ">= 0"),
-    ({"sigma_s": [0.1] * 5}, "medium.grid.sigma_s", "nx*ny*nz = 6 values"),
-    ({"sigma_a": [0.1, float("nan")] * 3}, "medium.grid.sigma_a", "finite"),
-    ({"shape": [2, 0, 1]}, "medium.grid.shape", ">= 1"),
-    ({"shape": [1000, 1000, 21], "sigma_a": 0.1}, "medium.grid.shape", "limit"),
-    ({"shape": [1, 1, 1001], "sigma_a": 0.1}, "medium.grid.shape", "1001 cells along one axis"),
-    ({"max": [5, 5, 1]}, "medium.grid", "must exceed"),
-])
+@pytest.mark.parametrize(
+    "change,where,what",
+    [
+        ({"sigma_a": [0.1, 0.1, -0.1, 0.1, 0.1, 0.1]}, "medium.grid.sigma_a", "flat index 2 (cell 0, 2, 0)"),
+        ({"sigma_s": -1.0}, "medium.grid.sigma_s", ">= 0"),
+        ({"sigma_s": [0.1] * 5}, "medium.grid.sigma_s", "nx*ny*nz = 6 values"),
+        ({"sigma_a": [0.1, float("nan")] * 3}, "medium.grid.sigma_a", "finite"),
+        ({"shape": [2, 0, 1]}, "medium.grid.shape", ">= 1"),
+        ({"shape": [1000, 1000, 21], "sigma_a": 0.1}, "medium.grid.shape", "limit"),
+        ({"shape": [1, 1, 1001], "sigma_a": 0.1}, "medium.grid.shape", "1001 cells along one axis"),
+        ({"max": [5, 5, 1]}, "medium.grid", "must exceed"),
+    ],
+)
 def test_grid_spec_errors_are_located(change, where, what):
     msg = _errors(dict(GRID, **change))
     assert where in msg and what in msg, msg

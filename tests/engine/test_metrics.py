@@ -1,11 +1,11 @@
 """Tests for engine.metrics against closed-form references and simulation."""
+
 import warnings
 
 import numpy as np
 import pytest
 
-from owcsim.engine.metrics import (bandwidth_3db, bin_stderr, delay_metrics, jackknife,
-                            path_loss_db, rms_delay_spread_h2)
+from owcsim.engine.metrics import bandwidth_3db, bin_stderr, delay_metrics, jackknife, path_loss_db, rms_delay_spread_h2
 
 NS = 1e-9
 KEYS = ["dc_gain", "mean_delay_s", "rms_delay_spread_s"]
@@ -50,8 +50,7 @@ def test_dc_gain_stderr_is_sample_stderr():
     x = random_paths(rng, (), 500)
     r = delay_metrics(*tallies(x))
     assert r["dc_gain"] == pytest.approx(x[:, 0].mean(), rel=1e-12)
-    assert r["dc_gain_stderr"] == pytest.approx(
-        x[:, 0].std(ddof=1) / np.sqrt(len(x)), rel=1e-9)
+    assert r["dc_gain_stderr"] == pytest.approx(x[:, 0].std(ddof=1) / np.sqrt(len(x)), rel=1e-9)
     # delta method for tau0 equals the textbook ratio-estimator stderr
     tau0 = x[:, 1].sum() / x[:, 0].sum()
     resid = x[:, 1] - tau0 * x[:, 0]
@@ -110,7 +109,7 @@ def test_deterministic_part_shifts_means_not_errors():
 def test_unreachable_and_degenerate_inputs_are_warning_and_inf_free():
     rng = np.random.default_rng(4)
     x = random_paths(rng, (3,), 50)
-    x[1] = 0.0                                   # link 1 never reached
+    x[1] = 0.0  # link 1 never reached
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         r = delay_metrics(*tallies(x))
@@ -174,7 +173,7 @@ def test_exponential_profile():
     assert r["dc_gain"] == pytest.approx(1.0, rel=1e-9)
     assert r["rms_delay_spread_s"] == pytest.approx(T, rel=1e-4)
     assert r["mean_delay_s"] == pytest.approx(T, rel=1e-3)
-    tau0_h2, rms_h2 = rms_delay_spread_h2(edges, p)   # h^2 ~ exp(-2t/T)
+    tau0_h2, rms_h2 = rms_delay_spread_h2(edges, p)  # h^2 ~ exp(-2t/T)
     assert tau0_h2 == pytest.approx(T / 2, rel=1e-3)
     assert rms_h2 == pytest.approx(T / 2, rel=1e-4)
     f3 = bandwidth_3db(edges, p)
@@ -235,8 +234,7 @@ def test_jackknife_stderr_matches_replicate_spread():
     w = rng.exponential(1.0, (n_rep, G, n)) + 1.5 * (k == 2)
     idx = (np.arange(n_rep * G)[:, None] * nb + k.reshape(n_rep * G, n)).ravel()
     groups = np.bincount(idx, w.ravel(), n_rep * G * nb).reshape(n_rep, G, nb)
-    h2 = np.array([jackknife(lambda s: rms_delay_spread_h2(edges, s)[1], g)
-                   for g in groups])
+    h2 = np.array([jackknife(lambda s: rms_delay_spread_h2(edges, s)[1], g) for g in groups])
     bw = np.array([jackknife(lambda s: bandwidth_3db(edges, s), g) for g in groups])
     pb = np.array([bin_stderr(g, n) for g in groups])
     mean_p = groups.sum(1) / (G * n)

@@ -14,6 +14,7 @@ References:
 - Size averaging: direct adaptive quadrature (scipy.integrate.quad) of miepython's
   single-sphere results written here.
 """
+
 from __future__ import annotations
 
 import functools
@@ -84,10 +85,10 @@ def test_small_particle_limit_is_rayleigh():
     m, x = 1.5 + 0.1j, 0.005
     qext, qsca, _, g = (float(v[0]) for v in mie.efficiencies(m, x))
     K = _rayleigh_k(m)
-    assert qsca == pytest.approx(8 / 3 * x ** 4 * abs(K) ** 2, rel=1e-4, abs=0)
+    assert qsca == pytest.approx(8 / 3 * x**4 * abs(K) ** 2, rel=1e-4, abs=0)
     assert qext - qsca == pytest.approx(4 * x * K.imag, rel=1e-4, abs=0)
     mu = np.linspace(-1, 1, 21)
-    np.testing.assert_allclose(mie.phase_single(m, x, mu), 3 * (1 + mu ** 2) / (16 * np.pi), rtol=1e-4)
+    np.testing.assert_allclose(mie.phase_single(m, x, mu), 3 * (1 + mu**2) / (16 * np.pi), rtol=1e-4)
     assert abs(g) < 1e-4
 
 
@@ -95,18 +96,19 @@ def test_distribution_in_the_rayleigh_regime_against_lognormal_moments():
     """Every size scatters like Rayleigh: sigma/N from <D^6> and <D^3> in closed form, phase 3(1+mu^2)/16pi."""
     lam, dg, sg = 1e-6, 2e-9, 1.5
     m = 1.5 + 0.1j
-    p = ParticlesSpec(geometric_mean_diameter=dg, geometric_std=sg, refractive_index={"real": 1.5, "imag": 0.1},
-                      wavelength=lam)
+    p = ParticlesSpec(
+        geometric_mean_diameter=dg, geometric_std=sg, refractive_index={"real": 1.5, "imag": 0.1}, wavelength=lam
+    )
     o = mie.particle_optics(p, n_angles=201)
     s2 = math.log(sg) ** 2
     K = _rayleigh_k(m)
-    c_sca = 2 * math.pi ** 5 / 3 * abs(K) ** 2 * dg ** 6 * math.exp(18 * s2) / lam ** 4
-    c_abs = math.pi ** 2 * K.imag * dg ** 3 * math.exp(4.5 * s2) / lam
+    c_sca = 2 * math.pi**5 / 3 * abs(K) ** 2 * dg**6 * math.exp(18 * s2) / lam**4
+    c_abs = math.pi**2 * K.imag * dg**3 * math.exp(4.5 * s2) / lam
     # (cross sections are ~1e-26 m^2: compare ratios, pytest.approx's default abs=1e-12 would pass anything)
     assert abs(o.c_sca / c_sca - 1) < 5e-4  # measured: 3e-5 and 8e-5 (x^2 corrections)
     assert abs(o.c_abs / c_abs - 1) < 5e-4
-    assert abs(o.mean_d3 / (dg ** 3 * math.exp(4.5 * s2)) - 1) < 1e-12
-    np.testing.assert_allclose(o.phase, 3 * (1 + o.cos_theta ** 2) / (16 * np.pi), rtol=1e-3)
+    assert abs(o.mean_d3 / (dg**3 * math.exp(4.5 * s2)) - 1) < 1e-12
+    np.testing.assert_allclose(o.phase, 3 * (1 + o.cos_theta**2) / (16 * np.pi), rtol=1e-3)
     # power: the monodisperse value (sigma_g ignored) is far off
     assert abs(o.c_sca / (c_sca / math.exp(18 * s2)) - 1) > 1.0
 
@@ -134,20 +136,26 @@ def _lognormal(y, mu, s):
 def _direct(p: ParticlesSpec, fun):
     """int fun(D) n(D) dD by adaptive quadrature in ln D over +-10 ln sigma_g."""
     mu, s = math.log(p.geometric_mean_diameter), math.log(p.geometric_std)
-    val, _ = integrate.quad(lambda y: fun(math.exp(y)) * _lognormal(y, mu, s), mu - 10 * s, mu + 10 * s,
-                            limit=400, epsrel=1e-8, epsabs=0.0)
+    val, _ = integrate.quad(
+        lambda y: fun(math.exp(y)) * _lognormal(y, mu, s), mu - 10 * s, mu + 10 * s, limit=400, epsrel=1e-8, epsabs=0.0
+    )
     return val
 
 
-@pytest.mark.parametrize("index, dg, sg", [((1.57, 0.56), 0.3e-6, 1.6), ((1.33, 0.0), 0.4e-6, 1.4)],
-                         ids=["soot", "water"])
+@pytest.mark.parametrize(
+    "index, dg, sg", [((1.57, 0.56), 0.3e-6, 1.6), ((1.33, 0.0), 0.4e-6, 1.4)], ids=["soot", "water"]
+)
 def test_size_averaging_against_direct_quadrature(index, dg, sg):
     lam = 0.65e-6
-    p = ParticlesSpec(geometric_mean_diameter=dg, geometric_std=sg, refractive_index=dict(zip(("real", "imag"), index)),
-                      wavelength=lam)
+    p = ParticlesSpec(
+        geometric_mean_diameter=dg,
+        geometric_std=sg,
+        refractive_index=dict(zip(("real", "imag"), index)),
+        wavelength=lam,
+    )
     mp_m = complex(index[0], -index[1])
 
-    @functools.lru_cache(maxsize=None)
+    @functools.cache
     def q(d):
         return [float(np.ravel(v)[0]) for v in miepython.efficiencies_mx(mp_m, math.pi * d / lam)]
 
@@ -161,9 +169,11 @@ def test_size_averaging_against_direct_quadrature(index, dg, sg):
     assert abs(o.g / (g_sca / c_sca) - 1) < 1e-6
     # the averaged phase function at a few angles (miepython's own angular sums, per sphere)
     for mu in (-0.9, 0.0, 0.8):
+
         def weighted(d, mu=mu):
             x = math.pi * d / lam
             return float(miepython.i_unpolarized(mp_m, x, np.array([mu]), norm="one")[0]) * q(d)[1] * d * d
+
         ref = _direct(p, weighted) / _direct(p, lambda d: q(d)[1] * d * d)
         assert float(np.interp(mu, o.cos_theta, o.phase)) == pytest.approx(ref, rel=1e-4)
     table = MiePhase(o.cos_theta, o.phase)
@@ -171,8 +181,12 @@ def test_size_averaging_against_direct_quadrature(index, dg, sg):
     assert table.mean_cosine == pytest.approx(o.g, abs=1e-4)
 
 
-SOOT = {"geometric_mean_diameter": 1.5e-7, "geometric_std": 1.8, "refractive_index": {"real": 1.57, "imag": 0.56},
-        "wavelength": 8.5e-7}
+SOOT = {
+    "geometric_mean_diameter": 1.5e-7,
+    "geometric_std": 1.8,
+    "refractive_index": {"real": 1.57, "imag": 0.56},
+    "wavelength": 8.5e-7,
+}
 
 
 def _medium(**kw):
@@ -182,7 +196,7 @@ def _medium(**kw):
 def test_mass_concentration_to_number_by_quadrature():
     med = ParticleMediumSpec.model_validate(_medium())
     p = med.particles
-    d3 = _direct(p, lambda d: d ** 3)
+    d3 = _direct(p, lambda d: d**3)
     assert mie.number_concentration(med) == pytest.approx(5e-5 / (1800.0 * math.pi / 6 * d3), rel=1e-7, abs=0)
 
 
@@ -207,8 +221,12 @@ def test_particle_medium_builds_coefficients_and_mie_table():
     # the same smoke as a homogeneous medium with the derived numbers and the table gives the same run
     sim = dict(algorithm=5, direction="forward", max_scattering=3, paths=4000, seed=5)
     a = simulate(spec(room_doc(medium=_medium(), **sim)))["links"][0]
-    hom = {"type": "homogeneous", "sigma_a": info["sigma_a"], "sigma_s": info["sigma_s"],
-           "phase": {"type": "tabulated", "cos_theta": o.cos_theta.tolist(), "values": o.phase.tolist()}}
+    hom = {
+        "type": "homogeneous",
+        "sigma_a": info["sigma_a"],
+        "sigma_s": info["sigma_s"],
+        "phase": {"type": "tabulated", "cos_theta": o.cos_theta.tolist(), "values": o.phase.tolist()},
+    }
     b = simulate(spec(room_doc(medium=hom, **sim)))["links"][0]
     assert a["dc_gain"] == pytest.approx(b["dc_gain"], rel=1e-9, abs=0)
 
@@ -222,16 +240,21 @@ def test_number_concentration_and_zero_concentration():
     assert isinstance(phase_from_spec({"type": "mie", "particles": SOOT}), MiePhase)
 
 
-@pytest.mark.parametrize("doc, match", [
-    (_medium(number_concentration=1e12), "exactly one of"),
-    ({"type": "particles", "particles": SOOT, "mass_concentration": 1e-4}, "needs `particle_density`"),
-    ({"type": "particles", "particles": SOOT, "number_concentration": 1e12, "particle_density": 1800},
-     "only with `mass_concentration`"),
-    (_medium(particles={**SOOT, "geometric_mean_diameter": 1e-5}), "reaches size parameter"),
-    (_medium(particles={**SOOT, "geometric_std": 0.9}), "greater than or equal to 1"),
-    (_medium(particles={**SOOT, "refractive_index": {"real": 1.5, "imag": -0.1}}), "greater than or equal to 0"),
-    (_medium(particles={**SOOT, "wavelength": 0}), "greater than 0.00000001"),
-])
+@pytest.mark.parametrize(
+    "doc, match",
+    [
+        (_medium(number_concentration=1e12), "exactly one of"),
+        ({"type": "particles", "particles": SOOT, "mass_concentration": 1e-4}, "needs `particle_density`"),
+        (
+            {"type": "particles", "particles": SOOT, "number_concentration": 1e12, "particle_density": 1800},
+            "only with `mass_concentration`",
+        ),
+        (_medium(particles={**SOOT, "geometric_mean_diameter": 1e-5}), "reaches size parameter"),
+        (_medium(particles={**SOOT, "geometric_std": 0.9}), "greater than or equal to 1"),
+        (_medium(particles={**SOOT, "refractive_index": {"real": 1.5, "imag": -0.1}}), "greater than or equal to 0"),
+        (_medium(particles={**SOOT, "wavelength": 0}), "greater than 0.00000001"),
+    ],
+)
 def test_bad_particle_media_are_refused(doc, match):
     with pytest.raises(ValidationError, match=match):
         ParticleMediumSpec.model_validate(doc)
@@ -280,8 +303,10 @@ def test_medium_report_for_the_result():
     assert mie.medium_report(particles) == mie.describe(particles)
     assert mie.medium_report(None) is None
     hom = spec(room_doc(medium={"type": "homogeneous", "sigma_a": 0.1, "sigma_s": 0.1})).medium
-    assert mie.medium_report(hom, HenyeyGreenstein(0.3)) == {"model": "homogeneous",
-                                                             "phase": {"type": "hg", "mean_cosine": 0.3}}
+    assert mie.medium_report(hom, HenyeyGreenstein(0.3)) == {
+        "model": "homogeneous",
+        "phase": {"type": "hg", "mean_cosine": 0.3},
+    }
     table = Tabulated([-1, 1], [2, 2])
     rep = mie.medium_report(hom, table)["phase"]
     assert rep["type"] == "tabulated" and rep["normalisation"] == pytest.approx(8 * math.pi) and rep["points"] == 2

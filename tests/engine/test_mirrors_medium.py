@@ -9,6 +9,7 @@
 - Algorithm 5 against algorithm 4 where their families coincide; forward against backward and
   both devices against one, per reflection and scattering order.
 """
+
 from __future__ import annotations
 
 import math
@@ -67,7 +68,7 @@ def image_source(rho_m, sigma_t, m=1.0):
     v = RX - floor_image(TX)
     d = float(np.linalg.norm(v))
     cos_phi = cos_psi = v[2] / d  # both devices face down; the image ray rises from Tx' to Rx
-    return rho_m * (m + 1) / (2 * np.pi) * cos_phi ** m * AREA * cos_psi / d ** 2 * math.exp(-sigma_t * d)
+    return rho_m * (m + 1) / (2 * np.pi) * cos_phi**m * AREA * cos_psi / d**2 * math.exp(-sigma_t * d)
 
 
 def hg(cos, g):
@@ -82,8 +83,10 @@ def _box_exit(o, w):
     return np.minimum(t_hi, t_lo).min(axis=0)
 
 
-RESPONSE = {"tx": lambda c: 2 / (2 * np.pi) * np.clip(c, 0, None),  # m = 1, per watt
-            "rx": lambda c: AREA * np.clip(c, 0, None)}  # FOV 90 deg
+RESPONSE = {
+    "tx": lambda c: 2 / (2 * np.pi) * np.clip(c, 0, None),  # m = 1, per watt
+    "rx": lambda c: AREA * np.clip(c, 0, None),
+}  # FOV 90 deg
 
 
 def _about(first: str, b, b_normal, rho, sigma_s, sigma_t, g, n, plane=None):
@@ -115,10 +118,10 @@ def _about(first: str, b, b_normal, rho, sigma_s, sigma_t, g, n, plane=None):
         r = xi * r_max
         p = a[:, None, None] + r * w
         v = b[:, None, None] - p
-        d = np.sqrt((v ** 2).sum(0))
+        d = np.sqrt((v**2).sum(0))
         cos_b = -np.einsum("i,ijk->jk", b_normal, v) / d
         cos_th = (w * v).sum(0) / d
-        f = r_a(CT) * np.exp(-sigma_t * r) * sigma_s * hg(cos_th, g) * rho * r_b(cos_b) / d ** 2 * np.exp(-sigma_t * d)
+        f = r_a(CT) * np.exp(-sigma_t * r) * sigma_s * hg(cos_th, g) * rho * r_b(cos_b) / d**2 * np.exp(-sigma_t * d)
         total += float((wt[:, None] * wp * wi * r_max * f).sum())
     return total
 
@@ -140,8 +143,9 @@ def direct_single_scattering(sigma_s, sigma_t, g, n=80):
     """Tx -> p -> Rx in the room: each half of the room (split by the devices' bisector plane) about its own
     device, so that each 1 / r^2 singularity is cancelled by its own coordinates (tests/reference_volume.py)."""
     mid, axis = 0.5 * (TX + RX), (TX - RX) / np.linalg.norm(TX - RX)
-    return (_about("tx", RX, RX_N, 1.0, sigma_s, sigma_t, g, n, plane=(mid, axis))
-            + _about("rx", TX, TX_N, 1.0, sigma_s, sigma_t, g, n, plane=(mid, -axis)))
+    return _about("tx", RX, RX_N, 1.0, sigma_s, sigma_t, g, n, plane=(mid, axis)) + _about(
+        "rx", TX, TX_N, 1.0, sigma_s, sigma_t, g, n, plane=(mid, -axis)
+    )
 
 
 SMOKE_CLEAR = medium(0.05, 0.15, 0.5)  # albedo 0.75, optical depth ~ 0.8 across the room
@@ -154,8 +158,7 @@ def test_mirror_floor_in_an_absorbing_medium_is_the_attenuated_image_source(dire
     """Black room, mirror floor, non-scattering absorbing medium: k = 1 is exactly the image source times
     exp(-sigma_t d_image) (no variance: the only path is the deterministic image connection)."""
     sigma_a = 0.1
-    link = _link(mirror_floor_doc(0.9, medium=medium(sigma_a, 0.0), max_reflections=2, paths=2048,
-                                  direction=direction))
+    link = _link(mirror_floor_doc(0.9, medium=medium(sigma_a, 0.0), max_reflections=2, paths=2048, direction=direction))
     ref = image_source(0.9, sigma_a)
     k1, se = _k(link, 1)
     assert k1 == pytest.approx(ref, rel=1e-9)
@@ -168,8 +171,9 @@ def test_mirror_floor_in_an_absorbing_medium_is_the_attenuated_image_source(dire
 def test_algorithm_1_forward_and_backward_agree_with_a_mirror_and_an_absorbing_medium():
     out = {}
     for direction in ("forward", "backward"):
-        d = mirror_floor_doc(0.6, medium=medium(0.15, 0.1), max_reflections=3, paths=40_000, seed=3,
-                             direction=direction)
+        d = mirror_floor_doc(
+            0.6, medium=medium(0.15, 0.1), max_reflections=3, paths=40_000, seed=3, direction=direction
+        )
         d["room"]["reflectance"].update(walls=0.7, ceiling=phong(0.8, 0.5, 10.0))
         d["room"]["reflectance"]["floor"] = mirror(0.6, 0.4)
         out[direction] = _link(d)
@@ -188,13 +192,19 @@ SIG = (0.15, 0.2, 0.5)  # SMOKE_CLEAR's sigma_s, sigma_t, g
 @pytest.fixture(scope="module")
 def single():
     """Quadratures of the three single-scattering families of the mirror-floor room (K = 1)."""
-    return {"direct": direct_single_scattering(*SIG), "tx": via_mirror_single_scattering("tx", 0.9, *SIG),
-            "rx": via_mirror_single_scattering("rx", 0.9, *SIG)}
+    return {
+        "direct": direct_single_scattering(*SIG),
+        "tx": via_mirror_single_scattering("tx", 0.9, *SIG),
+        "rx": via_mirror_single_scattering("rx", 0.9, *SIG),
+    }
 
 
 def test_reference_quadratures_are_converged(single):
-    coarse = {"direct": direct_single_scattering(*SIG, n=40), "tx": via_mirror_single_scattering("tx", 0.9, *SIG, n=40),
-              "rx": via_mirror_single_scattering("rx", 0.9, *SIG, n=40)}
+    coarse = {
+        "direct": direct_single_scattering(*SIG, n=40),
+        "tx": via_mirror_single_scattering("tx", 0.9, *SIG, n=40),
+        "rx": via_mirror_single_scattering("rx", 0.9, *SIG, n=40),
+    }
     for fam, value in coarse.items():
         assert abs(value - single[fam]) < 1e-4 * single[fam], fam
 
@@ -218,8 +228,18 @@ def _check_single(link, algorithm, single):
 def test_single_scattering_through_a_mirror_against_quadrature(algorithm, single):
     """Black room, mirror floor, K = 1, S = 1: run by the planner from both devices, the image connections
     of medium points and of the scattering branch shared by the partition of unity (engine/mirrors.py)."""
-    link = _link(mirror_floor_doc(0.9, medium=SMOKE_CLEAR, algorithm=algorithm, max_reflections=1,
-                                  max_scattering=1, paths=60_000, seed=40 + algorithm, **COARSE))
+    link = _link(
+        mirror_floor_doc(
+            0.9,
+            medium=SMOKE_CLEAR,
+            algorithm=algorithm,
+            max_reflections=1,
+            max_scattering=1,
+            paths=60_000,
+            seed=40 + algorithm,
+            **COARSE,
+        )
+    )
     assert link["direction"] == "both"
     _check_single(link, algorithm, single)
 
@@ -228,8 +248,17 @@ def test_algorithm_2_through_a_mirror_from_the_receiver_alone(single):
     """Algorithm 2's family from its natural side alone (no image connection from medium points there: the
     receiver's path reflects specularly off the mirror) against the same quadratures. (Algorithm 3 forward
     alone has the heavier one-sided tail near the receiver: 5x the paths for the same power.)"""
-    doc = mirror_floor_doc(0.9, medium=SMOKE_CLEAR, algorithm=2, max_reflections=1, max_scattering=1,
-                           paths=300_000, batch_size=16_384, seed=52, **COARSE)
+    doc = mirror_floor_doc(
+        0.9,
+        medium=SMOKE_CLEAR,
+        algorithm=2,
+        max_reflections=1,
+        max_scattering=1,
+        paths=300_000,
+        batch_size=16_384,
+        seed=52,
+        **COARSE,
+    )
     _check_single(simulate_two_sided(spec(doc), direction="backward")["links"][0], 2, single)
 
 
@@ -238,9 +267,19 @@ def test_algorithm_2_through_a_mirror_from_the_receiver_alone(single):
 def test_algorithm_5_single_scattering_through_a_mirror_against_quadrature(direction, single):
     """Algorithm 5 with S = 1, K = 1 in the black mirror-floor room: its s = 1 order holds the three families
     (collisions connect through the image). "auto" runs from both devices (partition of unity)."""
-    link = _link(mirror_floor_doc(0.9, medium=SMOKE_CLEAR, algorithm=5, max_reflections=1, max_scattering=1,
-                                  paths={"auto": 60_000}.get(direction, 200_000), batch_size=16_384,
-                                  seed=60, direction=direction))
+    link = _link(
+        mirror_floor_doc(
+            0.9,
+            medium=SMOKE_CLEAR,
+            algorithm=5,
+            max_reflections=1,
+            max_scattering=1,
+            paths={"auto": 60_000}.get(direction, 200_000),
+            batch_size=16_384,
+            seed=60,
+            direction=direction,
+        )
+    )
     assert link["direction"] == ("both" if direction == "auto" else direction)
     ref = single["direct"] + single["tx"] + single["rx"]
     s1, se = _s(link, 1)
@@ -270,9 +309,20 @@ def test_algorithm_5_agrees_with_algorithm_4_with_a_mirror_in_smoke():
 def test_algorithm_5_forward_backward_and_both_agree_per_order_with_a_mirror_in_smoke():
     """Mirror + diffuse floor, diffuse walls, Phong ceiling, forward-peaked smoke, K = 3, S = 2: forward
     alone, backward alone and both devices agree on every reflection and scattering order."""
-    out = {d: _link(_room_with_mirror(algorithm=5, max_reflections=3, max_scattering=2, seed=80 + i,
-                                      paths=150_000 if d != "auto" else 60_000, batch_size=16_384, direction=d))
-           for i, d in enumerate(("forward", "backward", "auto"))}
+    out = {
+        d: _link(
+            _room_with_mirror(
+                algorithm=5,
+                max_reflections=3,
+                max_scattering=2,
+                seed=80 + i,
+                paths=150_000 if d != "auto" else 60_000,
+                batch_size=16_384,
+                direction=d,
+            )
+        )
+        for i, d in enumerate(("forward", "backward", "auto"))
+    }
     for key, n in (("dc_gain_by_reflection_order", 4), ("dc_gain_by_scattering_order", 3)):
         for o in range(n):
             vals = [(out[d][key][o], out[d][key + "_stderr"][o]) for d in out]
@@ -282,16 +332,21 @@ def test_algorithm_5_forward_backward_and_both_agree_per_order_with_a_mirror_in_
                 assert within(a, b, err), (key, o, a, b, err)
 
 
-@pytest.mark.parametrize("algorithm,side,paths", [
-    pytest.param(2, "backward", 1_000_000, marks=pytest.mark.slow),  # the one-sided tail near the Tx: 7 s
-    (3, "forward", 200_000)])
+@pytest.mark.parametrize(
+    "algorithm,side,paths",
+    [
+        pytest.param(2, "backward", 1_000_000, marks=pytest.mark.slow),  # the one-sided tail near the Tx: 7 s
+        (3, "forward", 200_000),
+    ],
+)
 def test_both_devices_agree_with_the_natural_side_with_a_mirror_and_phong_surfaces(algorithm, side, paths):
     """K = 2, mirror + diffuse floor, Phong ceiling: algorithms 2 and 3 from both devices (the other side's
     scattering branch follows the materials and connects through mirror images, e.g. Tx -> p -> x -> mirror
     -> Rx) against the one-sided estimator of the same family (whose traced path needs no image), per order."""
     base = dict(algorithm=algorithm, max_reflections=2, max_scattering=1, batch_size=16_384, **COARSE)
-    one = simulate_two_sided(spec(_room_with_mirror(paths=paths, seed=90 + algorithm, **base)),
-                             direction=side)["links"][0]
+    one = simulate_two_sided(spec(_room_with_mirror(paths=paths, seed=90 + algorithm, **base)), direction=side)[
+        "links"
+    ][0]
     two = _link(_room_with_mirror(paths=60_000, seed=95 + algorithm, **base))
     assert two["direction"] == "both" and one["direction"] == side
     for k in (1, 2):
@@ -309,8 +364,20 @@ def test_error_bars_of_the_image_family_are_reliable_near_a_mirror():
     reported errors varied 6.7x between replicates and the spread was 1.5x their mean)."""
     vals, ses = [], []
     for seed in range(24):
-        d = room_doc(0.6, 0.0, 0.8, rx=(1.5, 1.5, 0.1), rx_normal=(0, 0, -1), medium=medium(0.05, 0.3, 0.9),
-                     algorithm=2, max_reflections=1, max_scattering=1, paths=10_000, seed=1000 + seed, **COARSE)
+        d = room_doc(
+            0.6,
+            0.0,
+            0.8,
+            rx=(1.5, 1.5, 0.1),
+            rx_normal=(0, 0, -1),
+            medium=medium(0.05, 0.3, 0.9),
+            algorithm=2,
+            max_reflections=1,
+            max_scattering=1,
+            paths=10_000,
+            seed=1000 + seed,
+            **COARSE,
+        )
         d["room"]["reflectance"]["floor"] = mirror(0.9)
         k1, se = _k(_link(d), 1)
         vals.append(k1)

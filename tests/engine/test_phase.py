@@ -8,15 +8,14 @@ import numpy as np
 import pytest
 from scipy import integrate, stats
 
+from conftest import SEED, seeded_rng  # noqa: F401
 from owcsim.engine import phase as ph
 from owcsim.engine.sampling import orthonormal_basis
 from owcsim.schemas import medium as sm
-from conftest import SEED, seeded_rng  # noqa: F401
 
 N_SAMPLES = 100_000
 ALPHA = 0.01
 N_BINS = 100  # equal-probability bins: expected count 1000 per bin
-
 
 
 def _sidak(m: int) -> float:
@@ -31,7 +30,7 @@ def _cdf(f, c):
     if isinstance(f, (ph.Isotropic,)):
         return (1.0 + c) / 2.0
     if isinstance(f, ph.Rayleigh):
-        return (c ** 3 + 3.0 * c + 4.0) / 8.0
+        return (c**3 + 3.0 * c + 4.0) / 8.0
     if isinstance(f, ph.Schlick):
         k = f.k
         return (1.0 - k) * (1.0 + c) / (2.0 * (1.0 - k * c))
@@ -47,14 +46,13 @@ def _cdf(f, c):
     raise TypeError(f)
 
 
-_BREAKS = sorted({-1.0, 0.0, 1.0} | {s * (1.0 - 10.0 ** -j) for j in range(1, 14) for s in (-1, 1)})
+_BREAKS = sorted({-1.0, 0.0, 1.0} | {s * (1.0 - 10.0**-j) for j in range(1, 14) for s in (-1, 1)})
 
 
 def _quad(fun, lo=-1.0, hi=1.0):
     """int_lo^hi fun(c) dc with geometric breakpoints towards +-1 (peaks up to g = 0.999999)."""
     pts = [lo] + [b for b in _BREAKS if lo < b < hi] + [hi]
-    return sum(integrate.quad(fun, a, b, epsabs=1e-13, epsrel=1e-12, limit=200)[0]
-               for a, b in zip(pts[:-1], pts[1:]))
+    return sum(integrate.quad(fun, a, b, epsabs=1e-13, epsrel=1e-12, limit=200)[0] for a, b in zip(pts[:-1], pts[1:]))
 
 
 def _norm(f):
@@ -66,17 +64,23 @@ def _mean_quad(f):
 
 
 TWO_HG = ph.Mixture([(0.8, ph.HenyeyGreenstein(0.7)), (0.2, ph.HenyeyGreenstein(-0.3))])
-ALL_MIX = ph.Mixture([(1, ph.Isotropic()), (2, ph.HenyeyGreenstein(0.9)), (1.5, ph.Schlick(-0.6)),
-                      (0.5, ph.Rayleigh())])
+ALL_MIX = ph.Mixture(
+    [(1, ph.Isotropic()), (2, ph.HenyeyGreenstein(0.9)), (1.5, ph.Schlick(-0.6)), (0.5, ph.Rayleigh())]
+)
 
-NORM_CASES = ([ph.Isotropic(), ph.Rayleigh(), TWO_HG, ALL_MIX]
-              + [ph.HenyeyGreenstein(g) for g in (0.0, 0.5, -0.5, 0.9, -0.9, 0.999, -0.999, 0.9999, -0.9999)]
-              + [ph.Schlick(k) for k in (0.0, 0.5, -0.5, 0.999, -0.999)]
-              + [ph.Schlick.from_g(0.7), ph.Schlick.from_g(0.999, method="exact")])
+NORM_CASES = (
+    [ph.Isotropic(), ph.Rayleigh(), TWO_HG, ALL_MIX]
+    + [ph.HenyeyGreenstein(g) for g in (0.0, 0.5, -0.5, 0.9, -0.9, 0.999, -0.999, 0.9999, -0.9999)]
+    + [ph.Schlick(k) for k in (0.0, 0.5, -0.5, 0.999, -0.999)]
+    + [ph.Schlick.from_g(0.7), ph.Schlick.from_g(0.999, method="exact")]
+)
 
-CHI_CASES = ([ph.Isotropic(), ph.Rayleigh(), TWO_HG, ALL_MIX]
-             + [ph.HenyeyGreenstein(g) for g in (0.0, 0.3, -0.3, 0.5, 0.9, -0.9, 0.999, -0.999)]
-             + [ph.Schlick(k) for k in (0.5, -0.5, 0.9, 0.999, -0.999)] + [ph.Schlick.from_g(0.7)])
+CHI_CASES = (
+    [ph.Isotropic(), ph.Rayleigh(), TWO_HG, ALL_MIX]
+    + [ph.HenyeyGreenstein(g) for g in (0.0, 0.3, -0.3, 0.5, 0.9, -0.9, 0.999, -0.999)]
+    + [ph.Schlick(k) for k in (0.5, -0.5, 0.9, 0.999, -0.999)]
+    + [ph.Schlick.from_g(0.7)]
+)
 
 
 @pytest.mark.parametrize("f", NORM_CASES, ids=repr)
@@ -192,8 +196,11 @@ def test_limit_g_to_zero():
         assert np.all(np.isfinite(ph.HenyeyGreenstein(g).sample_cos(u)))
 
 
-@pytest.mark.parametrize("f", [ph.HenyeyGreenstein(0.999999), ph.HenyeyGreenstein(-0.999999),
-                               ph.Schlick(0.999999), ph.Schlick(-0.999999)], ids=repr)
+@pytest.mark.parametrize(
+    "f",
+    [ph.HenyeyGreenstein(0.999999), ph.HenyeyGreenstein(-0.999999), ph.Schlick(0.999999), ph.Schlick(-0.999999)],
+    ids=repr,
+)
 def test_limit_g_to_one_is_finite(f):
     c = np.concatenate([np.linspace(-1, 1, 2001), [np.nextafter(1, 0), np.nextafter(-1, 0)]])
     p = f.eval(c)
@@ -225,7 +232,7 @@ def test_orientation_positive_is_forward(f):
 
 def test_schlick_blasi_mapping_accuracy():
     g = np.linspace(-0.9, 0.9, 18001)
-    err = np.abs(ph.schlick_mean_cosine(1.55 * g - 0.55 * g ** 3) - g)
+    err = np.abs(ph.schlick_mean_cosine(1.55 * g - 0.55 * g**3) - g)
     # Blasi's polynomial fits the HG shape, not its first moment: ~0.075 at |g| = 0.85
     assert 0.074 < err.max() < 0.076
     assert abs(g[np.argmax(err)]) == pytest.approx(0.849, abs=0.002)
@@ -252,8 +259,9 @@ def test_mixture_weights_and_one_uniform():
     np.testing.assert_allclose(m.eval(c), 0.75 / (4 * np.pi) + 0.25 * ph.HenyeyGreenstein(0.5).eval(c))
     u = np.array([0.0, 0.3, 0.74999, 0.75, 0.9, np.nextafter(1, 0)])
     np.testing.assert_allclose(m.sample_cos(u[:3]), 2 * (u[:3] / 0.75) - 1)
-    np.testing.assert_allclose(m.sample_cos(u[3:]), ph.HenyeyGreenstein(0.5).sample_cos((u[3:] - 0.75) / 0.25),
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        m.sample_cos(u[3:]), ph.HenyeyGreenstein(0.5).sample_cos((u[3:] - 0.75) / 0.25), atol=1e-12
+    )
     assert np.shape(m.sample_cos(0.5)) == ()
     assert m.mean_cosine == pytest.approx(0.125)
 
@@ -287,30 +295,40 @@ def test_phase_from_spec():
     schlick = ph.phase_from_spec(sm.SchlickPhaseSpec(g=0.5))
     assert schlick.mean_cosine == pytest.approx(0.5, abs=1e-10) and schlick.k != pytest.approx(0.70625)
     assert ph.phase_from_spec(sm.SchlickPhaseSpec(g=0.95)).mean_cosine == pytest.approx(0.95, abs=1e-10)
-    mix = ph.phase_from_spec({"type": "mixture", "components": [
-        {"weight": 2, "phase": {"type": "hg", "g": 0.8}}, {"weight": 1, "phase": {"type": "rayleigh"}}]})
+    mix = ph.phase_from_spec(
+        {
+            "type": "mixture",
+            "components": [
+                {"weight": 2, "phase": {"type": "hg", "g": 0.8}},
+                {"weight": 1, "phase": {"type": "rayleigh"}},
+            ],
+        }
+    )
     assert isinstance(mix, ph.Mixture) and mix.mean_cosine == pytest.approx(2 / 3 * 0.8)
     assert isinstance(ph.phase_from_spec(sm.HomogeneousMediumSpec(sigma_a=0, sigma_s=1).phase), ph.Isotropic)
     with pytest.raises(ValueError, match="unknown phase"):
         ph.phase_from_spec(object())
 
 
-@pytest.mark.parametrize("make, exc, match", [
-    (lambda: ph.HenyeyGreenstein(1.0), ValueError, "g must lie"),
-    (lambda: ph.HenyeyGreenstein(-1.0), ValueError, "g must lie"),
-    (lambda: ph.HenyeyGreenstein(float("nan")), ValueError, "g must lie"),
-    (lambda: ph.Schlick(1.0), ValueError, "k must lie"),
-    (lambda: ph.Schlick(-1.5), ValueError, "k must lie"),
-    (lambda: ph.Schlick.from_g(1.0), ValueError, "g must lie"),
-    (lambda: ph.Schlick.from_g(-0.95), ValueError, "Blasi"),
-    (lambda: ph.Schlick.from_g(0.5, method="fit"), ValueError, "unknown Schlick mapping"),
-    (lambda: ph.Mixture([]), ValueError, "at least one"),
-    (lambda: ph.Mixture([(-0.1, ph.Isotropic()), (1, ph.Rayleigh())]), ValueError, ">= 0"),
-    (lambda: ph.Mixture([(0, ph.Isotropic()), (0.0, ph.Rayleigh())]), ValueError, "all zero"),
-    (lambda: ph.Mixture([(float("inf"), ph.Isotropic())]), ValueError, "finite"),
-    (lambda: ph.Mixture([(1, "hg")]), TypeError, "not a PhaseFunction"),
-    (lambda: ph.Isotropic().sample(np.zeros((4, 3)), 0.5, 0.5), ValueError, "shape"),
-])
+@pytest.mark.parametrize(
+    "make, exc, match",
+    [
+        (lambda: ph.HenyeyGreenstein(1.0), ValueError, "g must lie"),
+        (lambda: ph.HenyeyGreenstein(-1.0), ValueError, "g must lie"),
+        (lambda: ph.HenyeyGreenstein(float("nan")), ValueError, "g must lie"),
+        (lambda: ph.Schlick(1.0), ValueError, "k must lie"),
+        (lambda: ph.Schlick(-1.5), ValueError, "k must lie"),
+        (lambda: ph.Schlick.from_g(1.0), ValueError, "g must lie"),
+        (lambda: ph.Schlick.from_g(-0.95), ValueError, "Blasi"),
+        (lambda: ph.Schlick.from_g(0.5, method="fit"), ValueError, "unknown Schlick mapping"),
+        (lambda: ph.Mixture([]), ValueError, "at least one"),
+        (lambda: ph.Mixture([(-0.1, ph.Isotropic()), (1, ph.Rayleigh())]), ValueError, ">= 0"),
+        (lambda: ph.Mixture([(0, ph.Isotropic()), (0.0, ph.Rayleigh())]), ValueError, "all zero"),
+        (lambda: ph.Mixture([(float("inf"), ph.Isotropic())]), ValueError, "finite"),
+        (lambda: ph.Mixture([(1, "hg")]), TypeError, "not a PhaseFunction"),
+        (lambda: ph.Isotropic().sample(np.zeros((4, 3)), 0.5, 0.5), ValueError, "shape"),
+    ],
+)
 def test_construction_errors(make, exc, match):
     with pytest.raises(exc, match=match):
         make()

@@ -4,6 +4,7 @@ References are independent of engine/photometry.py: closed forms (cos^m, constan
 intensity), a plain bilinear interpolation and a fine midpoint quadrature written here,
 and chi-square tests of the sampled directions against probabilities computed that way.
 """
+
 from __future__ import annotations
 
 import math
@@ -19,19 +20,22 @@ from owcsim.engine.photometry import PhotometryError, luminaire_frame, parse_ies
 # ----------------------------------------------------------------------------- writers (test fixtures)
 def _rows(values, per_line=8):
     values = list(values)
-    return "\n".join(" ".join(f"{v:.6g}" for v in values[k:k + per_line]) for k in range(0, len(values), per_line))
+    return "\n".join(" ".join(f"{v:.6g}" for v in values[k : k + per_line]) for k in range(0, len(values), per_line))
 
 
-def ies_text(gamma_deg, c_deg, candela, *, version="IESNA:LM-63-2002", lumens=-1.0, multiplier=1.0,
-             tilt="NONE") -> str:
+def ies_text(gamma_deg, c_deg, candela, *, version="IESNA:LM-63-2002", lumens=-1.0, multiplier=1.0, tilt="NONE") -> str:
     """An LM-63 file: `candela` (n_c, n_g) [cd] at horizontal angles c_deg, vertical gamma_deg."""
     cd = np.asarray(candela, float)
     head = [version] if version else []
     head += ["[TEST] synthetic", "[MANUFAC] owcsim tests", "[LUMINAIRE] test pattern", f"TILT={tilt}"]
     if tilt == "INCLUDE":
         head += ["1", "3", "0 45 90", "1.0 0.95 0.9"]
-    head += [f"1 {lumens:g} {multiplier:g} {len(gamma_deg)} {len(c_deg)} 1 2 0.1 0.1 0.02",
-             "1.0 1.0 12.5", _rows(gamma_deg), _rows(c_deg)]
+    head += [
+        f"1 {lumens:g} {multiplier:g} {len(gamma_deg)} {len(c_deg)} 1 2 0.1 0.1 0.02",
+        "1.0 1.0 12.5",
+        _rows(gamma_deg),
+        _rows(c_deg),
+    ]
     head += [_rows(row) for row in cd]
     return "\r\n".join(head) + "\r\n"
 
@@ -40,10 +44,40 @@ def ldt_text(gamma_deg, c_all_deg, stored_cd, isym, *, lamp_flux=1000.0, lor=100
     """A EULUMDAT file; `stored_cd` (planes stored for isym, n_g) [cd/klm]."""
     mc, ng = len(c_all_deg), len(gamma_deg)
     dc = c_all_deg[1] - c_all_deg[0] if mc > 1 else 0
-    lines = ["owcsim tests", "1", str(isym), str(mc), f"{dc:g}", str(ng), f"{gamma_deg[1] - gamma_deg[0]:g}",
-             "report", "test luminaire", "T-1", "test.ldt", "2026-12-01", "600", "600", "80", "580", "580",
-             "0", "0", "0", "0", "100", f"{lor:g}".replace(".", ","), f"{factor:g}", "0", "1", "1", "LED",
-             f"{lamp_flux:g}", "4000", "80", "30"]
+    lines = [
+        "owcsim tests",
+        "1",
+        str(isym),
+        str(mc),
+        f"{dc:g}",
+        str(ng),
+        f"{gamma_deg[1] - gamma_deg[0]:g}",
+        "report",
+        "test luminaire",
+        "T-1",
+        "test.ldt",
+        "2026-12-01",
+        "600",
+        "600",
+        "80",
+        "580",
+        "580",
+        "0",
+        "0",
+        "0",
+        "0",
+        "100",
+        f"{lor:g}".replace(".", ","),
+        f"{factor:g}",
+        "0",
+        "1",
+        "1",
+        "LED",
+        f"{lamp_flux:g}",
+        "4000",
+        "80",
+        "30",
+    ]
     lines += ["0.5"] * 10
     lines += [f"{c:g}" for c in c_all_deg] + [f"{g:g}" for g in gamma_deg]
     lines += [f"{v:.6g}" for v in np.asarray(stored_cd, float).ravel()]
@@ -84,8 +118,12 @@ def bilinear(gamma_deg, c_deg, table, g, c):
         j = min(np.searchsorted(c_deg, cc, side="right") - 1, len(c_deg) - 2)
         s = (gg - gamma_deg[i]) / (gamma_deg[i + 1] - gamma_deg[i])
         t = (cc - c_deg[j]) / (c_deg[j + 1] - c_deg[j])
-        out[k] = ((1 - s) * (1 - t) * table[j, i] + (1 - s) * t * table[j + 1, i]
-                  + s * (1 - t) * table[j, i + 1] + s * t * table[j + 1, i + 1])
+        out[k] = (
+            (1 - s) * (1 - t) * table[j, i]
+            + (1 - s) * t * table[j + 1, i]
+            + s * (1 - t) * table[j, i + 1]
+            + s * t * table[j + 1, i + 1]
+        )
     return out
 
 
@@ -98,8 +136,12 @@ def midpoint_masses(gamma_deg, c_deg, table, sub=24):
     for j in range(len(c_deg) - 1):
         for i in range(len(gamma_deg) - 1):
             g = np.radians(gamma_deg[i] + s * (gamma_deg[i + 1] - gamma_deg[i]))
-            val = ((1 - s) * (1 - t) * table[j, i] + (1 - s) * t * table[j + 1, i]
-                   + s * (1 - t) * table[j, i + 1] + s * t * table[j + 1, i + 1])
+            val = (
+                (1 - s) * (1 - t) * table[j, i]
+                + (1 - s) * t * table[j + 1, i]
+                + s * (1 - t) * table[j, i + 1]
+                + s * t * table[j + 1, i + 1]
+            )
             area = math.radians(gamma_deg[i + 1] - gamma_deg[i]) * math.radians(c_deg[j + 1] - c_deg[j])
             masses[j, i] = (val * np.sin(g)).mean() * area
     return masses
@@ -146,13 +188,17 @@ def test_flux_of_constant_and_linear_tables_closed_form():
     assert lin.flux == pytest.approx(180.0 * 2 * np.pi, rel=1e-12)
 
 
-@pytest.mark.parametrize("symmetry,c_stored", [
-    ("quadrant", np.arange(0.0, 90.01, 15.0)),
-    ("bilateral_c0_c180", np.arange(0.0, 180.01, 15.0)),
-    ("bilateral_c90_c270", np.arange(90.0, 270.01, 15.0)),
-])
+@pytest.mark.parametrize(
+    "symmetry,c_stored",
+    [
+        ("quadrant", np.arange(0.0, 90.01, 15.0)),
+        ("bilateral_c0_c180", np.arange(0.0, 180.01, 15.0)),
+        ("bilateral_c90_c270", np.arange(90.0, 270.01, 15.0)),
+    ],
+)
 def test_symmetric_ies_files_equal_the_full_file(symmetry, c_stored):
     """A quadrant-symmetric pattern written in each symmetric form and in full gives one distribution."""
+
     def pattern(cs):  # symmetric about both the C0-C180 and the C90-C270 planes
         g, c = np.meshgrid(np.radians(G180), np.radians(cs))
         return 100 * (1 + 0.6 * np.cos(2 * c) * np.sin(g)) * (1.2 + np.cos(g))
@@ -171,8 +217,13 @@ def test_eulumdat_equals_ies_for_every_symmetry():
     full = tilted_lobe(g, np.append(c_all, 360.0), tilt_deg=0.0)  # rotationally symmetric here
     ref = parse_ies(ies_text(g, np.append(c_all, 360.0), full).encode())
     dirs = _random_dirs(2000, 3)
-    for isym, stored in ((0, np.arange(24)), (1, [0]), (2, np.arange(13)), (3, (18 + np.arange(13)) % 24),
-                         (4, np.arange(7))):
+    for isym, stored in (
+        (0, np.arange(24)),
+        (1, [0]),
+        (2, np.arange(13)),
+        (3, (18 + np.arange(13)) % 24),
+        (4, np.arange(7)),
+    ):
         ph = parse_ldt(ldt_text(g, c_all, full[stored], isym).encode())
         np.testing.assert_allclose(ph.eval_local(dirs), ref.eval_local(dirs), rtol=1e-9, atol=1e-15)
     # an asymmetric one: Isym 3 stores C270 .. C0 .. C90 (EULUMDAT: Mc1 = 3 Mc / 4 + 1)
@@ -251,16 +302,22 @@ def test_sampled_directions_in_world_frame():
 GOOD = ies_text(G5, [0.0], cos_power_table(1, G5, [0.0]))
 
 
-@pytest.mark.parametrize("mutate,message", [
-    (lambda t: t.replace("TILT=NONE", "TILT=lamp.tlt"), "line 5: TILT=LAMP.TLT names an external tilt file"),
-    (lambda t: t.replace("1 -1 1 19 1 1 2", "1 -1 1 19 1 2 2"), "photometric type 2 (B) is not supported"),
-    (lambda t: t.replace("1 -1 1 19 1", "1 -1 1 19 x"), "line 6: the number of horizontal angles should be a number"),
-    (lambda t: t.rsplit(" ", 3)[0], "the file ends (line 13) before candela values (16 of 19)"),
-    (lambda t: t + "42\r\n", "line 15: unexpected value '42' after the 1 x 19 candela table"),
-    (lambda t: t.replace("0 5 10 15", "0 10 5 15"), "vertical angles must increase strictly"),
-    (lambda t: t.replace("IESNA:LM-63-2002", "IESNA:LM-63-2042"), "line 1: unknown IES version tag"),
-    (lambda t: t.replace("TILT=NONE", "NOTILT"), "no TILT= line"),
-])
+@pytest.mark.parametrize(
+    "mutate,message",
+    [
+        (lambda t: t.replace("TILT=NONE", "TILT=lamp.tlt"), "line 5: TILT=LAMP.TLT names an external tilt file"),
+        (lambda t: t.replace("1 -1 1 19 1 1 2", "1 -1 1 19 1 2 2"), "photometric type 2 (B) is not supported"),
+        (
+            lambda t: t.replace("1 -1 1 19 1", "1 -1 1 19 x"),
+            "line 6: the number of horizontal angles should be a number",
+        ),
+        (lambda t: t.rsplit(" ", 3)[0], "the file ends (line 13) before candela values (16 of 19)"),
+        (lambda t: t + "42\r\n", "line 15: unexpected value '42' after the 1 x 19 candela table"),
+        (lambda t: t.replace("0 5 10 15", "0 10 5 15"), "vertical angles must increase strictly"),
+        (lambda t: t.replace("IESNA:LM-63-2002", "IESNA:LM-63-2042"), "line 1: unknown IES version tag"),
+        (lambda t: t.replace("TILT=NONE", "NOTILT"), "no TILT= line"),
+    ],
+)
 def test_bad_ies_files_have_located_errors(mutate, message):
     with pytest.raises(PhotometryError, match=re.escape(message)):
         parse_ies(mutate(GOOD).encode(), "transmitters[0].photometry")
@@ -301,13 +358,18 @@ def test_gamma_inversion_is_exact_on_hard_cells():
     from owcsim.engine.photometry import _invert_gamma_cdf
 
     rng = np.random.default_rng(9)
-    cases = [(0.0, 1.0, 0.0, 0.1), (1.0, -10.0, 0.0, 0.1), (2.0, 0.0, 3.0, math.pi), (0.0, 5.0, 1.5, 1.501),
-             (3.0, -3.0 / 0.5, 1.0, 1.5)]
+    cases = [
+        (0.0, 1.0, 0.0, 0.1),
+        (1.0, -10.0, 0.0, 0.1),
+        (2.0, 0.0, 3.0, math.pi),
+        (0.0, 5.0, 1.5, 1.501),
+        (3.0, -3.0 / 0.5, 1.0, 1.5),
+    ]
     for a, b, g0, g1 in cases:
         v = np.concatenate([[0.0, 1.0, 1e-9, 1 - 1e-9], rng.random(50)])
         x = _invert_gamma_cdf(np.full(len(v), a), np.full(len(v), b), np.full(len(v), g0), np.full(len(v), g1), v)
         assert np.all((x >= g0) & (x <= g1))
-        dens = lambda t: (a + b * (t - g0)) * math.sin(t)  # noqa: E731
+        dens = lambda t, a=a, b=b, g0=g0: (a + b * (t - g0)) * math.sin(t)  # noqa: E731
         total = integrate.quad(dens, g0, g1, epsabs=0, epsrel=1e-13)[0]
         for xi, vi in zip(x[:20], v[:20]):
             got = integrate.quad(dens, g0, xi, epsabs=0, epsrel=1e-13)[0]

@@ -4,6 +4,7 @@ The unit tests check engine/reliability.py by hand computations; the slow tests 
 independent replicates (seeds) and compare the spread of their estimates with the
 standard errors they report (benchmarks/replicate_study.py prints the full table).
 """
+
 import math
 
 import numpy as np
@@ -58,20 +59,31 @@ def test_may_stop_needs_a_trusted_error_bar():
     x[3] = 12.0
     spiky = R.group_reliability(x, np.full((16, 1), 1000))
     assert not R.may_stop([0.001], spiky, 0.01)  # a lucky per-path estimate next to a spike
-    assert R.may_stop([0.5, 0.001], R.group_reliability(np.ones((16, 2)), np.ones((16, 2))), 0.01,
-                      served=[False, True])
+    assert R.may_stop([0.5, 0.001], R.group_reliability(np.ones((16, 2)), np.ones((16, 2))), 0.01, served=[False, True])
 
 
 # --- replicate studies (slow) ------------------------------------------------------------------------
 
+
 def _open_doc(D, g, algorithm, paths, seed, **sim):
-    s = {"algorithm": algorithm, "max_reflections": 0, "time_bin_s": 1e-9, "t_max_s": 1e-7, "paths": paths,
-         "seed": seed, "batch_size": max(64, paths // 16), "segment_time_step_s": 5e-9, "max_strata": 8}
+    s = {
+        "algorithm": algorithm,
+        "max_reflections": 0,
+        "time_bin_s": 1e-9,
+        "t_max_s": 1e-7,
+        "paths": paths,
+        "seed": seed,
+        "batch_size": max(64, paths // 16),
+        "segment_time_step_s": 5e-9,
+        "max_strata": 8,
+    }
     s.update(sim)
-    return {"transmitters": [{"id": "tx", "position": [0, 0, 0], "normal": [1, 0, 0], "lambertian_order": 1}],
-            "receivers": [{"id": "rx", "position": [D, 0, 0], "normal": [-1, 0, 0], "area": 1e-4, "fov_deg": 90}],
-            "medium": {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2, "phase": {"type": "hg", "g": g}},
-            "simulation": s}
+    return {
+        "transmitters": [{"id": "tx", "position": [0, 0, 0], "normal": [1, 0, 0], "lambertian_order": 1}],
+        "receivers": [{"id": "rx", "position": [D, 0, 0], "normal": [-1, 0, 0], "area": 1e-4, "fov_deg": 90}],
+        "medium": {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2, "phase": {"type": "hg", "g": g}},
+        "simulation": s,
+    }
 
 
 def _replicates(make, seeds, quantity):
@@ -100,10 +112,17 @@ def test_replicates_two_sided_algorithm_5_room(g):
     med = {"type": "homogeneous", "sigma_a": 0.0, "sigma_s": 0.2, "phase": {"type": "hg", "g": g}}
 
     def make(seed):
-        return simulate_two_sided(spec(room_doc(medium=med, algorithm=5, max_reflections=0, max_scattering=1,
-                                                paths=6000, batch_size=375, seed=seed)))
-    vals, errs = _replicates(make, range(12), lambda lk: (lk["dc_gain_by_scattering_order"][1],
-                                                          lk["dc_gain_by_scattering_order_stderr"][1]))
+        return simulate_two_sided(
+            spec(
+                room_doc(
+                    medium=med, algorithm=5, max_reflections=0, max_scattering=1, paths=6000, batch_size=375, seed=seed
+                )
+            )
+        )
+
+    vals, errs = _replicates(
+        make, range(12), lambda lk: (lk["dc_gain_by_scattering_order"][1], lk["dc_gain_by_scattering_order_stderr"][1])
+    )
     _check(vals, errs, f"room g={g}")
 
 
@@ -114,9 +133,11 @@ def test_replicates_unbounded_close_devices(algorithm):
 
     (The s = 2 order alone, 5 % of H0 here, is heavier-tailed where both of its vertices sit
     near the devices; docs/smoke-error-bars.md gives its figures.)"""
+
     def make(seed):
         doc = _open_doc(0.5, 0.7, algorithm, 4096, seed, **({"max_scattering": 2} if algorithm == 5 else {}))
         return simulate(spec(doc)) if algorithm == 4 else simulate_two_sided(spec(doc))
+
     runs = [make(seed)["links"][0] for seed in range(12)]
     vals = np.array([lk["dc_gain"] for lk in runs])
     errs = np.array([lk["dc_gain_stderr"] for lk in runs])
@@ -154,6 +175,7 @@ def test_single_scattering_weights_obey_the_proven_bound(monkeypatch):
     doc = _open_doc(D, g, 5, 20_000, 3, max_scattering=1)
     two = _max_contribution(monkeypatch, lambda: simulate_two_sided(spec(doc)))
     assert 0 < two <= bound, (two, bound)
-    one = _max_contribution(monkeypatch, lambda: simulate(spec({**doc, "simulation": {
-        **doc["simulation"], "direction": "forward"}})))
+    one = _max_contribution(
+        monkeypatch, lambda: simulate(spec({**doc, "simulation": {**doc["simulation"], "direction": "forward"}}))
+    )
     assert one > bound, (one, bound)  # the bound is not trivially loose: one side alone exceeds it

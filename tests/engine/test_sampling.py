@@ -3,18 +3,17 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import chisquare
 import pytest
 from scipy import integrate, stats
+from scipy.stats import chisquare
 
-from owcsim.engine import sampling as smp
 from conftest import SEED, seeded_rng  # noqa: F401
+from owcsim.engine import sampling as smp
 
 N_SAMPLES = 100_000
 ALPHA = 0.01
 M_VALUES = (0, 1, 5, 1000)
 CONE_DEGREES = (0.01, 1.0, 30.0, 85.0, 90.0)
-
 
 
 def _uniforms(n=N_SAMPLES):
@@ -34,10 +33,10 @@ def _unit(v):
 # Orthonormal basis / to_world
 # --------------------------------------------------------------------------
 
+
 def _special_normals():
     tiny = [1e-8, 1e-12, 1e-20, 1e-300]
-    rows = [(0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0),
-            (1, 0, -0.0), (0, 1, -0.0)]
+    rows = [(0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (1, 0, -0.0), (0, 1, -0.0)]
     for e in tiny:
         for sz in (1.0, -1.0):
             rows += [(e, e, sz), (-e, e, sz), (e, -3 * e, sz), (e, 0, sz)]
@@ -48,8 +47,7 @@ def _random_normals(n=20_000):
     return _unit(seeded_rng().standard_normal((n, 3)))
 
 
-@pytest.mark.parametrize("normals", [_special_normals(), _random_normals()],
-                         ids=["special", "random"])
+@pytest.mark.parametrize("normals", [_special_normals(), _random_normals()], ids=["special", "random"])
 def test_basis_orthonormal_and_right_handed(normals):
     s, t = smp.orthonormal_basis(normals)
     assert s.shape == t.shape == normals.shape
@@ -85,14 +83,12 @@ def test_to_world_maps_z_to_normal_and_preserves_angles():
     a = _unit(rng.standard_normal((n, 3)))
     b = _unit(rng.standard_normal((n, 3)))
     wa, wb = smp.to_world(a, normals), smp.to_world(b, normals)
-    np.testing.assert_allclose(np.einsum("ij,ij->i", wa, wb),
-                               np.einsum("ij,ij->i", a, b), atol=1e-13, rtol=0)
+    np.testing.assert_allclose(np.einsum("ij,ij->i", wa, wb), np.einsum("ij,ij->i", a, b), atol=1e-13, rtol=0)
     np.testing.assert_allclose(np.linalg.norm(wa, axis=1), 1.0, atol=1e-13, rtol=0)
     # local z-component = cosine to the normal
     np.testing.assert_allclose(np.einsum("ij,ij->i", wa, normals), a[:, 2], atol=1e-13, rtol=0)
     # orientation preserved: (a x b) -> (wa x wb)
-    np.testing.assert_allclose(smp.to_world(np.cross(a, b), normals), np.cross(wa, wb),
-                               atol=1e-13, rtol=0)
+    np.testing.assert_allclose(smp.to_world(np.cross(a, b), normals), np.cross(wa, wb), atol=1e-13, rtol=0)
 
 
 def test_to_world_broadcasts_single_normal():
@@ -100,8 +96,9 @@ def test_to_world_broadcasts_single_normal():
     local = smp.sample_cosine_hemisphere(*_uniforms(500))
     world = smp.to_world(local, normal)
     assert world.shape == (500, 3)
-    np.testing.assert_allclose(world, smp.to_world(local, np.tile(normal, (500, 1))),
-                               atol=1e-15, rtol=0)  # one matrix product vs per-row sums: rounding only
+    np.testing.assert_allclose(
+        world, smp.to_world(local, np.tile(normal, (500, 1))), atol=1e-15, rtol=0
+    )  # one matrix product vs per-row sums: rounding only
     np.testing.assert_allclose(world @ normal, local[:, 2], atol=1e-14, rtol=0)
 
 
@@ -109,8 +106,7 @@ def test_to_world_broadcasts_single_normal():
 # Known points, unit length, support, numerical robustness
 # --------------------------------------------------------------------------
 
-EXTREME_U = np.array([0.0, 5e-324, 1e-300, 1e-16, 1e-8, 0.25, 0.5,
-                      1 - 1e-8, 1 - 1e-16, np.nextafter(1.0, 0.0), 1.0])
+EXTREME_U = np.array([0.0, 5e-324, 1e-300, 1e-16, 1e-8, 0.25, 0.5, 1 - 1e-8, 1 - 1e-16, np.nextafter(1.0, 0.0), 1.0])
 
 
 def _all_samplers():
@@ -143,8 +139,7 @@ def test_lambertian_known_points():
     # m = 0: cos theta = u1 ; m = 1: cos theta = sqrt(u1)
     u = np.linspace(0.0, 1.0, 11)
     np.testing.assert_allclose(smp.sample_generalized_lambertian(0, u, u)[:, 2], u, rtol=1e-15)
-    np.testing.assert_allclose(smp.sample_generalized_lambertian(1, u, u)[:, 2], np.sqrt(u),
-                               rtol=1e-15)
+    np.testing.assert_allclose(smp.sample_generalized_lambertian(1, u, u)[:, 2], np.sqrt(u), rtol=1e-15)
     # u1 = 1 - 1e-16 with m = 1000: essentially the pole, with a tiny but exact sin theta
     u_hi = np.array([1 - 1e-16])  # rounds to 1 - 2**-53
     d = smp.sample_generalized_lambertian(1000, u_hi, np.array([0.0]))
@@ -156,8 +151,7 @@ def test_lambertian_known_points():
 def test_cone_known_points_and_support():
     for deg in CONE_DEGREES:
         cm = _cos_max(deg)
-        np.testing.assert_array_equal(
-            smp.sample_cosine_cone(cm, np.array([0.0]), np.array([0.7])), [[0.0, 0.0, 1.0]])
+        np.testing.assert_array_equal(smp.sample_cosine_cone(cm, np.array([0.0]), np.array([0.7])), [[0.0, 0.0, 1.0]])
         rim = smp.sample_cosine_cone(cm, np.array([1.0]), np.array([0.0]))
         np.testing.assert_allclose(rim[0, 2], cm, rtol=1e-15, atol=1e-16)
         # relative accuracy limited by the rounding of cos_max itself: ~eps / sin^2(theta_max)
@@ -171,11 +165,9 @@ def test_cone_known_points_and_support():
 
 def test_cosine_hemisphere_is_cone_with_cos_max_zero():
     u1, u2 = _uniforms(1000)
-    np.testing.assert_array_equal(smp.sample_cosine_hemisphere(u1, u2),
-                                  smp.sample_cosine_cone(0.0, u1, u2))
+    np.testing.assert_array_equal(smp.sample_cosine_hemisphere(u1, u2), smp.sample_cosine_cone(0.0, u1, u2))
     c = np.linspace(-1, 1, 101)
-    np.testing.assert_allclose(smp.cosine_cone_pdf(0.0, c), smp.generalized_lambertian_pdf(1, c),
-                               rtol=1e-15)
+    np.testing.assert_allclose(smp.cosine_cone_pdf(0.0, c), smp.generalized_lambertian_pdf(1, c), rtol=1e-15)
 
 
 def test_uniform_sphere_known_points():
@@ -203,9 +195,17 @@ def test_pdfs_zero_outside_support_and_no_warnings():
 # Normalization (quadrature over theta)
 # --------------------------------------------------------------------------
 
+
 def _theta_integral(pdf_of_cos, lo, hi, points=None):
-    val, _ = integrate.quad(lambda th: pdf_of_cos(np.cos(th)) * 2 * np.pi * np.sin(th),
-                              lo, hi, points=points, limit=500, epsabs=1e-13, epsrel=1e-11)
+    val, _ = integrate.quad(
+        lambda th: pdf_of_cos(np.cos(th)) * 2 * np.pi * np.sin(th),
+        lo,
+        hi,
+        points=points,
+        limit=500,
+        epsabs=1e-13,
+        epsrel=1e-11,
+    )
     return val
 
 
@@ -228,13 +228,15 @@ def test_cone_pdf_integrates_to_one(deg):
 
 
 def test_uniform_sphere_pdf_integrates_to_one():
-    assert _theta_integral(lambda c: np.full_like(c, smp.uniform_sphere_pdf()), 0, np.pi) == \
-        pytest.approx(1.0, abs=1e-12)
+    assert _theta_integral(lambda c: np.full_like(c, smp.uniform_sphere_pdf()), 0, np.pi) == pytest.approx(
+        1.0, abs=1e-12
+    )
 
 
 # --------------------------------------------------------------------------
 # Moments
 # --------------------------------------------------------------------------
+
 
 def _assert_mean(x, expected, var, k=5.0):
     se = np.sqrt(var / len(x))
@@ -246,8 +248,8 @@ def test_lambertian_moments(m):
     c = smp.sample_generalized_lambertian(m, *_uniforms())[:, 2]
     e1, e2 = (m + 1) / (m + 2), (m + 1) / (m + 3)  # E[cos], E[cos^2]
     e4 = (m + 1) / (m + 5)
-    _assert_mean(c, e1, e2 - e1 ** 2)
-    _assert_mean(c ** 2, e2, e4 - e2 ** 2)
+    _assert_mean(c, e1, e2 - e1**2)
+    _assert_mean(c**2, e2, e4 - e2**2)
 
 
 @pytest.mark.parametrize("deg", CONE_DEGREES)
@@ -258,9 +260,9 @@ def test_cone_moments(deg):
     _assert_mean((d[:, 0] ** 2 + d[:, 1] ** 2) / s2max, 0.5, 1 / 12)
     if deg >= 30:
         cm = _cos_max(deg)
-        e1 = 2 * (1 - cm ** 3) / (3 * s2max)
-        e2 = (1 - cm ** 4) / (2 * s2max)
-        _assert_mean(d[:, 2], e1, e2 - e1 ** 2)
+        e1 = 2 * (1 - cm**3) / (3 * s2max)
+        e2 = (1 - cm**4) / (2 * s2max)
+        _assert_mean(d[:, 2], e1, e2 - e1**2)
 
 
 def test_uniform_sphere_moments():
@@ -274,29 +276,41 @@ def test_uniform_sphere_moments():
 # Chi-square goodness of fit against the exact pdfs
 # --------------------------------------------------------------------------
 
+
 def _lambert_case(m):
-    return dict(sample=lambda u1, u2: smp.sample_generalized_lambertian(m, u1, u2),
-                pdf=lambda c: smp.generalized_lambertian_pdf(m, c),
-                quantile=lambda q: q ** (1.0 / (m + 1)), lo=0.0)
+    return dict(
+        sample=lambda u1, u2: smp.sample_generalized_lambertian(m, u1, u2),
+        pdf=lambda c: smp.generalized_lambertian_pdf(m, c),
+        quantile=lambda q: q ** (1.0 / (m + 1)),
+        lo=0.0,
+    )
 
 
 def _cone_case(deg):
     cm = _cos_max(deg)
     s2 = (1 - cm) * (1 + cm)
-    return dict(sample=lambda u1, u2: smp.sample_cosine_cone(cm, u1, u2),
-                pdf=lambda c: smp.cosine_cone_pdf(cm, c),
-                quantile=lambda q: np.sqrt(1 - (1 - q) * s2), lo=cm)
+    return dict(
+        sample=lambda u1, u2: smp.sample_cosine_cone(cm, u1, u2),
+        pdf=lambda c: smp.cosine_cone_pdf(cm, c),
+        quantile=lambda q: np.sqrt(1 - (1 - q) * s2),
+        lo=cm,
+    )
 
 
 def _sphere_case():
-    return dict(sample=smp.sample_uniform_sphere,
-                pdf=lambda c: np.full_like(np.asarray(c, float), smp.uniform_sphere_pdf()),
-                quantile=lambda q: 2 * q - 1, lo=-1.0)
+    return dict(
+        sample=smp.sample_uniform_sphere,
+        pdf=lambda c: np.full_like(np.asarray(c, float), smp.uniform_sphere_pdf()),
+        quantile=lambda q: 2 * q - 1,
+        lo=-1.0,
+    )
 
 
-DISTRIBUTIONS = ({f"lambert_m{m}": _lambert_case(m) for m in M_VALUES}
-                 | {f"cone_{deg}deg": _cone_case(deg) for deg in CONE_DEGREES}
-                 | {"uniform_sphere": _sphere_case()})
+DISTRIBUTIONS = (
+    {f"lambert_m{m}": _lambert_case(m) for m in M_VALUES}
+    | {f"cone_{deg}deg": _cone_case(deg) for deg in CONE_DEGREES}
+    | {"uniform_sphere": _sphere_case()}
+)
 CHI2_CASES = [(name, var) for name in DISTRIBUTIONS for var in ("cos", "phi")]
 ALPHA_CASE = 1 - (1 - ALPHA) ** (1 / len(CHI2_CASES))  # Sidak correction
 N_BINS = 20
@@ -313,9 +327,12 @@ def _cos_bins_probs(case, k=N_BINS):
     """Inner edges at (approximate) equiprobable cos quantiles; exact bin
     probabilities from quadrature of the pdf: P = int 2 pi pdf(c) dc."""
     edges = np.concatenate([[case["lo"]], case["quantile"](np.arange(1, k) / k), [1.0]])
-    probs = np.array([integrate.quad(lambda c: 2 * np.pi * case["pdf"](c), a, b,
-                                     epsabs=0, epsrel=1e-10, limit=200)[0]
-                      for a, b in zip(edges[:-1], edges[1:])])
+    probs = np.array(
+        [
+            integrate.quad(lambda c: 2 * np.pi * case["pdf"](c), a, b, epsabs=0, epsrel=1e-10, limit=200)[0]
+            for a, b in zip(edges[:-1], edges[1:])
+        ]
+    )
     return edges[1:-1], probs
 
 
@@ -338,12 +355,15 @@ def test_chi_square_goodness_of_fit(name, var):
     assert p > ALPHA_CASE, f"{name}/{var}: p = {p:.3g} <= {ALPHA_CASE:.3g}"
 
 
-@pytest.mark.parametrize("sampled,claimed", [
-    (_lambert_case(6), _lambert_case(5)),
-    (_lambert_case(1000), _lambert_case(950)),
-    (_cone_case(29.0), _cone_case(30.0)),
-    (_lambert_case(1), _cone_case(85.0)),
-])
+@pytest.mark.parametrize(
+    "sampled,claimed",
+    [
+        (_lambert_case(6), _lambert_case(5)),
+        (_lambert_case(1000), _lambert_case(950)),
+        (_cone_case(29.0), _cone_case(30.0)),
+        (_lambert_case(1), _cone_case(85.0)),
+    ],
+)
 def test_chi_square_has_power(sampled, claimed):
     """The goodness-of-fit check rejects slightly wrong distributions."""
     d = sampled["sample"](*_uniforms())

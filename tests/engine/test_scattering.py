@@ -1,14 +1,14 @@
 """Algorithms 2-5 against each other and against independent references (physics.md section 6)."""
+
 import math
 
 import numpy as np
 import pytest
 
-from tests.results import simulate_document as simulate
 from tests import reference as ref
 from tests.reference_volume import single_scattering
+from tests.results import simulate_document as simulate
 from tests.scenes import SMOKE, open_doc, room_doc, spec, within
-
 
 
 def _link(doc, **kw):
@@ -26,11 +26,16 @@ def quadrature():
     return single_scattering(3.0, 1.0, 1e-4, 0.2, 0.25, 0.5, n=96, t_edges=CIR_EDGES)
 
 
-@pytest.mark.parametrize("algorithm,extra", [
-    (2, {}), (3, {}), (4, {"paths": 20_000}),
-    (5, {"max_scattering": 1, "direction": "forward", "paths": 200_000}),
-    (5, {"max_scattering": 1, "direction": "backward", "paths": 400_000}),
-])
+@pytest.mark.parametrize(
+    "algorithm,extra",
+    [
+        (2, {}),
+        (3, {}),
+        (4, {"paths": 20_000}),
+        (5, {"max_scattering": 1, "direction": "forward", "paths": 200_000}),
+        (5, {"max_scattering": 1, "direction": "backward", "paths": 400_000}),
+    ],
+)
 def test_single_scattering_unbounded_medium(quadrature, algorithm, extra):
     """Unbounded medium, no surfaces: s = 1 gain of each algorithm against volume quadrature."""
     h1, hist = quadrature
@@ -76,8 +81,20 @@ def test_energy_on_surfaces_non_absorbing_medium(sigma_s, g):
     """Closed room, reflectance rho, medium without absorption: surfaces receive P (1 - rho^K)/(1 - rho)."""
     rho, K = 0.5, 40
     medium = {"type": "homogeneous", "sigma_a": 0.0, "sigma_s": sigma_s, "phase": {"type": "hg", "g": g}}
-    doc = room_doc(rho, rho, rho, medium=medium, algorithm=5, direction="forward", max_reflections=K,
-                   max_scattering=1000, paths=5_000, russian_roulette=False, t_max_s=1e-6, time_bin_s=1e-8)
+    doc = room_doc(
+        rho,
+        rho,
+        rho,
+        medium=medium,
+        algorithm=5,
+        direction="forward",
+        max_reflections=K,
+        max_scattering=1000,
+        paths=5_000,
+        russian_roulette=False,
+        t_max_s=1e-6,
+        time_bin_s=1e-8,
+    )
     res = simulate(spec(doc))
     assert res["diagnostics"]["escaped_power"]["tx"] == 0.0
     # Scattering without absorption keeps every weight: the sum is exact, with no variance.
@@ -98,10 +115,20 @@ def test_algorithm_5_directions_agree_in_smoke():
 
 def test_black_room_single_scattering_families_agree():
     """Reflectance 0: only volume paths. Algorithms 2, 3, 4 and 5 (S = 1) agree on s = 1."""
-    base = dict(rho_walls=0.0, rho_floor=0.0, rho_ceiling=0.0, medium=SMOKE, max_reflections=0,
-                paths=30_000, seed=41, rx=(1.5, 1.0, 0.0))
-    links = {a: _link(room_doc(algorithm=a, direction="backward" if a == 5 else "auto",
-                               max_scattering=1, **base)) for a in (2, 3, 4, 5)}
+    base = dict(
+        rho_walls=0.0,
+        rho_floor=0.0,
+        rho_ceiling=0.0,
+        medium=SMOKE,
+        max_reflections=0,
+        paths=30_000,
+        seed=41,
+        rx=(1.5, 1.0, 0.0),
+    )
+    links = {
+        a: _link(room_doc(algorithm=a, direction="backward" if a == 5 else "auto", max_scattering=1, **base))
+        for a in (2, 3, 4, 5)
+    }
     ref_s1 = links[4]["dc_gain_by_scattering_order"][1]
     ref_err = links[4]["dc_gain_by_scattering_order_stderr"][1]
     assert ref_err < 0.05 * ref_s1

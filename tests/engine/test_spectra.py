@@ -8,6 +8,7 @@
   tests/reference.py (Barry et al. 1993), within 4 standard errors + 0.1 %;
 - algorithm 1 with smoke per band: LOS transmittance exp(-sigma_t,b d) per band in closed form.
 """
+
 from __future__ import annotations
 
 import copy
@@ -45,8 +46,13 @@ def _surf(values):
 
 def test_flat_spectra_give_the_grey_result():
     grey = simulate(spec(room_doc(rho_walls=0.6, rho_floor=0.3, rho_ceiling=0.8, paths=6000)))
-    doc = _spectral_room(_surf([0.6, 0.6, 0.6]), _surf(0.3), 0.8, {"band_edges": [400 * NM, 500 * NM, 600 * NM,
-                                                                                 700 * NM]}, russian_roulette=True)
+    doc = _spectral_room(
+        _surf([0.6, 0.6, 0.6]),
+        _surf(0.3),
+        0.8,
+        {"band_edges": [400 * NM, 500 * NM, 600 * NM, 700 * NM]},
+        russian_roulette=True,
+    )
     doc["simulation"]["batch_size"] = 16384
     doc["transmitters"][0]["spectrum"] = [1.0, 2.0, 0.5]
     res = simulate(spec(doc))
@@ -66,8 +72,9 @@ def test_two_bands_equal_two_single_band_runs():
     gains = two["spectral"]["links"][0]["dc_gain_by_band"]
     rms = two["spectral"]["links"][0]["rms_delay_spread_s_by_band"]
     for b in range(2):
-        one = simulate(spec(_spectral_room(_surf([walls[b]]), _surf([floor[b]]), 0.8,
-                                           {"wavelengths": [(450, 650)[b] * NM]})))
+        one = simulate(
+            spec(_spectral_room(_surf([walls[b]]), _surf([floor[b]]), 0.8, {"wavelengths": [(450, 650)[b] * NM]}))
+        )
         assert not one["spectral"]["carried_ratios"]
         assert gains[b] == pytest.approx(one["links"][0]["dc_gain"], rel=1e-12)
         assert rms[b] == pytest.approx(one["links"][0]["rms_delay_spread_s"], rel=1e-10)
@@ -77,23 +84,28 @@ def test_two_bands_equal_two_single_band_runs():
 
 def test_two_bands_with_smoke_per_band_equal_single_band_runs():
     medium = {"type": "homogeneous", "sigma_a": 0.1, "sigma_s": 0.0}
-    doc = _spectral_room(_surf([0.2, 0.7]), 0.3, 0.8, {"wavelengths": [450 * NM, 650 * NM],
-                                                       "medium": {"sigma_a": [0.3, 0.1], "sigma_s": [0.0, 0.0]}})
+    doc = _spectral_room(
+        _surf([0.2, 0.7]),
+        0.3,
+        0.8,
+        {"wavelengths": [450 * NM, 650 * NM], "medium": {"sigma_a": [0.3, 0.1], "sigma_s": [0.0, 0.0]}},
+    )
     doc["medium"] = medium
     two = simulate(spec(doc))
     for b, (rho, sigma) in enumerate([(0.2, 0.3), (0.7, 0.1)]):
         one_doc = _spectral_room(_surf([rho]), 0.3, 0.8, {"wavelengths": [(450, 650)[b] * NM]})
         one_doc["medium"] = {"type": "homogeneous", "sigma_a": sigma, "sigma_s": 0.0}
         one = simulate(spec(one_doc))
-        assert two["spectral"]["links"][0]["dc_gain_by_band"][b] == pytest.approx(one["links"][0]["dc_gain"],
-                                                                                   rel=1e-11)
+        assert two["spectral"]["links"][0]["dc_gain_by_band"][b] == pytest.approx(one["links"][0]["dc_gain"], rel=1e-11)
 
 
 def test_smoke_per_band_line_of_sight_in_closed_form():
     doc = room_doc(max_reflections=0)
     doc["medium"] = {"type": "homogeneous", "sigma_a": 0.1, "sigma_s": 0.0}
-    doc["spectral"] = {"band_edges": [400 * NM, 500 * NM, 600 * NM], "medium": {"sigma_a": [0.4, 0.1],
-                                                                                 "sigma_s": [0.0, 0.05]}}
+    doc["spectral"] = {
+        "band_edges": [400 * NM, 500 * NM, 600 * NM],
+        "medium": {"sigma_a": [0.4, 0.1], "sigma_s": [0.0, 0.05]},
+    }
     res = simulate(spec(doc))
     d = math.dist((2.5, 2.5, 3.0), (1.0, 1.0, 0.0))
     los, _ = reference.los_gain((2.5, 2.5, 3.0), (0, 0, -1), 1.0, (1.0, 1.0, 0.0), (0, 0, 1), 1e-4, math.pi / 2)
@@ -105,8 +117,10 @@ def test_smoke_per_band_line_of_sight_in_closed_form():
 
 def _led(lam):
     """A white LED of the test's own: blue chip (448 nm, FWHM 22 nm) + phosphor (565 nm, FWHM 120 nm)."""
+
     def g(peak, fwhm):
         return np.exp(-0.5 * ((lam - peak) / (fwhm / 2.3548)) ** 2)
+
     return 1.8 * g(448 * NM, 22 * NM) + g(565 * NM, 120 * NM)
 
 
@@ -116,8 +130,9 @@ def test_white_led_illuminance_against_a_hand_computation():
     lam = np.linspace(380 * NM, 780 * NM, 801)
     power, h = 2.0, 2.5
     doc = room_doc(max_reflections=0, tx=(2.5, 2.5, 3.0), rx=(2.5, 2.5, 0.5), area=1e-4)
-    doc["transmitters"][0].update(power=power, spectrum={"type": "table", "wavelengths": lam.tolist(),
-                                                         "values": _led(lam).tolist()})
+    doc["transmitters"][0].update(
+        power=power, spectrum={"type": "table", "wavelengths": lam.tolist(), "values": _led(lam).tolist()}
+    )
     doc["spectral"] = {"band_edges": np.linspace(380 * NM, 780 * NM, 9).tolist()}
     res = simulate(spec(doc))
     # by hand: K_m int S V / int S on a fine grid, times the irradiance P (m + 1) / (2 pi h^2) below a Lambertian
@@ -138,16 +153,24 @@ def test_white_led_illuminance_against_a_hand_computation():
 def test_coloured_walls_first_bounce_against_the_integrator():
     size, tx, rx = (5.0, 5.0, 3.0), (2.5, 2.5, 3.0), (1.0, 1.0, 0.0)
     walls, floor, ceiling = [0.15, 0.75], [0.4, 0.2], [0.8, 0.8]
-    doc = _spectral_room(_surf(walls), _surf(floor), _surf(ceiling), {"wavelengths": [470 * NM, 620 * NM]},
-                         max_reflections=1, paths=100_000, batch_size=20_000)
+    doc = _spectral_room(
+        _surf(walls),
+        _surf(floor),
+        _surf(ceiling),
+        {"wavelengths": [470 * NM, 620 * NM]},
+        max_reflections=1,
+        paths=100_000,
+        batch_size=20_000,
+    )
     doc["simulation"]["direction"] = "backward"
     res = simulate(spec(doc))
     link = res["spectral"]["links"][0]
     los = res["links"][0]["los_gain"]
     for b in range(2):
         rho = {"floor": floor[b], "ceiling": ceiling[b], **{f: walls[b] for f in reference.FACES[2:]}}
-        ref = reference.first_bounce_box_dc_gain(size, rho, tx, (0, 0, -1), 1.0, rx, (0, 0, 1), 1e-4, math.pi / 2,
-                                                 rel_tol=1e-3)
+        ref = reference.first_bounce_box_dc_gain(
+            size, rho, tx, (0, 0, -1), 1.0, rx, (0, 0, 1), 1e-4, math.pi / 2, rel_tol=1e-3
+        )
         h1, se = link["dc_gain_by_band"][b] - los, link["dc_gain_by_band_stderr"][b]
         assert abs(h1 - ref) <= 4 * se + 1e-3 * ref, (b, h1, ref, se)
         assert 4 * se < 0.03 * ref  # a 3 % error in a band would fail
@@ -158,49 +181,69 @@ def test_coloured_walls_first_bounce_against_the_integrator():
 @pytest.mark.parametrize("direction", ["forward", "backward"])
 def test_electrical_gain_is_the_responsivity_weighted_sum(direction):
     """Two transmitters with their own SPDs, receivers with their own responsivity and filter, a grid."""
-    doc = _spectral_room(_surf([0.3, 0.6]), 0.3, 0.8, {"band_edges": [500 * NM, 700 * NM, 900 * NM]},
-                         direction=direction, paths=2000)
+    doc = _spectral_room(
+        _surf([0.3, 0.6]), 0.3, 0.8, {"band_edges": [500 * NM, 700 * NM, 900 * NM]}, direction=direction, paths=2000
+    )
     doc["transmitters"][0]["spectrum"] = [3.0, 1.0]
-    doc["transmitters"].append({"id": "tx2", "position": [1, 4, 3], "normal": [0, 0, -1], "lambertian_order": 2,
-                                "spectrum": [1.0, 3.0]})
+    doc["transmitters"].append(
+        {"id": "tx2", "position": [1, 4, 3], "normal": [0, 0, -1], "lambertian_order": 2, "spectrum": [1.0, 3.0]}
+    )
     doc["receivers"][0].update(responsivity=[0.3, 0.5], filter_transmission=[0.5, 0.9])
-    doc["receivers"].append({"id": "rx2", "position": [4, 1, 0], "normal": [0, 0, 1], "area": 1e-4,
-                             "responsivity": [0.6, 0.2]})
-    doc["receiver_grids"] = [{"origin": [1, 1, 0.8], "size": [1, 1], "spacing": 1.0, "area": 1e-4,
-                              "responsivity": 0.4}]
+    doc["receivers"].append(
+        {"id": "rx2", "position": [4, 1, 0], "normal": [0, 0, 1], "area": 1e-4, "responsivity": [0.6, 0.2]}
+    )
+    doc["receiver_grids"] = [{"origin": [1, 1, 0.8], "size": [1, 1], "spacing": 1.0, "area": 1e-4, "responsivity": 0.4}]
     res = simulate(spec(doc))
     f = {"tx": [0.75, 0.25], "tx2": [0.25, 0.75]}
     e = {"rx": [0.15, 0.45], "rx2": [0.6, 0.2]}
     assert len(res["spectral"]["links"]) == 2 * 6
     for link, main in zip(res["spectral"]["links"], res["links"]):
         h, fb, eb = link["dc_gain_by_band"], f[link["transmitter"]], e.get(link["receiver"], [0.4, 0.4])
-        assert link["electrical_gain_a_per_w"] == pytest.approx(fb[0] * eb[0] * h[0] + fb[1] * eb[1] * h[1],
-                                                                rel=1e-12)
+        assert link["electrical_gain_a_per_w"] == pytest.approx(fb[0] * eb[0] * h[0] + fb[1] * eb[1] * h[1], rel=1e-12)
         assert link["optical_gain"] == pytest.approx(fb[0] * h[0] + fb[1] * h[1], rel=1e-12)
         assert main["dc_gain"] == pytest.approx(link["optical_gain"], rel=1e-12)
 
-BASE = {"room": {"size": [4, 4, 3], "reflectance": {"floor": 0.3, "ceiling": 0.8, "walls": _surf([0.2, 0.7])}},
-        "transmitters": [{"position": [2, 2, 3], "normal": [0, 0, -1], "lambertian_order": 1}],
-        "receivers": [{"position": [1, 1, 0], "normal": [0, 0, 1], "area": 1e-4}],
-        "spectral": {"band_edges": [400e-9, 550e-9, 700e-9]}}
+
+BASE = {
+    "room": {"size": [4, 4, 3], "reflectance": {"floor": 0.3, "ceiling": 0.8, "walls": _surf([0.2, 0.7])}},
+    "transmitters": [{"position": [2, 2, 3], "normal": [0, 0, -1], "lambertian_order": 1}],
+    "receivers": [{"position": [1, 1, 0], "normal": [0, 0, 1], "area": 1e-4}],
+    "spectral": {"band_edges": [400e-9, 550e-9, 700e-9]},
+}
 
 
-@pytest.mark.parametrize("change, message", [
-    (lambda d: d.pop("spectral"), "room.reflectance.walls.reflectance: a spectral curve needs the scene's wavelength"),
-    (lambda d: d["spectral"].update(band_edges=[500e-9, 400e-9]), "strictly increasing: entry 1"),
-    (lambda d: d["spectral"].update(band_edges=[400, 500]), "wavelengths are in metres"),
-    (lambda d: d["room"]["reflectance"].update(walls=_surf([0.2, 1.3])),
-     "walls.reflectance: entry 1 value 1.3 outside"),
-    (lambda d: d["receivers"][0].update(responsivity=[1, 2, 3]), "receivers[0].responsivity: 3 values but the scene "
-                                                                  "has 2 band(s)"),
-    (lambda d: d["transmitters"][0].update(spectrum={"type": "table", "wavelengths": [450e-9, 800e-9],
-                                                     "values": [1, 1]}), "transmitters[0].spectrum: the table covers"),
-    (lambda d: d["transmitters"][0].update(spectrum={"type": "named", "name": "white_paint"}),
-     "'white_paint' is a reflectance table, not a spectrum"),
-    (lambda d: d["transmitters"][0].update(spectrum=[0, 0]), "zero everywhere"),
-    (lambda d: d["receivers"][0].update(filter_transmission=[0.5, 1.5]), "filter_transmission: entry 1"),
-    (lambda d: d["spectral"].update(medium={"sigma_a": [0.1, 0.1], "sigma_s": [0, 0]}), "the scene has no medium"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (
+            lambda d: d.pop("spectral"),
+            "room.reflectance.walls.reflectance: a spectral curve needs the scene's wavelength",
+        ),
+        (lambda d: d["spectral"].update(band_edges=[500e-9, 400e-9]), "strictly increasing: entry 1"),
+        (lambda d: d["spectral"].update(band_edges=[400, 500]), "wavelengths are in metres"),
+        (
+            lambda d: d["room"]["reflectance"].update(walls=_surf([0.2, 1.3])),
+            "walls.reflectance: entry 1 value 1.3 outside",
+        ),
+        (
+            lambda d: d["receivers"][0].update(responsivity=[1, 2, 3]),
+            "receivers[0].responsivity: 3 values but the scene has 2 band(s)",
+        ),
+        (
+            lambda d: d["transmitters"][0].update(
+                spectrum={"type": "table", "wavelengths": [450e-9, 800e-9], "values": [1, 1]}
+            ),
+            "transmitters[0].spectrum: the table covers",
+        ),
+        (
+            lambda d: d["transmitters"][0].update(spectrum={"type": "named", "name": "white_paint"}),
+            "'white_paint' is a reflectance table, not a spectrum",
+        ),
+        (lambda d: d["transmitters"][0].update(spectrum=[0, 0]), "zero everywhere"),
+        (lambda d: d["receivers"][0].update(filter_transmission=[0.5, 1.5]), "filter_transmission: entry 1"),
+        (lambda d: d["spectral"].update(medium={"sigma_a": [0.1, 0.1], "sigma_s": [0, 0]}), "the scene has no medium"),
+    ],
+)
 def test_validation_errors_are_located(change, message):
     doc = copy.deepcopy(BASE)
     change(doc)
@@ -210,9 +253,14 @@ def test_validation_errors_are_located(change, message):
 
 
 def test_scattering_algorithms_in_smoke_per_band_say_what_to_use():
-    doc = _spectral_room(_surf([0.2, 0.7]), 0.3, 0.8, {"wavelengths": [450 * NM, 650 * NM],
-                                                       "medium": {"sigma_a": [0.05, 0.02], "sigma_s": [0.2, 0.1]}},
-                         algorithm=5, max_scattering=2)
+    doc = _spectral_room(
+        _surf([0.2, 0.7]),
+        0.3,
+        0.8,
+        {"wavelengths": [450 * NM, 650 * NM], "medium": {"sigma_a": [0.05, 0.02], "sigma_s": [0.2, 0.1]}},
+        algorithm=5,
+        max_scattering=2,
+    )
     doc["medium"] = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2}
     with pytest.raises(SceneError, match="use algorithms 1-4"):
         simulate(spec(doc))
@@ -232,8 +280,9 @@ def test_spectral_surfaces_in_grey_smoke_with_scattering_algorithms(algorithm):
     if algorithm == 5:
         sim["max_scattering"] = 2
     grey = room_doc(rho_walls=0.6, medium=smoke, **sim)
-    flat = _spectral_room(_surf([0.6, 0.6]), 0.3, 0.8, {"wavelengths": [450 * NM, 650 * NM]},
-                          russian_roulette=True, **sim)
+    flat = _spectral_room(
+        _surf([0.6, 0.6]), 0.3, 0.8, {"wavelengths": [450 * NM, 650 * NM]}, russian_roulette=True, **sim
+    )
     flat["medium"] = smoke
     g, f = simulate(spec(grey)), simulate(spec(flat))
     assert f["spectral"]["carried_ratios"]
@@ -246,16 +295,27 @@ def test_spectral_surfaces_in_grey_smoke_with_scattering_algorithms(algorithm):
         one = _spectral_room(_surf([rho]), 0.3, 0.8, {"wavelengths": [(450, 650)[b] * NM]}, **sim)
         one["medium"] = smoke
         assert res["spectral"]["links"][0]["dc_gain_by_band"][b] == pytest.approx(
-            simulate(spec(one))["links"][0]["dc_gain"], rel=1e-11)
+            simulate(spec(one))["links"][0]["dc_gain"], rel=1e-11
+        )
+
 
 def test_particle_smoke_per_band_equals_grey_runs_at_each_wavelength():
     """Mie per band: each band of a two-band soot scene equals the grey scene at that band's wavelength and index."""
-    particles = {"geometric_mean_diameter": 1.5e-7, "geometric_std": 1.8,
-                 "refractive_index": {"real": 1.57, "imag": 0.56}, "wavelength": 850 * NM}
+    particles = {
+        "geometric_mean_diameter": 1.5e-7,
+        "geometric_std": 1.8,
+        "refractive_index": {"real": 1.57, "imag": 0.56},
+        "wavelength": 850 * NM,
+    }
     medium = {"type": "particles", "particles": particles, "mass_concentration": 1e-4, "particle_density": 1800.0}
     index = [{"real": 1.55, "imag": 0.50}, {"real": 1.60, "imag": 0.60}]
-    doc = _spectral_room(_surf([0.3, 0.6]), 0.3, 0.8, {"wavelengths": [450 * NM, 850 * NM],
-                                                       "medium": {"refractive_index": index}}, max_reflections=2)
+    doc = _spectral_room(
+        _surf([0.3, 0.6]),
+        0.3,
+        0.8,
+        {"wavelengths": [450 * NM, 850 * NM], "medium": {"refractive_index": index}},
+        max_reflections=2,
+    )
     doc["medium"] = medium
     two = simulate(spec(doc))
     bands = two["spectral"]["medium_bands"]
@@ -265,8 +325,7 @@ def test_particle_smoke_per_band_equals_grey_runs_at_each_wavelength():
         grey["medium"] = {**medium, "particles": {**particles, "wavelength": lam * NM, "refractive_index": index[b]}}
         one = simulate(spec(grey))
         assert one["modeled"]["medium"]["sigma_t"] == pytest.approx(bands[b]["sigma_t"], rel=1e-12)
-        assert two["spectral"]["links"][0]["dc_gain_by_band"][b] == pytest.approx(one["links"][0]["dc_gain"],
-                                                                                   rel=1e-10)
+        assert two["spectral"]["links"][0]["dc_gain_by_band"][b] == pytest.approx(one["links"][0]["dc_gain"], rel=1e-10)
 
 
 def test_job_memory_estimate_counts_the_channel_sums():
@@ -283,9 +342,18 @@ def test_job_memory_estimate_counts_the_channel_sums():
 
 def _smoke_room(medium, bands, rx=(4.0, 2.5, 1.5), rx_normal=(-1, 0, 0), **sim):
     """A beam along x from (1, 2.5, 1.5) in a dark room with smoke; by default the receiver faces it 3 m away."""
-    doc = room_doc(rho_walls=0.1, rho_floor=0.1, rho_ceiling=0.1, tx=(1.0, 2.5, 1.5), tx_normal=(1, 0, 0), m=3.0,
-                   rx=rx, rx_normal=rx_normal, medium=medium,
-                   **{"algorithm": 4, "max_reflections": 1, "paths": 4000, "batch_size": 1000, **sim})
+    doc = room_doc(
+        rho_walls=0.1,
+        rho_floor=0.1,
+        rho_ceiling=0.1,
+        tx=(1.0, 2.5, 1.5),
+        tx_normal=(1, 0, 0),
+        m=3.0,
+        rx=rx,
+        rx_normal=rx_normal,
+        medium=medium,
+        **{"algorithm": 4, "max_reflections": 1, "paths": 4000, "batch_size": 1000, **sim},
+    )
     if bands is not None:
         doc["spectral"] = bands
     return doc
@@ -315,20 +383,30 @@ def test_algorithm_4_with_mie_per_band_carries_the_phase_ratio(monkeypatch):
     (light scattered sideways); without the phase ratio p_b / p_c the blue band misses by more than 4."""
     from owcsim.engine.spectra import SceneSpectra
 
-    particles = {"geometric_mean_diameter": 1.5e-7, "geometric_std": 1.8,
-                 "refractive_index": {"real": 1.5, "imag": 0.01}, "wavelength": 850 * NM}
+    particles = {
+        "geometric_mean_diameter": 1.5e-7,
+        "geometric_std": 1.8,
+        "refractive_index": {"real": 1.5, "imag": 0.01},
+        "wavelength": 850 * NM,
+    }
     medium = {"type": "particles", "particles": particles, "mass_concentration": 4e-4, "particle_density": 1800.0}
     where = {"rx": (2.5, 2.5, 0.3), "rx_normal": (0, 0, 1), "paths": 40_000, "batch_size": 5000}
     bands = {"wavelengths": [450 * NM, 850 * NM]}
     two = simulate(spec(_smoke_room(medium, bands, **where)))["spectral"]
     g = [m["g"] for m in two["medium_bands"]]
     assert abs(g[0] - g[1]) > 0.05
-    ones = [simulate(spec(_smoke_room({**medium, "particles": {**particles, "wavelength": lam * NM}}, None, seed=11,
-                                      **where)))["links"][0] for lam in (450, 850)]
+    ones = [
+        simulate(
+            spec(_smoke_room({**medium, "particles": {**particles, "wavelength": lam * NM}}, None, seed=11, **where))
+        )["links"][0]
+        for lam in (450, 850)
+    ]
 
     def z(link, b):
-        return (link["dc_gain_by_band"][b] - ones[b]["dc_gain"]) / math.hypot(link["dc_gain_by_band_stderr"][b],
-                                                                               ones[b]["dc_gain_stderr"])
+        return (link["dc_gain_by_band"][b] - ones[b]["dc_gain"]) / math.hypot(
+            link["dc_gain_by_band_stderr"][b], ones[b]["dc_gain_stderr"]
+        )
+
     assert all(abs(z(two["links"][0], b)) <= 4 for b in range(2))
     monkeypatch.setattr(SceneSpectra, "phase_ratio", lambda self, cos: np.ones((self.n_bands, len(cos))))
     wrong = simulate(spec(_smoke_room(medium, bands, **where)))["spectral"]["links"][0]

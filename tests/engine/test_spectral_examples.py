@@ -1,4 +1,5 @@
 """The spectral and Mie examples run (small path counts) and print what their docstrings promise."""
+
 from __future__ import annotations
 
 import re
@@ -12,8 +13,9 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _run(script: str, *args: str) -> str:
-    out = subprocess.run([sys.executable, str(ROOT / "examples" / script), *args], capture_output=True, text=True,
-                         timeout=120, cwd=ROOT)
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "examples" / script), *args], capture_output=True, text=True, timeout=120, cwd=ROOT
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     return out.stdout
 
@@ -25,8 +27,9 @@ def test_white_led_room_prints_bands_and_combined():
     combined = next(line for line in text.splitlines() if line.strip().startswith("combined"))
     h, se, g, e_v = (float(x) for x in combined.replace("±", " ").split()[2:6])
     assert 0 < se < 0.05 * h and g > 0 and e_v > 0
-    total, direct = (float(x) for x in re.search(r"illuminance ([\d.]+) ± \S+ lx, of which direct ([\d.]+) lx",
-                                                 text).groups())
+    total, direct = (
+        float(x) for x in re.search(r"illuminance ([\d.]+) ± \S+ lx, of which direct ([\d.]+) lx", text).groups()
+    )
     assert direct < total  # reflections add light
     # per-band illuminances add up to the combined one (printed to 0.01 lx)
     assert sum(float(r.split()[-1]) for r in rows) == pytest.approx(e_v, abs=0.06)

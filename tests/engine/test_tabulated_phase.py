@@ -5,6 +5,7 @@ piecewise-linear function (numpy), scipy quadrature of np.interp, the closed-for
 The engine-level test runs algorithm 5 with an HG spec and with a fine table of the
 same HG and compares H0.
 """
+
 from __future__ import annotations
 
 import math
@@ -44,22 +45,31 @@ def _cdf(c_grid, v, c):
     return (seg[i] + 0.5 * (v[i] + vc) * (c - c_grid[i])) / seg[-1]
 
 
-@pytest.mark.parametrize("c, v", [(ODD_C, ODD_V), _hg_table(0.9, 801), _hg_table(-0.5, 51)],
-                         ids=["odd", "hg0.9", "hg-0.5"])
+@pytest.mark.parametrize(
+    "c, v", [(ODD_C, ODD_V), _hg_table(0.9, 801), _hg_table(-0.5, 51)], ids=["odd", "hg0.9", "hg-0.5"]
+)
 def test_normalisation_and_mean_cosine_against_quadrature(c, v):
     f = ph.Tabulated(c, v)
     interp = lambda x: float(np.interp(x, c, v))  # noqa: E731
     pts = list(c[1:-1])
     norm = 2 * np.pi * integrate.quad(interp, -1, 1, points=pts, limit=10 * len(c), epsabs=1e-13)[0]
-    mean = 2 * np.pi * integrate.quad(lambda x: x * interp(x), -1, 1, points=pts, limit=10 * len(c),
-                                      epsabs=1e-13)[0] / norm
+    mean = (
+        2
+        * np.pi
+        * integrate.quad(lambda x: x * interp(x), -1, 1, points=pts, limit=10 * len(c), epsabs=1e-13)[0]
+        / norm
+    )
     assert f.normalisation == pytest.approx(norm, rel=1e-9)
     assert f.mean_cosine == pytest.approx(mean, abs=1e-9)
     # the normalised table integrates to 1 and evaluates to v / normalisation between the points
     x = np.linspace(-1, 1, 1001)
     np.testing.assert_allclose(f.eval(x), np.interp(x, c, v) / norm, rtol=1e-9, atol=1e-15)
-    assert f.describe() == {"type": "tabulated", "points": len(c), "mean_cosine": f.mean_cosine,
-                            "normalisation": f.normalisation}
+    assert f.describe() == {
+        "type": "tabulated",
+        "points": len(c),
+        "mean_cosine": f.mean_cosine,
+        "normalisation": f.normalisation,
+    }
 
 
 def test_fine_hg_table_reports_g_and_unit_normalisation():
@@ -84,7 +94,7 @@ def test_sample_cos_is_the_exact_inverse_cdf(c, v):
 def _chi2(samples, c, v, bins):
     """Chi-square p-value with the bins' probabilities by the trapezoid rule on the table's own points."""
     edges = c[bins]
-    mass = np.array([np.trapezoid(v[a:b + 1], c[a:b + 1]) for a, b in zip(bins[:-1], bins[1:])])
+    mass = np.array([np.trapezoid(v[a : b + 1], c[a : b + 1]) for a, b in zip(bins[:-1], bins[1:])])
     p = mass / mass.sum()
     counts, _ = np.histogram(samples, bins=edges)
     keep = p > 0
@@ -125,33 +135,39 @@ def test_angle_table_equals_cos_table():
     assert by_angle.mean_cosine == pytest.approx(by_cos.mean_cosine, abs=1e-12)
 
 
-@pytest.mark.parametrize("doc, match", [
-    ({"cos_theta": [-1, 0, 1], "values": [1, -0.1, 1]}, "entry 1 is -0.1"),
-    ({"cos_theta": [-1, 0.5, 0.2, 1], "values": [1, 1, 1, 1]}, "strictly increasing: entry 2"),
-    ({"cos_theta": [-1, 0, 0, 1], "values": [1, 1, 1, 1]}, "strictly increasing"),
-    ({"cos_theta": [-1, 0, 1], "values": [1, 1]}, "3 points but `values` has 2"),
-    ({"cos_theta": [-0.9, 1], "values": [1, 1]}, "from exactly -1"),
-    ({"angle_deg": [0, 90, 179], "values": [1, 1, 1]}, "from exactly 0 to exactly 180"),
-    ({"angle_deg": [0, 1e-9, 90, 180], "values": [1, 1, 1, 1]}, "entries 0 and 1 .* same cos"),
-    ({"cos_theta": [-1, 1], "values": [0, 0]}, "all zero"),
-    ({"cos_theta": [-1, 1], "angle_deg": [0, 180], "values": [1, 1]}, "exactly one of"),
-    ({"values": [1, 1]}, "exactly one of"),
-    ({"cos_theta": [-1, 1], "values": [1, float("nan")]}, "finite"),
-])
+@pytest.mark.parametrize(
+    "doc, match",
+    [
+        ({"cos_theta": [-1, 0, 1], "values": [1, -0.1, 1]}, "entry 1 is -0.1"),
+        ({"cos_theta": [-1, 0.5, 0.2, 1], "values": [1, 1, 1, 1]}, "strictly increasing: entry 2"),
+        ({"cos_theta": [-1, 0, 0, 1], "values": [1, 1, 1, 1]}, "strictly increasing"),
+        ({"cos_theta": [-1, 0, 1], "values": [1, 1]}, "3 points but `values` has 2"),
+        ({"cos_theta": [-0.9, 1], "values": [1, 1]}, "from exactly -1"),
+        ({"angle_deg": [0, 90, 179], "values": [1, 1, 1]}, "from exactly 0 to exactly 180"),
+        ({"angle_deg": [0, 1e-9, 90, 180], "values": [1, 1, 1, 1]}, "entries 0 and 1 .* same cos"),
+        ({"cos_theta": [-1, 1], "values": [0, 0]}, "all zero"),
+        ({"cos_theta": [-1, 1], "angle_deg": [0, 180], "values": [1, 1]}, "exactly one of"),
+        ({"values": [1, 1]}, "exactly one of"),
+        ({"cos_theta": [-1, 1], "values": [1, float("nan")]}, "finite"),
+    ],
+)
 def test_bad_tables_are_refused_at_the_schema(doc, match):
     with pytest.raises(ValidationError, match=match):
         TabulatedPhaseSpec.model_validate({"type": "tabulated", **doc})
 
 
-@pytest.mark.parametrize("c, v, match", [
-    ([-1, 0, 1], [1, -1, 1], "entry 1 is -1"),
-    ([-1, 0.5, 0.2, 1], [1, 1, 1, 1], "entry 2"),
-    ([-1, 1], [1, 1, 1], "one length"),
-    ([-1, 0.99], [1, 1], "exactly -1 to exactly 1"),
-    ([-1, 1], [0, 0], "all zero"),
-    ([-1, 1], [1, np.inf], "finite"),
-    ([[-1, 1]], [[1, 1]], "one length"),
-])
+@pytest.mark.parametrize(
+    "c, v, match",
+    [
+        ([-1, 0, 1], [1, -1, 1], "entry 1 is -1"),
+        ([-1, 0.5, 0.2, 1], [1, 1, 1, 1], "entry 2"),
+        ([-1, 1], [1, 1, 1], "one length"),
+        ([-1, 0.99], [1, 1], "exactly -1 to exactly 1"),
+        ([-1, 1], [0, 0], "all zero"),
+        ([-1, 1], [1, np.inf], "finite"),
+        ([[-1, 1]], [[1, 1]], "one length"),
+    ],
+)
 def test_bad_tables_are_refused_by_the_engine(c, v, match):
     with pytest.raises(ValueError, match=match):
         ph.Tabulated(c, v)
@@ -159,14 +175,23 @@ def test_bad_tables_are_refused_by_the_engine(c, v, match):
 
 # --- through the whole engine ------------------------------------------------------------------
 
+
 def _open_doc(phase, paths, seed):
     """No surfaces, Tx facing Rx 3 m away in smoke: the scattered part depends on the phase function."""
     return {
         "transmitters": [{"id": "tx", "position": [0, 0, 0], "normal": [1, 0, 0], "lambertian_order": 1}],
         "receivers": [{"id": "rx", "position": [3, 0, 0], "normal": [-1, 0, 0], "area": 1e-4, "fov_deg": 90}],
         "medium": {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.3, "phase": phase},
-        "simulation": {"algorithm": 5, "direction": "backward", "max_reflections": 0, "max_scattering": 3,
-                       "time_bin_s": 1e-9, "t_max_s": 1e-7, "paths": paths, "seed": seed},
+        "simulation": {
+            "algorithm": 5,
+            "direction": "backward",
+            "max_reflections": 0,
+            "max_scattering": 3,
+            "time_bin_s": 1e-9,
+            "t_max_s": 1e-7,
+            "paths": paths,
+            "seed": seed,
+        },
     }
 
 
@@ -201,8 +226,16 @@ def test_guide_table_lookups_equal_binary_search_and_interp(c, v):
     """eval and sample_cos find segments by guide tables: same answers as np.interp and np.searchsorted."""
     f = ph.Tabulated(c, v)
     rng = np.random.default_rng(SEED)
-    keys = np.concatenate([rng.uniform(-1, 1, 200_000), c, np.nextafter(c, 2), np.nextafter(c, -2), [-1.0, 1.0],
-                           1 - rng.random(1000) * 1e-9])
+    keys = np.concatenate(
+        [
+            rng.uniform(-1, 1, 200_000),
+            c,
+            np.nextafter(c, 2),
+            np.nextafter(c, -2),
+            [-1.0, 1.0],
+            1 - rng.random(1000) * 1e-9,
+        ]
+    )
     keys = np.clip(keys, -1, 1)
     ref = np.interp(keys, f.cos_theta, f.values)
     np.testing.assert_allclose(f.eval(keys), ref, rtol=1e-12, atol=1e-300)

@@ -1,4 +1,5 @@
 """Automatic truncation of S when the medium does not absorb (sigma_a = 0), and true `modeled` statements."""
+
 import math
 
 import numpy as np
@@ -45,19 +46,32 @@ def test_non_absorbing_smoke_room_gets_a_finite_stated_bound():
     assert "per order" in modeled["max_scattering_reason"] and "inf" not in modeled["max_scattering_reason"]
     assert modeled["truncation_estimate_per_watt"] is not None and modeled["truncation_estimate_per_watt"] >= 0
     bound = modeled["truncation_estimate_per_watt"]
-    long = simulate(spec(room_doc(medium=WHITE_SMOKE, algorithm=5, max_reflections=8, max_scattering=S + 30,
-                                  paths=20_000, seed=4, t_max_s=modeled["time_window_s"][1])))["links"][0]
-    above = sum(long["dc_gain_by_scattering_order"][S + 1:])
-    above_se = math.sqrt(sum(e**2 for e in long["dc_gain_by_scattering_order_stderr"][S + 1:]))
+    long = simulate(
+        spec(
+            room_doc(
+                medium=WHITE_SMOKE,
+                algorithm=5,
+                max_reflections=8,
+                max_scattering=S + 30,
+                paths=20_000,
+                seed=4,
+                t_max_s=modeled["time_window_s"][1],
+            )
+        )
+    )["links"][0]
+    above = sum(long["dc_gain_by_scattering_order"][S + 1 :])
+    above_se = math.sqrt(sum(e**2 for e in long["dc_gain_by_scattering_order_stderr"][S + 1 :]))
     assert above <= bound + 4 * above_se, (S, above, bound, above_se)
 
 
 def test_unbounded_non_absorbing_medium_says_no_bound():
     """No walls and sigma_a = 0: the per-order gains decay too slowly for a geometric bound; the result says so."""
-    doc = {"transmitters": [{"id": "tx", "position": [0, 0, 0], "normal": [1, 0, 0], "lambertian_order": 1}],
-           "receivers": [{"id": "rx", "position": [3, 0, 0], "normal": [-1, 0, 0], "area": 1e-4, "fov_deg": 90}],
-           "medium": {**WHITE_SMOKE, "phase": {"type": "hg", "g": 0.0}},
-           "simulation": {"paths": 4096, "seed": 3, "pilot_paths": 2048}}
+    doc = {
+        "transmitters": [{"id": "tx", "position": [0, 0, 0], "normal": [1, 0, 0], "lambertian_order": 1}],
+        "receivers": [{"id": "rx", "position": [3, 0, 0], "normal": [-1, 0, 0], "area": 1e-4, "fov_deg": 90}],
+        "medium": {**WHITE_SMOKE, "phase": {"type": "hg", "g": 0.0}},
+        "simulation": {"paths": 4096, "seed": 3, "pilot_paths": 2048},
+    }
     res = simulate(spec(doc))
     reason = res["modeled"]["max_scattering_reason"]
     assert res["modeled"]["truncation_estimate_per_watt"] is None

@@ -1,4 +1,5 @@
 """schemas.link_budget: Komine's defaults, the one-of rules, bounds and located errors."""
+
 import math
 
 import pytest
@@ -24,8 +25,12 @@ def _errors(doc) -> list[tuple[str, str]]:
 
 def test_defaults_are_komine_2004():
     spec = LinkBudgetSpec(bit_rate=10e6)
-    assert (spec.responsivity, spec.background_current, spec.temperature, spec.open_loop_gain) == (0.53, 5.1e-3,
-                                                                                                   295.0, 10.0)
+    assert (spec.responsivity, spec.background_current, spec.temperature, spec.open_loop_gain) == (
+        0.53,
+        5.1e-3,
+        295.0,
+        10.0,
+    )
     assert spec.capacitance_per_area == pytest.approx(112e-12 / 1e-4)  # 112 pF/cm^2 in F/m^2
     assert (spec.channel_noise_factor, spec.transconductance) == (1.5, 30e-3)
     assert (spec.noise_bandwidth_factor_i2, spec.noise_bandwidth_factor_i3) == (0.562, 0.0868)
@@ -46,25 +51,48 @@ def test_json_round_trip_and_descriptions_carry_units():
     assert LinkBudgetSpec.model_validate_json(spec.model_dump_json()) == spec
     for name, field in LinkBudgetSpec.model_fields.items():
         assert field.description, name
-    units = {"responsivity": "[A/W]", "bit_rate": "[bit/s]", "bandwidth": "[Hz]", "background_current": "[A]",
-             "temperature": "[K]", "capacitance_per_area": "[F/m^2]", "transconductance": "[S]"}
+    units = {
+        "responsivity": "[A/W]",
+        "bit_rate": "[bit/s]",
+        "bandwidth": "[Hz]",
+        "background_current": "[A]",
+        "temperature": "[K]",
+        "capacitance_per_area": "[F/m^2]",
+        "transconductance": "[S]",
+    }
     for name, unit in units.items():
         assert unit in LinkBudgetSpec.model_fields[name].description
 
 
 def test_needs_bit_rate_or_bandwidth():
     errs = _errors({"link_budget": {}})
-    assert errs == [("link_budget", "give `bit_rate` [bit/s] or `bandwidth` [Hz] (or both): "
-                                    "the noise needs a bandwidth")]
+    assert errs == [
+        ("link_budget", "give `bit_rate` [bit/s] or `bandwidth` [Hz] (or both): the noise needs a bandwidth")
+    ]
 
 
-@pytest.mark.parametrize("field,value", [
-    ("responsivity", 0.0), ("responsivity", -0.5), ("responsivity", 11.0), ("bit_rate", 0.0),
-    ("bit_rate", 1e14), ("bandwidth", -1.0), ("background_current", -1e-6), ("temperature", 0.0),
-    ("open_loop_gain", 0.0), ("capacitance_per_area", 0.0), ("channel_noise_factor", -1.0),
-    ("transconductance", 0.0), ("noise_bandwidth_factor_i2", 0.0), ("noise_bandwidth_factor_i3", 20.0),
-    ("temperature", float("nan")), ("bit_rate", float("inf")), ("isi_split", "gaussian"),
-])
+@pytest.mark.parametrize(
+    "field,value",
+    [
+        ("responsivity", 0.0),
+        ("responsivity", -0.5),
+        ("responsivity", 11.0),
+        ("bit_rate", 0.0),
+        ("bit_rate", 1e14),
+        ("bandwidth", -1.0),
+        ("background_current", -1e-6),
+        ("temperature", 0.0),
+        ("open_loop_gain", 0.0),
+        ("capacitance_per_area", 0.0),
+        ("channel_noise_factor", -1.0),
+        ("transconductance", 0.0),
+        ("noise_bandwidth_factor_i2", 0.0),
+        ("noise_bandwidth_factor_i3", 20.0),
+        ("temperature", float("nan")),
+        ("bit_rate", float("inf")),
+        ("isi_split", "gaussian"),
+    ],
+)
 def test_bad_value_is_located(field, value):
     errs = _errors({"link_budget": {"bit_rate": 1e7, field: value}})
     assert [loc for loc, _ in errs] == [f"link_budget.{field}"]
@@ -81,9 +109,10 @@ def test_zero_background_is_allowed():
 
 # --- photometry ----------------------------------------------------------------------------------
 
+
 def test_photometry_one_of_and_conversions():
     m = 1.0
-    by_flux = LuminousOutputSpec(luminous_flux=math.pi * 100.0)   # Lambertian: Phi = pi I0
+    by_flux = LuminousOutputSpec(luminous_flux=math.pi * 100.0)  # Lambertian: Phi = pi I0
     by_cd = LuminousOutputSpec(center_luminous_intensity=100.0)
     assert by_flux.center_intensity(m) == pytest.approx(100.0)
     assert by_cd.flux(m) == pytest.approx(math.pi * 100.0)
@@ -93,17 +122,27 @@ def test_photometry_one_of_and_conversions():
     assert LuminousOutputSpec(center_luminous_intensity=2628.0).flux(m70) == pytest.approx(10031.4, abs=0.1)
 
 
-@pytest.mark.parametrize("doc,msg", [
-    ({}, "give exactly one of"),
-    ({"luminous_flux": 1000.0, "center_luminous_intensity": 300.0}, "give exactly one of"),
-])
+@pytest.mark.parametrize(
+    "doc,msg",
+    [
+        ({}, "give exactly one of"),
+        ({"luminous_flux": 1000.0, "center_luminous_intensity": 300.0}, "give exactly one of"),
+    ],
+)
 def test_photometry_needs_exactly_one(doc, msg):
     errs = _errors({"link_budget": {"bit_rate": 1e7}, "photometry": [{"luminous_flux": 10.0}, doc]})
     assert errs[0][0] == "photometry.1" and msg in errs[0][1]
 
 
-@pytest.mark.parametrize("field,value", [("luminous_flux", 0.0), ("luminous_flux", -5.0), ("luminous_flux", 1e9),
-                                         ("center_luminous_intensity", float("nan"))])
+@pytest.mark.parametrize(
+    "field,value",
+    [
+        ("luminous_flux", 0.0),
+        ("luminous_flux", -5.0),
+        ("luminous_flux", 1e9),
+        ("center_luminous_intensity", float("nan")),
+    ],
+)
 def test_photometry_bad_value_is_located(field, value):
     errs = _errors({"link_budget": {"bit_rate": 1e7}, "photometry": [{field: value}]})
     assert errs[0][0] == f"photometry.0.{field}"

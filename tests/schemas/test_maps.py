@@ -3,6 +3,7 @@
 References are computed here independently: positions and the 1/d^2 field point by point in plain
 Python from the grid's definition (origin + i s u + j s v), and closed forms for the extremes.
 """
+
 import math
 import subprocess
 import sys
@@ -10,17 +11,39 @@ import sys
 import numpy as np
 import pytest
 
-from owcsim.schemas.maps import (GridMap, MapDecor, _hull, _project, format_summary, from_xarray, heatmap_png,
-                                 masked_points, summary, to_dataframe, to_netcdf, to_xarray, write_map_files)
+from owcsim.schemas.maps import (
+    GridMap,
+    MapDecor,
+    _hull,
+    _project,
+    format_summary,
+    from_xarray,
+    heatmap_png,
+    masked_points,
+    summary,
+    to_dataframe,
+    to_netcdf,
+    to_xarray,
+    write_map_files,
+)
 from tests.scenes import room_doc, spec
 
-S = 0.5        # grid spacing [m]
-H = 2.0        # source height above the grid plane [m]
+S = 0.5  # grid spacing [m]
+H = 2.0  # source height above the grid plane [m]
 PNG = b"\x89PNG\r\n\x1a\n"
 
 
-def _field(nu=5, nv=4, origin=(1.0, 0.5, 0.85), u=(1.0, 0.0, 0.0), v=(0.0, 1.0, 0.0), channel="tx0", grid="wp",
-           mask=(), source=None):
+def _field(
+    nu=5,
+    nv=4,
+    origin=(1.0, 0.5, 0.85),
+    u=(1.0, 0.0, 0.0),
+    v=(0.0, 1.0, 0.0),
+    channel="tx0",
+    grid="wp",
+    mask=(),
+    source=None,
+):
     """E = 1/d^2 from a point H above the grid point (0, 0); masked points carry a (wrong) huge value."""
     origin, u, v = np.array(origin), np.array(u), np.array(v)
     src = origin + H * np.cross(u, v) if source is None else np.asarray(source)
@@ -29,11 +52,20 @@ def _field(nu=5, nv=4, origin=(1.0, 0.5, 0.85), u=(1.0, 0.0, 0.0), v=(0.0, 1.0, 
     reason = np.full((nu, nv), "", dtype=object)
     for i, j in mask:
         reason[i, j] = "inside furniture 'desk'"
-        e[i, j] = 1e6          # a masked point must be left out whatever it holds
-    return GridMap(grid=grid, channel=channel, origin=origin, u=u, v=v, x=S * np.arange(nu), y=S * np.arange(nv),
-                   values={"illuminance": e, "dc_gain": e * 1e-6, "received_power_dbm": 10 * np.log10(e)},
-                   stderr={"illuminance": 0.01 * e}, units={"illuminance": "lx", "dc_gain": "1",
-                                                            "received_power_dbm": "dBm"}, mask_reason=reason)
+        e[i, j] = 1e6  # a masked point must be left out whatever it holds
+    return GridMap(
+        grid=grid,
+        channel=channel,
+        origin=origin,
+        u=u,
+        v=v,
+        x=S * np.arange(nu),
+        y=S * np.arange(nv),
+        values={"illuminance": e, "dc_gain": e * 1e-6, "received_power_dbm": 10 * np.log10(e)},
+        stderr={"illuminance": 0.01 * e},
+        units={"illuminance": "lx", "dc_gain": "1", "received_power_dbm": "dBm"},
+        mask_reason=reason,
+    )
 
 
 def _direct(nu, nv, skip=()):
@@ -42,7 +74,7 @@ def _direct(nu, nv, skip=()):
     for i in range(nu):
         for j in range(nv):
             if (i, j) not in skip:
-                out[(i, j)] = 1.0 / ((i * S) ** 2 + (j * S) ** 2 + H ** 2)
+                out[(i, j)] = 1.0 / ((i * S) ** 2 + (j * S) ** 2 + H**2)
     return out
 
 
@@ -60,8 +92,8 @@ def test_summary_against_direct_computation():
     s = summary(m)["illuminance"]
     mean = sum(ref.values()) / len(ref)
     # closed forms: brightest point under the source, darkest at the farthest unmasked corner (4, 2) or (3, 3)
-    e_max = 1 / H ** 2
-    e_min = min(1 / ((4 * S) ** 2 + (2 * S) ** 2 + H ** 2), 1 / ((3 * S) ** 2 + (3 * S) ** 2 + H ** 2))
+    e_max = 1 / H**2
+    e_min = min(1 / ((4 * S) ** 2 + (2 * S) ** 2 + H**2), 1 / ((3 * S) ** 2 + (3 * S) ** 2 + H**2))
     assert s["count"] == 18 and s["masked"] == 2 and s["missing"] == 0
     assert math.isclose(s["max"], e_max, rel_tol=1e-12) and s["max_index"] == (0, 0)
     assert math.isclose(s["min"], e_min, rel_tol=1e-12) and s["min_index"] == (4, 2)
@@ -69,7 +101,7 @@ def test_summary_against_direct_computation():
     assert math.isclose(s["uniformity"], e_min / mean, rel_tol=1e-12)
     assert math.isclose(s["max_rel_stderr"], 0.01, rel_tol=1e-9)
     # with the masked corner (4, 3) counted the minimum would be lower: the mask does matter here
-    assert 1 / ((4 * S) ** 2 + (3 * S) ** 2 + H ** 2) < e_min * 0.99
+    assert 1 / ((4 * S) ** 2 + (3 * S) ** 2 + H**2) < e_min * 0.99
     # a ratio of decibels is no uniformity
     assert summary(m)["received_power_dbm"]["uniformity"] is None
     assert summary(m)["dc_gain"]["uniformity"] == pytest.approx(e_min / mean, rel=1e-12)
@@ -79,9 +111,10 @@ def test_masked_points_reported_and_missing_values_counted():
     m = _field(mask=[(1, 1), (3, 0)])
     assert {r: ij.tolist() for r, ij in masked_points(m).items()} == {"inside furniture 'desk'": [[1, 1], [3, 0]]}
     e = m.values["illuminance"].copy()
-    e[0, 3] = np.nan                                    # not available (e.g. an unreachable link), not masked
-    m2 = GridMap(m.grid, m.channel, m.origin, m.u, m.v, m.x, m.y, {"illuminance": e}, {}, {"illuminance": "lx"},
-                 m.mask_reason)
+    e[0, 3] = np.nan  # not available (e.g. an unreachable link), not masked
+    m2 = GridMap(
+        m.grid, m.channel, m.origin, m.u, m.v, m.x, m.y, {"illuminance": e}, {}, {"illuminance": "lx"}, m.mask_reason
+    )
     s = summary(m2)["illuminance"]
     assert (s["count"], s["masked"], s["missing"]) == (17, 2, 1)
     text = format_summary([m2])
@@ -98,11 +131,24 @@ def test_all_masked_gives_no_figures():
 def test_format_summary_scales_units():
     m = _field()
     e = m.values["illuminance"]
-    m = GridMap("wp", "leds", m.origin, m.u, m.v, m.x, m.y,
-                {"received_power": e * 1e-3, "rms_delay_spread": e * 1e-9, "dc_gain": e * 1e-6,
-                 "path_loss_db": -10 * np.log10(e * 1e-6), "illuminance": e * 1000},
-                {}, {"received_power": "W", "rms_delay_spread": "s", "dc_gain": "1", "path_loss_db": "dB",
-                     "illuminance": "lx"})
+    m = GridMap(
+        "wp",
+        "leds",
+        m.origin,
+        m.u,
+        m.v,
+        m.x,
+        m.y,
+        {
+            "received_power": e * 1e-3,
+            "rms_delay_spread": e * 1e-9,
+            "dc_gain": e * 1e-6,
+            "path_loss_db": -10 * np.log10(e * 1e-6),
+            "illuminance": e * 1000,
+        },
+        {},
+        {"received_power": "W", "rms_delay_spread": "s", "dc_gain": "1", "path_loss_db": "dB", "illuminance": "lx"},
+    )
     lines = {ln.split()[1]: ln for ln in format_summary(m).splitlines()[2:]}
     assert "µW" in lines["received_power"] and f"{1e-3 / H**2 * 1e6:.4g}" in lines["received_power"]
     assert " ns " in lines["rms_delay_spread"] and f"{1e-9 / H**2 * 1e9:.4g}" in lines["rms_delay_spread"]
@@ -137,8 +183,18 @@ def test_netcdf_round_trip(tmp_path):
     xr = pytest.importorskip("xarray")
     a = _field(channel="tx0", mask=[(1, 2)])
     b = _field(channel="group A", source=(1.5, 1.0, 3.0))
-    b = GridMap(b.grid, b.channel, b.origin, b.u, b.v, b.x, b.y, {"illuminance": b.values["illuminance"]}, {},
-                {"illuminance": "lx"})                                      # b lacks two quantities
+    b = GridMap(
+        b.grid,
+        b.channel,
+        b.origin,
+        b.u,
+        b.v,
+        b.x,
+        b.y,
+        {"illuminance": b.values["illuminance"]},
+        {},
+        {"illuminance": "lx"},
+    )  # b lacks two quantities
     path = to_netcdf([a, b], tmp_path / "m.nc")
     with xr.open_dataset(path, engine="scipy") as ds:
         ds = ds.load()
@@ -154,7 +210,7 @@ def test_netcdf_round_trip(tmp_path):
     assert ds["illuminance"].attrs["units"] == "lx" and ds["received_power_dbm"].attrs["units"] == "dBm"
     assert ds["x"].attrs["units"] == "m" and ds.attrs["grid"] == "wp"
     np.testing.assert_array_equal(ds.attrs["u"], a.u)
-    assert ds["mask_reason"].dims == ("channel", "i", "j")      # the channels' masks differ
+    assert ds["mask_reason"].dims == ("channel", "i", "j")  # the channels' masks differ
     assert ds["mask_reason"].values[0, 1, 2] == "inside furniture 'desk'" and ds["mask_reason"].values[1, 1, 2] == ""
     back = from_xarray(ds)
     assert [m.channel for m in back] == ["tx0", "group A"] and not back[1].masked.any()
@@ -191,8 +247,16 @@ def test_write_map_files_and_mat_round_trip(tmp_path):
     tilted = _field(grid="wall/north 1", u=(0.0, 0.6, 0.8), v=(-1.0, 0.0, 0.0), nu=3, nv=2)
     paths = write_map_files([a, b, tilted], tmp_path, heatmaps=["illuminance"])
     names = sorted(p.name for p in paths)
-    assert names == sorted(["map_wp.nc", "map_wall_north_1.nc", "maps.mat", "map_wp_tx0_illuminance.png",
-                            "map_wp_tx1_illuminance.png", "map_wall_north_1_tx0_illuminance.png"])
+    assert names == sorted(
+        [
+            "map_wp.nc",
+            "map_wall_north_1.nc",
+            "maps.mat",
+            "map_wp_tx0_illuminance.png",
+            "map_wp_tx1_illuminance.png",
+            "map_wall_north_1_tx0_illuminance.png",
+        ]
+    )
     assert all(p.exists() and p.stat().st_size > 0 for p in paths)
     mat = loadmat(tmp_path / "maps.mat", simplify_cells=True)
     wp, wall = mat["map_wp"], mat["map_wall_north_1"]
@@ -204,14 +268,16 @@ def test_write_map_files_and_mat_round_trip(tmp_path):
     np.testing.assert_array_equal(wp["x"], a.x)
     codes = wp["mask_code"]
     assert codes.shape == (2, 5, 4) and codes.sum() == 1 and codes[0, 0, 1] == 1
-    assert wp["mask_reasons"] == "inside furniture 'desk'"       # a one-element cell reads back as its string
+    assert wp["mask_reasons"] == "inside furniture 'desk'"  # a one-element cell reads back as its string
     assert np.all(mat["map_wall_north_1"]["mask_code"] == 0)
 
 
 def _decor():
-    return MapDecor(room=((0, 0, 0), (5, 5, 3)),
-                    furniture=[("desk", (1.2, 0.4, 0.0), (2.0, 1.2, 0.75)), ("shelf", (4.5, 4.0, 0), (5, 5, 2))],
-                    luminaires=[("led0", (1.0, 0.5, 2.85)), ("led1", (3.75, 3.75, 3.0))])
+    return MapDecor(
+        room=((0, 0, 0), (5, 5, 3)),
+        furniture=[("desk", (1.2, 0.4, 0.0), (2.0, 1.2, 0.75)), ("shelf", (4.5, 4.0, 0), (5, 5, 2))],
+        luminaires=[("led0", (1.0, 0.5, 2.85)), ("led1", (3.75, 3.75, 3.0))],
+    )
 
 
 @pytest.mark.parametrize("case", ["linear", "log", "decor_masked", "tilted", "one_point", "one_row", "no_data"])
@@ -227,7 +293,7 @@ def test_heatmap_png(tmp_path, case):
         m = _field(nu=1, nv=1)
     elif case == "one_row":
         m, decor = _field(nu=7, nv=1), _decor()
-    elif case == "no_data":                 # every point masked: nothing to scale the colours by
+    elif case == "no_data":  # every point masked: nothing to scale the colours by
         m, decor, log = _field(nu=3, nv=2, mask=[(i, j) for i in range(3) for j in range(2)]), _decor(), True
     for q in ("illuminance", "dc_gain"):
         p = heatmap_png(m, q, decor, tmp_path / f"{case}_{q}.png", log=log)
@@ -238,22 +304,38 @@ def test_heatmap_png(tmp_path, case):
 def test_heatmaps_render_the_same_in_threads(tmp_path):
     """The object API keeps no global state: PNGs drawn in parallel threads equal those drawn one by one."""
     from concurrent.futures import ThreadPoolExecutor
-    jobs = [(_field(channel=f"c{k}", mask=[(k, 1)], source=(1.0 + k, 1.0, 3.0)), q)
-            for k in range(3) for q in ("illuminance", "dc_gain")]
+
+    jobs = [
+        (_field(channel=f"c{k}", mask=[(k, 1)], source=(1.0 + k, 1.0, 3.0)), q)
+        for k in range(3)
+        for q in ("illuminance", "dc_gain")
+    ]
     one = [heatmap_png(m, q, _decor(), tmp_path / f"s{k}.png").read_bytes() for k, (m, q) in enumerate(jobs)]
     with ThreadPoolExecutor(4) as pool:
-        par = list(pool.map(lambda k: heatmap_png(*jobs[k], _decor(), tmp_path / f"p{k}.png").read_bytes(),
-                            range(len(jobs))))
+        par = list(
+            pool.map(lambda k: heatmap_png(*jobs[k], _decor(), tmp_path / f"p{k}.png").read_bytes(), range(len(jobs)))
+        )
     assert par == one and len(set(one)) == len(one)
 
 
 def test_log_scale_is_chosen_for_gains_spanning_decades(tmp_path, monkeypatch):
     plt_colors = pytest.importorskip("matplotlib.colors")
     import matplotlib.figure
-    m = _field(nu=20, nv=3)                 # 1/d^2 over 10 m: a factor ~25 -> linear
+
+    m = _field(nu=20, nv=3)  # 1/d^2 over 10 m: a factor ~25 -> linear
     e = m.values["dc_gain"]
-    wide = GridMap(m.grid, m.channel, m.origin, m.u, m.v, m.x, m.y, {"dc_gain": e ** 3, "snr_db": e}, {},
-                   {"dc_gain": "1", "snr_db": "dB"})
+    wide = GridMap(
+        m.grid,
+        m.channel,
+        m.origin,
+        m.u,
+        m.v,
+        m.x,
+        m.y,
+        {"dc_gain": e**3, "snr_db": e},
+        {},
+        {"dc_gain": "1", "snr_db": "dB"},
+    )
     norms = []
     orig = matplotlib.figure.Figure.savefig
 
@@ -277,13 +359,15 @@ def test_furniture_footprint_projection():
     # a unit cube seen along its diagonal: a regular hexagon of area |nx| + |ny| + |nz| = sqrt(3)
     assert len(hull) == 6 and area == pytest.approx(math.sqrt(3), rel=1e-12)
     flat = _hull(_project(_field(), np.array([[1, 0, 0], [1, 2, 0], [1, 0, 1], [1, 2, 1]], dtype=float)))
-    assert len(flat) == 2                       # a box seen edge-on is a segment, not an error
+    assert len(flat) == 2  # a box seen edge-on is a segment, not an error
 
 
 def test_decor_from_scene():
     doc = room_doc()
-    doc["furniture"] = [{"min": [0, 0, 0], "max": [1, 1, 0.7], "reflectance": 0.5},
-                        {"name": "desk", "min": [2, 2, 0], "max": [3, 3, 0.7], "reflectance": 0.5}]
+    doc["furniture"] = [
+        {"min": [0, 0, 0], "max": [1, 1, 0.7], "reflectance": 0.5},
+        {"name": "desk", "min": [2, 2, 0], "max": [3, 3, 0.7], "reflectance": 0.5},
+    ]
     doc["transmitters"].append({"position": [1, 1, 3], "normal": [0, 0, -1], "lambertian_order": 1})
     d = MapDecor.from_scene(spec(doc))
     assert [n for n, *_ in d.furniture] == ["furniture[0]", "desk"]
@@ -300,7 +384,9 @@ def test_dataframe_is_long():
 
 
 def test_import_stays_light():
-    code = ("import sys, owcsim.schemas, owcsim.schemas.maps; "
-            "print(sorted(m for m in ('matplotlib', 'xarray', 'scipy', 'pandas') if m in sys.modules))")
+    code = (
+        "import sys, owcsim.schemas, owcsim.schemas.maps; "
+        "print(sorted(m for m in ('matplotlib', 'xarray', 'scipy', 'pandas') if m in sys.modules))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"

@@ -1,4 +1,5 @@
 """Bad input gets a clear, located error; good input parses (schemas/)."""
+
 import copy
 
 import pytest
@@ -114,8 +115,9 @@ def test_hg_g_range():
 
 def test_mesh_with_nan_or_no_faces():
     doc = barry_doc()
-    doc["meshes"] = [{"vertices": [[0, 0, 0], [1, 0, 0], [float("nan"), 1, 0]], "faces": [[0, 1, 2]],
-                      "reflectance": 0.5}]
+    doc["meshes"] = [
+        {"vertices": [[0, 0, 0], [1, 0, 0], [float("nan"), 1, 0]], "faces": [[0, 1, 2]], "reflectance": 0.5}
+    ]
     assert "meshes.0.vertices" in _errors(doc)
     doc["meshes"] = [{"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]], "faces": [], "reflectance": 0.5}]
     assert "non-empty" in _errors(doc)
@@ -129,10 +131,15 @@ def test_bin_budget():
     assert "simulation" in msg and "bins" in msg and "budget" in msg
 
 
-@pytest.mark.parametrize("field,value,where", [
-    ("time_bin_s", 1e-300, "simulation.time_bin_s"), ("time_bin_s", 5e-324, "simulation.time_bin_s"),
-    ("segment_time_step_s", 1e-300, "simulation.segment_time_step_s"), ("t_min_s", 1e300, "simulation.t_min_s"),
-])
+@pytest.mark.parametrize(
+    "field,value,where",
+    [
+        ("time_bin_s", 1e-300, "simulation.time_bin_s"),
+        ("time_bin_s", 5e-324, "simulation.time_bin_s"),
+        ("segment_time_step_s", 1e-300, "simulation.segment_time_step_s"),
+        ("t_min_s", 1e300, "simulation.t_min_s"),
+    ],
+)
 def test_time_scales_below_a_femtosecond_or_beyond_a_second_are_refused(field, value, where):
     # Unphysical bin widths and window starts: a located error, not an overflowing bin index.
     msg = _errors(barry_doc(**{field: value, "t_max_s": None}))
@@ -183,10 +190,13 @@ def test_receiver_grid_expands():
     assert spec.receiver_ids()[1] == "grid[0,0]" and rx[-1].position == (4.5, 4.5, 0.85)
 
 
-@pytest.mark.parametrize("field,value,message", [
-    ("half_power_semi_angle_deg", 1e-300, "above 10000"),
-    ("half_power_semi_angle_deg", 0.5, "above 10000"),
-])
+@pytest.mark.parametrize(
+    "field,value,message",
+    [
+        ("half_power_semi_angle_deg", 1e-300, "above 10000"),
+        ("half_power_semi_angle_deg", 0.5, "above 10000"),
+    ],
+)
 def test_extreme_half_power_angle_is_an_error_not_a_crash(field, value, message):
     doc = barry_doc()
     del doc["transmitters"][0]["lambertian_order"]
@@ -206,11 +216,14 @@ def test_tiny_fov_is_bounded():
     assert "receivers.0.fov_deg" in _errors(doc)
 
 
-@pytest.mark.parametrize("path,where", [
-    (("transmitters", 0, "power"), "transmitters.0.power"),
-    (("simulation", "time_bin_s"), "simulation.time_bin_s"),
-    (("receivers", 0, "area"), "receivers.0.area"),
-])
+@pytest.mark.parametrize(
+    "path,where",
+    [
+        (("transmitters", 0, "power"), "transmitters.0.power"),
+        (("simulation", "time_bin_s"), "simulation.time_bin_s"),
+        (("receivers", 0, "area"), "receivers.0.area"),
+    ],
+)
 def test_infinite_numbers_are_located_errors(path, where):
     # JSON readers accept `Infinity`; the schema does not (it used to reach the engine, or the store as null).
     doc = barry_doc()
@@ -226,6 +239,10 @@ def test_infinite_grid_spacing_and_mixture_weight_are_located():
     doc["receiver_grids"] = [{"origin": [1, 1, 0.5], "size": [1, 1], "spacing": float("inf"), "area": 1e-4}]
     assert "receiver_grids.0.spacing: Input should be a finite number" in _errors(doc)
     doc = barry_doc()
-    doc["medium"] = {"type": "homogeneous", "sigma_a": 0.01, "sigma_s": 0.1,
-                     "phase": {"type": "mixture", "components": [{"weight": float("inf"), "phase": {"type": "isotropic"}}]}}
+    doc["medium"] = {
+        "type": "homogeneous",
+        "sigma_a": 0.01,
+        "sigma_s": 0.1,
+        "phase": {"type": "mixture", "components": [{"weight": float("inf"), "phase": {"type": "isotropic"}}]},
+    }
     assert "components.0.weight: Input should be a finite number" in _errors(doc)

@@ -11,12 +11,13 @@ both, the server's limits), so such documents get a located 422, the answer they
 Not part of the default run (it is slower): `.ci/run` runs it, or
 `scripts/test tests/server/fuzz_openapi.py`. FUZZ_EXAMPLES sets the examples per operation.
 """
+
 import os
-from collections import Counter
 import sqlite3
 import tempfile
 import time
 import warnings
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -33,9 +34,19 @@ SCENARIO_JOBS: Counter = Counter()  # final status of the jobs the stateful scen
 DB = Path(tempfile.mkdtemp(prefix="owcsim-fuzz-")) / "jobs.sqlite"
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
-    app = create_app(Settings(db=DB, api_keys=KEY,
-                              max_concurrent_jobs=1, max_queued_jobs=40, max_paths_per_job=200_000,
-                              max_wall_time_s=5, max_receivers=2000, max_body_bytes=256 * 1024), run_jobs=False)
+    app = create_app(
+        Settings(
+            db=DB,
+            api_keys=KEY,
+            max_concurrent_jobs=1,
+            max_queued_jobs=40,
+            max_paths_per_job=200_000,
+            max_wall_time_s=5,
+            max_receivers=2000,
+            max_body_bytes=256 * 1024,
+        ),
+        run_jobs=False,
+    )
 schema = schemathesis.openapi.from_asgi("/v1/openapi.json", app)
 
 
@@ -54,8 +65,10 @@ def dispatcher():
     yield
     alive = app.state.dispatcher.alive
     app.state.dispatcher.stop()
-    print(f"\nfuzz: jobs in the store at the end, by status: {app.state.store.counts()}; "
-          f"jobs of the stateful scenarios, by final status: {dict(SCENARIO_JOBS)}; dispatcher alive: {alive}")
+    print(
+        f"\nfuzz: jobs in the store at the end, by status: {app.state.store.counts()}; "
+        f"jobs of the stateful scenarios, by final status: {dict(SCENARIO_JOBS)}; dispatcher alive: {alive}"
+    )
 
 
 def checks(case) -> dict:
@@ -105,5 +118,6 @@ class Workflows(schema.as_state_machine()):
 
 
 TestWorkflows = Workflows.TestCase
-TestWorkflows.settings = settings(max_examples=max(5, EXAMPLES // 4), stateful_step_count=6, deadline=None,
-                                  suppress_health_check=list(HealthCheck))
+TestWorkflows.settings = settings(
+    max_examples=max(5, EXAMPLES // 4), stateful_step_count=6, deadline=None, suppress_health_check=list(HealthCheck)
+)

@@ -1,4 +1,5 @@
 """Helpers of the service tests: small scene documents, an in-process app, a real server process."""
+
 from __future__ import annotations
 
 import os
@@ -25,8 +26,15 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def quick_doc(paths: int = 2000, **simulation) -> dict:
     """A job of a few tens of milliseconds: 5 x 5 x 3 m room, K = 1, 50 bins."""
-    sim = {"max_reflections": 1, "time_bin_s": 1e-9, "t_max_s": 5e-8, "paths": paths, "seed": 1,
-           "batch_size": 1024, "direction": "backward"}
+    sim = {
+        "max_reflections": 1,
+        "time_bin_s": 1e-9,
+        "t_max_s": 5e-8,
+        "paths": paths,
+        "seed": 1,
+        "batch_size": 1024,
+        "direction": "backward",
+    }
     sim.update(simulation)
     return room_doc(**sim)
 
@@ -62,8 +70,17 @@ def free_port() -> int:
 class ServerProcess:
     """`owcsim serve` on 127.0.0.1 in a child process; settings from OWCSIM_* variables."""
 
-    def __init__(self, db: Path, port: int | None = None, log: Path | None = None, *, root: Path = ROOT,
-                 python: str = sys.executable, address_space_bytes: int | None = None, **settings):
+    def __init__(
+        self,
+        db: Path,
+        port: int | None = None,
+        log: Path | None = None,
+        *,
+        root: Path = ROOT,
+        python: str = sys.executable,
+        address_space_bytes: int | None = None,
+        **settings,
+    ):
         """`root`, `python`: another checkout and its interpreter (a baseline for benchmarks);
         `address_space_bytes`: soft RLIMIT_AS of the server (inherited by its children)."""
         self.root, self.python, self.address_space_bytes = Path(root), python, address_space_bytes
@@ -79,9 +96,25 @@ class ServerProcess:
     def start(self, timeout: float = 60.0) -> "ServerProcess":
         out = open(self.log, "a")
         self.proc = subprocess.Popen(
-            [self.python, "-m", "owcsim", "serve", "--host", "127.0.0.1", "--port", str(self.port),
-             "--db", str(self.db)], env=self.env, stdout=out, stderr=subprocess.STDOUT, cwd=self.root,
-            start_new_session=True, preexec_fn=self._cap if self.address_space_bytes else None)
+            [
+                self.python,
+                "-m",
+                "owcsim",
+                "serve",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(self.port),
+                "--db",
+                str(self.db),
+            ],
+            env=self.env,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            cwd=self.root,
+            start_new_session=True,
+            preexec_fn=self._cap if self.address_space_bytes else None,
+        )
         self._groups.append(self.proc.pid)
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:

@@ -1,4 +1,5 @@
 """Every endpoint and every error answer, in-process (TestClient); jobs stay queued (no dispatcher)."""
+
 import base64
 import json
 
@@ -42,13 +43,22 @@ def test_health_version_and_openapi(api):
     assert api.get("/v1/version").json()["api_version"] == "v1"
     doc = api.get("/v1/openapi.json").json()
     assert doc["paths"]["/v1/jobs"]["post"]["requestBody"]["content"]["application/json"]["schema"] == {
-        "$ref": "#/components/schemas/SceneSpec"}
+        "$ref": "#/components/schemas/SceneSpec"
+    }
     assert "receivers" in doc["components"]["schemas"]["SceneSpec"]["properties"]
     ops = {(m.upper(), p) for p, item in doc["paths"].items() for m in item}
-    assert ops == {("POST", "/v1/jobs"), ("GET", "/v1/jobs"), ("GET", "/v1/jobs/{job_id}"),
-                   ("POST", "/v1/jobs/{job_id}/cancel"), ("GET", "/v1/jobs/{job_id}/result"),
-                   ("GET", "/v1/jobs/{job_id}/result.csv"), ("GET", "/v1/jobs/{job_id}/result.npz"),
-                   ("GET", "/v1/jobs/{job_id}/plot.png"), ("GET", "/v1/health"), ("GET", "/v1/version")}
+    assert ops == {
+        ("POST", "/v1/jobs"),
+        ("GET", "/v1/jobs"),
+        ("GET", "/v1/jobs/{job_id}"),
+        ("POST", "/v1/jobs/{job_id}/cancel"),
+        ("GET", "/v1/jobs/{job_id}/result"),
+        ("GET", "/v1/jobs/{job_id}/result.csv"),
+        ("GET", "/v1/jobs/{job_id}/result.npz"),
+        ("GET", "/v1/jobs/{job_id}/plot.png"),
+        ("GET", "/v1/health"),
+        ("GET", "/v1/version"),
+    }
     post = doc["paths"]["/v1/jobs"]["post"]["responses"]
     assert post["422"]["content"] == {PROBLEM: {"schema": {"$ref": "#/components/schemas/Problem"}}}
 
@@ -58,20 +68,26 @@ def test_health_is_ok_with_the_dispatcher(live):
     assert body["status"] == "ok" and body["dispatcher"] and body["max_concurrent_jobs"] == 2
 
 
-@pytest.mark.parametrize("body,status,kind", [
-    (b"{not json", 400, "malformed-json"),
-    (b"\xff\xfe", 400, "malformed-json"),
-    (b"[1, 2]", 422, "invalid-scene"),
-    (b"", 400, "malformed-json"),
-])
+@pytest.mark.parametrize(
+    "body,status,kind",
+    [
+        (b"{not json", 400, "malformed-json"),
+        (b"\xff\xfe", 400, "malformed-json"),
+        (b"[1, 2]", 422, "invalid-scene"),
+        (b"", 400, "malformed-json"),
+    ],
+)
 def test_malformed_bodies(api, body, status, kind):
     p = problem(api.post("/v1/jobs", content=body, headers={"content-type": "application/json"}), status, kind)
     assert locs(p) == {"body"}
 
 
 def test_wrong_media_type_is_415(api):
-    problem(api.post("/v1/jobs", content=b"a=1", headers={"content-type": "application/x-www-form-urlencoded"}),
-            415, "unsupported-media-type")
+    problem(
+        api.post("/v1/jobs", content=b"a=1", headers={"content-type": "application/x-www-form-urlencoded"}),
+        415,
+        "unsupported-media-type",
+    )
 
 
 def test_invalid_fields_are_located(api):
@@ -110,8 +126,10 @@ def test_unreadable_base64_mesh_gets_the_engine_message(api):
 def test_inline_and_base64_meshes_are_accepted(api):
     obj = "v 1 1 1\nv 2 1 1\nv 1 2 1\nf 1 2 3\n"
     doc = quick_doc()
-    doc["meshes"] = [{"vertices": [[1, 1, 1], [2, 1, 1], [1, 2, 1]], "faces": [[0, 1, 2]], "reflectance": 0.5},
-                     {"data_base64": base64.b64encode(obj.encode()).decode(), "format": "obj", "reflectance": 0.4}]
+    doc["meshes"] = [
+        {"vertices": [[1, 1, 1], [2, 1, 1], [1, 2, 1]], "faces": [[0, 1, 2]], "reflectance": 0.5},
+        {"data_base64": base64.b64encode(obj.encode()).decode(), "format": "obj", "reflectance": 0.4},
+    ]
     assert api.post("/v1/jobs", json=doc).status_code == 202
 
 
@@ -135,29 +153,32 @@ def test_engine_refusal_is_a_422_with_its_message(api, monkeypatch):
 def test_body_size_limit_declared_and_streamed(tmp_path):
     with app_client(tmp_path, max_body_bytes=4096) as c:
         big = json.dumps(quick_doc() | {"description": "x" * 5000}).encode()
-        p = problem(c.post("/v1/jobs", content=big, headers={"content-type": "application/json"}), 413,
-                    "body-too-large")
+        p = problem(
+            c.post("/v1/jobs", content=big, headers={"content-type": "application/json"}), 413, "body-too-large"
+        )
         assert p["max_body_bytes"] == 4096
 
         def chunks():  # no Content-Length: counted while it streams
             for i in range(0, len(big), 1000):
-                yield big[i:i + 1000]
+                yield big[i : i + 1000]
 
         problem(c.post("/v1/jobs", content=chunks(), headers={"content-type": "application/json"}), 413)
         assert c.post("/v1/jobs", json=quick_doc()).status_code == 202
 
 
 def test_server_limits(tmp_path):
-    with app_client(tmp_path, max_triangles=20, max_paths_per_job=10_000, max_wall_time_s=60,
-                    max_receivers=50) as c:
+    with app_client(tmp_path, max_triangles=20, max_paths_per_job=10_000, max_wall_time_s=60, max_receivers=50) as c:
         doc = quick_doc()
         doc["furniture"] = [{"min": [1, 1, 0], "max": [2, 2, 1], "reflectance": 0.5}]
         p = problem(c.post("/v1/jobs", json=doc), 422, "limit-exceeded")
         assert locs(p) == {"body.meshes"} and "24 triangles" in p["detail"]
         p = problem(c.post("/v1/jobs", json=quick_doc(paths=20_000)), 422, "limit-exceeded")
         assert locs(p) == {"body.simulation.paths"}
-        p = problem(c.post("/v1/jobs", json=quick_doc(paths=None, target_rel_error=0.01, time_budget_s=120)),
-                    422, "limit-exceeded")
+        p = problem(
+            c.post("/v1/jobs", json=quick_doc(paths=None, target_rel_error=0.01, time_budget_s=120)),
+            422,
+            "limit-exceeded",
+        )
         assert locs(p) == {"body.simulation.time_budget_s"}
         doc = quick_doc()
         doc["receiver_grids"] = [{"origin": [0.5, 0.5, 0.5], "size": [4, 4], "spacing": 0.5, "area": 1e-4}]
@@ -191,16 +212,19 @@ def test_idempotency_key_returns_the_first_job(api, monkeypatch):
     assert again.json()["id"] == first.json()["id"] and again.headers["idempotent-replayed"] == "true"
     # the same document in another spelling is the same request
     respaced = json.dumps(quick_doc(), indent=3).encode()
-    same = api.post("/v1/jobs", content=respaced, headers={"Idempotency-Key": "abc-1",
-                                                          "content-type": "application/json"})
+    same = api.post(
+        "/v1/jobs", content=respaced, headers={"Idempotency-Key": "abc-1", "content-type": "application/json"}
+    )
     assert same.json()["id"] == first.json()["id"]
-    other = problem(api.post("/v1/jobs", json=quick_doc(seed=2), headers={"Idempotency-Key": "abc-1"}), 422,
-                    "idempotency-key-reused")
+    other = problem(
+        api.post("/v1/jobs", json=quick_doc(seed=2), headers={"Idempotency-Key": "abc-1"}),
+        422,
+        "idempotency-key-reused",
+    )
     assert other["job_id"] == first.json()["id"]
     assert api.post("/v1/jobs", json=quick_doc()).json()["id"] != first.json()["id"]
     assert len(api.get("/v1/jobs").json()["items"]) == 2
-    problem(api.post("/v1/jobs", json=quick_doc(), headers={"Idempotency-Key": "x" * 300}), 422,
-            "invalid-parameter")
+    problem(api.post("/v1/jobs", json=quick_doc(), headers={"Idempotency-Key": "x" * 300}), 422, "invalid-parameter")
 
 
 def test_list_pages_newest_first_and_filters(api):
@@ -237,8 +261,7 @@ def test_unknown_job_route_and_method(api):
 
 def test_unusable_json_numbers_are_400(api):
     body = b'{"simulation": {"seed": ' + b"9" * 5000 + b"}}"  # past Python's 4300-digit integer limit
-    p = problem(api.post("/v1/jobs", content=body, headers={"content-type": "application/json"}), 400,
-                "malformed-json")
+    p = problem(api.post("/v1/jobs", content=body, headers={"content-type": "application/json"}), 400, "malformed-json")
     assert "4300" in p["detail"]
 
 

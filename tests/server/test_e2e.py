@@ -1,4 +1,5 @@
 """End to end: a real `owcsim serve` (uvicorn) on 127.0.0.1, driven by the Python client."""
+
 import io
 import json
 import signal
@@ -19,8 +20,9 @@ from .helpers import ServerProcess, long_doc, quick_doc
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    with ServerProcess(tmp_path_factory.mktemp("e2e") / "jobs.sqlite", progress_interval_s=0.1,
-                       max_body_bytes=200_000) as s:
+    with ServerProcess(
+        tmp_path_factory.mktemp("e2e") / "jobs.sqlite", progress_interval_s=0.1, max_body_bytes=200_000
+    ) as s:
         yield s
 
 
@@ -137,7 +139,9 @@ def test_restart_while_a_job_runs_loses_nothing(tmp_path, sig):
                 assert owc.job(job.id).wait(timeout=90).status == "succeeded"
             again = owc.job(running.id)
             assert again.attempts == 2
-            assert again.error.startswith("requeued: the server " + ("restarted" if sig == signal.SIGKILL else "stopped"))
+            assert again.error.startswith(
+                "requeued: the server " + ("restarted" if sig == signal.SIGKILL else "stopped")
+            )
             result = again.result()
             assert result.run.paths_total == 4_000_000 and result.run.stop_reason == "paths"
             if sig == signal.SIGKILL:  # same seed: the rerun gives exactly the uninterrupted result
@@ -153,8 +157,23 @@ def test_cli_serve_and_submit(server, tmp_path, capsys, monkeypatch):
     from tests.scenes import EXAMPLES
 
     out = tmp_path / "out"
-    assert main(["submit", str(EXAMPLES / "barry_config_a.json"), "--server", server.url, "--out", str(out),
-                 "--paths", "20000", "--set", "receivers.0.fov_deg=60"]) == 0
+    assert (
+        main(
+            [
+                "submit",
+                str(EXAMPLES / "barry_config_a.json"),
+                "--server",
+                server.url,
+                "--out",
+                str(out),
+                "--paths",
+                "20000",
+                "--set",
+                "receivers.0.fov_deg=60",
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr()
     assert "tx -> rx" in printed.out and "20,000 paths" in printed.out and "submitted job" in printed.err
     res = json.loads((out / "result.json").read_text())

@@ -3,10 +3,10 @@
 Bounded in time and memory: in-process apps on tmp stores, small scenes, loopback only.
 Item numbers are the issue's.
 """
+
 from __future__ import annotations
 
 import base64
-import io
 import json
 import multiprocessing as mp
 import os
@@ -22,7 +22,6 @@ import numpy as np
 import pytest
 
 from owcsim.schemas.results import SimulationResultPublic
-from owcsim.server.settings import Settings
 from owcsim.server.store import JobStore, StoreError
 
 from .helpers import ServerProcess, app_client, quick_doc, wait_for
@@ -48,6 +47,7 @@ def _instancing_glb(nodes: int, subdivisions: int) -> tuple[bytes, int]:
 
 
 # -- 1. mesh instancing bomb ---------------------------------------------------------------------
+
 
 def test_1_instancing_bomb_is_refused_from_the_file_structure_at_once(tmp_path):
     glb, flattened = _instancing_glb(300, 5)  # ~0.5 MB file, 300 x 20 480 = 6.1 M triangles
@@ -77,11 +77,13 @@ def test_1_triangles_counted_from_structure_equal_the_flattened_count():
 
 # -- 2. results served in bounded memory -----------------------------------------------------------
 
+
 def _grid_doc(n_side: int, **sim) -> dict:
     doc = quick_doc(**{"paths": 1024, "direction": "forward", "max_reflections": 1, **sim})
     doc["receivers"] = []
-    doc["receiver_grids"] = [{"id_prefix": "g", "origin": [0.5, 0.5, 0.0], "size": [4.0, 4.0],
-                              "spacing": 4.0 / (n_side - 1), "area": 1e-4}]
+    doc["receiver_grids"] = [
+        {"id_prefix": "g", "origin": [0.5, 0.5, 0.0], "size": [4.0, 4.0], "spacing": 4.0 / (n_side - 1), "area": 1e-4}
+    ]
     doc["outputs"] = {"cir": True, "orders": True}  # a grid gets no CIR unless asked: these jobs are large on purpose
     return doc
 
@@ -123,15 +125,20 @@ def test_2_csv_ids_that_look_like_formulas_are_escaped():
     from owcsim.schemas.results import CirPublic, LinkPublic, TimeBinsPublic
     from owcsim.server.formats import cir_csv
 
-    link = LinkPublic.model_construct(transmitter="=HYPERLINK(\"http://x\")", receiver="@rx", cir=CirPublic(
-        total=[1.0], total_stderr=[None], by_reflection_order=[[1.0]]))
-    result = SimulationResultPublic.model_construct(time_bins=TimeBinsPublic(t_min_s=0.0, time_bin_s=1e-9, n_bins=1),
-                                                    links=[link])
+    link = LinkPublic.model_construct(
+        transmitter='=HYPERLINK("http://x")',
+        receiver="@rx",
+        cir=CirPublic(total=[1.0], total_stderr=[None], by_reflection_order=[[1.0]]),
+    )
+    result = SimulationResultPublic.model_construct(
+        time_bins=TimeBinsPublic(t_min_s=0.0, time_bin_s=1e-9, n_bins=1), links=[link]
+    )
     row = cir_csv(result).splitlines()[1]
-    assert row.startswith("\"'=HYPERLINK(\"\"http://x\"\")\",'@rx,")
+    assert row.startswith('"\'=HYPERLINK(""http://x"")",\'@rx,')
 
 
 # -- 4. memory budget per job ----------------------------------------------------------------------
+
 
 def test_4_a_job_over_the_per_job_memory_limit_is_refused_at_submission(tmp_path):
     from owcsim.engine.budget import job_memory_bytes
@@ -171,8 +178,15 @@ def _oom_child(db, job_id, token, budget):
 
 def test_4_a_worker_past_its_budget_fails_with_a_clear_reason(tmp_path):
     store = JobStore(tmp_path / "jobs.sqlite")
-    job, _ = store.submit(owner="", scene_json=json.dumps(_grid_doc(60, t_max_s=1e-6)), name=None, request_hash="h",
-                          idempotency_key=None, max_queued=10, memory_bytes=300 * 2**20)
+    job, _ = store.submit(
+        owner="",
+        scene_json=json.dumps(_grid_doc(60, t_max_s=1e-6)),
+        name=None,
+        request_hash="h",
+        idempotency_key=None,
+        max_queued=10,
+        memory_bytes=300 * 2**20,
+    )
     _, token = store.claim_next()
     from owcsim.server.dispatcher import start_forkserver
 
@@ -211,6 +225,7 @@ def test_4_jobs_are_admitted_against_the_server_memory_budget(tmp_path):
 
 # -- 5. the served result equals `owcsim run`, bit for bit ---------------------------------------
 
+
 def test_5_served_result_equals_owcsim_run_with_non_unit_normals(tmp_path):
     import subprocess
     import sys
@@ -220,8 +235,12 @@ def test_5_served_result_equals_owcsim_run_with_non_unit_normals(tmp_path):
     doc["receivers"][0]["normal"] = [0.0, 0.2, 1.3]
     path = tmp_path / "scene.json"
     path.write_text(json.dumps(doc))
-    run = subprocess.run([sys.executable, "-m", "owcsim", "run", str(path), "--out", str(tmp_path / "out")],
-                         capture_output=True, text=True, timeout=120)
+    run = subprocess.run(
+        [sys.executable, "-m", "owcsim", "run", str(path), "--out", str(tmp_path / "out")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert run.returncode == 0, run.stderr
     local = json.loads((tmp_path / "out" / "result.json").read_text())
     with app_client(tmp_path, run_jobs=True) as c:
@@ -235,6 +254,7 @@ def test_5_served_result_equals_owcsim_run_with_non_unit_normals(tmp_path):
 
 
 # -- 6. disk full ----------------------------------------------------------------------------------
+
 
 def test_6_disk_full_is_507_with_retry_after_health_degraded_and_no_busy_loop(tmp_path, monkeypatch, caplog):
     full = threading.Event()
@@ -279,6 +299,7 @@ def test_6_disk_full_is_507_with_retry_after_health_degraded_and_no_busy_loop(tm
 
 # -- 7, 8. one server per store; a store that holds its data -------------------------------------------
 
+
 def test_7_a_second_server_on_the_same_store_refuses_to_start(tmp_path, capsys):
     from owcsim.cli import main
 
@@ -317,14 +338,22 @@ def test_8_a_damaged_store_is_a_clear_error_naming_the_file(tmp_path):
 
 # -- 9. fair sharing between API keys ------------------------------------------------------------
 
+
 def test_9_dispatch_is_fair_between_owners_and_each_has_a_queue_quota(tmp_path):
     from owcsim.server.store import QueueFull
 
     store = JobStore(tmp_path / "jobs.sqlite")
 
     def submit(owner, i, quota=None):
-        return store.submit(owner=owner, scene_json="{}", name=None, request_hash=f"{owner}{i}",
-                            idempotency_key=None, max_queued=100, max_queued_per_owner=quota)[0].id
+        return store.submit(
+            owner=owner,
+            scene_json="{}",
+            name=None,
+            request_hash=f"{owner}{i}",
+            idempotency_key=None,
+            max_queued=100,
+            max_queued_per_owner=quota,
+        )[0].id
 
     a = [submit("a", i) for i in range(6)]
     b = [submit("b", i) for i in range(2)]
@@ -343,8 +372,12 @@ def test_9_dispatch_is_fair_between_owners_and_each_has_a_queue_quota(tmp_path):
 def test_9_a_tenant_that_fills_its_quota_does_not_lock_out_others(tmp_path):
     with app_client(tmp_path, api_keys="key-a,key-b", max_queued_per_key=3) as c:
         a, b = {"Authorization": "Bearer key-a"}, {"Authorization": "Bearer key-b"}
-        assert [c.post("/v1/jobs", json=quick_doc(seed=i), headers=a).status_code for i in range(4)] == \
-            [202, 202, 202, 429]
+        assert [c.post("/v1/jobs", json=quick_doc(seed=i), headers=a).status_code for i in range(4)] == [
+            202,
+            202,
+            202,
+            429,
+        ]
         assert c.post("/v1/jobs", json=quick_doc(), headers=b).status_code == 202
         # the listing cursor is opaque and per tenant
         page = c.get("/v1/jobs?limit=2", headers=a).json()
@@ -353,6 +386,7 @@ def test_9_a_tenant_that_fills_its_quota_does_not_lock_out_others(tmp_path):
 
 
 # -- 10. free text is bounded ------------------------------------------------------------------
+
 
 def test_10_long_text_fields_are_refused_before_validation(tmp_path):
     with app_client(tmp_path) as c:
@@ -370,6 +404,7 @@ def test_10_long_text_fields_are_refused_before_validation(tmp_path):
 
 
 # -- 11. the client reads only regular files ---------------------------------------------------
+
 
 def _doc_with_mesh(path) -> dict:
     doc = quick_doc()
@@ -452,6 +487,7 @@ def test_1_only_small_scenes_are_preflighted_in_the_server_process():
 
 
 # -- Low: a hung worker does not keep its slot -------------------------------------------------
+
 
 def test_a_worker_that_stops_making_progress_is_killed_and_the_job_failed(tmp_path):
     import signal

@@ -1,4 +1,5 @@
 """Jobs that run: worker processes, progress, results in every form, cancel, crashes, limits, order."""
+
 import io
 import json
 import os
@@ -139,8 +140,9 @@ def test_a_cancel_while_queued_never_runs(tmp_path):
 
 def test_engine_warnings_are_kept_with_the_job(live):
     doc = quick_doc()
-    doc["meshes"] = [{"vertices": [[1, 1, 1], [2, 1, 1], [1, 2, 1], [3, 3, 1]], "faces": [[0, 1, 2], [0, 0, 3]],
-                      "reflectance": 0.5}]
+    doc["meshes"] = [
+        {"vertices": [[1, 1, 1], [2, 1, 1], [1, 2, 1], [3, 3, 1]], "faces": [[0, 1, 2], [0, 0, 3]], "reflectance": 0.5}
+    ]
     with pytest.warns(UserWarning, match="degenerate"):  # a small scene is pre-flighted in the request thread
         job = live.post("/v1/jobs", json=doc).json()
     done = wait_for(live, job["id"], "succeeded")

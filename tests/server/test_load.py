@@ -5,6 +5,7 @@ Every job must be accounted for (200 distinct ids, all succeeded, all listed), a
 server must stay responsive: a monitor polls /v1/health throughout. Bounded: 200 jobs,
 at most LOAD_TIMEOUT_S. The figures are printed (run with -s to see them).
 """
+
 import statistics
 import threading
 import time
@@ -34,8 +35,7 @@ def test_200_submissions_from_20_clients(tmp_path):
         with lock:
             statuses[response.status_code] = statuses.get(response.status_code, 0) + 1
 
-    with ServerProcess(tmp_path / "jobs.sqlite", max_concurrent_jobs=2, max_queued_jobs=50,
-                       retry_after_s=1) as srv:
+    with ServerProcess(tmp_path / "jobs.sqlite", max_concurrent_jobs=2, max_queued_jobs=50, retry_after_s=1) as srv:
         submitted: list[tuple[str, float]] = []
         errors: list[BaseException] = []
         health: list[float] = []
@@ -54,8 +54,9 @@ def test_200_submissions_from_20_clients(tmp_path):
         def client(i: int):
             try:
                 http = httpx.Client(base_url=srv.url, timeout=30, event_hooks={"response": [count]})
-                with Client(srv.url, retry=RetryPolicy(retries=100, backoff_s=0.2, max_backoff_s=2.0),
-                            http=http) as owc:
+                with Client(
+                    srv.url, retry=RetryPolicy(retries=100, backoff_s=0.2, max_backoff_s=2.0), http=http
+                ) as owc:
                     for k in range(PER_CLIENT):
                         t0 = time.perf_counter()
                         job = owc.submit(quick_doc(seed=i * PER_CLIENT + k))
@@ -94,13 +95,19 @@ def test_200_submissions_from_20_clients(tmp_path):
     assert set(listed) == set(ids) and set(listed.values()) == {"succeeded"}
     assert statuses.get(500, 0) == 0
     assert len(health) >= 10 and max(health) < 2.0, f"health check took up to {max(health):.2f} s"
-    print(f"\nload: {len(ids)} jobs from {CLIENTS} clients; submitted in {t_submitted:.1f} s "
-          f"({len(ids) / t_submitted:.1f} submissions/s), all {len(listed)} succeeded after {t_all:.1f} s "
-          f"({len(ids) / t_all:.1f} jobs/s)")
-    print(f"load: submit latency incl. retries p50 {_pct(latency, 50):.3f} s, p95 {_pct(latency, 95):.3f} s, "
-          f"p99 {_pct(latency, 99):.3f} s, max {max(latency):.3f} s; answers {dict(sorted(statuses.items()))}")
-    print(f"load: /v1/health during the run ({len(health)} probes): p50 {1e3 * statistics.median(health):.1f} ms, "
-          f"p99 {1e3 * _pct(health, 99):.1f} ms, max {1e3 * max(health):.1f} ms")
+    print(
+        f"\nload: {len(ids)} jobs from {CLIENTS} clients; submitted in {t_submitted:.1f} s "
+        f"({len(ids) / t_submitted:.1f} submissions/s), all {len(listed)} succeeded after {t_all:.1f} s "
+        f"({len(ids) / t_all:.1f} jobs/s)"
+    )
+    print(
+        f"load: submit latency incl. retries p50 {_pct(latency, 50):.3f} s, p95 {_pct(latency, 95):.3f} s, "
+        f"p99 {_pct(latency, 99):.3f} s, max {max(latency):.3f} s; answers {dict(sorted(statuses.items()))}"
+    )
+    print(
+        f"load: /v1/health during the run ({len(health)} probes): p50 {1e3 * statistics.median(health):.1f} ms, "
+        f"p99 {1e3 * _pct(health, 99):.1f} ms, max {1e3 * max(health):.1f} ms"
+    )
 
 
 @pytest.mark.slow
@@ -109,8 +116,9 @@ def test_health_answers_while_60_clients_download_large_results(tmp_path):
     must not hold up /v1/health (the old routes rendered each CSV in the shared thread pool: 60 s)."""
     doc = quick_doc(paths=1024, direction="forward", t_max_s=2e-7)
     doc["receivers"] = []
-    doc["receiver_grids"] = [{"id_prefix": "g", "origin": [0.5, 0.5, 0.0], "size": [4.0, 4.0],
-                              "spacing": 4.0 / 29, "area": 1e-4}]
+    doc["receiver_grids"] = [
+        {"id_prefix": "g", "origin": [0.5, 0.5, 0.0], "size": [4.0, 4.0], "spacing": 4.0 / 29, "area": 1e-4}
+    ]
     with ServerProcess(tmp_path / "jobs.sqlite", max_connections=500) as srv:
         with Client(srv.url) as owc:
             job = owc.submit(doc)
@@ -150,7 +158,9 @@ def test_health_answers_while_60_clients_download_large_results(tmp_path):
         wall = time.perf_counter() - t0
         stop.set()
         mon.join()
-    print(f"\n60 clients x 2 CSV downloads in {wall:.1f} s; /v1/health p50 {_pct(health, 50) * 1e3:.0f} ms, "
-          f"p99 {_pct(health, 99) * 1e3:.0f} ms, max {max(health) * 1e3:.0f} ms over {len(health)} calls")
+    print(
+        f"\n60 clients x 2 CSV downloads in {wall:.1f} s; /v1/health p50 {_pct(health, 50) * 1e3:.0f} ms, "
+        f"p99 {_pct(health, 99) * 1e3:.0f} ms, max {max(health) * 1e3:.0f} ms over {len(health)} calls"
+    )
     assert not failures, failures[:3]
     assert max(health) < 2.0  # the container's health check allows 5 s

@@ -1,4 +1,5 @@
 """The SQLite job store: WAL, order, run tokens that keep stale workers out, restart bookkeeping."""
+
 import sqlite3
 
 import pytest
@@ -9,8 +10,14 @@ from owcsim.server.store import IdempotencyConflict, JobStore, QueueFull
 def _submit(store, n=1, **kw):
     out = []
     for i in range(n):
-        args = dict(owner="", scene_json='{"x": %d}' % i, name=f"j{i}", request_hash=str(i), idempotency_key=None,
-                    max_queued=100)
+        args = dict(
+            owner="",
+            scene_json=f'{{"x": {i}}}',
+            name=f"j{i}",
+            request_hash=str(i),
+            idempotency_key=None,
+            max_queued=100,
+        )
         args.update(kw)
         out.append(store.submit(**args)[0])
     return out
@@ -90,10 +97,12 @@ def test_queue_limit_and_idempotency(tmp_path):
     _submit(store, 2, max_queued=2)
     with pytest.raises(QueueFull):
         _submit(store, 1, max_queued=2)
-    first, created = store.submit(owner="a", scene_json="{}", name=None, request_hash="h", idempotency_key="k",
-                                  max_queued=10)
-    again, created2 = store.submit(owner="a", scene_json="{}", name=None, request_hash="h", idempotency_key="k",
-                                   max_queued=10)
+    first, created = store.submit(
+        owner="a", scene_json="{}", name=None, request_hash="h", idempotency_key="k", max_queued=10
+    )
+    again, created2 = store.submit(
+        owner="a", scene_json="{}", name=None, request_hash="h", idempotency_key="k", max_queued=10
+    )
     assert created and not created2 and again.id == first.id
     with pytest.raises(IdempotencyConflict):
         store.submit(owner="a", scene_json="{}", name=None, request_hash="other", idempotency_key="k", max_queued=10)
