@@ -181,16 +181,20 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
     pieces += [_load_mesh(i, m, base_dir) for i, m in enumerate(spec.meshes)]
     if not pieces:
         return Geometry(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0), np.zeros(0, np.int64), [])
-    verts, faces, rho, labels, offset = [], [], [], [], 0
+    verts: list[np.ndarray] = []
+    face_parts: list[np.ndarray] = []
+    rho_parts: list[np.ndarray] = []
+    labels: list[str] = []
+    offset = 0
     for v, f, r, names in pieces:
         if not np.all(np.isfinite(v)):
             raise SceneError(f"{names[0].split('.')[0]}: vertices contain NaN or infinite values")
         verts.append(v)
-        faces.append(f + offset)
+        face_parts.append(f + offset)
         offset += len(v)
-        rho.append(r)
+        rho_parts.append(r)
         labels += names
-    vertices, faces, rho = np.concatenate(verts), np.concatenate(faces), np.concatenate(rho)
+    vertices, faces, surfaces_all = np.concatenate(verts), np.concatenate(face_parts), np.concatenate(rho_parts)
     group_names, group = np.unique(np.asarray(labels), return_inverse=True)
     extent = check_extent(vertices, "the surfaces") or 1.0
     tri = vertices[faces]
@@ -201,7 +205,7 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
         warnings.warn(f"dropped {int((~ok).sum())} degenerate (zero-area) triangles from {bad}", stacklevel=2)
     if not ok.any():
         raise SceneError("every triangle of the scene is degenerate")
-    surfaces = rho[ok]
+    surfaces = surfaces_all[ok]
     from .spectra import grey_surfaces  # spectral surfaces: the carrier's reflectance (max over the bands)
 
     rho, material = _materials(grey_surfaces(surfaces, spec))

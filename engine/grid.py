@@ -47,11 +47,16 @@ class GridMedium(Medium):
         self.sigma_s_grid = s
         uniform = a.strides == s.strides == (0, 0, 0)  # both given as one number: keep it one number
         self.sigma_t_grid = np.broadcast_to(a[0, 0, 0] + s[0, 0, 0], self.shape) if uniform else a + s
-        self.sigma_t_max = float(self.sigma_t_grid.max())
+        self._sigma_t_max = float(self.sigma_t_grid.max())
         self.sigma_t_min = float(self.sigma_t_grid.min())
         self.bounds = (self.lo, self.hi)
         self.phase_spec = phase_spec if phase_spec is not None else IsotropicPhaseSpec()
         self.evaluations = 0
+
+    @property
+    def sigma_t_max(self) -> float:
+        """Largest cell sigma_t [1/m] (the delta-tracking majorant)."""
+        return self._sigma_t_max
 
     def cells(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(cell indices (n, 3), inside the box?) of points (n, 3); points on the box's faces are inside."""

@@ -46,8 +46,12 @@ class Medium:
 
     evaluations: int
     phase_spec: PhaseSpec
-    sigma_t_max: float
     bounds: tuple[np.ndarray, np.ndarray] | None
+
+    @property
+    def sigma_t_max(self) -> float:
+        """Majorant of sigma_t over the medium [1/m]."""
+        raise NotImplementedError
 
     # --- to implement ----------------------------------------------------------------
     def _optical_depth(self, o, d, L) -> tuple[np.ndarray, int]:
@@ -173,6 +177,7 @@ class HomogeneousMedium(Medium):
     def __post_init__(self):
         if self.box is not None and self.region is not None:
             raise ValueError("give a box or a mesh region, not both")
+        self._region: BoxRegion | MeshRegion | WholeRegion
         if self.box is not None:
             self.box = (np.asarray(self.box[0], np.float64), np.asarray(self.box[1], np.float64))
             self._region = BoxRegion(*self.box)

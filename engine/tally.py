@@ -247,6 +247,7 @@ class BatchBuilder:
         ib = b.astype(np.int64)
         _accumulate(self.cir, slot * bins.n + ib, power)
         if self.cir_k is not None:
+            assert self.cir_s is not None  # allocated together with cir_k
             _accumulate(self.cir_k, (slot * plan.n_orders + k) * bins.n + ib, power)
             _accumulate(self.cir_s, (slot * plan.n_scatter + s) * bins.n + ib, power)
 
@@ -354,6 +355,7 @@ class Accumulator:
         self.s1[ln] += batch.s1
         self.s2[ln] += batch.s2
         g = batch_index % N_GROUPS
+        assert batch.h0_groups is not None and batch.h0_group_paths is not None  # set by BatchBuilder.finish
         self.group_paths[g, ln] += batch.n_paths
         self.group_h0[:, ln] += batch.h0_groups.T
         self.h0_group_paths[:, ln] += batch.h0_group_paths[:, None]
@@ -364,6 +366,7 @@ class Accumulator:
             self.late[cs] += batch.late
             self.groups[g, cs] += batch.cir
             if batch.cir_k is not None:
+                assert self.cir_k is not None and self.cir_s is not None and batch.cir_s is not None
                 self.cir_k[cs] += batch.cir_k
                 self.cir_s[cs] += batch.cir_s
         if len(batch.order_links):
@@ -371,6 +374,7 @@ class Accumulator:
             self.order_sum[os_] += batch.order_sum
             self.order_sumsq[os_] += batch.order_sumsq
         if batch.channel_s1 is not None:
+            assert batch.channel_s2 is not None
             self.channel_n[:, source] += batch.n_paths
             self.channel_s1[:, source] += batch.channel_s1
             self.channel_s2[:, source] += batch.channel_s2
