@@ -3,6 +3,7 @@
     import owcsim
     result = owcsim.simulate("examples/barry_config_a.json")   # or a dict, or a SceneSpec
     result.links[0].dc_gain, result.grid_maps()                    # typed result, numpy arrays
+    from owcsim import build                                       # box_room, lamp, photodiode, work_plane, scene
 
 The installed package holds the layers as subpackages: `owcsim.schemas` (wire models),
 `owcsim.engine` (simulation core), `owcsim.server` (HTTP service), `owcsim.clients`
