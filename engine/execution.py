@@ -21,6 +21,7 @@ import multiprocessing as mp
 import os
 import pickle
 import tempfile
+import time
 from collections import OrderedDict, deque
 from collections.abc import Generator, Iterable
 from concurrent.futures import ProcessPoolExecutor
@@ -53,12 +54,33 @@ def job_ref(scene: Scene, base_dir: str | None, folder: str | None = None) -> Jo
     key = hashlib.sha256(scene.spec.model_dump_json().encode() + b"\0" + data + str(base_dir).encode()).hexdigest()[:24]
     folder = folder or _private_folder()
     path = os.path.join(folder, f"{key}.pickle")
-    if not os.path.exists(path):
+    if os.path.exists(path):
+        os.utime(path)  # in use again: not stale
+    else:
         tmp = f"{path}.{os.getpid()}.tmp"
         with open(tmp, "wb") as fh:
             fh.write(data)
         os.replace(tmp, path)
+        _prune(folder)
     return JobRef(scene, key, path, base_dir)
+
+
+#: Scene documents not used for this long are deleted when a new one is written [s].
+STALE_SCENE_S = 7 * 24 * 3600.0
+
+
+def _prune(folder: str, now: float | None = None) -> int:
+    """Delete the scene pickles (and stray temporaries) of `folder` unused for STALE_SCENE_S; their count."""
+    now = time.time() if now is None else now
+    removed = 0
+    for entry in os.scandir(folder):
+        try:
+            if entry.name.endswith((".pickle", ".tmp")) and now - entry.stat().st_mtime > STALE_SCENE_S:
+                os.remove(entry.path)
+                removed += 1
+        except FileNotFoundError:  # another process pruned it first
+            continue
+    return removed
 
 
 def _private_folder() -> str:

@@ -1,7 +1,10 @@
-"""Determinism: the same seed gives bit-identical results with 1 or 2 worker processes."""
+"""Determinism: the same seed gives bit-identical results with 1 or 2 worker processes; scene files."""
 
 import json
+import os
+import time
 
+from owcsim.engine.scene import build_scene
 from tests.results import simulate_document as simulate
 from tests.scenes import room_doc, spec
 
@@ -74,3 +77,24 @@ def test_warm_pool_serves_several_jobs():
     assert _strip(pooled[0]) == _strip(serial[0]) == _strip(pooled[2])
     assert _strip(pooled[1]) == _strip(serial[1])
     assert pooled[0]["links"][0]["dc_gain"] != pooled[1]["links"][0]["dc_gain"]
+
+
+def test_scene_pickles_unused_for_a_week_are_pruned(tmp_path):
+    """job_ref writes content-addressed pickles; those untouched for STALE_SCENE_S go when a new one is written."""
+    from owcsim.engine import execution
+
+    scene_a = build_scene(spec(room_doc(paths=100)))
+    scene_b = build_scene(spec(room_doc(rx=(4.0, 1.0, 0.0), paths=100)))
+    ref_a = execution.job_ref(scene_a, None, str(tmp_path))
+    old = time.time() - execution.STALE_SCENE_S - 10
+    os.utime(ref_a.spec_path, (old, old))
+    (tmp_path / "stray.pickle.123.tmp").write_bytes(b"")
+    os.utime(tmp_path / "stray.pickle.123.tmp", (old, old))
+    ref_b = execution.job_ref(scene_b, None, str(tmp_path))
+    assert os.path.exists(ref_b.spec_path) and not os.path.exists(ref_a.spec_path)
+    assert not (tmp_path / "stray.pickle.123.tmp").exists()
+    # a pickle in use again is touched, so it is not stale
+    ref_a = execution.job_ref(scene_a, None, str(tmp_path))
+    os.utime(ref_a.spec_path, (old, old))
+    execution.job_ref(scene_a, None, str(tmp_path))
+    assert execution._prune(str(tmp_path)) == 0 and os.path.exists(ref_a.spec_path)

@@ -12,7 +12,9 @@ Not part of the default run (it is slower): `.ci/run` runs it, or
 `scripts/test tests/server/fuzz_openapi.py`. FUZZ_EXAMPLES sets the examples per operation.
 """
 
+import atexit
 import os
+import shutil
 import sqlite3
 import tempfile
 import time
@@ -32,6 +34,7 @@ KEY = "fuzz-key"
 SCENARIO_JOBS: Counter = Counter()  # final status of the jobs the stateful scenarios submitted
 
 DB = Path(tempfile.mkdtemp(prefix="owcsim-fuzz-")) / "jobs.sqlite"
+atexit.register(shutil.rmtree, DB.parent, ignore_errors=True)  # the store lives as long as the module's app
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     app = create_app(
