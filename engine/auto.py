@@ -323,15 +323,6 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
     if sim.algorithm == "auto":
         room_bounds = (np.asarray(spec.room.lo), np.asarray(spec.room.hi)) if spec.room is not None else None
         number, why, drop_medium = choose_algorithm(spec, scene.medium, room_bounds)
-        spectra = scene.spectra
-        if number == 5 and spectra is not None and spectra.carry and spectra.tau_scale is not None:
-            number, why = (
-                4,
-                (
-                    "smoke that varies over the spectral bands: algorithm 4 (single and double scattering "
-                    "per band; algorithm 5 does not carry per-band ratios through collisions)"
-                ),
-            )
         update["algorithm"] = number
         modeled.algorithm_reason = why
         if drop_medium and spec.medium is not None:

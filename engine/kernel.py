@@ -284,6 +284,13 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
             frames = _EquiangularFrames(ctx, paths, t_seg) if settings.equiangular_points else None
             medium_rows = np.flatnonzero(collided & (paths.s < S))
             _medium_next_events(ctx, paths, frames, medium_rows, t_col.take(medium_rows), rng)
+            if ctx.spectra is not None and ctx.spectra.depth_row:  # smoke per band: T_b / T_c of the flight
+                flown = np.flatnonzero(hit & ~collided & (paths.k < K))  # (its collisions: `_medium_collision`)
+                if len(flown):
+                    tau = medium.optical_depth(
+                        paths.origins.take(flown, axis=1).T, paths.directions.take(flown, axis=1).T, t.take(flown)
+                    )
+                    paths.ratio = ctx.spectra.transmit_rows(paths.ratio, flown, tau)
         elif medium is not None:  # algorithm 1 (and 2-4): the segment's extinction
             tau = medium.optical_depth(paths.origins.T, paths.directions.T, t_seg)
             paths.weights = paths.weights * np.exp(-tau)  # = medium.transmittance
@@ -447,7 +454,10 @@ def _medium_next_events(
             )
             if n_eq:
                 frame_rows = frame_rows.take(inside)
-        transmittance = medium.transmittance(pp.origins.T, pp.directions.T, s)
+        tau = medium.optical_depth(pp.origins.T, pp.directions.T, s)
+        transmittance = np.exp(-tau)  # = medium.transmittance
+        if ctx.spectra is not None:  # smoke per band: sigma_s,b T_b over the carrier's at the point (spectra.py)
+            pp.ratio = ctx.spectra.scatter(pp.ratio, tau)
         n_e = frame.density(s, n_eq, frame_rows) if n_eq else 0.0
         throughput = _scattering_point_throughput(pp.weights, transmittance, sigma_t, sigma_s, n_e)
         mid_g = None
@@ -467,6 +477,10 @@ def _medium_collision(ctx: "_Context", paths: _Paths, rows, t_col, rng) -> _Path
     K, S = settings.max_reflections, settings.max_scattering
     mp = paths.gather(rows)
     points = mp.origins + t_col * mp.directions
+    if ctx.spectra is not None and ctx.spectra.depth_row:  # smoke per band: ratio tracking (spectra.py)
+        # the carrier sampled t_col with density sigma_t,c T_c and keeps albedo_c: band b's true sigma_s,b T_b
+        # over that is (sigma_s,b / sigma_s,c) exp(-tau_c (sigma_t,b / sigma_t,c - 1)) x albedo_c
+        mp.ratio = ctx.spectra.scatter(mp.ratio, medium.optical_depth(mp.origins.T, mp.directions.T, t_col))
     mp.lengths = mp.lengths + t_col
     mp.weights = mp.weights * medium.albedo_at(points.T)
     mp.s = mp.s + 1
@@ -477,6 +491,8 @@ def _medium_collision(ctx: "_Context", paths: _Paths, rows, t_col, rng) -> _Path
     u = ctx.bounce_uniforms(mp, rng)
     arriving = mp.directions
     mp.directions = phase.sample(arriving, u[0], u[1])
+    if ctx.spectra is not None:  # Mie per band: p_b / p_c of the sampled direction (spectra.py)
+        mp.ratio = ctx.spectra.turn(mp.ratio, _dot(arriving, mp.directions))
     if settings.both_sides:  # leaving the path's first vertex: its phase density (medium_nee)
         at_first = mp.k + mp.s == 1
         if at_first.any():

@@ -245,8 +245,8 @@ def connect_from_target(ctx, mp, points, rng) -> None:
             w12.take(keep, axis=1),
         )
         dj = dirs.take(sel, axis=1)
-        p1 = scene.phase.eval(_dot(arriving.take(sel, axis=1), w12))
-        p2 = scene.phase.eval(-_dot(w12, dj))
+        p_cos1, p_cos2 = _dot(arriving.take(sel, axis=1), w12), -_dot(w12, dj)
+        p1, p2 = scene.phase.eval(p_cos1), scene.phase.eval(p_cos2)
         g = medium.transmittance(a.T, w12.T, r12) / (r12 * r12)
         to_dev = pos - y
         r2 = np.sqrt(_dot(to_dev, to_dev))
@@ -260,6 +260,17 @@ def connect_from_target(ctx, mp, points, rng) -> None:
         ok = np.flatnonzero(power > 0)
         if len(ok) == 0:
             continue
+        ratio = None
+        if "ratio" in ctx.out:  # spectral: the ratios at x_1 (k = 0: only smoke per band changes them)
+            ratio = mp.ratio.take(first.take(sel.take(ok)), axis=1)
+            if ctx.spectra.depth_row:  # sigma_s,b T_b at x_2 over the carrier's, T_b / T_c of x_1 -> x_2
+                o_k, d_k = origins.take(sel.take(ok), axis=1), dj.take(ok, axis=1)
+                tau = medium.optical_depth(o_k.T, d_k.T, t_y.take(sel.take(ok)))
+                tau = tau + medium.optical_depth(a.take(ok, axis=1).T, w12.take(ok, axis=1).T, r12.take(ok))
+                ratio = ctx.spectra.estimate_ratio(ctx.spectra.scatter(ratio, tau))
+            if ctx.spectra.phase_bands is not None:  # p_b / p_c at x_1 and at x_2
+                ratio = ratio[: ctx.spectra.n_bands] * ctx.spectra.phase_ratio(p_cos1.take(ok))
+                ratio = ratio * ctx.spectra.phase_ratio(p_cos2.take(ok))
         from .constants import SPEED_OF_LIGHT
 
         ctx.record(
@@ -269,8 +280,7 @@ def connect_from_target(ctx, mp, points, rng) -> None:
             (lengths.take(sel.take(ok)) + r12.take(ok) + r2.take(ok)) / SPEED_OF_LIGHT,
             power.take(ok),
             path.take(sel.take(ok)),  # cell k = 0, s = 2
-            # spectral scenes: k = 0 and grey smoke (spectra._check_supported), the ratios of the source
-            mp.ratio.take(first.take(sel.take(ok)), axis=1) if "ratio" in ctx.out else None,
+            ratio,
         )
 
 

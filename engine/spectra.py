@@ -30,8 +30,11 @@ Per-band smoke: homogeneous coefficients per band, or Mie per band centre for pa
 (engine/mie.py). Algorithms 1-4 in any spectral scene: a scattering point p placed by the carrier
 (points on segments, or a collision starting a branch of medium_nee.first_segment_branch) multiplies
 the band's ratio by sigma_s,b / sigma_s,c and its depth factor, and the direction taken from p (the
-connection, or the branch's sampled direction) by p_b(cos) / p_c(cos). Algorithm 5 with spectral
-surfaces in grey smoke; in smoke that varies per band, a SceneError says what to run.
+connection, or the branch's sampled direction) by p_b(cos) / p_c(cos). Algorithm 5 by spectral
+ratio tracking: the carrier samples free flights with sigma_t,c and keeps albedo_c at a collision;
+an uncollided flight to a surface multiplies band b by T_b / T_c (`transmit_rows`), a collision and
+each scattering point's estimate by sigma_s,b T_b / (sigma_s,c T_c) (`scatter`), the sampled
+direction by p_b / p_c (`turn`).
 """
 
 from __future__ import annotations
@@ -201,6 +204,20 @@ class SceneSpectra:
             return ratio
         out = ratio.copy()
         out[-1] += tau
+        return out
+
+    @property
+    def depth_row(self) -> bool:
+        """True when the ratio state has the carrier-depth row (ratios carried, smoke varying per band)."""
+        return self.carry and self.tau_scale is not None
+
+    def transmit_rows(self, ratio: np.ndarray, rows: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """`transmit` for the paths `rows` only (algorithm 5: the flights that reached a surface uncollided; the
+        carrier's weight is unchanged, T_c / P(no collision) = 1, band b's is T_b / T_c)."""
+        if not self.depth_row:
+            return ratio
+        out = ratio.copy()
+        out[-1, rows] += tau
         return out
 
     def scatter(self, ratio: np.ndarray, tau: np.ndarray) -> np.ndarray:
@@ -469,17 +486,10 @@ def _check_supported(scene, out: SceneSpectra, algorithm=None) -> None:
     a = scene.spec.simulation.algorithm if algorithm is None else algorithm
     if scene.medium is None or out.tau_scale is None or a in (1, "auto"):
         return
-    if a == 5:
-        raise SceneError(
-            f"spectral: algorithm 5 with smoke that varies over the {out.n_bands} bands is not "
-            "supported (free-flight tracking would need a per-band ratio at every collision): use "
-            "algorithms 1-4, or run one job per band (`spectral` with one band each, any algorithm), or "
-            "give grey smoke (spectral surfaces work with every algorithm in grey smoke)"
-        )
     if out.scatter_scale is None and out.sigma_s is not None and np.any(out.sigma_s > 0):
         raise SceneError(
             f"spectral.medium: band {out.carrier_band} (the least attenuated) does not scatter while "
-            "others do: algorithms 2-4 sample scattering points in that band; give it a positive "
+            "others do: algorithms 2-5 sample scattering points in that band; give it a positive "
             "sigma_s (e.g. 1e-9 1/m), or use algorithm 1"
         )
 

@@ -253,6 +253,8 @@ def test_validation_errors_are_located(change, message):
 
 
 def test_scattering_algorithms_in_smoke_per_band_say_what_to_use():
+    """Algorithm 5 runs in smoke per band, and automatic settings pick it for scattering smoke; a carrier band that
+    does not scatter while others do is refused with what to do."""
     doc = _spectral_room(
         _surf([0.2, 0.7]),
         0.3,
@@ -260,15 +262,20 @@ def test_scattering_algorithms_in_smoke_per_band_say_what_to_use():
         {"wavelengths": [450 * NM, 650 * NM], "medium": {"sigma_a": [0.05, 0.02], "sigma_s": [0.2, 0.1]}},
         algorithm=5,
         max_scattering=2,
+        paths=500,
     )
     doc["medium"] = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2}
-    with pytest.raises(SceneError, match="use algorithms 1-4"):
-        simulate(spec(doc))
-    # the same scene with automatic settings runs: auto picks algorithm 4 and says why
-    doc["simulation"].update(algorithm="auto", max_scattering=None, paths=500)
     res = simulate(spec(doc))
-    assert res["algorithm"] == 4
-    assert "varies over the spectral bands" in res["modeled"]["algorithm_reason"]
+    assert res["algorithm"] == 5 and res["spectral"]["links"][0]["dc_gain_by_band"][0] > 0
+    # automatic settings: the grey rules choose (algorithm 5 for this optically thick, scattering smoke)
+    auto = copy.deepcopy(doc)
+    auto["simulation"].update(algorithm="auto", max_scattering=None)
+    res = simulate(spec(auto))
+    assert res["algorithm"] == 5
+    assert "varies over the spectral bands" not in res["modeled"]["algorithm_reason"]
+    doc["spectral"]["medium"] = {"sigma_a": [0.3, 0.02], "sigma_s": [0.2, 0.0]}  # the carrier (band 1) is clear
+    with pytest.raises(SceneError, match="does not scatter while others do"):
+        simulate(spec(doc))
 
 
 @pytest.mark.parametrize("algorithm", [4, 5])
@@ -377,7 +384,8 @@ def test_algorithm_4_in_smoke_per_band_against_one_band_runs():
 
 
 @pytest.mark.slow
-def test_algorithm_4_with_mie_per_band_carries_the_phase_ratio(monkeypatch):
+@pytest.mark.parametrize("algorithm", [4, 5])
+def test_mie_per_band_carries_the_phase_ratio(monkeypatch, algorithm):
     """Mie per band (phase functions differ: g 0.69 at 450 nm, 0.60 at 850 nm): each band of a two-band run agrees
     with a one-band run at that wavelength within 4 combined standard errors, seen by a receiver below the beam
     (light scattered sideways); without the phase ratio p_b / p_c the blue band misses by more than 4."""
@@ -391,6 +399,8 @@ def test_algorithm_4_with_mie_per_band_carries_the_phase_ratio(monkeypatch):
     }
     medium = {"type": "particles", "particles": particles, "mass_concentration": 4e-4, "particle_density": 1800.0}
     where = {"rx": (2.5, 2.5, 0.3), "rx_normal": (0, 0, 1), "paths": 40_000, "batch_size": 5000}
+    if algorithm == 5:  # free flight: the collisions' sampled directions carry p_b / p_c too
+        where.update(algorithm=5, max_scattering=2)
     bands = {"wavelengths": [450 * NM, 850 * NM]}
     two = simulate(spec(_smoke_room(medium, bands, **where)))["spectral"]
     g = [m["g"] for m in two["medium_bands"]]
@@ -411,3 +421,89 @@ def test_algorithm_4_with_mie_per_band_carries_the_phase_ratio(monkeypatch):
     monkeypatch.setattr(SceneSpectra, "phase_ratio", lambda self, cos: np.ones((self.n_bands, len(cos))))
     wrong = simulate(spec(_smoke_room(medium, bands, **where)))["spectral"]["links"][0]
     assert abs(z(wrong, 0)) > 4
+
+
+def test_algorithm_5_in_smoke_per_band_against_one_band_runs(monkeypatch):
+    """Algorithm 5 (free flight, equiangular points, both devices) with coefficients that differ per band: the
+    carrier band (the least attenuated, 850 nm) equals its one-band run with the same seed to rounding; the other
+    band agrees within 4 combined standard errors with a one-band run of its smoke (another seed) and with
+    algorithm 4's (single and double scattering: the same family as S = 2). Power: the bands differ by > 8
+    standard errors, and leaving out sigma_s,b / sigma_s,c (a factor 2 here) misses by more than 4."""
+    from owcsim.engine.spectra import SceneSpectra
+
+    medium = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.3, "phase": {"type": "hg", "g": 0.6}}
+    bands = {"wavelengths": [450 * NM, 850 * NM], "medium": {"sigma_a": [0.2, 0.05], "sigma_s": [0.6, 0.3]}}
+    sim = {"algorithm": 5, "max_scattering": 2, "russian_roulette": False}
+    two = simulate(spec(_smoke_room(medium, bands, **sim)))["spectral"]["links"][0]
+    assert two["dc_gain_by_band"][1] == pytest.approx(
+        simulate(spec(_smoke_room(medium, None, **sim)))["links"][0]["dc_gain"], rel=1e-10
+    )
+    blue = {**medium, "sigma_a": 0.2, "sigma_s": 0.6}
+    h, se = two["dc_gain_by_band"][0], two["dc_gain_by_band_stderr"][0]
+    for alg in (5, 4):
+        one = simulate(spec(_smoke_room(blue, None, **{**sim, "algorithm": alg, "seed": 11})))["links"][0]
+        assert abs(h - one["dc_gain"]) <= 4 * math.hypot(se, one["dc_gain_stderr"]), (alg, h, one["dc_gain"], se)
+    assert abs(h - two["dc_gain_by_band"][1]) > 8 * math.hypot(se, two["dc_gain_by_band_stderr"][1])
+    scatter = SceneSpectra.scatter
+
+    def without_sigma_s(self, ratio, tau):
+        keep, self.scatter_scale = self.scatter_scale, None
+        try:
+            return scatter(self, ratio, tau)
+        finally:
+            self.scatter_scale = keep
+
+    monkeypatch.setattr(SceneSpectra, "scatter", without_sigma_s)
+    wrong = simulate(spec(_smoke_room(medium, bands, **sim)))["spectral"]["links"][0]
+    assert abs(wrong["dc_gain_by_band"][0] - one["dc_gain"]) > 4 * math.hypot(se, one["dc_gain_stderr"])
+
+
+def test_algorithm_5_flat_and_albedo_only_smoke_per_band_equal_grey_runs():
+    """Algorithm 5: smoke given per band but flat gives the grey result (roulette on); smoke whose bands share
+    sigma_t but not sigma_s samples the same collisions in both bands, so each band equals its grey run with the
+    same seed to rounding (band 1 through the ratio sigma_s,1 / sigma_s,0 at every scattering point, the
+    equiangular points and the third strategy of medium_nee included)."""
+    smoke = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.3, "phase": {"type": "hg", "g": 0.6}}
+    sim = {"algorithm": 5, "max_scattering": 2, "max_reflections": 1}
+    grey = simulate(spec(_smoke_room(smoke, None, russian_roulette=True, **sim)))["links"][0]
+    flat = {"wavelengths": [450 * NM, 850 * NM], "medium": {"sigma_a": [0.05, 0.05], "sigma_s": [0.3, 0.3]}}
+    res = simulate(spec(_smoke_room(smoke, flat, russian_roulette=True, **sim)))
+    assert res["links"][0]["dc_gain"] == pytest.approx(grey["dc_gain"], rel=1e-12)
+    assert np.allclose(res["spectral"]["links"][0]["dc_gain_by_band"], grey["dc_gain"], rtol=1e-12)
+    albedo = {"wavelengths": [450 * NM, 850 * NM], "medium": {"sigma_a": [0.05, 0.15], "sigma_s": [0.3, 0.2]}}
+    two = simulate(spec(_smoke_room(smoke, albedo, russian_roulette=False, **sim)))["spectral"]["links"][0]
+    for b, (sigma_a, sigma_s) in enumerate([(0.05, 0.3), (0.15, 0.2)]):
+        one = simulate(
+            spec(_smoke_room({**smoke, "sigma_a": sigma_a, "sigma_s": sigma_s}, None, russian_roulette=False, **sim))
+        )
+        assert two["dc_gain_by_band"][b] == pytest.approx(one["links"][0]["dc_gain"], rel=1e-10), b
+    # power: the bands differ (the albedo ratio 2/3 acts once or twice) by far more than rounding
+    assert two["dc_gain_by_band"][1] < 0.9 * two["dc_gain_by_band"][0]
+
+
+def test_algorithm_5_in_smoke_per_band_through_reflections(monkeypatch):
+    """Algorithm 5 in a bright room (rho 0.8, K = 2) with smoke per band: the attenuated band agrees with its
+    one-band run within 4 combined standard errors, the carrier band equals its one-band run with the same seed;
+    leaving out T_b / T_c of the flights that reach a surface uncollided misses by more than 4."""
+    from owcsim.engine.spectra import SceneSpectra
+
+    smoke = {"type": "homogeneous", "sigma_a": 0.02, "sigma_s": 0.05, "phase": {"type": "hg", "g": 0.6}}
+    bands = {"wavelengths": [450 * NM, 850 * NM], "medium": {"sigma_a": [0.2, 0.02], "sigma_s": [0.1, 0.05]}}
+    sim = {"algorithm": 5, "max_scattering": 2, "max_reflections": 2, "paths": 4000, "batch_size": 2000}
+
+    def run(bands, medium, seed=7):
+        doc = _spectral_room(0.8, 0.8, 0.8, bands, seed=seed, **sim)
+        doc["medium"] = medium
+        return simulate(spec(doc))
+
+    two = run(bands, smoke)["spectral"]["links"][0]
+    assert two["dc_gain_by_band"][1] == pytest.approx(
+        run({"wavelengths": [850 * NM]}, smoke)["links"][0]["dc_gain"], rel=1e-10
+    )
+    one = run({"wavelengths": [450 * NM]}, {**smoke, "sigma_a": 0.2, "sigma_s": 0.1}, seed=11)["links"][0]
+    h, se = two["dc_gain_by_band"][0], two["dc_gain_by_band_stderr"][0]
+    tol = 4 * math.hypot(se, one["dc_gain_stderr"])
+    assert abs(h - one["dc_gain"]) <= tol, (h, one["dc_gain"], se)
+    monkeypatch.setattr(SceneSpectra, "transmit_rows", lambda self, ratio, rows, tau: ratio)
+    wrong = run(bands, smoke)["spectral"]["links"][0]
+    assert abs(wrong["dc_gain_by_band"][0] - one["dc_gain"]) > tol
