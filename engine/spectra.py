@@ -511,7 +511,7 @@ class ChannelBatch:
 
 
 class ChannelBuilder:
-    """One batch's estimates summed per channel, target and path group (one bincount per kernel step).
+    """One batch's estimates summed per channel, target and path group (per kernel step, `add`).
 
     Rows per target and path group: the B bands' power, then the optical, electrical and luminous
     combinations' (w, w t, w t^2). Per band, w t and w t^2 are summed without groups (mean delay and
@@ -534,30 +534,49 @@ class ChannelBuilder:
 
     def add(self, target, delay, power, ratio, path) -> np.ndarray:
         """Estimates (m,) of local targets `target`, delays [s], carrier powers, band ratios (B, m) or (0, m)
-        (all 1), batch path indices; returns their optical (whole-spectrum) power (m,)."""
+        (all 1), batch path indices; returns their optical (whole-spectrum) power (m,).
+
+        Per target, the estimates are sorted by path group (a radix sort of m small keys) and each group's
+        moments sum_m r_bm p_m t_m^k (k = 0, 1, 2) are one contraction (einsum: no BLAS threads) of its
+        ratios with (p, p t, p t^2); the combinations' sums are the weights (3, B) times those band sums
+        (they are linear in the bands), and the per-band delay sums are the k = 1, 2 sums over the groups.
+        """
         optical = np.zeros(len(power))
-        cells = self.T * N_GROUPS
-        rows = (np.arange(self.B + 9) * cells)[:, None]
+        B = self.B
+        sums = self.sums.reshape(B + 9, self.T, N_GROUPS)
         for j in range(self.T):  # a loop over target devices
-            sel = slice(None) if self.T == 1 else np.flatnonzero(target == j)
-            p, t = power[sel], delay[sel]
+            sel = None if self.T == 1 else np.flatnonzero(target == j)
+            p, t, pth = (power, delay, path) if sel is None else (power[sel], delay[sel], path[sel])
             if len(p) == 0:
                 continue
-            bands = p * ratio[:, sel] if ratio.shape[0] else np.broadcast_to(p, (self.B, len(p)))
-            combo = np.einsum("cb,bm->cm", self.weights[j], bands)  # (3, m_j); einsum, not BLAS threads
-            ct = combo * t
-            x = np.concatenate([bands, combo, ct, ct * t])
-            key = j * N_GROUPS + path[sel] % N_GROUPS
-            self.sums += np.bincount((rows + key[None, :]).ravel(), x.ravel(), len(self.sums))
+            group = (pth % N_GROUPS).astype(np.uint8)
+            counts = np.bincount(group, minlength=N_GROUPS)
+            w = self.weights[j]  # (3, B)
+            s = np.zeros((3, B, N_GROUPS))  # sum over a group's estimates of band power x t^k
             if ratio.shape[0]:
-                bt = bands * t
-                self.band_bc[0, :, j] += bt.sum(axis=1)
-                self.band_bc[1, :, j] += (bt * t).sum(axis=1)
-            else:
+                order = np.argsort(group, kind="stable")
+                p_o, t_o = p.take(order), t.take(order)
+                pt = p_o * t_o
+                moments = np.stack([p_o, pt, pt * t_o])  # (3, m)
+                r_o = ratio.take(order if sel is None else sel.take(order), axis=1)  # (B, m) by group
+                bounds = np.concatenate([[0], np.cumsum(counts)])
+                for g in np.flatnonzero(counts):  # a loop over the path groups
+                    lo, hi = bounds[g], bounds[g + 1]
+                    s[:, :, g] = np.einsum("bm,km->kb", r_o[:, lo:hi], moments[:, lo:hi])
+                opt = np.empty(len(p))
+                opt[order] = p_o * np.einsum("b,bm->m", w[0], r_o)
+            else:  # every ratio 1: each band's sums are the carrier's
                 pt = p * t
-                self.band_bc[0, :, j] += pt.sum()
-                self.band_bc[1, :, j] += (pt * t).sum()
-            optical[sel] = combo[0]
+                for k, x in enumerate((p, pt, pt * t)):
+                    s[k] = np.bincount(group, x, N_GROUPS)[None, :]
+                opt = p * w[0].sum()
+            sums[:B, j] += s[0]
+            sums[B:, j] += np.einsum("cb,kbg->kcg", w, s).reshape(9, N_GROUPS)
+            self.band_bc[:, :, j] += s[1:].sum(axis=2)
+            if sel is None:
+                optical = opt
+            else:
+                optical[sel] = opt
         return optical
 
     def finish(self) -> ChannelBatch:

@@ -507,3 +507,43 @@ def test_algorithm_5_in_smoke_per_band_through_reflections(monkeypatch):
     monkeypatch.setattr(SceneSpectra, "transmit_rows", lambda self, ratio, rows, tau: ratio)
     wrong = run(bands, smoke)["spectral"]["links"][0]
     assert abs(wrong["dc_gain_by_band"][0] - one["dc_gain"]) > tol
+
+
+@pytest.mark.parametrize("carried", [True, False])
+def test_channel_builder_sums_against_a_plain_loop(carried):
+    """ChannelBuilder.add (sorted by path group, one contraction per group) against sums written out here with
+    np.add.at: per target and path group, each band's power, each combination's w, w t, w t^2; per band the
+    delay sums; and the optical power it returns. Two targets, estimates in random order."""
+    from types import SimpleNamespace
+
+    from owcsim.engine.spectra import N_GROUPS, ChannelBuilder
+
+    rng = np.random.default_rng(5)
+    B, T, m = 3, 2, 500
+    sp = SimpleNamespace(
+        n_bands=B,
+        tx_fraction=np.array([[0.2, 0.5, 0.3]]),
+        rx_electrical=rng.random((T, B)),
+        tx_luminous=np.array([[100.0, 600.0, 50.0]]),
+    )
+    builder = ChannelBuilder(sp, "forward", 0, np.arange(T), np.array([4, 9]), 1000)
+    target, path = rng.integers(0, T, m), rng.integers(0, 1000, m)
+    delay, power = rng.random(m) * 1e-8, rng.random(m)
+    ratio = rng.random((B, m)) if carried else np.ones((0, m))
+    optical = builder.add(target, delay, power, ratio, path)
+    r = ratio if carried else np.ones((B, m))
+    sums, bc = np.zeros((B + 9, T, N_GROUPS)), np.zeros((2, B, T))
+    for i in range(m):  # the plain reference: one estimate at a time
+        j, g = target[i], path[i] % N_GROUPS
+        bands = power[i] * r[:, i]
+        combo = [bands @ sp.tx_fraction[0], bands @ (sp.tx_fraction[0] * sp.rx_electrical[j])]
+        combo.append(bands @ (sp.tx_fraction[0] * sp.tx_luminous[0]))
+        sums[:B, j, g] += bands
+        for k in range(3):
+            sums[B + 3 * k : B + 3 * k + 3, j, g] += np.array(combo) * delay[i] ** k
+        bc[0, :, j] += bands * delay[i]
+        bc[1, :, j] += bands * delay[i] ** 2
+        assert optical[i] == pytest.approx(combo[0], rel=1e-13)
+    batch = builder.finish()
+    assert np.allclose(batch.sums, sums, rtol=1e-12, atol=0)
+    assert np.allclose(batch.band_bc, bc, rtol=1e-12, atol=0)
