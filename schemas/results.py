@@ -72,7 +72,10 @@ class LinkPublic(LightingPublic):
     receiver_index: int
     receiver_position: tuple[float, float, float] = Field(description="position of the receiver [m]")
     direction: Direction
-    paths: int
+    paths: int = Field(
+        description="paths traced for this link; with direction both, the sum of the two devices' runs "
+        "(each runs simulation.paths)"
+    )
     dc_gain: float | None
     dc_gain_stderr: float | None
     path_loss_db: float | None
