@@ -6,6 +6,8 @@ import json
 import time
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -35,3 +37,28 @@ def rss_mb(pid: int) -> float:
     except OSError:
         pass
     return 0.0
+
+
+def raw_embree(scene, n_intersect: int, n_occluded: int, batch: int, rng, clock=time.perf_counter) -> float:
+    """Seconds Embree alone takes for the given ray counts, in batches of `batch` rays (random rays in the
+    scene's bounding box; only `EmbreeScene.run` timed, by `clock`)."""
+    emb = scene.intersector._scene
+    lo = scene.geometry.vertices.min(axis=0) - scene.intersector.center
+    hi = scene.geometry.vertices.max(axis=0) - scene.intersector.center
+    total = 0.0
+    for count, query in ((n_intersect, "INTERSECT"), (n_occluded, "OCCLUDED")):
+        done = 0
+        while done < count:
+            n = min(batch, count - done)
+            o = (lo + rng.random((n, 3)) * (hi - lo)).astype(np.float32)
+            d = rng.normal(size=(n, 3))
+            d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+            dist = np.full(n, 1.0 if query == "OCCLUDED" else 1e30, np.float32)
+            t = clock()
+            if query == "INTERSECT":
+                emb.run(o, d, dists=dist, output=1)
+            else:
+                emb.run(o, d, dists=dist, query="OCCLUDED")
+            total += clock() - t
+            done += n
+    return total

@@ -95,32 +95,10 @@ ACCURACY_CASES = {
 
 
 # --- measurements (run inside the tree under test) ------------------------------------------------
-def raw_embree(scene, n_intersect: int, n_occluded: int, batch: int, rng) -> float:
-    """Seconds Embree alone takes for the given ray counts, in batches of `batch` rays."""
-    emb = scene.intersector._scene
-    lo = scene.geometry.vertices.min(axis=0) - scene.intersector.center
-    hi = scene.geometry.vertices.max(axis=0) - scene.intersector.center
-    total = 0.0
-    for count, query in ((n_intersect, "INTERSECT"), (n_occluded, "OCCLUDED")):
-        done = 0
-        while done < count:
-            n = min(batch, count - done)
-            o = (lo + rng.random((n, 3)) * (hi - lo)).astype(np.float32)
-            d = rng.normal(size=(n, 3))
-            d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
-            dist = np.full(n, 1.0 if query == "OCCLUDED" else 1e30, np.float32)
-            t = time.process_time()
-            if query == "INTERSECT":
-                emb.run(o, d, dists=dist, output=1)
-            else:
-                emb.run(o, d, dists=dist, query="OCCLUDED")
-            total += time.process_time() - t
-            done += n
-    return total
 
 
 def measure_rays(paths: int = 200_000) -> dict:
-    from benchmarks._common import barry_doc
+    from benchmarks._common import barry_doc, raw_embree
     from owcsim.engine.scene import build_scene
     from owcsim.schemas import SceneSpec
 
@@ -132,7 +110,7 @@ def measure_rays(paths: int = 200_000) -> dict:
         scene.all_visible = not cast
         el, res = _simulate(doc, scene)
         n_i, n_o = res["run"]["rays_intersect"], res["run"]["rays_occluded"]
-        raw = raw_embree(scene, n_i, n_o, 16384, rng)
+        raw = raw_embree(scene, n_i, n_o, 16384, rng, clock=time.process_time)
         out["shadows cast" if cast else "empty room"] = {
             "time_s": el,
             "rays": n_i + n_o,

@@ -20,35 +20,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from benchmarks._common import barry_doc, best_of  # noqa: E402
+from benchmarks._common import barry_doc, best_of, raw_embree  # noqa: E402
 from owcsim.engine.execution import ProcessExecutor  # noqa: E402
 from owcsim.engine.scene import build_scene  # noqa: E402
 from owcsim.engine.simulate import simulate  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
-
-
-def raw_embree(scene, n_intersect: int, n_occluded: int, batch: int, rng) -> float:
-    """Seconds Embree alone takes for the given ray counts, in batches of `batch` rays."""
-    emb = scene.intersector._scene
-    lo = scene.geometry.vertices.min(axis=0) - scene.intersector.center
-    hi = scene.geometry.vertices.max(axis=0) - scene.intersector.center
-    total = 0.0
-    for count, query in ((n_intersect, "INTERSECT"), (n_occluded, "OCCLUDED")):
-        done = 0
-        while done < count:
-            n = min(batch, count - done)
-            o = (lo + rng.random((n, 3)) * (hi - lo)).astype(np.float32)
-            d = rng.normal(size=(n, 3))
-            d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
-            dist = np.full(n, 1.0 if query == "OCCLUDED" else 1e30, np.float32)
-            t = time.perf_counter()
-            if query == "INTERSECT":
-                emb.run(o, d, dists=dist, output=1)
-            else:
-                emb.run(o, d, dists=dist, query="OCCLUDED")
-            total += time.perf_counter() - t
-            done += n
-    return total
 
 
 def solo(paths: int, batch: int) -> None:
