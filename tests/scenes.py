@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 from pathlib import Path
 
 from owcsim.schemas import SceneSpec
@@ -16,6 +17,29 @@ def barry_doc(**simulation) -> dict:
     doc = json.loads((EXAMPLES / "barry_config_a.json").read_text())
     doc["simulation"].update(simulation)
     return doc
+
+
+#: Reflectances of room_doc's defaults (Barry et al. 1993 configuration A) per face, as tests/reference.py takes them.
+BARRY_RHO = {"floor": 0.3, "ceiling": 0.8, "wall_x_min": 0.8, "wall_x_max": 0.8, "wall_y_min": 0.8, "wall_y_max": 0.8}
+
+
+def barry_first_bounce(rx, fov_deg: float, rel_tol: float = 1e-4) -> float:
+    """First-reflection DC gain H1 of room_doc's default room and transmitter (Barry configuration A) at an
+    upward 1 cm^2 receiver `rx` with half-angle FOV `fov_deg`: the patch integral of tests/reference.py."""
+    from tests.reference import first_bounce_box_dc_gain
+
+    return first_bounce_box_dc_gain(
+        (5.0, 5.0, 3.0),
+        BARRY_RHO,
+        (2.5, 2.5, 3.0),
+        (0, 0, -1),
+        1.0,
+        rx,
+        (0, 0, 1),
+        1e-4,
+        math.radians(fov_deg),
+        rel_tol=rel_tol,
+    )
 
 
 def room_doc(

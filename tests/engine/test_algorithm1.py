@@ -7,9 +7,7 @@ import pytest
 
 from tests import reference as ref
 from tests.results import simulate_document as simulate
-from tests.scenes import room_doc, spec, within
-
-BARRY_RHO = {"floor": 0.3, "ceiling": 0.8, "wall_x_min": 0.8, "wall_x_max": 0.8, "wall_y_min": 0.8, "wall_y_max": 0.8}
+from tests.scenes import BARRY_RHO, room_doc, spec, within
 
 
 def _link(doc, **kw):

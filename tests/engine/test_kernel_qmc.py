@@ -14,10 +14,7 @@ from owcsim.engine.kernel import WorkItem, trace_batch
 from owcsim.engine.scene import build_scene
 from owcsim.engine.simulate import kernel_settings
 from owcsim.schemas import SceneSpec
-from tests import reference as ref
-from tests.scenes import room_doc, within
-
-BARRY_RHO = {"floor": 0.3, "ceiling": 0.8, "wall_x_min": 0.8, "wall_x_max": 0.8, "wall_y_min": 0.8, "wall_y_max": 0.8}
+from tests.scenes import barry_first_bounce, room_doc, within
 
 
 @pytest.mark.parametrize("direction", ["forward", "backward"])
@@ -31,18 +28,7 @@ def test_first_bounce_with_sobol_first_dimensions(direction):
     means = np.array(
         [trace_batch(scene, WorkItem(direction, 0, (0,), b, n, 5), settings).s1[0, 0] / n for b in range(replicates)]
     )
-    h1 = ref.first_bounce_box_dc_gain(
-        (5.0, 5.0, 3.0),
-        BARRY_RHO,
-        (2.5, 2.5, 3.0),
-        (0, 0, -1),
-        1.0,
-        rx,
-        (0, 0, 1),
-        1e-4,
-        math.radians(fov),
-        rel_tol=1e-4,
-    )
+    h1 = barry_first_bounce(rx, fov)
     se = means.std(ddof=1) / math.sqrt(replicates)
     assert se < 0.01 * h1  # power: a 4-sigma band narrower than 4 %, so a 5 % bias would fail
     assert within(means.mean(), h1, se, bias=1e-3 * h1), (means.mean(), h1, se)

@@ -28,9 +28,7 @@ from tests.engine.test_photometry import (
     tilted_lobe,
 )
 from tests.results import simulate_document as simulate
-from tests.scenes import room_doc, spec, within
-
-BARRY_RHO = {"floor": 0.3, "ceiling": 0.8, "wall_x_min": 0.8, "wall_x_max": 0.8, "wall_y_min": 0.8, "wall_y_max": 0.8}
+from tests.scenes import barry_first_bounce, room_doc, spec, within
 
 
 def _b64(text: str) -> str:
@@ -94,18 +92,7 @@ def test_cos_power_file_first_bounce_equals_barry_integration(direction):
             text, rx=rx, fov_deg=fov, max_reflections=1, paths=150_000, batch_size=8192, direction=direction, seed=11
         )
     )
-    h1 = ref.first_bounce_box_dc_gain(
-        (5.0, 5.0, 3.0),
-        BARRY_RHO,
-        (2.5, 2.5, 3.0),
-        (0, 0, -1),
-        1.0,
-        rx,
-        (0, 0, 1),
-        1e-4,
-        math.radians(fov),
-        rel_tol=1e-4,
-    )
+    h1 = barry_first_bounce(rx, fov)
     k1, k1_err = link["dc_gain_by_reflection_order"][1], link["dc_gain_by_reflection_order_stderr"][1]
     assert k1_err < 0.01 * h1
     # bias budget: reference 1e-4, table interpolation (1 deg, cos: < 4e-5 of R)
