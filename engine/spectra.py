@@ -304,19 +304,28 @@ def surface_bands(surface, spectral) -> np.ndarray:
     return np.full(spectral.n_bands, float(surface.reflectance))
 
 
+def spectral_faces(surfaces: np.ndarray, spectral) -> tuple[np.ndarray, np.ndarray]:
+    """(face indices, (B, m) band reflectances) of the faces whose surface is spectral.
+
+    Faces of one mesh or room face share one surface object: each distinct object is evaluated once.
+    """
+    keys = np.fromiter((id(s) for s in surfaces), np.int64, len(surfaces))
+    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    bands = np.full((len(first), spectral.n_bands), np.nan)
+    for u, i in enumerate(first):  # a loop over distinct surface objects
+        if getattr(surfaces[i], "type", None) == "spectral":
+            bands[u] = surface_bands(surfaces[i], spectral)
+    faces = np.flatnonzero(~np.isnan(bands[inverse, 0]))
+    return faces, bands[inverse[faces]].T
+
+
 def grey_surfaces(surfaces: np.ndarray, spec) -> np.ndarray:
     """The carrier's surfaces: each spectral surface replaced by its largest band reflectance (geometry.py)."""
     if surfaces.dtype != object or spec.spectral is None:
         return surfaces
-    cache: dict[int, float] = {}
-    out = np.empty(len(surfaces), object)
-    for i, s in enumerate(surfaces):  # a loop over faces; surfaces are shared objects, computed once each
-        if getattr(s, "type", None) == "spectral":
-            if id(s) not in cache:
-                cache[id(s)] = float(surface_bands(s, spec.spectral).max())
-            out[i] = cache[id(s)]
-        else:
-            out[i] = s
+    faces, bands = spectral_faces(surfaces, spec.spectral)
+    out = surfaces.copy()
+    out[faces] = bands.max(axis=0)
     if all(isinstance(v, (int, float)) for v in out):
         return out.astype(float)
     return out
@@ -361,19 +370,9 @@ def attach(scene) -> None:
     face_rho = np.repeat(np.asarray(geo.reflectance, float)[None, :], B, axis=0)
     spectral_surfaces = False
     if surfaces is not None:
-        cache: dict[int, np.ndarray] = {}
-        cols: list[np.ndarray | None] = []
-        for s in surfaces:  # a loop over faces (shared surface objects computed once)
-            if getattr(s, "type", None) == "spectral":
-                spectral_surfaces = True
-                if id(s) not in cache:
-                    cache[id(s)] = surface_bands(s, spectral)
-                cols.append(cache[id(s)])
-            else:
-                cols.append(None)
-        for f, c in enumerate(cols):
-            if c is not None:
-                face_rho[:, f] = c
+        faces, bands = spectral_faces(surfaces, spectral)
+        face_rho[:, faces] = bands
+        spectral_surfaces = len(faces) > 0
     carrier = np.asarray(geo.reflectance, float)
     with np.errstate(invalid="ignore", divide="ignore"):
         face_ratio = np.where(carrier[None, :] > 0, face_rho / np.where(carrier > 0, carrier, 1.0)[None, :], 1.0)
