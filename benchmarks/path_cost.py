@@ -173,8 +173,9 @@ def measure_algorithms() -> dict:
     return out
 
 
-def measure_qmc(replicates: int = 64, paths: int = 2048) -> dict:
-    """Variance per path of H0 with scrambled Sobol first dimensions against pseudo-random ones.
+def measure_qmc(replicates: int = 96, paths: int = 4096) -> dict:
+    """Variance per path of H0 with quasi-random first dimensions (engine/qmc.py: Sobol blocks of 256 paths,
+    one random digital shift each) against pseudo-random ones.
 
     `replicates` independent batches (their own streams) of `paths` paths per side; the variance per
     path is the spread of the batch means x paths (valid for both, unlike the per-path formula under QMC).
@@ -192,8 +193,8 @@ def measure_qmc(replicates: int = 64, paths: int = 2048) -> dict:
         spec = SceneSpec.model_validate(COST_CASES[case](paths))
         scene = build_scene(spec)
         base = kernel_settings(spec, scene)
-        for label, flag in (("pseudo-random", False), ("scrambled Sobol", True)):
-            settings = dataclasses.replace(base, qmc_first_dimensions=flag)
+        for label, block in (("pseudo-random", 1), ("Sobol blocks", 256)):
+            settings = dataclasses.replace(base, qmc_block=block)
             t = time.process_time()
             means = [
                 sum(trace_batch(scene, WorkItem(d, 0, (0,), r, paths, 11), settings).s1[0, 0] / paths for d in sides)
@@ -225,7 +226,7 @@ def measure(what: list[str]) -> dict:
             out[f"accuracy {case}"] = measure_accuracy(case)
     if "algorithms" in what:
         out["algorithms"] = measure_algorithms()
-    if "qmc" in what and "qmc_first_dimensions" in kernel.KernelSettings.__dataclass_fields__:  # not in the baseline
+    if "qmc" in what and "qmc_block" in kernel.KernelSettings.__dataclass_fields__:  # not in the baseline
         out["qmc"] = measure_qmc()
     return out
 
@@ -410,7 +411,7 @@ def report(results: dict[str, dict], profiles: dict[str, dict], markdown: bool) 
     if "qmc" in results[names[-1]]:
         q = results[names[-1]]["qmc"]
         for case in ("clear", "smoky"):
-            mc, sob = q[f"{case} pseudo-random"], q[f"{case} scrambled Sobol"]
+            mc, sob = q[f"{case} pseudo-random"], q[f"{case} Sobol blocks"]
             ratio = sob["var_per_path"] / mc["var_per_path"]
             z = (sob["mean"] - mc["mean"]) / np.hypot(sob["se"], mc["se"])
             rel = np.sqrt(2.0 / (mc["replicates"] - 1)) * np.sqrt(2.0)  # rough relative error of a variance ratio

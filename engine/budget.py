@@ -14,10 +14,11 @@ The terms follow the arrays the engine allocates:
   (BYTES_PER_TRIANGLE, about 100 B of it Embree's);
 - `devices`: per transmitter and receiver its spec object (grids expanded), id and arrays;
 - `accumulators`: two `tally.Accumulator`s (forward and backward): per link the per-path moments
-  (s1, s2, path counts, N_GROUPS path-group and batch-group sums: ~45 numbers); per link with a
+  (s1, s2, path and sample counts, the sample sums q1, q0, N_GROUPS path-group and batch-group sums:
+  ~50 numbers); per link with a
   binned CIR (the job's `outputs`; by default the explicit receivers only) n_bins x (1 + N_GROUPS,
-  + (K+1) + (S+1) with the order split) numbers; per link with the order split 2 (K+1)(S+1);
-  the groups' channels G x n_rx x 13;
+  + (K+1) + (S+1) with the order split) numbers; per link with the order split 3 (K+1)(S+1);
+  the groups' channels G x n_rx x 18;
 - `batch`: batches in flight (1 serial, 2 x workers in a pool); a batch holds paths x targets capped
   by `simulate.PATH_TARGET_BUDGET` (dense per-path tallies: 3 arrays and temporaries, ~10 numbers
   per pair) and one step's next-event estimates capped by `simulate.ESTIMATE_BUDGET` (~60 B each);
@@ -122,7 +123,7 @@ def memory_estimate(
     n_split = n_tx * sum(c and o for c, o in zip(cir, orders))
     n_groups = len(spec.transmitter_groups)
     per_cir_link = n_bins * (1 + N_GROUPS) + 2 + n_split / max(n_cir, 1) * n_bins * ((k + 1) + (s + 1))
-    accumulators = 2 * 8 * (n_links * 45 + int(n_cir * per_cir_link) + n_ord * 2 * cells + n_groups * n_rx * 13)
+    accumulators = 2 * 8 * (n_links * 50 + int(n_cir * per_cir_link) + n_ord * 3 * cells + n_groups * n_rx * 18)
     n_bands = spec.spectral.n_bands if spec.spectral is not None else 0
     if n_bands:  # spectral channel sums per link and direction (engine/spectra.ChannelAccumulator)
         accumulators += 2 * 8 * n_links * ((n_bands + 10) * N_GROUPS + 2 * n_bands)

@@ -57,6 +57,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import qmc
 from .constants import SPEED_OF_LIGHT
 from .devices import Devices
 from .medium_nee import (
@@ -97,12 +98,11 @@ class KernelSettings:
     both_sides: bool = False
     #: roulette threshold theta: survival min(1, w / (theta w0)); paths above theta w0 always survive
     rr_threshold: float = 0.25  # measured: benchmarks/replicate_study.py --study roulette (docs/smoke-error-bars.md)
-    #: scrambled Sobol points (scipy.stats.qmc, Owen scrambling from the batch's stream) for the first
-    #: dimensions of each path: emission direction, first free-flight distance, first bounce direction.
-    #: Unbiased, but the paths of a batch are no longer independent, so the per-path standard errors
-    #: (tally.py) overstate the error; off until the errors come from independent batches
-    #: (benchmarks/path_cost.py --what qmc measures the variance it saves).
-    qmc_first_dimensions: bool = False
+    #: paths per block of randomly shifted Sobol points for the first dimensions of each path (emission
+    #: direction, first free-flight distance, first bounce direction; engine/qmc.py); a batch that is not a
+    #: whole number of blocks, or qmc_block <= 1, draws pseudo-random numbers. Blocks are independent, the
+    #: paths in a block are not: the tallies take a block as one sample of the standard errors (tally.py).
+    qmc_block: int = qmc.BLOCK
     #: tallies per target: 1, or 1 + the channels of a spectral scene (engine/spectra.py); bounds batch memory
     tally_channels: int = 1
 
@@ -240,10 +240,9 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     # --- emission: directions with pdf R_source / W_source, throughput W_source ----------------------------
     w0 = ctx.w0 = sources.total_response(i)
     two_sided = settings.mis or settings.both_sides
-    if settings.qmc_first_dimensions:
-        from scipy.stats import qmc  # imported here: scipy costs 0.3-1.5 s to import
-
-        first_u = qmc.Sobol(d=5, scramble=True, seed=rng).random(n).T  # (5, n)
+    block = qmc.block_size(n, settings.qmc_block)
+    if block > 1:
+        first_u = qmc.shifted_blocks(n, block, rng)  # (5, n)
         u = first_u[:2]
     else:
         first_u, u = None, rng.random((2, n))
@@ -543,12 +542,12 @@ class _Context:
         self.pending: dict[int, list[tuple]] = {}  # depth k + s -> estimate groups waiting for their step
         self.mirrors = scene.mirror_planes
         self.builder: BatchBuilder | None = None  # the batch's tally (trace_batch)
-        #: (2, n_paths) quasi-random uniforms of the first bounce (KernelSettings.qmc_first_dimensions), step 0
+        #: (2, n_paths) quasi-random uniforms of the first bounce (KernelSettings.qmc_block), step 0
         self.first_bounce_u: np.ndarray | None = None
 
     def bounce_uniforms(self, paths: _Paths, rng) -> np.ndarray:
         """(2, n) uniforms for the new directions of `paths`: the path's quasi-random pair on the first
-        bounce under KernelSettings.qmc_first_dimensions, else pseudo-random ones."""
+        bounce under KernelSettings.qmc_block, else pseudo-random ones."""
         if self.first_bounce_u is not None:
             return self.first_bounce_u.take(paths.path, axis=1)
         return rng.random((2, len(paths)))
@@ -564,9 +563,10 @@ class _Context:
             or settings.both_sides
             or settings.in_then_out
         )
-        self.builder = BatchBuilder(settings.tally, item_links(self.scene, item), item.n_paths, several)
+        block = qmc.block_size(item.n_paths, settings.qmc_block)  # paths per independent sample
+        self.builder = BatchBuilder(settings.tally, item_links(self.scene, item), item.n_paths, several, block)
         if self.spectra is not None:  # per-(link, channel) sums (spectra.py)
-            self.channels = self.spectra.builder(item, self.tgt, item_links(self.scene, item))
+            self.channels = self.spectra.builder(item, self.tgt, item_links(self.scene, item), block)
 
     def connect(
         self,

@@ -27,7 +27,7 @@ from owcsim.schemas import SceneSpec, SimulationSpec
 from owcsim.schemas.algorithms import Direction, TwoSided, algorithm
 from owcsim.schemas.results import DirectionChoicePublic, ModeledPublic, SimulationResultPublic, StopReason
 
-from . import auto, spectra
+from . import auto, qmc, spectra
 from .constants import SPEED_OF_LIGHT
 from .estimates import may_stop, reported_rel_stderr
 from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
@@ -142,6 +142,7 @@ def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = N
         max_strata=sim.max_strata,
         equiangular_points=sim.equiangular_points,
         tally_channels=1 + (scene.spectra.n_channels if scene.spectra is not None else 0),
+        qmc_block=qmc.BLOCK if sim.quasi_random else 1,
         **alg.kernel,
     )
     both = two_sided(spec, scene) if both_devices is None else both_devices
@@ -268,7 +269,8 @@ def batch_size(sim: SimulationSpec, settings: KernelSettings, n_targets: int) ->
         per_segment += settings.equiangular_points
     n_targets = max(1, n_targets)
     n_targets *= settings.tally_channels  # spectral scenes tally 1 + V channels per target (engine/spectra.py)
-    return max(1, min(sim.batch_size, PATH_TARGET_BUDGET // n_targets, ESTIMATE_BUDGET // (n_targets * per_segment)))
+    size = max(1, min(sim.batch_size, PATH_TARGET_BUDGET // n_targets, ESTIMATE_BUDGET // (n_targets * per_segment)))
+    return qmc.whole_blocks(size, settings.qmc_block)
 
 
 #: A run of batches: (direction, source device, target devices).
@@ -304,7 +306,7 @@ def _items(
     if n_paths is None:  # accuracy mode: a round of many sources checks the target sooner: first batches of a
         # quarter (or 1 / sources) of batch_size, growing to the largest batch the memory caps allow
         grown = bs
-        bs = min(bs, max(MIN_PATHS_FOR_STOP, sim.batch_size // max(len(runs), 4)))
+        bs = qmc.whole_blocks(min(bs, max(MIN_PATHS_FOR_STOP, sim.batch_size // max(len(runs), 4))), settings.qmc_block)
     rounds = itertools.count() if n_paths is None else range(-(-n_paths // bs))
     for b in rounds:
         size = bs if n_paths is None else min(bs, n_paths - b * bs)

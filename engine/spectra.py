@@ -45,6 +45,7 @@ import numpy as np
 
 from .errors import SceneError
 from .spectra_tables import CURVES, K_M, VISIBLE, v_lambda
+from .tally import N_GROUPS, group_shift
 
 #: Most channels x links a spectral job may tally (each link holds ~(B + 10) x 16 sums per direction).
 MAX_CHANNEL_LINKS = 400_000
@@ -290,9 +291,10 @@ class SceneSpectra:
         return ch * grey[None, :]
 
     # --- tallies -------------------------------------------------------------------------
-    def builder(self, item, tgt: np.ndarray, links: np.ndarray) -> "ChannelBuilder":
-        """The channel tally of a batch (kernel.WorkItem) whose targets `tgt` are the global `links`."""
-        return ChannelBuilder(self, item.direction, item.source, tgt, links, item.n_paths)
+    def builder(self, item, tgt: np.ndarray, links: np.ndarray, block: int = 1) -> "ChannelBuilder":
+        """The channel tally of a batch (kernel.WorkItem) whose targets `tgt` are the global `links`;
+        `block` paths per independent sample (engine/qmc.py)."""
+        return ChannelBuilder(self, item.direction, item.source, tgt, links, item.n_paths, block)
 
 
 def surface_bands(surface, spectral) -> np.ndarray:
@@ -497,8 +499,8 @@ def _check_supported(scene, out: SceneSpectra, algorithm=None) -> None:
 
 
 # --- channel tallies --------------------------------------------------------------------------------------------------
-#: Path groups of the channel tallies (path index mod N_GROUPS in every batch, as tally.py's reliability groups).
-N_GROUPS = 16
+# Path groups of the channel tallies: tally.N_GROUPS, sample index mod N_GROUPS as tally.py's reliability
+# groups (a sample is a path, or a block of quasi-random paths: engine/qmc.py).
 
 
 @dataclass
@@ -523,9 +525,17 @@ class ChannelBuilder:
     small. The whole-spectrum optical gain also has the main tally's per-path error bars (dc_gain)."""
 
     def __init__(
-        self, sp: "SceneSpectra", item_direction: str, source: int, tgt: np.ndarray, links: np.ndarray, n_paths: int
+        self,
+        sp: "SceneSpectra",
+        item_direction: str,
+        source: int,
+        tgt: np.ndarray,
+        links: np.ndarray,
+        n_paths: int,
+        block: int = 1,
     ):
         self.B, self.T, self.n_paths, self.links = sp.n_bands, len(tgt), n_paths, np.asarray(links, np.int64)
+        self.block = block  # paths per independent sample: groups hold whole blocks
         own = np.full(self.T, source, np.int64)
         tx, rx = (own, tgt) if item_direction == "forward" else (tgt, own)
         f = sp.tx_fraction[tx]  # (T, B)
@@ -551,7 +561,7 @@ class ChannelBuilder:
             p, t, pth = (power, delay, path) if sel is None else (power[sel], delay[sel], path[sel])
             if len(p) == 0:
                 continue
-            group = (pth % N_GROUPS).astype(np.uint8)
+            group = ((pth // self.block if self.block > 1 else pth) % N_GROUPS).astype(np.uint8)
             counts = np.bincount(group, minlength=N_GROUPS)
             w = self.weights[j]  # (3, B)
             s = np.zeros((3, B, N_GROUPS))  # sum over a group's estimates of band power x t^k
@@ -582,7 +592,7 @@ class ChannelBuilder:
         return optical
 
     def finish(self) -> ChannelBatch:
-        paths = np.bincount(np.arange(self.n_paths) % N_GROUPS, minlength=N_GROUPS)
+        paths = np.bincount(np.arange(self.n_paths) // self.block % N_GROUPS, minlength=N_GROUPS)
         return ChannelBatch(
             self.links, self.n_paths, self.sums.reshape(self.B + 9, self.T, N_GROUPS), self.band_bc, paths
         )
@@ -610,10 +620,11 @@ class ChannelAccumulator:
         self.band_bc = np.zeros((2, n_bands, n_links))
         self.paths = np.zeros((n_links, N_GROUPS))
 
-    def add(self, batch: ChannelBatch) -> None:
-        self.sums[:, batch.links] += batch.sums
+    def add(self, batch: ChannelBatch, shift: int = 0) -> None:
+        """Add a batch whose path group 0 is the job's group `shift` (tally.group_shift)."""
+        self.sums[:, batch.links] += np.roll(batch.sums, shift, axis=2)
         self.band_bc[:, :, batch.links] += batch.band_bc
-        self.paths[batch.links] += batch.group_paths[None, :]
+        self.paths[batch.links] += np.roll(batch.group_paths, shift)[None, :]
 
     def moments(self) -> tuple[np.ndarray, np.ndarray]:
         """Per virtual link (channel-major, V L): mean per path of (a, b, c) (V L, 3) and its covariance
@@ -646,7 +657,7 @@ def add_batch(acc, tally, item) -> None:
     """Merge a batch's channel tally into the direction's Accumulator (simulate._merge)."""
     extra = getattr(tally, "spectral", None)
     if extra is not None:
-        acc.spectral.add(extra)
+        acc.spectral.add(extra, group_shift(item.batch, tally.n_paths // tally.block))
 
 
 def result_block(spec, scene, accs, los_geometry, los_grey, los_delay) -> dict | None:

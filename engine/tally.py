@@ -22,6 +22,12 @@ this product stays under `simulate.PATH_TARGET_BUDGET` whatever the number of re
 Each path adds to a (target, k, s) cell only in one call of `BatchBuilder.add_step` (the kernel
 hands over the estimates of one depth k + s at a time, estimates of deeper cells made early
 waiting for their step), so per-(path, cell) sums are formed step by step.
+Samples. Standard errors need independent samples. A pseudo-random path is one; the paths of a
+quasi-random block (engine/qmc.py: Sobol points with one random shift per block) are not, the blocks
+are. So a batch of n paths in blocks of m reduces its per-path sums to n / m block sums before the
+second moments, and every covariance comes from `sample_cov`, the variance of a mean over independent
+samples of unequal path counts (one-path samples give the usual per-path formula, bit for bit).
+
 Batches are merged in batch order, so results are bit-identical whatever the number of
 workers. Batch groups (batch index mod N_GROUPS) keep per-bin power and per-link H0 for
 batch-spread standard errors, the jackknife, and the reliability of the error bars.
@@ -107,8 +113,12 @@ class BatchTally:
     order_links: np.ndarray  # (To,)
     order_sum: np.ndarray  # (To, K+1, S+1)
     order_sumsq: np.ndarray  # (To, K+1, S+1)
+    order_ssum: np.ndarray  # (To, K+1, S+1) the sum of the sample sums squared in order_sumsq
     h0_groups: np.ndarray | None = None  # (T, N_GROUPS) sum of per-path H0 estimates per path group
     h0_group_paths: np.ndarray | None = None  # (N_GROUPS,) paths per path group
+    #: paths per independent sample (engine/qmc.py): s2, order_sumsq and channel_s2 are sums over samples
+    #: of the outer products of their sums
+    block: int = 1
     channel_s1: np.ndarray | None = None  # (G, 3) backward batches: the groups' channels
     channel_s2: np.ndarray | None = None  # (G, 3, 3)
     rays_intersect: int = 0
@@ -137,10 +147,12 @@ class BatchBuilder:
     order s, delay [s], power [W/W], path index in the batch.
     """
 
-    def __init__(self, plan: TallyPlan, links: np.ndarray, n_paths: int, several_per_cell: bool):
+    def __init__(self, plan: TallyPlan, links: np.ndarray, n_paths: int, several_per_cell: bool, block: int = 1):
         self.plan, self.links, self.n_paths = plan, np.asarray(links, np.int64), n_paths
-        #: a path may add several estimates to one order cell in one step: sum them before squaring
-        self.several_per_cell = several_per_cell
+        #: paths per independent sample (engine/qmc.py); n_paths is a multiple of it
+        self.block = block
+        #: a sample may add several estimates to one order cell in one step: sum them before squaring
+        self.several_per_cell = several_per_cell or block > 1
         n_t = len(self.links)
         self.abc = np.zeros((3, n_t * n_paths))
         bins = plan.bins
@@ -161,8 +173,10 @@ class BatchBuilder:
         n_cells = self.n_ord * plan.n_orders * plan.n_scatter
         self.order_sum = np.zeros(n_cells)
         self.order_sumsq = np.zeros(n_cells)
+        #: sum of the same per-sample sums that order_sumsq squares: the variance takes both from one rounding
+        self.order_ssum = np.zeros(n_cells)
         #: scratch of `_add_squared_path_sums`: one representative cell per owner (path, order-split target)
-        self._cell_of_owner = np.zeros(n_paths * self.n_ord if several_per_cell else 0, np.int64)
+        self._cell_of_owner = np.zeros(n_paths // block * self.n_ord if self.several_per_cell else 0, np.int64)
 
     def add_step(self, target, k, s, delay, power, path) -> None:
         if len(power) == 0:
@@ -190,10 +204,12 @@ class BatchBuilder:
                 slot, k, s, power, path = slot.take(sel), k.take(sel), s.take(sel), power.take(sel), path.take(sel)
             cell = (slot * plan.n_orders + k) * plan.n_scatter + s
             _accumulate(self.order_sum, cell, power)
-            if self.several_per_cell:  # several estimates of one path in one cell: sum before squaring
-                self._add_squared_path_sums(path * self.n_ord + slot, cell, power)
+            if self.several_per_cell:  # several estimates of one sample in one cell: sum before squaring
+                sample = path // self.block if self.block > 1 else path
+                self._add_squared_path_sums(sample * self.n_ord + slot, cell, power)
             else:
                 _accumulate(self.order_sumsq, cell, power * power)
+                _accumulate(self.order_ssum, cell, power)
 
     def _ranked(self, local, target):
         """(slot of each estimate, the estimates with a slot or None for all): `local` maps the batch's
@@ -205,7 +221,7 @@ class BatchBuilder:
         return slot, (None if len(sel) == len(slot) else sel)
 
     def _add_squared_path_sums(self, owner, cell, p) -> None:
-        """order_sumsq[c] += (sum of the p of each owner (path, target) in cell c)^2, without sorting.
+        """order_sumsq[c] += (sum of the p of each owner (sample, target) in cell c)^2, without sorting.
 
         Rounds: every owner with estimates left picks one of its cells (the last one written to a
         scratch indexed by owner); the estimates in that cell are summed per owner with `np.bincount`
@@ -227,7 +243,9 @@ class BatchBuilder:
             lo, hi = int(o.min()), int(o.max()) + 1
             sums = np.bincount(o - lo, w, hi - lo)
             touched = np.flatnonzero(sums)  # estimates are >= 0: an owner summing to 0 adds 0 anyway
-            _accumulate(self.order_sumsq, scratch.take(touched + lo), sums.take(touched) ** 2)
+            cells, owner_sums = scratch.take(touched + lo), sums.take(touched)
+            _accumulate(self.order_sumsq, cells, owner_sums**2)
+            _accumulate(self.order_ssum, cells, owner_sums)
 
     def _bin(self, slot, k, s, delay, power) -> None:
         bins, plan = self.plan.bins, self.plan
@@ -254,16 +272,18 @@ class BatchBuilder:
     def finish(self, channel_weights: np.ndarray | None = None) -> BatchTally:
         """The batch's tally; `channel_weights` (G, T) adds the per-path moments of G channels."""
         plan, n_t = self.plan, len(self.links)
-        abc = self.abc.reshape(3, n_t, self.n_paths)
+        m = self.block
+        n_samples = self.n_paths // m
+        abc = self.abc.reshape(3, n_t, n_samples, m).sum(axis=3) if m > 1 else self.abc.reshape(3, n_t, n_samples)
         s1 = abc.sum(axis=2).T
-        # Path groups (path index mod N_GROUPS): independent sub-samples of this batch for the reliability
+        # Path groups (sample index mod N_GROUPS): independent sub-samples of this batch for the reliability
         # figures (engine/reliability.py), filled from the first batch whatever the batch count.
         # Summed by reshaping, not by a product with a one-hot matrix: that product went to BLAS, whose
         # threads took 30-120 ms instead of 0.2 ms on a loaded host.
-        n_full = self.n_paths - self.n_paths % N_GROUPS
+        n_full = n_samples - n_samples % N_GROUPS
         h0_groups = abc[0, :, :n_full].reshape(n_t, -1, N_GROUPS).sum(axis=1)
-        h0_groups[:, : self.n_paths - n_full] += abc[0, :, n_full:]
-        h0_group_paths = np.bincount(np.arange(self.n_paths) % N_GROUPS, minlength=N_GROUPS)
+        h0_groups[:, : n_samples - n_full] += abc[0, :, n_full:]
+        h0_group_paths = np.bincount(np.arange(n_samples) % N_GROUPS, minlength=N_GROUPS) * m
         s2 = np.einsum("qtn,rtn->tqr", abc, abc)
         ch_s1 = ch_s2 = None
         if channel_weights is not None and len(channel_weights):
@@ -287,11 +307,52 @@ class BatchBuilder:
             order_links=self.links.take(ord_sel),
             order_sum=self.order_sum.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
             order_sumsq=self.order_sumsq.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
+            order_ssum=self.order_ssum.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
             channel_s1=ch_s1,
             channel_s2=ch_s2,
             h0_groups=h0_groups,
             h0_group_paths=h0_group_paths,
+            block=m,
         )
+
+
+def group_shift(batch_index: int, n_samples: int) -> int:
+    """Path group of a batch's first sample: batches of fewer than N_GROUPS samples (blocks of quasi-random
+    paths, engine/qmc.py) fill the groups in turn instead of always the first ones."""
+    return batch_index * n_samples % N_GROUPS
+
+
+def sample_cov(
+    n: np.ndarray, n_samples: np.ndarray, s1: np.ndarray, s2: np.ndarray, q1: np.ndarray, q0: np.ndarray
+) -> np.ndarray:
+    """Covariance (..., Q, Q) of the mean per path H = s1 / n from B = n_samples independent samples, sample b
+    holding n_b paths with sums S_b (..., Q): s2 = sum S_b S_b^T, q1 = sum n_b S_b, q0 = sum n_b^2;
+        Cov(H) = B / (B - 1) sum_b (S_b - n_b H)(S_b - n_b H)^T / n^2
+               = B / (B - 1) (s2 - H q1^T - q1 H^T + q0 H H^T) / n^2
+    (the ratio estimator's variance over clusters of unequal size, Cochran 1977, ch. 9A). One-path samples
+    (n_b = 1) give (s2 - n H H^T) / (n (n - 1)). Zero with no path; NaN with one sample."""
+    nn, bb = n.astype(float)[..., None], n_samples.astype(float)[..., None, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        h = np.where(nn > 0, s1 / np.maximum(nn, 1.0), 0.0)
+        hq = h[..., :, None] * q1[..., None, :]
+        r = s2 - hq - np.swapaxes(hq, -1, -2) + q0[..., None, None] * h[..., :, None] * h[..., None, :]
+        cov = bb / np.maximum(bb - 1, 1) * r / np.maximum(nn, 1.0)[..., None] ** 2
+    return np.where(bb >= 2, cov, np.where(bb > 0, np.nan, 0.0))
+
+
+def per_path_s2(
+    n: np.ndarray, n_samples: np.ndarray, s1: np.ndarray, s2: np.ndarray, q1: np.ndarray, q0: np.ndarray
+) -> np.ndarray:
+    """The sum of per-path outer products (..., Q, Q) that independent paths would need to give the same
+    covariance of the mean as the samples (`sample_cov`): n H H^T + n (n - 1) Cov(H); the samples' own s2
+    where every sample is one path, so per-path formulas (metrics.delay_metrics) stay valid for blocks."""
+    nn = n.astype(float)[..., None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        h = np.where(nn > 0, s1 / np.maximum(nn, 1.0), 0.0)
+        eff = nn[..., None] * h[..., :, None] * h[..., None, :] + (nn * (nn - 1))[..., None] * sample_cov(
+            n, n_samples, s1, s2, q1, q0
+        )
+    return np.where((n_samples == n)[..., None, None], s2, eff)
 
 
 def _mean_cov(n: np.ndarray, s1: np.ndarray, s2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -324,8 +385,13 @@ class Accumulator:
         plan, bins = self.plan, self.plan.bins
         n_tx = self.n_links // max(plan.n_rx, 1)
         self.n_paths = np.zeros(self.n_links, np.int64)
+        #: independent samples (paths, or blocks of quasi-random paths) and their sums (`sample_cov`):
+        #: s1 = sum S_b, s2_samples = sum S_b S_b^T, q1 = sum n_b S_b, q0 = sum n_b^2
+        self.n_samples = np.zeros(self.n_links, np.int64)
         self.s1 = np.zeros((self.n_links, 3))
-        self.s2 = np.zeros((self.n_links, 3, 3))
+        self.s2_samples = np.zeros((self.n_links, 3, 3))
+        self.q1 = np.zeros((self.n_links, 3))
+        self.q0 = np.zeros(self.n_links)
         n_cir = n_tx * plan.n_cir_rx
         self.cir = np.zeros((n_cir, bins.n))
         self.early = np.zeros(n_cir)
@@ -335,7 +401,9 @@ class Accumulator:
         self.cir_s = np.zeros((n_cir, plan.n_scatter, bins.n)) if split else None
         n_ord = n_tx * plan.n_order_rx
         self.order_sum = np.zeros((n_ord, plan.n_orders, plan.n_scatter))
-        self.order_sumsq = np.zeros((n_ord, plan.n_orders, plan.n_scatter))
+        self.order_sumsq = np.zeros((n_ord, plan.n_orders, plan.n_scatter))  # sum over samples of S_b^2
+        self.order_ssum = np.zeros((n_ord, plan.n_orders, plan.n_scatter))  # sum of S_b, rounded as order_sumsq
+        self.order_q1 = np.zeros((n_ord, plan.n_orders, plan.n_scatter))  # sum of n_b S_b
         self.groups = np.zeros((N_GROUPS, n_cir, bins.n))  # per batch group, summed over k, s
         self.group_paths = np.zeros((N_GROUPS, self.n_links), np.int64)
         #: per path group (path index mod N_GROUPS, in every batch): sum of per-path H0 estimates, and paths
@@ -343,22 +411,30 @@ class Accumulator:
         self.h0_group_paths = np.zeros((N_GROUPS, self.n_links), np.int64)
         n_groups = plan.group_weights.shape[0]
         self.channel_n = np.zeros((n_groups, plan.n_rx), np.int64)
+        self.channel_samples = np.zeros((n_groups, plan.n_rx), np.int64)
         self.channel_s1 = np.zeros((n_groups, plan.n_rx, 3))
         self.channel_s2 = np.zeros((n_groups, plan.n_rx, 3, 3))
+        self.channel_q1 = np.zeros((n_groups, plan.n_rx, 3))
+        self.channel_q0 = np.zeros((n_groups, plan.n_rx))
         self.surface_power: dict[int, float] = {}
         self.escaped_power: dict[int, float] = {}
 
     def add(self, batch: BatchTally, batch_index: int, source: int) -> None:
         """Add one batch of `source` (a transmitter forward, a receiver backward); call in batch order."""
-        ln = batch.links
+        ln, m = batch.links, batch.block
+        n_samples = batch.n_paths // m
         self.n_paths[ln] += batch.n_paths
+        self.n_samples[ln] += n_samples
         self.s1[ln] += batch.s1
-        self.s2[ln] += batch.s2
+        self.s2_samples[ln] += batch.s2
+        self.q1[ln] += m * batch.s1
+        self.q0[ln] += n_samples * m * m
         g = batch_index % N_GROUPS
         assert batch.h0_groups is not None and batch.h0_group_paths is not None  # set by BatchBuilder.finish
         self.group_paths[g, ln] += batch.n_paths
-        self.group_h0[:, ln] += batch.h0_groups.T
-        self.h0_group_paths[:, ln] += batch.h0_group_paths[:, None]
+        shift = group_shift(batch_index, n_samples)
+        self.group_h0[:, ln] += np.roll(batch.h0_groups, shift, axis=1).T
+        self.h0_group_paths[:, ln] += np.roll(batch.h0_group_paths, shift)[:, None]
         if len(batch.cir_links):
             cs = self.plan.cir_slots(batch.cir_links)
             self.cir[cs] += batch.cir
@@ -373,11 +449,16 @@ class Accumulator:
             os_ = self.plan.order_slots(batch.order_links)
             self.order_sum[os_] += batch.order_sum
             self.order_sumsq[os_] += batch.order_sumsq
+            self.order_ssum[os_] += batch.order_ssum
+            self.order_q1[os_] += m * batch.order_ssum
         if batch.channel_s1 is not None:
             assert batch.channel_s2 is not None
             self.channel_n[:, source] += batch.n_paths
+            self.channel_samples[:, source] += n_samples
             self.channel_s1[:, source] += batch.channel_s1
             self.channel_s2[:, source] += batch.channel_s2
+            self.channel_q1[:, source] += m * batch.channel_s1
+            self.channel_q0[:, source] += n_samples * m * m
         self.rays_intersect += batch.rays_intersect
         self.rays_occluded += batch.rays_occluded
         self.medium_evaluations += batch.medium_evaluations
@@ -385,20 +466,34 @@ class Accumulator:
             self.surface_power[source] = self.surface_power.get(source, 0.0) + batch.surface_power
             self.escaped_power[source] = self.escaped_power.get(source, 0.0) + batch.escaped_power
 
+    @property
+    def s2(self) -> np.ndarray:
+        """(L, 3, 3) per-path second moments of (a, b, c), or their equivalent for blocks (`per_path_s2`)."""
+        return per_path_s2(self.n_paths, self.n_samples, self.s1, self.s2_samples, self.q1, self.q0)
+
     def moments(self) -> tuple[np.ndarray, np.ndarray]:
         """Per link: mean of the per-path (a, b, c) (L, 3) and the covariance of that mean (L, 3, 3)."""
         return _mean_cov(self.n_paths, self.s1, self.s2)
 
     def channel_moments(self) -> tuple[np.ndarray, np.ndarray]:
         """Per (group, receiver) of backward runs: mean (G, R, 3) and covariance (G, R, 3, 3) of the channel."""
-        return _mean_cov(self.channel_n, self.channel_s1, self.channel_s2)
+        s2 = per_path_s2(
+            self.channel_n, self.channel_samples, self.channel_s1, self.channel_s2, self.channel_q1, self.channel_q0
+        )
+        return _mean_cov(self.channel_n, self.channel_s1, s2)
 
     def order_moments(self, order_links: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per order-split slot (links given in slot order): mean gain per (k, s) and the variance of that mean."""
-        n = self.n_paths.take(order_links).astype(float)[:, None, None]
+        cell = (slice(None), None, None)
+        n, n_samples = self.n_paths.take(order_links)[cell], self.n_samples.take(order_links)[cell]
         with np.errstate(invalid="ignore", divide="ignore"):
-            mean = np.where(n > 0, self.order_sum / np.maximum(n, 1.0), 0.0)
-            var = np.maximum(np.where(n > 0, self.order_sumsq / np.maximum(n, 1.0), 0.0) - mean**2, 0.0) / np.maximum(
-                n - 1, 1
-            )
-        return mean, np.where(n >= 2, var, np.where(n > 0, np.nan, 0.0))
+            mean = np.where(n > 0, self.order_sum / np.maximum(n, 1), 0.0)
+        var = sample_cov(
+            n,
+            n_samples,
+            self.order_ssum[..., None],
+            self.order_sumsq[..., None, None],
+            self.order_q1[..., None],
+            self.q0.take(order_links)[cell],
+        )[..., 0, 0]
+        return mean, np.where(np.isnan(var), var, np.maximum(var, 0.0))

@@ -1,5 +1,6 @@
-"""The kernel hands the tally one depth k + s at a time, and the per-(path, cell) squared sums of the order
-split (tally.BatchBuilder._add_squared_path_sums, no sorting) match a plain computation over the whole batch."""
+"""The kernel hands the tally one depth k + s at a time, and the per-(sample, cell) squared sums of the order
+split (tally.BatchBuilder._add_squared_path_sums, no sorting) match a plain computation over the whole batch;
+a sample is a path, or a block of quasi-random paths (engine/qmc.py)."""
 
 import numpy as np
 import pytest
@@ -27,10 +28,13 @@ CASES = {
 }
 
 
+@pytest.mark.parametrize("quasi_random", [True, False])
 @pytest.mark.parametrize("case", list(CASES))
 @pytest.mark.parametrize("direction", ["forward", "backward"])
-def test_one_depth_per_step_and_order_sums_of_squares(case, direction, monkeypatch):
-    spec = SceneSpec.model_validate(CASES[case]())
+def test_one_depth_per_step_and_order_sums_of_squares(case, direction, quasi_random, monkeypatch):
+    doc = CASES[case]()
+    doc["simulation"]["quasi_random"] = quasi_random
+    spec = SceneSpec.model_validate(doc)
     scene = build_scene(spec)
     settings = kernel_settings(spec, scene)
     calls = []
@@ -45,8 +49,10 @@ def test_one_depth_per_step_and_order_sums_of_squares(case, direction, monkeypat
     depths = [np.unique(k + s) for k, s, *_ in calls]
     assert all(len(d) == 1 for d in depths)  # one depth per call ...
     assert len({int(d[0]) for d in depths}) == len(depths)  # ... and each depth in one call
-    # Reference: per-(path, k, s) sums over the whole batch by sorting, then squared per cell.
+    assert tally.block == (256 if quasi_random else 1)  # 512 paths: two blocks of 256, or 512 samples
+    # Reference: per-(sample, k, s) sums over the whole batch by sorting, then squared per cell.
     k, s, p, path = (np.concatenate([c[i] for c in calls]) for i in range(4))
+    path = path // tally.block
     n_s = settings.tally.n_scatter
     cells = k * n_s + s
     keys, inverse = np.unique(path * (settings.tally.n_orders * n_s) + cells, return_inverse=True)
@@ -54,7 +60,7 @@ def test_one_depth_per_step_and_order_sums_of_squares(case, direction, monkeypat
     want = np.bincount(keys % (settings.tally.n_orders * n_s), per_path**2, settings.tally.n_orders * n_s)
     got = tally.order_sumsq[0].reshape(-1)
     several = np.bincount(inverse).max()
-    assert several >= 2 or case.startswith("mirror")  # the case has several estimates per (path, cell)
+    assert several >= 2 or (case.startswith("mirror") and not quasi_random)  # several estimates per (sample, cell)
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=0.0)
     # power check: squaring each estimate alone (the error this guards against) differs
     assert not np.allclose(np.bincount(cells, p**2, len(want)), want, rtol=1e-6, atol=0.0) or several == 1

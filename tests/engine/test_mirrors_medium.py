@@ -278,6 +278,11 @@ def test_algorithm_5_single_scattering_through_a_mirror_against_quadrature(direc
             batch_size=16_384,
             seed=60,
             direction=direction,
+            # The seeds of this test and the next were set for pseudo-random paths. Forward runs to a point
+            # receiver are heavy-tailed: about 1 seed in 12 draws a rare large contribution that inflates se
+            # 3-6x (seeds 60-74, both sampling modes), and quasi-random paths draw other numbers, which do so
+            # here. Quasi-random paths have their own tests (test_qmc.py).
+            quasi_random=False,
         )
     )
     assert link["direction"] == ("both" if direction == "auto" else direction)
@@ -319,6 +324,7 @@ def test_algorithm_5_forward_backward_and_both_agree_per_order_with_a_mirror_in_
                 paths=150_000 if d != "auto" else 60_000,
                 batch_size=16_384,
                 direction=d,
+                quasi_random=False,  # as the test above: seeds set for pseudo-random paths
             )
         )
         for i, d in enumerate(("forward", "backward", "auto"))
