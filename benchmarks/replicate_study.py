@@ -39,7 +39,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from owcsim.engine import (
     medium_nee,  # noqa: E402
-    reliability,  # noqa: E402
 )
 from owcsim.engine import simulate as engine  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
@@ -57,8 +56,9 @@ def simulate_two_sided(*args, **kwargs) -> dict:
 VARIANTS = [(2, "one"), (3, "one"), (5, "one"), (2, "two"), (3, "two"), (4, "two"), (5, "two")]
 
 
-def scene(geometry: str, g: float, D: float, algorithm: int, paths: int, seed: int) -> dict:
+def scene(geometry: str, g: float, D: float, algorithm: int, paths: int, seed: int, quasi_random: bool = True) -> dict:
     sim = {
+        "quasi_random": quasi_random,
         "algorithm": algorithm,
         "paths": paths,
         "seed": seed,
@@ -88,27 +88,6 @@ def scene(geometry: str, g: float, D: float, algorithm: int, paths: int, seed: i
     }
 
 
-def _with_reliability_warnings(build):
-    """build_result plus engine/reliability.py's warning: the integration the result needs (see docs)."""
-
-    def wrapped(spec, scene, accs, settings, los_gain, *a, **kw):
-        doc = build(spec, scene, accs, settings, los_gain, *a, **kw)
-        rel = reliability.from_accumulators(accs.values(), los_gain)
-        doc["warnings"] = doc["warnings"] + reliability.warnings(
-            rel, [f"{lk['transmitter']}-{lk['receiver']}" for lk in doc["links"]]
-        )
-        return doc
-
-    return wrapped
-
-
-import owcsim.engine.result as _result  # noqa: E402
-import owcsim.engine.simulate as _simulate  # noqa: E402
-
-_result.build_result = _with_reliability_warnings(_result.build_result)
-_simulate.build_result = _result.build_result
-
-
 def run(doc: dict, sides: str) -> dict:
     spec = SceneSpec.model_validate(doc)
     res = simulate(spec) if sides == "one" else simulate_two_sided(spec)
@@ -131,7 +110,8 @@ def accuracy_study(args) -> None:
 
     print(
         f"accuracy mode, {args.seeds} seeds per row; true error against a long two-sided run "
-        f"({args.ref_paths:,d} paths per side); batch_size 1024"
+        f"({args.ref_paths:,d} paths per side); batch_size 1024; "
+        f"{'pseudo-random paths' if args.pseudo_random else 'quasi-random blocks of 256 paths'}"
     )
     print(
         f"{'scene':22s} {'target':>6s} {'variant':8s} {'within 2x':>9s} {'median paths':>12s} "
@@ -148,12 +128,13 @@ def accuracy_study(args) -> None:
             flush=True,
         )
         for target in (0.03, 0.01):
-            for variant in ("before", "after"):
+            for variant in args.variants.split(","):
                 errs, paths, times = [], [], []
                 for seed in range(args.seeds):
                     doc = smoky_room(
                         g, 500 + seed, paths=None, target_rel_error=target, batch_size=1024, time_budget_s=600
                     )
+                    doc["simulation"]["quasi_random"] = not args.pseudo_random
                     if variant == "before":
                         doc["simulation"]["direction"] = "auto"
                         keep = sim_mod.reliability.may_stop, sim_mod.kernel_settings
@@ -299,6 +280,8 @@ def main() -> None:
     ap.add_argument("--paths", type=int, default=4096)
     ap.add_argument("--json", default=None)
     ap.add_argument("--geometries", default="room,unbounded")
+    ap.add_argument("--pseudo-random", action="store_true", help="quasi_random: false (default: the blocks)")
+    ap.add_argument("--variants", default="before,after", help="accuracy study: before (main's old rules), after")
     args = ap.parse_args()
     if args.study == "accuracy":
         accuracy_study(args)
@@ -312,7 +295,9 @@ def main() -> None:
     rows = []
     t0 = time.perf_counter()
     print(
-        f"{args.seeds} seeds x {args.paths} paths per side; ratio = spread / median stderr of H0; "
+        f"{args.seeds} seeds x {args.paths} paths per side, "
+        f"{'pseudo-random paths' if args.pseudo_random else 'quasi-random blocks of 256 paths'}; "
+        "ratio = spread / median stderr of H0; "
         "max z = worst |H0 - ref| / own stderr"
     )
     print(f"{'case':26s} " + " ".join(f"{a}{'/2s' if s == 'two' else '/1s'}".rjust(15) for a, s in VARIANTS))
@@ -325,7 +310,12 @@ def main() -> None:
                     for seed in range(args.seeds):
                         # not shared between cases
                         case_seed = zlib.crc32(repr((geometry, g, D, algorithm, sides)).encode()) % 100_000
-                        res = run(scene(geometry, g, D, algorithm, args.paths, 1000 * seed + case_seed), sides)
+                        res = run(
+                            scene(
+                                geometry, g, D, algorithm, args.paths, 1000 * seed + case_seed, not args.pseudo_random
+                            ),
+                            sides,
+                        )
                         link = res["links"][0]
                         vals.append(link["dc_gain"])
                         errs.append(link["dc_gain_stderr"])

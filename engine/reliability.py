@@ -3,8 +3,9 @@
 Monte Carlo error bars are estimates: under heavy tails (connections to point-like
 devices, physics.md section 4) a run that has not yet drawn its rare large
 contributions reports an error that is too small, and an accuracy run that stops on
-it stops on a lucky batch. These functions look at the estimate through independent
-batch groups (batch index mod G, engine/tally.py) and report, per link:
+it stops on a lucky batch. These functions look at the estimate through G independent
+path groups (sample index mod G, filled in turn from the first batch; engine/tally.py) and
+report, per link:
 
 - `max_group_share`: the largest single group's share of sum_g n_g |x_g| (x_g the
   group's per-path estimate, n_g its paths); 1/G for identical groups, near 1 when
@@ -12,14 +13,14 @@ batch groups (batch index mod G, engine/tally.py) and report, per link:
 - `effective_groups`: (sum_g n_g x_g)^2 / sum_g (n_g x_g)^2 (Kish 1965), G for
   identical groups, ~1 when one group dominates;
 - `group_rel_stderr`: the relative standard error of H0 from the spread of the group
-  estimates (batch means; independent of the per-path second moments);
+  estimates (batch means; independent of the samples' second moments);
 - `stderr_rel_error`: the relative error of that standard error,
       0.5 sqrt(2 / (G - 1) + kappa / G),
   kappa the excess kurtosis of the group estimates (clipped at 0; the variance of a
   sample variance is sigma^4 (2 / (G - 1) + kappa / G), e.g. Cramer 1946 section 27.4,
   and the delta method halves it for the standard error).
 
-`may_stop` is the accuracy rule: the per-path relative standard error at or below the
+`may_stop` is the accuracy rule: the relative standard error (tally.sample_cov) at or below the
 target is not enough; the group spread must agree (within `GROUP_SLACK`), enough groups
 must be filled, no single group may dominate and the error bar's own relative error
 must be small. `warnings` turns the same figures into result warnings.

@@ -521,7 +521,7 @@ class ChannelBuilder:
     combinations' (w, w t, w t^2). Per band, w t and w t^2 are summed without groups (mean delay and
     delay spread per band, without error bars). Standard errors come from the spread of the N_GROUPS
     path-group means (batch means, 15 degrees of freedom: an error bar good to about 20 %), not from
-    per-path second moments: per-path sums would cost a scatter per band and estimate, these stay
+    per-sample second moments: per-sample sums would cost a scatter per band and estimate, these stay
     small. The whole-spectrum optical gain also has the main tally's per-path error bars (dc_gain)."""
 
     def __init__(

@@ -406,7 +406,8 @@ class Accumulator:
         self.order_q1 = np.zeros((n_ord, plan.n_orders, plan.n_scatter))  # sum of n_b S_b
         self.groups = np.zeros((N_GROUPS, n_cir, bins.n))  # per batch group, summed over k, s
         self.group_paths = np.zeros((N_GROUPS, self.n_links), np.int64)
-        #: per path group (path index mod N_GROUPS, in every batch): sum of per-path H0 estimates, and paths
+        #: per path group (sample index mod N_GROUPS, groups filled in turn: group_shift): sum of per-path H0
+        #: estimates, and paths
         self.group_h0 = np.zeros((N_GROUPS, self.n_links))
         self.h0_group_paths = np.zeros((N_GROUPS, self.n_links), np.int64)
         n_groups = plan.group_weights.shape[0]
