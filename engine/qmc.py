@@ -79,8 +79,10 @@ def block_size(n_paths: int, block: int) -> int:
 
 
 def whole_blocks(n_paths: int, block: int) -> int:
-    """The largest batch of at most n_paths paths made of whole blocks (n_paths itself below one block)."""
-    return n_paths - n_paths % block if block > 1 and n_paths >= block else n_paths
+    """A batch size for at most n_paths paths: rounded down to whole blocks when that loses at most 1/16 of
+    the paths (n_paths >= 16 blocks), else n_paths itself (then pseudo-random unless already whole blocks:
+    smaller batches cost more per path, e.g. maps whose many receivers cap the batch)."""
+    return n_paths - n_paths % block if block > 1 and n_paths >= 16 * block else n_paths
 
 
 def shifted_blocks(n_paths: int, block: int, rng: np.random.Generator) -> np.ndarray:

@@ -38,6 +38,7 @@ def test_block_rules():
     assert qmc.block_size(128, 256) == 1
     assert qmc.block_size(512, 1) == 1
     assert qmc.whole_blocks(5461, 256) == 5376
+    assert qmc.whole_blocks(419, 256) == 419  # rounding would cost 39 % of the batch: pseudo-random instead
     assert qmc.whole_blocks(100, 256) == 100
     assert qmc.whole_blocks(5461, 1) == 5461
 
