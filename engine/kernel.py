@@ -461,7 +461,9 @@ def _medium_next_events(
         throughput = _scattering_point_throughput(pp.weights, transmittance, sigma_t, sigma_s, n_e)
         mid_g = None
         if settings.both_sides:  # a point on the first segment is the path's first vertex (medium_nee)
-            pp.first = np.asarray(np.where(pp.k + pp.s == 0, first_medium_factor(ctx, points, transmittance), pp.first))
+            at_first = (pp.k + pp.s == 0).nonzero()[0]  # only on the first segment (pp's fields are its own copies)
+            if len(at_first):
+                pp.first[at_first] = first_medium_factor(ctx, points.take(at_first, axis=1), transmittance.take(at_first))
             mid_g = transmittance / (s * s)  # edge factor T / r^2 of the edge that reached the point
         pp.s = pp.s + 1
         ctx.connect(points, points, throughput, pp, in_dirs=pp.directions, target=j, extra_length=s, mid_g=mid_g)
@@ -644,26 +646,31 @@ class _Context:
                 f *= vertex_factor
             if mis is not None:
                 f *= mis if np.isscalar(mis) else _rows(mis, vertex_rows)
-            live = np.flatnonzero(f > 0)
+            live = (f > 0).nonzero()[0]
             if len(live) == 0:
                 continue
-            vertex = live if vertex_rows is None else vertex_rows.take(live)  # vertex of each live estimate
-            f, d, out_dir = f.take(live), d.take(live), out_dir.take(live, axis=1)
-            column = np.full(len(live), columns[0]) if column_rows is None else column_rows.take(live)
             both_sides = self.settings.both_sides and medium is not None
-            if both_sides:
-                response, vertex_factor = response.take(live), vertex_factor.take(live)
+            # `vertex`: the vertex of each live estimate, None while that is every vertex of `points` in order
+            # (then no gathers: in smoke nearly every connection contributes)
+            if len(live) < len(f):
+                vertex = live if vertex_rows is None else vertex_rows.take(live)
+                f, d, out_dir = f.take(live), d.take(live), out_dir.take(live, axis=1)
+                column = np.full(len(live), columns[0]) if column_rows is None else column_rows.take(live)
+                if both_sides:
+                    response, vertex_factor = response.take(live), vertex_factor.take(live)
+            else:
+                vertex = vertex_rows
+                column = np.full(len(live), columns[0]) if column_rows is None else column_rows
             if not scene.all_visible:  # the shadow ray stops short of the device (it may sit on a surface)
-                seen = np.flatnonzero(
-                    ~isect.occluded(shadow_origins.take(vertex, axis=1).T, out_dir.T, d - 2.0 * isect.offset)
-                )
-                if len(seen) < len(vertex):
-                    vertex, column, f, d = vertex.take(seen), column.take(seen), f.take(seen), d.take(seen)
+                seen = (~isect.occluded(_rows(shadow_origins, vertex).T, out_dir.T, d - 2.0 * isect.offset)).nonzero()[0]
+                if len(seen) < len(d):
+                    vertex = seen if vertex is None else vertex.take(seen)
+                    column, f, d = column.take(seen), f.take(seen), d.take(seen)
                     out_dir = out_dir.take(seen, axis=1)
                     if both_sides:
                         response, vertex_factor = response.take(seen), vertex_factor.take(seen)
             if medium is not None:
-                tau = medium.optical_depth(points.take(vertex, axis=1).T, out_dir.T, d)
+                tau = medium.optical_depth(_rows(points, vertex).T, out_dir.T, d)
                 tr = np.exp(-tau)  # = medium.transmittance
                 f = f * tr
                 if both_sides:  # algorithm 5 from both devices: this run's share (medium_nee.connection_weight)
@@ -679,26 +686,19 @@ class _Context:
                         surface=normals is not None,
                         mid_g=mid_g,
                     )
-            length = paths.lengths.take(vertex) + d
+            length = _rows(paths.lengths, vertex) + d
             if extra_length is not None:
-                length += extra_length.take(vertex)
-            s_order = (paths.s if scatter_order is None else scatter_order).take(vertex)
+                length += _rows(extra_length, vertex)
+            s_order = _rows(paths.s if scatter_order is None else scatter_order, vertex)
             ratio = None
             if "ratio" in self.out:  # spectral: the path's band ratios, with T_b / T_c of the connection
                 ratio = self.spectra.estimate_ratio(
-                    paths.ratio.take(vertex, axis=1), tau if medium is not None else None
+                    _rows(paths.ratio, vertex), tau if medium is not None else None
                 )
                 if normals is None and self.spectra.phase_bands is not None:  # medium vertex: p_b / p_c
                     ratio = ratio * self.spectra.phase_ratio(_dot(_rows(in_dirs, vertex), out_dir))
-            self.record(
-                column,
-                paths.k.take(vertex),
-                s_order,
-                length * (1.0 / SPEED_OF_LIGHT),
-                f,
-                paths.path.take(vertex),
-                ratio,
-            )
+            length *= 1.0 / SPEED_OF_LIGHT
+            self.record(column, _rows(paths.k, vertex), s_order, length, f, _rows(paths.path, vertex), ratio)
 
     def record(self, target, k, s, delay, power, path, ratio=None) -> None:
         """One group of estimates: local target index, cell (k, s), delay [s], power [W/W], path in the batch,

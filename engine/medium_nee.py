@@ -174,23 +174,33 @@ def connection_weight(ctx, paths, vertex, column, d, tr, response, vertex_factor
     `response` R_tgt(cos) and `vertex_factor` (cos at a surface vertex, the phase function's value
     at a medium vertex) come from the connection (kernel._Context.connect), which computed them.
     """
-    resp = response / ctx.t_total.take(column)
+    def rows(a):  # the connected vertices' values (`vertex` None: every vertex, in order)
+        return a if vertex is None else a.take(vertex)
+
+    t_total = ctx.t_total
+    resp = response / (t_total[0] if len(t_total) == 1 else t_total.take(column))
     if surface:
-        c, rho_t = vertex_factor, 1.0 / np.pi
+        last = resp * vertex_factor * tr / (d * d)
+        rho_t = 1.0 / np.pi
     else:
-        c, rho_t = 1.0, vertex_factor
-    last = resp * c * tr / (d * d)
-    first = paths.first.take(vertex)
-    rho_f = paths.first_rho.take(vertex)
-    k, s = paths.k.take(vertex), paths.s.take(vertex)
-    several = k + s >= 2
-    a = np.where(several, first * rho_f, first)
-    b = np.where(several, last * rho_t, last)
+        last = resp * tr / (d * d)
+        rho_t = vertex_factor
+    first = rows(paths.first)
+    k, s = rows(paths.k), rows(paths.s)
+    depth = k + s
+    if depth.min() >= 2:  # every path has several vertices (the usual step past the first)
+        a = first * rows(paths.first_rho)
+        b = last * rho_t
+    else:
+        several = depth >= 2
+        a = np.where(several, first * rows(paths.first_rho), first)
+        b = np.where(several, last * rho_t, last)
     if mid_g is not None and not surface:
-        g = mid_g.take(vertex)
         three = (k == 0) & (s == 2)
-        a = np.where(three, a * g, a)
-        b = np.where(three, b * g + first * last, b)
+        if three.any():
+            g = rows(mid_g)
+            a = np.where(three, a * g, a)
+            b = np.where(three, b * g + first * last, b)
     return side_weight(a, b)
 
 
