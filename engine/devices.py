@@ -100,6 +100,27 @@ class Devices:
             return out
         return np.where((cos > 0) & (cos >= self.cos_fov.take(idx)), self.gain.take(idx) * cos, 0.0)
 
+    def response_one(self, i: int, cos: np.ndarray, directions: np.ndarray | None = None) -> np.ndarray:
+        """`response` of device i alone at cosines `cos` [1/sr or m^2]: its parameters as scalars, no per-estimate
+        index arrays (the kernel's connections to one target); m = 1 is cos / pi without a power."""
+        if self.kind == "transmitter":
+            if self.patterns and self.patterns[i] is not None:
+                return self.response(np.full(len(cos), i), cos, directions)
+            m = float(self.order[i])
+            if m == 1.0:
+                return np.maximum(cos, 0.0) * (1.0 / np.pi)
+            safe = np.where(cos > 0, cos, 1.0)
+            return np.where(cos > 0, (m + 1) / (2 * np.pi) * np.exp(m * np.log(safe)), 0.0)
+        lowest, gain = float(self.cos_fov[i]), float(self.gain[i])
+        if lowest <= 0.0:  # FOV = 90 deg: the front hemisphere
+            return np.maximum(cos, 0.0) * gain
+        return np.where(cos >= lowest, gain * cos, 0.0)
+
+    @property
+    def directional(self) -> bool:
+        """True when a response needs the direction, not only the cosine (tabulated transmitters)."""
+        return self.kind == "transmitter" and any(p is not None for p in self.patterns)
+
     def total_response(self, i: int) -> float:
         """Integral of device i's response over the sphere (the weight of a sampled ray)."""
         if self.kind == "transmitter":

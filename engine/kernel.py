@@ -202,7 +202,7 @@ class _Paths:
         """The paths where `mask` holds; free when it holds everywhere."""
         if mask.all():
             return _Paths(**{f: getattr(self, f) for f in self.FIELDS})
-        return self.gather(np.flatnonzero(mask))
+        return self.gather(mask.nonzero()[0])
 
     @staticmethod
     def concat(parts) -> "_Paths":
@@ -281,10 +281,10 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
             if settings.both_sides and step == 0:
                 paths.first = first_vertex_factor(ctx, paths, prim, t, t_col, collided)
             frames = _EquiangularFrames(ctx, paths, t_seg) if settings.equiangular_points else None
-            medium_rows = np.flatnonzero(collided & (paths.s < S))
+            medium_rows = (collided & (paths.s < S)).nonzero()[0]
             _medium_next_events(ctx, paths, frames, medium_rows, t_col.take(medium_rows), rng)
             if ctx.spectra is not None and ctx.spectra.depth_row:  # smoke per band: T_b / T_c of the flight
-                flown = np.flatnonzero(hit & ~collided & (paths.k < K))  # (its collisions: `_medium_collision`)
+                flown = (hit & ~collided & (paths.k < K)).nonzero()[0]  # (its collisions: `_medium_collision`)
                 if len(flown):
                     tau = medium.optical_depth(
                         paths.origins.take(flown, axis=1).T, paths.directions.take(flown, axis=1).T, t.take(flown)
@@ -300,7 +300,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
             escaped_power += paths.weights[~hit if collided is None else ~hit & ~collided].sum()
         survivors = []
         # ====== surface vertex =============================================================================
-        surface_rows = np.flatnonzero(at_surface & (paths.k < K))
+        surface_rows = (at_surface & (paths.k < K)).nonzero()[0]
         if len(surface_rows):
             sp = paths.gather(surface_rows) if len(surface_rows) < len(paths) else paths
             if forward:
@@ -403,7 +403,7 @@ class _EquiangularFrames:
     density n_E."""
 
     def __init__(self, ctx: "_Context", paths: _Paths, t_seg):
-        self.rows = np.flatnonzero((paths.s < ctx.settings.max_scattering) & np.isfinite(t_seg))
+        self.rows = ((paths.s < ctx.settings.max_scattering) & np.isfinite(t_seg)).nonzero()[0]
         self.row_of = np.full(len(paths), -1, np.int64)
         self.row_of[self.rows] = np.arange(len(self.rows))
         self.end = t_seg.take(self.rows)
@@ -424,23 +424,23 @@ def _medium_next_events(
     """
     settings, medium = ctx.settings, ctx.scene.medium
     n_eq = settings.equiangular_points if eq is not None else 0
-    seg = np.repeat(np.flatnonzero(eq.end > 0), n_eq) if eq is not None and n_eq else np.zeros(0, np.int64)
+    seg = np.repeat((eq.end > 0).nonzero()[0], n_eq) if eq is not None and n_eq else np.zeros(0, np.int64)
     xi = np.tile(np.arange(n_eq), len(seg) // n_eq) / n_eq if n_eq else None  # stratum starts
     for j in range(len(ctx.tgt)):
         if eq is not None and n_eq:
             frame = eq.frames[j]
-            s_eq = np.clip(frame.sample(seg, xi + rng.random(len(seg)) / n_eq), 0.0, eq.end.take(seg))
+            s_eq, n_e_eq = frame.sample_with_density(seg, xi + rng.random(len(seg)) / n_eq, eq.end.take(seg), n_eq)
             rows = np.concatenate([eq.rows.take(seg), collision_rows])
             s = np.concatenate([s_eq, t_col])
-            frame_rows = np.concatenate([seg, eq.row_of.take(collision_rows)])
+            n_e = np.concatenate([n_e_eq, frame.density(t_col, n_eq, eq.row_of.take(collision_rows))])
         else:
-            rows, s = collision_rows, t_col
+            rows, s, n_e = collision_rows, t_col, 0.0
         if len(rows) == 0:
             continue
         pp = paths.gather(rows)
         points = pp.origins + s * pp.directions
         sigma_t, sigma_s = medium.coefficients_at(points.T)
-        inside = np.flatnonzero(sigma_s > 0)
+        inside = (sigma_s > 0).nonzero()[0]
         if len(inside) < len(s):
             if len(inside) == 0:
                 continue
@@ -452,12 +452,11 @@ def _medium_next_events(
                 sigma_s.take(inside),
             )
             if n_eq:
-                frame_rows = frame_rows.take(inside)
+                n_e = n_e.take(inside)
         tau = medium.optical_depth(pp.origins.T, pp.directions.T, s)
         transmittance = np.exp(-tau)  # = medium.transmittance
         if ctx.spectra is not None:  # smoke per band: sigma_s,b T_b over the carrier's at the point (spectra.py)
             pp.ratio = ctx.spectra.scatter(pp.ratio, tau)
-        n_e = frame.density(s, n_eq, frame_rows) if n_eq else 0.0
         throughput = _scattering_point_throughput(pp.weights, transmittance, sigma_t, sigma_s, n_e)
         mid_g = None
         if settings.both_sides:  # a point on the first segment is the path's first vertex (medium_nee)
@@ -511,7 +510,7 @@ def _roulette(ctx: "_Context", paths: _Paths, alive, rng) -> _Paths:
     """
     settings = ctx.settings
     if settings.russian_roulette:
-        at = np.flatnonzero(alive & (paths.k + paths.s >= settings.rr_start_depth))
+        at = (alive & (paths.k + paths.s >= settings.rr_start_depth)).nonzero()[0]
         if len(at):
             q = np.minimum(1.0, paths.weights.take(at) * (1.0 / (settings.rr_threshold * ctx.w0)))
             survive = rng.random(len(at)) < q
@@ -535,6 +534,7 @@ class _Context:
         self.t_pos = np.ascontiguousarray(targets.positions[tgt].T)  # (3, T)
         self.t_nrm = np.ascontiguousarray(targets.normals[tgt].T)
         self.t_total = np.array([targets.total_response(int(t)) for t in tgt], float)
+        self.t_directional = targets.directional
         #: spectral scenes: per-band tables; estimates carry their band ratios ("ratio") when paths do
         self.spectra = scene.spectra
         self.channels = None  # the per-(link, channel) sums of spectral scenes (spectra.ChannelBuilder)
@@ -617,7 +617,7 @@ class _Context:
                 vertex_rows = None if (lo, hi) == (0, n_pts) else np.arange(lo, hi)
                 column_rows = None
                 y, y_nrm = self.t_pos[:, columns[0] : columns[0] + 1], self.t_nrm[:, columns[0] : columns[0] + 1]
-                y_ids = np.full(hi - lo, self.tgt[columns[0]])
+                y_ids = None
             else:
                 vertex_rows = np.repeat(np.arange(lo, hi), n_tgt)
                 column_rows = np.tile(columns, hi - lo)
@@ -628,7 +628,11 @@ class _Context:
             d = np.sqrt(d2)
             out_dir = to / d
             cos_target = -_dot(out_dir, y_nrm)
-            response = targets.response(y_ids, cos_target, -out_dir.T)
+            toward = -out_dir.T if self.t_directional else None  # tabulated transmitters need the direction
+            if y_ids is None:
+                response = targets.response_one(int(self.tgt[columns[0]]), cos_target, toward)
+            else:
+                response = targets.response(y_ids, cos_target, toward)
             f = response / d2 * _rows(throughput, vertex_rows)
             if normals is not None:  # surface vertex: BRDF x cos
                 n_x = _rows(normals, vertex_rows)

@@ -102,7 +102,8 @@ def _device_factor(devices, i: int, points, c):
     r2 = _dot(v, v)
     r = np.sqrt(r2)
     cos = _dot(v, devices.normals[i][:, None]) / r
-    return devices.response(np.full(len(r2), i), cos, (v / r).T) / devices.total_response(i) * c / r2
+    toward = (v / r).T if devices.directional else None
+    return devices.response_one(i, cos, toward) / devices.total_response(i) * c / r2
 
 
 def source_factor(ctx, points):
@@ -144,7 +145,7 @@ def first_vertex_factor(ctx, paths, prim, t, t_col, collided):
         c[surf] = np.abs(_dot(normals, paths.directions[:, surf]))
     factor = np.where(collided | hit, _device_factor(src, i, points, c), 0.0)
     if ctx.settings.both_sides and scene.medium is not None:
-        live = np.flatnonzero(collided | hit)
+        live = (collided | hit).nonzero()[0]
         if len(live):
             factor[live] *= scene.medium.transmittance(paths.origins[:, live].T, paths.directions[:, live].T, t1[live])
     return factor
@@ -216,7 +217,7 @@ def connect_from_target(ctx, mp, points, rng) -> None:
     the transmitter and x_2 near the receiver, the corner neither unidirectional strategy
     samples well, this one carries the path, and its estimate there is bounded.
     """
-    first = np.flatnonzero((mp.k == 0) & (mp.s == 1))
+    first = ((mp.k == 0) & (mp.s == 1)).nonzero()[0]
     if len(first) == 0:
         return
     scene, medium, isect = ctx.scene, ctx.scene.medium, ctx.scene.intersector
@@ -234,7 +235,7 @@ def connect_from_target(ctx, mp, points, rng) -> None:
         prim, t_hit = isect.intersect(origins.T, dirs.T)
         seg = np.where(prim >= 0, t_hit, scene.medium_far_distance)
         t_y, col = medium.sample_distance(origins.T, dirs.T, seg, u[2])
-        sel = np.flatnonzero(col)
+        sel = col.nonzero()[0]
         if len(sel) == 0:
             continue
         y = origins.take(sel, axis=1) + t_y.take(sel) * dirs.take(sel, axis=1)
@@ -242,7 +243,7 @@ def connect_from_target(ctx, mp, points, rng) -> None:
         v = y - a
         r12 = np.sqrt(_dot(v, v))
         w12 = v / r12
-        keep = np.flatnonzero(r12 > 0)
+        keep = (r12 > 0).nonzero()[0]
         if not scene.all_visible and len(keep):
             keep = keep[~isect.occluded(a[:, keep].T, w12[:, keep].T, r12[keep] - 2.0 * isect.offset)]
         if len(keep) == 0:
@@ -267,7 +268,7 @@ def connect_from_target(ctx, mp, points, rng) -> None:
         total = Fs * p1 * g + L * p2 * g + q_c
         share = np.where(total > 0, q_c / np.where(total > 0, total, 1.0), 0.0)
         power = w.take(sel) * p1 * g * medium.albedo_at(y.T) * p2 * ctx.t_total[j] * share
-        ok = np.flatnonzero(power > 0)
+        ok = (power > 0).nonzero()[0]
         if len(ok) == 0:
             continue
         ratio = None
@@ -307,12 +308,12 @@ def _scatter_on_first_segment(ctx, paths, t_seg, rng):
     in a phase-sampled direction, with `first` = the source factor at p and s = 1; None if none collide."""
     scene = ctx.scene
     medium = scene.medium
-    ok = np.flatnonzero(np.isfinite(t_seg) & (paths.k + paths.s == 0))
+    ok = (np.isfinite(t_seg) & (paths.k + paths.s == 0)).nonzero()[0]
     if len(ok) == 0:
         return None
     base = paths.keep(ok)
     t_in, col = medium.sample_distance(base.origins.T, base.directions.T, t_seg.take(ok), rng.random(len(ok)))
-    sel = np.flatnonzero(col)
+    sel = col.nonzero()[0]
     if len(sel) == 0:
         return None
     br = base.keep(sel)
@@ -366,9 +367,9 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
         hit = prim >= 0
         if double:
             seg = np.where(hit, t, far)
-            live = np.flatnonzero(np.isfinite(seg))
+            live = (np.isfinite(seg)).nonzero()[0]
             segment_points(ctx, br.keep(live), seg.take(live), rng, order=2, weight_fn=partition)
-        nxt = np.flatnonzero(hit & (br.k < K))
+        nxt = (hit & (br.k < K)).nonzero()[0]
         if len(nxt) == 0:
             return
         br = br.keep(nxt)
