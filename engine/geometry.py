@@ -217,10 +217,13 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
 def _f32(a: np.ndarray, minus: np.ndarray | None = None) -> np.ndarray:
     """C-contiguous float32 (n, 3), as Embree wants it (from any layout, e.g. a transposed view), of `a` - `minus`
     (float64 arithmetic, one pass)."""
-    if minus is None:
-        return np.ascontiguousarray(a, dtype=np.float32)
-    out = np.empty(np.shape(a), np.float32)
-    np.subtract(a, minus, out=out, casting="same_kind")
+    a = np.asarray(a)
+    out = np.empty(a.shape, np.float32)
+    for k in range(a.shape[1]):  # column by column: 3-4x faster than one cast of a strided (transposed) view
+        if minus is None:
+            out[:, k] = a[:, k]
+        else:
+            np.subtract(a[:, k], minus[k], out=out[:, k], casting="same_kind")
     return out
 
 
