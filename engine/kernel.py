@@ -58,6 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import qmc
+from .allocator import tune_allocator
 from .constants import SPEED_OF_LIGHT
 from .devices import Devices
 from .medium_nee import (
@@ -224,6 +225,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     equiangular partner (algorithm 5), surface vertex, medium collision, roulette. Every
     next-event estimate goes through `_Context.connect` (the measurement equation).
     """
+    tune_allocator()  # once per process: the step's temporaries reuse heap memory (engine/allocator.py)
     rng = item.rng()
     sources, targets = device_sets(scene, item.direction)
     isect, medium = scene.intersector, scene.medium
