@@ -242,6 +242,11 @@ class HomogeneousMedium(Medium):
             crossed.append(ray)
         return t, scattered, _count(crossed)
 
+    def albedo_at(self, points) -> np.ndarray:
+        if isinstance(self._region, WholeRegion):  # the same everywhere
+            return np.full(len(as_rows(points)), self.albedo)
+        return super().albedo_at(points)
+
     def _coefficients_at(self, p):
         if isinstance(self._region, WholeRegion):
             return np.full(len(p), self.sigma_t), np.full(len(p), self.sigma_s)
