@@ -27,7 +27,7 @@ from owcsim.schemas import ReceiverSpec, TransmitterSpec
 from .errors import SceneError
 from .inputs import read_input
 from .photometry import Photometry, PhotometryError, luminaire_frame, parse_photometry
-from .sampling import sample_cosine_cone, sample_generalized_lambertian, to_world
+from .sampling import _cone_polar, _lambertian_polar, polar_about_soa
 
 
 @dataclass
@@ -133,10 +133,10 @@ class Devices:
             if self.patterns and self.patterns[i] is not None:
                 pattern, frame = self.pattern(i)
                 return (frame.T @ pattern.sample_rows(u1, u2)).T  # a view of (3, n) rows
-            local = sample_generalized_lambertian(self.order[i], u1, u2)
+            polar = _lambertian_polar(self.order[i], u1)
         else:
-            local = sample_cosine_cone(self.cos_fov[i], u1, u2)
-        return to_world(local, self.normals[i])
+            polar = _cone_polar(self.cos_fov[i], u1)
+        return polar_about_soa(*polar, u2, self.normals[i]).T  # (n, 3) view of (3, n) rows
 
 
 def unit_normals(specs) -> np.ndarray:
