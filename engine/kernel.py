@@ -193,26 +193,33 @@ class _Paths:
     def __len__(self) -> int:
         return len(self.weights)
 
+    @staticmethod
+    def _of(fields: dict) -> "_Paths":
+        """A _Paths from a complete field dict, without the keyword machinery (a step makes several)."""
+        out = object.__new__(_Paths)
+        out.__dict__.update(fields)
+        return out
+
     def gather(self, idx) -> "_Paths":
         """The paths at rows `idx` (any order, repeats allowed), every field gathered once (None stays None)."""
-        return _Paths(**{f: None if (a := getattr(self, f)) is None else a.take(idx, axis=-1) for f in self.FIELDS})
+        return _Paths._of({f: None if a is None else a.take(idx, axis=-1) for f, a in self.__dict__.items()})
 
     keep = gather
 
     def keep_where(self, mask) -> "_Paths":
         """The paths where `mask` holds; free when it holds everywhere."""
         if mask.all():
-            return _Paths(**{f: getattr(self, f) for f in self.FIELDS})
+            return _Paths._of(dict(self.__dict__))
         return self.gather(mask.nonzero()[0])
 
     @staticmethod
     def concat(parts) -> "_Paths":
         if len(parts) == 1:
             return parts[0]
-        return _Paths(
-            **{
-                f: None if getattr(parts[0], f) is None else np.concatenate([getattr(p, f) for p in parts], axis=-1)
-                for f in _Paths.FIELDS
+        return _Paths._of(
+            {
+                f: None if a is None else np.concatenate([p.__dict__[f] for p in parts], axis=-1)
+                for f, a in parts[0].__dict__.items()
             }
         )
 
@@ -406,8 +413,6 @@ class _EquiangularFrames:
 
     def __init__(self, ctx: "_Context", paths: _Paths, t_seg):
         self.rows = ((paths.s < ctx.settings.max_scattering) & np.isfinite(t_seg)).nonzero()[0]
-        self.row_of = np.full(len(paths), -1, np.int64)
-        self.row_of[self.rows] = np.arange(len(self.rows))
         self.end = t_seg.take(self.rows)
         o, w = paths.origins.take(self.rows, axis=1), paths.directions.take(self.rows, axis=1)
         self.frames = [EquiangularFrame(o, w, ctx.t_pos[:, j : j + 1], 0.0, self.end) for j in range(len(ctx.tgt))]
@@ -434,7 +439,8 @@ def _medium_next_events(
             s_eq, n_e_eq = frame.sample_with_density(seg, xi + rng.random(len(seg)) / n_eq, eq.end.take(seg), n_eq)
             rows = np.concatenate([eq.rows.take(seg), collision_rows])
             s = np.concatenate([s_eq, t_col])
-            n_e = np.concatenate([n_e_eq, frame.density(t_col, n_eq, eq.row_of.take(collision_rows))])
+            # (a collision lies on a finite segment with s < S: its row is in eq.rows, sorted)
+            n_e = np.concatenate([n_e_eq, frame.density(t_col, n_eq, np.searchsorted(eq.rows, collision_rows))])
         else:
             rows, s, n_e = collision_rows, t_col, 0.0
         if len(rows) == 0:
