@@ -442,7 +442,7 @@ def _medium_next_events(
             # (a collision lies on a finite segment with s < S: its row is in eq.rows, sorted)
             n_e = np.concatenate([n_e_eq, frame.density(t_col, n_eq, np.searchsorted(eq.rows, collision_rows))])
         else:
-            rows, s, n_e = collision_rows, t_col, 0.0
+            rows, s, n_e = collision_rows, t_col, np.zeros(len(collision_rows))
         if len(rows) == 0:
             continue
         pp = paths.gather(rows)
@@ -459,8 +459,7 @@ def _medium_next_events(
                 sigma_t.take(inside),
                 sigma_s.take(inside),
             )
-            if n_eq:
-                n_e = n_e.take(inside)
+            n_e = n_e.take(inside)
         tau = medium.optical_depth(pp.origins.T, pp.directions.T, s)
         transmittance = np.exp(-tau)  # = medium.transmittance
         if ctx.spectra is not None:  # smoke per band: sigma_s,b T_b over the carrier's at the point (spectra.py)
@@ -470,7 +469,10 @@ def _medium_next_events(
         if settings.both_sides:  # a point on the first segment is the path's first vertex (medium_nee)
             at_first = (pp.k + pp.s == 0).nonzero()[0]  # only on the first segment (pp's fields are its own copies)
             if len(at_first):
-                pp.first[at_first] = first_medium_factor(ctx, points.take(at_first, axis=1), transmittance.take(at_first))
+                assert pp.first is not None  # two-sided runs carry it
+                pp.first[at_first] = first_medium_factor(
+                    ctx, points.take(at_first, axis=1), transmittance.take(at_first)
+                )
             mid_g = transmittance / (s * s)  # edge factor T / r^2 of the edge that reached the point
         pp.s = pp.s + 1
         ctx.connect(points, points, throughput, pp, in_dirs=pp.directions, target=j, extra_length=s, mid_g=mid_g)
@@ -674,7 +676,8 @@ class _Context:
                 vertex = vertex_rows
                 column = np.full(len(live), columns[0]) if column_rows is None else column_rows
             if not scene.all_visible:  # the shadow ray stops short of the device (it may sit on a surface)
-                seen = (~isect.occluded(_rows(shadow_origins, vertex).T, out_dir.T, d - 2.0 * isect.offset)).nonzero()[0]
+                blocked = isect.occluded(_rows(shadow_origins, vertex).T, out_dir.T, d - 2.0 * isect.offset)
+                seen = (~blocked).nonzero()[0]
                 if len(seen) < len(d):
                     vertex = seen if vertex is None else vertex.take(seen)
                     column, f, d = column.take(seen), f.take(seen), d.take(seen)
@@ -704,9 +707,7 @@ class _Context:
             s_order = _rows(paths.s if scatter_order is None else scatter_order, vertex)
             ratio = None
             if "ratio" in self.out:  # spectral: the path's band ratios, with T_b / T_c of the connection
-                ratio = self.spectra.estimate_ratio(
-                    _rows(paths.ratio, vertex), tau if medium is not None else None
-                )
+                ratio = self.spectra.estimate_ratio(_rows(paths.ratio, vertex), tau if medium is not None else None)
                 if normals is None and self.spectra.phase_bands is not None:  # medium vertex: p_b / p_c
                     ratio = ratio * self.spectra.phase_ratio(_dot(_rows(in_dirs, vertex), out_dir))
             length *= 1.0 / SPEED_OF_LIGHT

@@ -175,6 +175,7 @@ def connection_weight(ctx, paths, vertex, column, d, tr, response, vertex_factor
     `response` R_tgt(cos) and `vertex_factor` (cos at a surface vertex, the phase function's value
     at a medium vertex) come from the connection (kernel._Context.connect), which computed them.
     """
+
     def rows(a):  # the connected vertices' values (`vertex` None: every vertex, in order)
         return a if vertex is None else a.take(vertex)
 
