@@ -345,7 +345,7 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
     isect, geo = scene.intersector, scene.geometry
     points = sp.origins + ts * sp.directions
     normals = isect.normals_soa.take(prims, axis=1)
-    normals *= np.where(_dot(normals, sp.directions) > 0, -1.0, 1.0)  # two-sided: face the arriving ray
+    np.negative(normals, out=normals, where=_dot(normals, sp.directions) > 0)  # two-sided: face the arriving ray
     spawn = points + isect.offset * normals
     arriving = sp.directions
     sp = _Paths(
@@ -520,12 +520,20 @@ def _roulette(ctx: "_Context", paths: _Paths, alive, rng) -> _Paths:
     """
     settings = ctx.settings
     if settings.russian_roulette:
-        at = (alive & (paths.k + paths.s >= settings.rr_start_depth)).nonzero()[0]
-        if len(at):
-            q = np.minimum(1.0, paths.weights.take(at) * (1.0 / (settings.rr_threshold * ctx.w0)))
-            survive = rng.random(len(at)) < q
-            paths.weights[at] = paths.weights.take(at) / np.where(survive, q, 1.0)
-            alive[at[~survive]] = False
+        deep = alive & (paths.k + paths.s >= settings.rr_start_depth)
+        scale = 1.0 / (settings.rr_threshold * ctx.w0)
+        if deep.all():  # every path plays (the usual step past rr_start_depth): no index arrays
+            q = np.minimum(1.0, paths.weights * scale)
+            survive = rng.random(len(q)) < q
+            paths.weights = paths.weights / np.where(survive, q, 1.0)
+            alive = survive
+        else:
+            at = deep.nonzero()[0]
+            if len(at):
+                q = np.minimum(1.0, paths.weights.take(at) * scale)
+                survive = rng.random(len(at)) < q
+                paths.weights[at] = paths.weights.take(at) / np.where(survive, q, 1.0)
+                alive[at[~survive]] = False
     return paths.keep_where(alive)
 
 
