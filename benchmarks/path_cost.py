@@ -19,7 +19,8 @@ alternately in the same run, best of `--repeats`):
   room (algorithm 5, K = 200, S = 35, run from both devices as the automatic settings choose);
   paths counted over both devices;
 - time to accuracy: the full automatic job (pilots included) to 0.03 % on the clear room and 0.3 % on
-  the smoky room: wall time, paths, H0;
+  the smoky room: CPU time, paths, H0, and the CPU time of its pilots (the truncation pilot that chooses
+  K / S / the window, the direction pilot) with their share;
 - `--profile`: the split Embree / numpy / interpreter of the cost-per-path runs, from py-spy
   (`py-spy record --native`, samples classified by their innermost frames: Embree's library,
   numpy's or another native library, else the interpreter); without py-spy, cProfile with the
@@ -137,8 +138,37 @@ def measure_cost(case: str, paths: int | None = None) -> dict:
     }
 
 
+#: The job runner's pilots: the truncation pilot (inside `_resolve`) and the direction pilot.
+PILOT_STEPS = ("_resolve", "_choose_directions")
+
+
 def measure_accuracy(case: str) -> dict:
-    el, res = _simulate(ACCURACY_CASES[case]())
+    """The automatic job to its target; `pilot_s` is the CPU time of its pilots (the outermost pilot step)."""
+    from owcsim.engine import simulate as sim_mod
+
+    spent, depth, original = {"pilot": 0.0}, [0], {}
+
+    def timed(f):
+        def run(*args, **kwargs):
+            depth[0] += 1
+            t = time.process_time()
+            try:
+                return f(*args, **kwargs)
+            finally:
+                depth[0] -= 1
+                if depth[0] == 0:
+                    spent["pilot"] += time.process_time() - t
+
+        return run
+
+    for name in PILOT_STEPS:
+        original[name] = getattr(sim_mod, name)
+        setattr(sim_mod, name, timed(original[name]))
+    try:
+        el, res = _simulate(ACCURACY_CASES[case]())
+    finally:
+        for name, f in original.items():
+            setattr(sim_mod, name, f)
     link = res["links"][0]
     return {
         "time_s": el,
@@ -146,6 +176,7 @@ def measure_accuracy(case: str) -> dict:
         "dc_gain": link["dc_gain"],
         "rel_stderr": link["dc_gain_stderr"] / link["dc_gain"],
         "stop": res["run"]["stop_reason"],
+        "pilot_s": spent["pilot"],
     }
 
 
@@ -399,6 +430,14 @@ def report(results: dict[str, dict], profiles: dict[str, dict], markdown: bool) 
         if key in first:
             row(f"time to {target}, {case} room [s]", [results[n][key]["time_s"] for n in names], "{:.2f}")
             row(f"paths to {target}, {case} room", [results[n][key]["paths"] for n in names], "{:,d}")
+            if all("pilot_s" in results[n][key] for n in names):
+                row(f"pilots' time in it, {case} room [s]", [results[n][key]["pilot_s"] for n in names], "{:.3f}")
+                row(
+                    f"pilots' share of it, {case} room",
+                    [results[n][key]["pilot_s"] / results[n][key]["time_s"] for n in names],
+                    "{:.0%}",
+                    False,
+                )
     if "algorithms" in first and len(names) == 2:
         a, b = (results[n]["algorithms"] for n in names)
         for key in a:

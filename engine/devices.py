@@ -27,7 +27,7 @@ from owcsim.schemas import ReceiverSpec, TransmitterSpec
 from .errors import SceneError
 from .inputs import read_input
 from .photometry import Photometry, PhotometryError, luminaire_frame, parse_photometry
-from .sampling import sample_cosine_cone, sample_generalized_lambertian, to_world
+from .sampling import _cone_polar, _lambertian_polar, polar_about_soa
 
 
 @dataclass
@@ -100,6 +100,27 @@ class Devices:
             return out
         return np.where((cos > 0) & (cos >= self.cos_fov.take(idx)), self.gain.take(idx) * cos, 0.0)
 
+    def response_one(self, i: int, cos: np.ndarray, directions: np.ndarray | None = None) -> np.ndarray:
+        """`response` of device i alone at cosines `cos` [1/sr or m^2]: its parameters as scalars, no per-estimate
+        index arrays (the kernel's connections to one target); m = 1 is cos / pi without a power."""
+        if self.kind == "transmitter":
+            if self.patterns and self.patterns[i] is not None:
+                return self.response(np.full(len(cos), i), cos, directions)
+            m = float(self.order[i])
+            if m == 1.0:
+                return np.maximum(cos, 0.0) * (1.0 / np.pi)
+            safe = np.where(cos > 0, cos, 1.0)
+            return np.where(cos > 0, (m + 1) / (2 * np.pi) * np.exp(m * np.log(safe)), 0.0)
+        lowest, gain = float(self.cos_fov[i]), float(self.gain[i])
+        if lowest <= 0.0:  # FOV = 90 deg: the front hemisphere
+            return np.maximum(cos, 0.0) * gain
+        return np.where(cos >= lowest, gain * cos, 0.0)
+
+    @property
+    def directional(self) -> bool:
+        """True when a response needs the direction, not only the cosine (tabulated transmitters)."""
+        return self.kind == "transmitter" and any(p is not None for p in self.patterns)
+
     def total_response(self, i: int) -> float:
         """Integral of device i's response over the sphere (the weight of a sampled ray)."""
         if self.kind == "transmitter":
@@ -112,10 +133,10 @@ class Devices:
             if self.patterns and self.patterns[i] is not None:
                 pattern, frame = self.pattern(i)
                 return (frame.T @ pattern.sample_rows(u1, u2)).T  # a view of (3, n) rows
-            local = sample_generalized_lambertian(self.order[i], u1, u2)
+            polar = _lambertian_polar(self.order[i], u1)
         else:
-            local = sample_cosine_cone(self.cos_fov[i], u1, u2)
-        return to_world(local, self.normals[i])
+            polar = _cone_polar(self.cos_fov[i], u1)
+        return polar_about_soa(*polar, u2, self.normals[i]).T  # (n, 3) view of (3, n) rows
 
 
 def unit_normals(specs) -> np.ndarray:

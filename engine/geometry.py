@@ -214,9 +214,17 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
     )
 
 
-def _f32(a: np.ndarray) -> np.ndarray:
-    """C-contiguous float32 (n, 3), as Embree wants it (from any layout, e.g. a transposed view)."""
-    return np.ascontiguousarray(a, dtype=np.float32)
+def _f32(a: np.ndarray, minus: np.ndarray | None = None) -> np.ndarray:
+    """C-contiguous float32 (n, 3), as Embree wants it (from any layout, e.g. a transposed view), of `a` - `minus`
+    (float64 arithmetic, one pass)."""
+    a = np.asarray(a)
+    out = np.empty(a.shape, np.float32)
+    for k in range(a.shape[1]):  # column by column: 3-4x faster than one cast of a strided (transposed) view
+        if minus is None:
+            out[:, k] = a[:, k]
+        else:
+            np.subtract(a[:, k], minus[k], out=out[:, k], casting="same_kind")
+    return out
 
 
 class Intersector:
@@ -248,7 +256,7 @@ class Intersector:
         if self.empty or n == 0:
             return np.full(n, -1, np.int64), np.full(n, np.inf)
         dists = np.full(n, 1e30, np.float32) if t_max is None else np.asarray(t_max, np.float32).copy()
-        out = self._scene.run(_f32(origins - self.center), _f32(directions), dists=dists, output=1)
+        out = self._scene.run(_f32(origins, self.center), _f32(directions), dists=dists, output=1)
         prim = out["primID"].astype(np.int64)
         t = np.where(prim >= 0, out["tfar"].astype(np.float64), np.inf)
         return prim, t
@@ -260,6 +268,6 @@ class Intersector:
         if self.empty or n == 0:
             return np.zeros(n, bool)
         res = self._scene.run(
-            _f32(origins - self.center), _f32(directions), dists=np.asarray(t_max, np.float32).copy(), query="OCCLUDED"
+            _f32(origins, self.center), _f32(directions), dists=np.asarray(t_max, np.float32).copy(), query="OCCLUDED"
         )
         return np.asarray(res) == 0

@@ -58,6 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import qmc
+from .allocator import tune_allocator
 from .constants import SPEED_OF_LIGHT
 from .devices import Devices
 from .medium_nee import (
@@ -192,26 +193,33 @@ class _Paths:
     def __len__(self) -> int:
         return len(self.weights)
 
+    @staticmethod
+    def _of(fields: dict) -> "_Paths":
+        """A _Paths from a complete field dict, without the keyword machinery (a step makes several)."""
+        out = object.__new__(_Paths)
+        out.__dict__.update(fields)
+        return out
+
     def gather(self, idx) -> "_Paths":
         """The paths at rows `idx` (any order, repeats allowed), every field gathered once (None stays None)."""
-        return _Paths(**{f: None if (a := getattr(self, f)) is None else a.take(idx, axis=-1) for f in self.FIELDS})
+        return _Paths._of({f: None if a is None else a.take(idx, axis=-1) for f, a in self.__dict__.items()})
 
     keep = gather
 
     def keep_where(self, mask) -> "_Paths":
         """The paths where `mask` holds; free when it holds everywhere."""
         if mask.all():
-            return _Paths(**{f: getattr(self, f) for f in self.FIELDS})
-        return self.gather(np.flatnonzero(mask))
+            return _Paths._of(dict(self.__dict__))
+        return self.gather(mask.nonzero()[0])
 
     @staticmethod
     def concat(parts) -> "_Paths":
         if len(parts) == 1:
             return parts[0]
-        return _Paths(
-            **{
-                f: None if getattr(parts[0], f) is None else np.concatenate([getattr(p, f) for p in parts], axis=-1)
-                for f in _Paths.FIELDS
+        return _Paths._of(
+            {
+                f: None if a is None else np.concatenate([p.__dict__[f] for p in parts], axis=-1)
+                for f, a in parts[0].__dict__.items()
             }
         )
 
@@ -224,6 +232,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     equiangular partner (algorithm 5), surface vertex, medium collision, roulette. Every
     next-event estimate goes through `_Context.connect` (the measurement equation).
     """
+    tune_allocator()  # once per process: the step's temporaries reuse heap memory (engine/allocator.py)
     rng = item.rng()
     sources, targets = device_sets(scene, item.direction)
     isect, medium = scene.intersector, scene.medium
@@ -281,10 +290,10 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
             if settings.both_sides and step == 0:
                 paths.first = first_vertex_factor(ctx, paths, prim, t, t_col, collided)
             frames = _EquiangularFrames(ctx, paths, t_seg) if settings.equiangular_points else None
-            medium_rows = np.flatnonzero(collided & (paths.s < S))
+            medium_rows = (collided & (paths.s < S)).nonzero()[0]
             _medium_next_events(ctx, paths, frames, medium_rows, t_col.take(medium_rows), rng)
             if ctx.spectra is not None and ctx.spectra.depth_row:  # smoke per band: T_b / T_c of the flight
-                flown = np.flatnonzero(hit & ~collided & (paths.k < K))  # (its collisions: `_medium_collision`)
+                flown = (hit & ~collided & (paths.k < K)).nonzero()[0]  # (its collisions: `_medium_collision`)
                 if len(flown):
                     tau = medium.optical_depth(
                         paths.origins.take(flown, axis=1).T, paths.directions.take(flown, axis=1).T, t.take(flown)
@@ -300,7 +309,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
             escaped_power += paths.weights[~hit if collided is None else ~hit & ~collided].sum()
         survivors = []
         # ====== surface vertex =============================================================================
-        surface_rows = np.flatnonzero(at_surface & (paths.k < K))
+        surface_rows = (at_surface & (paths.k < K)).nonzero()[0]
         if len(surface_rows):
             sp = paths.gather(surface_rows) if len(surface_rows) < len(paths) else paths
             if forward:
@@ -336,7 +345,7 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
     isect, geo = scene.intersector, scene.geometry
     points = sp.origins + ts * sp.directions
     normals = isect.normals_soa.take(prims, axis=1)
-    normals *= np.where(_dot(normals, sp.directions) > 0, -1.0, 1.0)  # two-sided: face the arriving ray
+    np.negative(normals, out=normals, where=_dot(normals, sp.directions) > 0)  # two-sided: face the arriving ray
     spawn = points + isect.offset * normals
     arriving = sp.directions
     sp = _Paths(
@@ -403,9 +412,7 @@ class _EquiangularFrames:
     density n_E."""
 
     def __init__(self, ctx: "_Context", paths: _Paths, t_seg):
-        self.rows = np.flatnonzero((paths.s < ctx.settings.max_scattering) & np.isfinite(t_seg))
-        self.row_of = np.full(len(paths), -1, np.int64)
-        self.row_of[self.rows] = np.arange(len(self.rows))
+        self.rows = ((paths.s < ctx.settings.max_scattering) & np.isfinite(t_seg)).nonzero()[0]
         self.end = t_seg.take(self.rows)
         o, w = paths.origins.take(self.rows, axis=1), paths.directions.take(self.rows, axis=1)
         self.frames = [EquiangularFrame(o, w, ctx.t_pos[:, j : j + 1], 0.0, self.end) for j in range(len(ctx.tgt))]
@@ -424,23 +431,24 @@ def _medium_next_events(
     """
     settings, medium = ctx.settings, ctx.scene.medium
     n_eq = settings.equiangular_points if eq is not None else 0
-    seg = np.repeat(np.flatnonzero(eq.end > 0), n_eq) if eq is not None and n_eq else np.zeros(0, np.int64)
+    seg = np.repeat((eq.end > 0).nonzero()[0], n_eq) if eq is not None and n_eq else np.zeros(0, np.int64)
     xi = np.tile(np.arange(n_eq), len(seg) // n_eq) / n_eq if n_eq else None  # stratum starts
     for j in range(len(ctx.tgt)):
         if eq is not None and n_eq:
             frame = eq.frames[j]
-            s_eq = np.clip(frame.sample(seg, xi + rng.random(len(seg)) / n_eq), 0.0, eq.end.take(seg))
+            s_eq, n_e_eq = frame.sample_with_density(seg, xi + rng.random(len(seg)) / n_eq, eq.end.take(seg), n_eq)
             rows = np.concatenate([eq.rows.take(seg), collision_rows])
             s = np.concatenate([s_eq, t_col])
-            frame_rows = np.concatenate([seg, eq.row_of.take(collision_rows)])
+            # (a collision lies on a finite segment with s < S: its row is in eq.rows, sorted)
+            n_e = np.concatenate([n_e_eq, frame.density(t_col, n_eq, np.searchsorted(eq.rows, collision_rows))])
         else:
-            rows, s = collision_rows, t_col
+            rows, s, n_e = collision_rows, t_col, np.zeros(len(collision_rows))
         if len(rows) == 0:
             continue
         pp = paths.gather(rows)
         points = pp.origins + s * pp.directions
         sigma_t, sigma_s = medium.coefficients_at(points.T)
-        inside = np.flatnonzero(sigma_s > 0)
+        inside = (sigma_s > 0).nonzero()[0]
         if len(inside) < len(s):
             if len(inside) == 0:
                 continue
@@ -451,17 +459,20 @@ def _medium_next_events(
                 sigma_t.take(inside),
                 sigma_s.take(inside),
             )
-            if n_eq:
-                frame_rows = frame_rows.take(inside)
+            n_e = n_e.take(inside)
         tau = medium.optical_depth(pp.origins.T, pp.directions.T, s)
         transmittance = np.exp(-tau)  # = medium.transmittance
         if ctx.spectra is not None:  # smoke per band: sigma_s,b T_b over the carrier's at the point (spectra.py)
             pp.ratio = ctx.spectra.scatter(pp.ratio, tau)
-        n_e = frame.density(s, n_eq, frame_rows) if n_eq else 0.0
         throughput = _scattering_point_throughput(pp.weights, transmittance, sigma_t, sigma_s, n_e)
         mid_g = None
         if settings.both_sides:  # a point on the first segment is the path's first vertex (medium_nee)
-            pp.first = np.asarray(np.where(pp.k + pp.s == 0, first_medium_factor(ctx, points, transmittance), pp.first))
+            at_first = (pp.k + pp.s == 0).nonzero()[0]  # only on the first segment (pp's fields are its own copies)
+            if len(at_first):
+                assert pp.first is not None  # two-sided runs carry it
+                pp.first[at_first] = first_medium_factor(
+                    ctx, points.take(at_first, axis=1), transmittance.take(at_first)
+                )
             mid_g = transmittance / (s * s)  # edge factor T / r^2 of the edge that reached the point
         pp.s = pp.s + 1
         ctx.connect(points, points, throughput, pp, in_dirs=pp.directions, target=j, extra_length=s, mid_g=mid_g)
@@ -509,12 +520,20 @@ def _roulette(ctx: "_Context", paths: _Paths, alive, rng) -> _Paths:
     """
     settings = ctx.settings
     if settings.russian_roulette:
-        at = np.flatnonzero(alive & (paths.k + paths.s >= settings.rr_start_depth))
-        if len(at):
-            q = np.minimum(1.0, paths.weights.take(at) * (1.0 / (settings.rr_threshold * ctx.w0)))
-            survive = rng.random(len(at)) < q
-            paths.weights[at] = paths.weights.take(at) / np.where(survive, q, 1.0)
-            alive[at[~survive]] = False
+        deep = alive & (paths.k + paths.s >= settings.rr_start_depth)
+        scale = 1.0 / (settings.rr_threshold * ctx.w0)
+        if deep.all():  # every path plays (the usual step past rr_start_depth): no index arrays
+            q = np.minimum(1.0, paths.weights * scale)
+            survive = rng.random(len(q)) < q
+            paths.weights = paths.weights / np.where(survive, q, 1.0)
+            alive = survive
+        else:
+            at = deep.nonzero()[0]
+            if len(at):
+                q = np.minimum(1.0, paths.weights.take(at) * scale)
+                survive = rng.random(len(at)) < q
+                paths.weights[at] = paths.weights.take(at) / np.where(survive, q, 1.0)
+                alive[at[~survive]] = False
     return paths.keep_where(alive)
 
 
@@ -533,6 +552,7 @@ class _Context:
         self.t_pos = np.ascontiguousarray(targets.positions[tgt].T)  # (3, T)
         self.t_nrm = np.ascontiguousarray(targets.normals[tgt].T)
         self.t_total = np.array([targets.total_response(int(t)) for t in tgt], float)
+        self.t_directional = targets.directional
         #: spectral scenes: per-band tables; estimates carry their band ratios ("ratio") when paths do
         self.spectra = scene.spectra
         self.channels = None  # the per-(link, channel) sums of spectral scenes (spectra.ChannelBuilder)
@@ -615,7 +635,7 @@ class _Context:
                 vertex_rows = None if (lo, hi) == (0, n_pts) else np.arange(lo, hi)
                 column_rows = None
                 y, y_nrm = self.t_pos[:, columns[0] : columns[0] + 1], self.t_nrm[:, columns[0] : columns[0] + 1]
-                y_ids = np.full(hi - lo, self.tgt[columns[0]])
+                y_ids = None
             else:
                 vertex_rows = np.repeat(np.arange(lo, hi), n_tgt)
                 column_rows = np.tile(columns, hi - lo)
@@ -626,7 +646,11 @@ class _Context:
             d = np.sqrt(d2)
             out_dir = to / d
             cos_target = -_dot(out_dir, y_nrm)
-            response = targets.response(y_ids, cos_target, -out_dir.T)
+            toward = -out_dir.T if self.t_directional else None  # tabulated transmitters need the direction
+            if y_ids is None:
+                response = targets.response_one(int(self.tgt[columns[0]]), cos_target, toward)
+            else:
+                response = targets.response(y_ids, cos_target, toward)
             f = response / d2 * _rows(throughput, vertex_rows)
             if normals is not None:  # surface vertex: BRDF x cos
                 n_x = _rows(normals, vertex_rows)
@@ -644,26 +668,32 @@ class _Context:
                 f *= vertex_factor
             if mis is not None:
                 f *= mis if np.isscalar(mis) else _rows(mis, vertex_rows)
-            live = np.flatnonzero(f > 0)
+            live = (f > 0).nonzero()[0]
             if len(live) == 0:
                 continue
-            vertex = live if vertex_rows is None else vertex_rows.take(live)  # vertex of each live estimate
-            f, d, out_dir = f.take(live), d.take(live), out_dir.take(live, axis=1)
-            column = np.full(len(live), columns[0]) if column_rows is None else column_rows.take(live)
             both_sides = self.settings.both_sides and medium is not None
-            if both_sides:
-                response, vertex_factor = response.take(live), vertex_factor.take(live)
+            # `vertex`: the vertex of each live estimate, None while that is every vertex of `points` in order
+            # (then no gathers: in smoke nearly every connection contributes)
+            if len(live) < len(f):
+                vertex = live if vertex_rows is None else vertex_rows.take(live)
+                f, d, out_dir = f.take(live), d.take(live), out_dir.take(live, axis=1)
+                column = np.full(len(live), columns[0]) if column_rows is None else column_rows.take(live)
+                if both_sides:
+                    response, vertex_factor = response.take(live), vertex_factor.take(live)
+            else:
+                vertex = vertex_rows
+                column = np.full(len(live), columns[0]) if column_rows is None else column_rows
             if not scene.all_visible:  # the shadow ray stops short of the device (it may sit on a surface)
-                seen = np.flatnonzero(
-                    ~isect.occluded(shadow_origins.take(vertex, axis=1).T, out_dir.T, d - 2.0 * isect.offset)
-                )
-                if len(seen) < len(vertex):
-                    vertex, column, f, d = vertex.take(seen), column.take(seen), f.take(seen), d.take(seen)
+                blocked = isect.occluded(_rows(shadow_origins, vertex).T, out_dir.T, d - 2.0 * isect.offset)
+                seen = (~blocked).nonzero()[0]
+                if len(seen) < len(d):
+                    vertex = seen if vertex is None else vertex.take(seen)
+                    column, f, d = column.take(seen), f.take(seen), d.take(seen)
                     out_dir = out_dir.take(seen, axis=1)
                     if both_sides:
                         response, vertex_factor = response.take(seen), vertex_factor.take(seen)
             if medium is not None:
-                tau = medium.optical_depth(points.take(vertex, axis=1).T, out_dir.T, d)
+                tau = medium.optical_depth(_rows(points, vertex).T, out_dir.T, d)
                 tr = np.exp(-tau)  # = medium.transmittance
                 f = f * tr
                 if both_sides:  # algorithm 5 from both devices: this run's share (medium_nee.connection_weight)
@@ -679,26 +709,17 @@ class _Context:
                         surface=normals is not None,
                         mid_g=mid_g,
                     )
-            length = paths.lengths.take(vertex) + d
+            length = _rows(paths.lengths, vertex) + d
             if extra_length is not None:
-                length += extra_length.take(vertex)
-            s_order = (paths.s if scatter_order is None else scatter_order).take(vertex)
+                length += _rows(extra_length, vertex)
+            s_order = _rows(paths.s if scatter_order is None else scatter_order, vertex)
             ratio = None
             if "ratio" in self.out:  # spectral: the path's band ratios, with T_b / T_c of the connection
-                ratio = self.spectra.estimate_ratio(
-                    paths.ratio.take(vertex, axis=1), tau if medium is not None else None
-                )
+                ratio = self.spectra.estimate_ratio(_rows(paths.ratio, vertex), tau if medium is not None else None)
                 if normals is None and self.spectra.phase_bands is not None:  # medium vertex: p_b / p_c
                     ratio = ratio * self.spectra.phase_ratio(_dot(_rows(in_dirs, vertex), out_dir))
-            self.record(
-                column,
-                paths.k.take(vertex),
-                s_order,
-                length * (1.0 / SPEED_OF_LIGHT),
-                f,
-                paths.path.take(vertex),
-                ratio,
-            )
+            length *= 1.0 / SPEED_OF_LIGHT
+            self.record(column, _rows(paths.k, vertex), s_order, length, f, _rows(paths.path, vertex), ratio)
 
     def record(self, target, k, s, delay, power, path, ratio=None) -> None:
         """One group of estimates: local target index, cell (k, s), delay [s], power [W/W], path in the batch,

@@ -224,10 +224,13 @@ class HomogeneousMedium(Medium):
 
     def _regular(self, o, d, L, need):
         """Exact inversion interval by interval: the collision is where the accumulated depth reaches `need`."""
+        if self.sigma_t == 0.0:
+            return L.copy(), np.zeros(len(L), bool), 0
+        if isinstance(self._region, WholeRegion):  # one interval [0, L] per segment: no index arrays
+            scattered = self.sigma_t * L > need  # (need >= 0: segments of length 0 never scatter)
+            return np.where(scattered, need / self.sigma_t, L), scattered, int(np.count_nonzero(L > 0))
         t, scattered, acc = L.copy(), np.zeros(len(L), bool), np.zeros(len(L))
         crossed = []
-        if self.sigma_t == 0.0:
-            return t, scattered, 0
         for ray, a, b in self._region.intervals(o, d, L):
             dtau = self.sigma_t * (b - a)
             rem = need[ray] - acc[ray]
@@ -239,7 +242,14 @@ class HomogeneousMedium(Medium):
             crossed.append(ray)
         return t, scattered, _count(crossed)
 
+    def albedo_at(self, points) -> np.ndarray:
+        if isinstance(self._region, WholeRegion):  # the same everywhere
+            return np.full(len(as_rows(points)), self.albedo)
+        return super().albedo_at(points)
+
     def _coefficients_at(self, p):
+        if isinstance(self._region, WholeRegion):
+            return np.full(len(p), self.sigma_t), np.full(len(p), self.sigma_s)
         inside = self._region.contains(p)
         return np.where(inside, self.sigma_t, 0.0), np.where(inside, self.sigma_s, 0.0)
 

@@ -102,7 +102,8 @@ def _device_factor(devices, i: int, points, c):
     r2 = _dot(v, v)
     r = np.sqrt(r2)
     cos = _dot(v, devices.normals[i][:, None]) / r
-    return devices.response(np.full(len(r2), i), cos, (v / r).T) / devices.total_response(i) * c / r2
+    toward = (v / r).T if devices.directional else None
+    return devices.response_one(i, cos, toward) / devices.total_response(i) * c / r2
 
 
 def source_factor(ctx, points):
@@ -144,7 +145,7 @@ def first_vertex_factor(ctx, paths, prim, t, t_col, collided):
         c[surf] = np.abs(_dot(normals, paths.directions[:, surf]))
     factor = np.where(collided | hit, _device_factor(src, i, points, c), 0.0)
     if ctx.settings.both_sides and scene.medium is not None:
-        live = np.flatnonzero(collided | hit)
+        live = (collided | hit).nonzero()[0]
         if len(live):
             factor[live] *= scene.medium.transmittance(paths.origins[:, live].T, paths.directions[:, live].T, t1[live])
     return factor
@@ -174,23 +175,34 @@ def connection_weight(ctx, paths, vertex, column, d, tr, response, vertex_factor
     `response` R_tgt(cos) and `vertex_factor` (cos at a surface vertex, the phase function's value
     at a medium vertex) come from the connection (kernel._Context.connect), which computed them.
     """
-    resp = response / ctx.t_total.take(column)
+
+    def rows(a):  # the connected vertices' values (`vertex` None: every vertex, in order)
+        return a if vertex is None else a.take(vertex)
+
+    t_total = ctx.t_total
+    resp = response / (t_total[0] if len(t_total) == 1 else t_total.take(column))
     if surface:
-        c, rho_t = vertex_factor, 1.0 / np.pi
+        last = resp * vertex_factor * tr / (d * d)
+        rho_t = 1.0 / np.pi
     else:
-        c, rho_t = 1.0, vertex_factor
-    last = resp * c * tr / (d * d)
-    first = paths.first.take(vertex)
-    rho_f = paths.first_rho.take(vertex)
-    k, s = paths.k.take(vertex), paths.s.take(vertex)
-    several = k + s >= 2
-    a = np.where(several, first * rho_f, first)
-    b = np.where(several, last * rho_t, last)
+        last = resp * tr / (d * d)
+        rho_t = vertex_factor
+    first = rows(paths.first)
+    k, s = rows(paths.k), rows(paths.s)
+    depth = k + s
+    if depth.min() >= 2:  # every path has several vertices (the usual step past the first)
+        a = first * rows(paths.first_rho)
+        b = last * rho_t
+    else:
+        several = depth >= 2
+        a = np.where(several, first * rows(paths.first_rho), first)
+        b = np.where(several, last * rho_t, last)
     if mid_g is not None and not surface:
-        g = mid_g.take(vertex)
         three = (k == 0) & (s == 2)
-        a = np.where(three, a * g, a)
-        b = np.where(three, b * g + first * last, b)
+        if three.any():
+            g = rows(mid_g)
+            a = np.where(three, a * g, a)
+            b = np.where(three, b * g + first * last, b)
     return side_weight(a, b)
 
 
@@ -206,7 +218,7 @@ def connect_from_target(ctx, mp, points, rng) -> None:
     the transmitter and x_2 near the receiver, the corner neither unidirectional strategy
     samples well, this one carries the path, and its estimate there is bounded.
     """
-    first = np.flatnonzero((mp.k == 0) & (mp.s == 1))
+    first = ((mp.k == 0) & (mp.s == 1)).nonzero()[0]
     if len(first) == 0:
         return
     scene, medium, isect = ctx.scene, ctx.scene.medium, ctx.scene.intersector
@@ -224,7 +236,7 @@ def connect_from_target(ctx, mp, points, rng) -> None:
         prim, t_hit = isect.intersect(origins.T, dirs.T)
         seg = np.where(prim >= 0, t_hit, scene.medium_far_distance)
         t_y, col = medium.sample_distance(origins.T, dirs.T, seg, u[2])
-        sel = np.flatnonzero(col)
+        sel = col.nonzero()[0]
         if len(sel) == 0:
             continue
         y = origins.take(sel, axis=1) + t_y.take(sel) * dirs.take(sel, axis=1)
@@ -232,7 +244,7 @@ def connect_from_target(ctx, mp, points, rng) -> None:
         v = y - a
         r12 = np.sqrt(_dot(v, v))
         w12 = v / r12
-        keep = np.flatnonzero(r12 > 0)
+        keep = (r12 > 0).nonzero()[0]
         if not scene.all_visible and len(keep):
             keep = keep[~isect.occluded(a[:, keep].T, w12[:, keep].T, r12[keep] - 2.0 * isect.offset)]
         if len(keep) == 0:
@@ -257,7 +269,7 @@ def connect_from_target(ctx, mp, points, rng) -> None:
         total = Fs * p1 * g + L * p2 * g + q_c
         share = np.where(total > 0, q_c / np.where(total > 0, total, 1.0), 0.0)
         power = w.take(sel) * p1 * g * medium.albedo_at(y.T) * p2 * ctx.t_total[j] * share
-        ok = np.flatnonzero(power > 0)
+        ok = (power > 0).nonzero()[0]
         if len(ok) == 0:
             continue
         ratio = None
@@ -297,12 +309,12 @@ def _scatter_on_first_segment(ctx, paths, t_seg, rng):
     in a phase-sampled direction, with `first` = the source factor at p and s = 1; None if none collide."""
     scene = ctx.scene
     medium = scene.medium
-    ok = np.flatnonzero(np.isfinite(t_seg) & (paths.k + paths.s == 0))
+    ok = (np.isfinite(t_seg) & (paths.k + paths.s == 0)).nonzero()[0]
     if len(ok) == 0:
         return None
     base = paths.keep(ok)
     t_in, col = medium.sample_distance(base.origins.T, base.directions.T, t_seg.take(ok), rng.random(len(ok)))
-    sel = np.flatnonzero(col)
+    sel = col.nonzero()[0]
     if len(sel) == 0:
         return None
     br = base.keep(sel)
@@ -356,9 +368,9 @@ def first_segment_branch(ctx, paths, t_seg, rng, chain: bool, double: bool) -> N
         hit = prim >= 0
         if double:
             seg = np.where(hit, t, far)
-            live = np.flatnonzero(np.isfinite(seg))
+            live = (np.isfinite(seg)).nonzero()[0]
             segment_points(ctx, br.keep(live), seg.take(live), rng, order=2, weight_fn=partition)
-        nxt = np.flatnonzero(hit & (br.k < K))
+        nxt = (hit & (br.k < K)).nonzero()[0]
         if len(nxt) == 0:
             return
         br = br.keep(nxt)

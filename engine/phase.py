@@ -81,7 +81,9 @@ class PhaseFunction:
         d = _f64(directions)
         if d.ndim != 2 or d.shape[0] != 3:
             raise ValueError(f"directions must have shape (3, n), got {d.shape}")
-        c = np.broadcast_to(self.sample_cos(u1), d.shape[1:])
+        c = self.sample_cos(u1)
+        if np.shape(c) != d.shape[1:]:
+            c = np.broadcast_to(c, d.shape[1:])
         sin_t = np.sqrt(np.maximum(0.0, (1.0 - c) * (1.0 + c)))
         # azimuth phi = 2 pi u2: cos phi from one transcendental, sin phi = +-sqrt((1 - cos)(1 + cos))
         # (sign + for phi < pi; error ~1e-16 / sin phi, far below the 1e-8 rad the tests ask)

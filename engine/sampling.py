@@ -39,6 +39,25 @@ def _from_polar(cos_t, sin_t, u2) -> np.ndarray:
     return np.stack((sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t), axis=-1)
 
 
+def polar_about_soa(cos_t, sin_t, u2, n) -> np.ndarray:
+    """Directions (3, m) at polar angle t (cos_t, sin_t (m,)) and azimuth phi = 2 pi u2 about one unit normal n (3,).
+
+    d = sin t cos phi s + sin t sin phi t + cos t n, frame (s, t) of `orthonormal_basis`, written on component
+    rows (no (m, 3) stacks, no matrix product). cos phi from one transcendental, sin phi = +-sqrt((1 - cos phi)
+    (1 + cos phi)) with the sign of pi - phi (as phase.PhaseFunction.sample: exact to ~1e-16 / sin phi).
+    """
+    u2 = _f64(u2)
+    cos_phi = np.cos(_TWO_PI * u2)
+    sin_phi = np.copysign(np.sqrt(np.maximum(0.0, (1.0 - cos_phi) * (1.0 + cos_phi))), 0.5 - u2)
+    a, b = sin_t * cos_phi, sin_t * sin_phi
+    n = _f64(n)
+    s, t = orthonormal_basis(n)
+    out = np.empty((3, len(u2)))
+    for k in range(3):
+        out[k] = a * s[k] + b * t[k] + cos_t * n[k]
+    return out
+
+
 def orthonormal_basis(n) -> tuple[np.ndarray, np.ndarray]:
     """Tangents (s, t) such that (s, t, n) is a right-handed orthonormal frame.
 
@@ -80,12 +99,15 @@ def sample_generalized_lambertian(m, u1, u2) -> np.ndarray:
     which stays accurate for m = 0 ... 1000+ and u1 -> 0 or 1 (u1 = 1 -> pole).
     Ref.: Gfeller & Bapst 1979 (radiation model); PBRT 4th ed. A.5.
     """
+    return _from_polar(*_lambertian_polar(m, u1), u2)
+
+
+def _lambertian_polar(m, u1) -> tuple[np.ndarray, np.ndarray]:
+    """(cos theta, sin theta) of `sample_generalized_lambertian`."""
     m, u1 = _f64(m), _f64(u1)
     with np.errstate(divide="ignore"):
         e = np.log(u1) / (m + 1.0)  # <= 0; -inf for u1 == 0
-    cos_t = np.exp(e)
-    sin_t = np.sqrt(np.maximum(0.0, -np.expm1(2.0 * e)))
-    return _from_polar(cos_t, sin_t, u2)
+    return np.exp(e), np.sqrt(np.maximum(0.0, -np.expm1(2.0 * e)))
 
 
 def generalized_lambertian_pdf(m, cos_theta) -> np.ndarray:
@@ -109,10 +131,15 @@ def sample_cosine_cone(cos_max, u1, u2) -> np.ndarray:
     Accurate for tiny cones (theta_max = 0.01 deg); cos_max = 0 gives the
     cosine-weighted hemisphere.  Ref.: PBRT 4th ed. sec. A.5.2 / 13.6.
     """
+    return _from_polar(*_cone_polar(cos_max, u1), u2)
+
+
+def _cone_polar(cos_max, u1) -> tuple[np.ndarray, np.ndarray]:
+    """(cos theta, sin theta) of `sample_cosine_cone`."""
     cos_max, u1 = _f64(cos_max), _f64(u1)
     sin2 = u1 * _sin2_from_cos(cos_max)
     cos2 = (1.0 - u1) + u1 * (cos_max * cos_max)
-    return _from_polar(np.sqrt(cos2), np.sqrt(sin2), u2)
+    return np.sqrt(cos2), np.sqrt(sin2)
 
 
 def cosine_cone_pdf(cos_max, cos_theta) -> np.ndarray:

@@ -105,6 +105,16 @@ class EquiangularFrame:
         D, h, ta, tb = self.D.take(seg), self.h.take(seg), self.theta_a.take(seg), self.theta_b.take(seg)
         return D + h * np.tan(ta + xi * (tb - ta))
 
+    def sample_with_density(self, seg, xi, end, n_per: int):
+        """(s, n_E(s)) of points with stratified uniforms `xi` on the segments `seg`, s clipped to [0, end]
+        (`sample` and `density` with one gather of the frame)."""
+        D, h, ta, tb = self.D.take(seg), self.h.take(seg), self.theta_a.take(seg), self.theta_b.take(seg)
+        span = tb - ta
+        s = np.clip(D + h * np.tan(ta + xi * span), 0.0, end)
+        x = s - D
+        pdf = h / (np.where(span > 0, span, 1.0) * (h * h + x * x))
+        return s, np.where(span > 0, n_per * pdf, 0.0)
+
     def density(self, s, n_per: int, seg=None):
         """n_E(s) = n_per h / ((theta_b - theta_a) (h^2 + (s - D)^2)) on the segments `seg` (all if None)."""
         D, h, ta, tb = (

@@ -249,9 +249,10 @@ class BatchBuilder:
 
     def _bin(self, slot, k, s, delay, power) -> None:
         bins, plan = self.plan.bins, self.plan
-        b = (delay - bins.t_min) * (1.0 / bins.dt)
-        inside = (b >= 0) & (b < bins.n)
-        if not inside.all():  # only bins inside the window are cast (a far arrival's index may not fit an int64)
+        b = delay - bins.t_min
+        b *= 1.0 / bins.dt
+        if not (b.min() >= 0 and b.max() < bins.n):  # only bins inside the window are cast (a far arrival's
+            inside = (b >= 0) & (b < bins.n)  # index may not fit an int64)
             early, late = np.where(b < 0, power, 0.0), np.where(b >= bins.n, power, 0.0)
             sel = np.flatnonzero(inside)
             if np.ndim(slot) == 0:  # one slot (`add_step` with one target)
@@ -263,6 +264,17 @@ class BatchBuilder:
                 slot = slot.take(sel)
             k, s, b, power = k.take(sel), s.take(sel), b.take(sel), power.take(sel)
         ib = b.astype(np.int64)
+        if np.ndim(slot) == 0:  # one slot: its offsets are numbers (fewer passes over the estimates)
+            _accumulate(self.cir, ib + int(slot) * bins.n if slot else ib, power)
+            if self.cir_k is not None:
+                assert self.cir_s is not None  # allocated together with cir_k
+                for table, order, n_ord in ((self.cir_k, k, plan.n_orders), (self.cir_s, s, plan.n_scatter)):
+                    idx = order * bins.n
+                    idx += ib
+                    if slot:
+                        idx += int(slot) * n_ord * bins.n
+                    _accumulate(table, idx, power)
+            return
         _accumulate(self.cir, slot * bins.n + ib, power)
         if self.cir_k is not None:
             assert self.cir_s is not None  # allocated together with cir_k

@@ -393,3 +393,31 @@ def test_cosine_about_normal_matches_cosine_law():
     uh = smp.sample_uniform_sphere(u[:, 0], u[:, 1])
     counts, _ = np.histogram(np.abs(uh[:, 2]) ** 2, bins=20, range=(0, 1))
     assert chisquare(counts).pvalue < 1e-6
+
+
+def test_polar_about_soa_by_hand():
+    """Directions about one normal on component rows: about +z they are (sin t cos phi, sin t sin phi, cos t)
+    with phi = 2 pi u2 (written out here); about any normal, unit vectors at angle t from it whose azimuths
+    in the normal's frame are 2 pi u2."""
+    from owcsim.engine.sampling import orthonormal_basis, polar_about_soa
+
+    rng = np.random.default_rng(3)
+    u1, u2 = rng.random((2, 2000))
+    cos_t = 1.0 - u1
+    sin_t = np.sqrt(1.0 - cos_t**2)
+    phi = 2.0 * np.pi * u2
+    d = polar_about_soa(cos_t, sin_t, u2, np.array([0.0, 0.0, 1.0]))
+    expected = np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t])
+    s, t = orthonormal_basis(np.array([0.0, 0.0, 1.0]))
+    expected = expected[0] * s[:, None] + expected[1] * t[:, None] + expected[2] * np.array([0, 0, 1.0])[:, None]
+    assert np.abs(d - expected).max() < 1e-9
+    for n in ([0.0, 0.0, -1.0], [0.6, 0.0, 0.8], [0.0, 1.0, 0.0]):
+        n = np.asarray(n)
+        d = polar_about_soa(cos_t, sin_t, u2, n)
+        s, t = orthonormal_basis(n)
+        assert np.abs(np.linalg.norm(d, axis=0) - 1.0).max() < 1e-12
+        assert np.abs(n @ d - cos_t).max() < 1e-12
+        az = np.mod(np.arctan2(t @ d, s @ d), 2 * np.pi)
+        ok = sin_t > 1e-3  # the azimuth is defined off the pole
+        err = np.abs(np.angle(np.exp(1j * (az[ok] - phi[ok]))))
+        assert err.max() < 1e-8

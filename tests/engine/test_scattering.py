@@ -135,3 +135,21 @@ def test_black_room_single_scattering_families_agree():
     for a in (2, 3, 5):
         s1, e = links[a]["dc_gain_by_scattering_order"][1], links[a]["dc_gain_by_scattering_order_stderr"][1]
         assert within(s1, ref_s1, math.hypot(e, ref_err)), (a, s1, ref_s1)
+
+
+def test_algorithm_5_without_equiangular_points_in_a_box_medium():
+    """Algorithm 5 from both devices in smoke filling half the room (points outside it do not scatter): the
+    free-flight collisions alone (equiangular_points = 0) and with the equiangular points (the balance heuristic
+    of medium_nee / kernel._scattering_point_throughput) estimate the same H0 and s = 1 gain."""
+    from tests.results import simulate_two_sided_document as simulate_two_sided
+
+    smoke = dict(SMOKE, region={"type": "box", "min": [0.0, 0.0, 0.0], "max": [5.0, 2.5, 3.0]})
+    doc = room_doc(medium=smoke, algorithm=5, max_reflections=3, max_scattering=2, paths=16_000, seed=5)
+    with_points = simulate_two_sided(spec(doc))["links"][0]
+    collisions = simulate_two_sided(spec(doc), equiangular_points=0)["links"][0]
+    se = math.hypot(with_points["dc_gain_stderr"], collisions["dc_gain_stderr"])
+    assert within(collisions["dc_gain"], with_points["dc_gain"], se)
+    s1 = [x["dc_gain_by_scattering_order"][1] for x in (with_points, collisions)]
+    se1 = math.hypot(*(x["dc_gain_by_scattering_order_stderr"][1] for x in (with_points, collisions)))
+    assert within(s1[1], s1[0], se1)
+    assert s1[0] > 50 * se1  # power: 4 se is < 8 % of the s = 1 gain (measured ~4 %), so such an error fails
