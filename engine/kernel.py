@@ -447,9 +447,16 @@ def _medium_next_events(
             continue
         pp = paths.gather(rows)
         points = pp.origins + s * pp.directions
-        sigma_t, sigma_s = medium.coefficients_at(points.T)
-        inside = (sigma_s > 0).nonzero()[0]
-        if len(inside) < len(s):
+        uniform = medium.uniform_coefficients  # (sigma_t, sigma_s) of a medium the same everywhere, else None
+        if uniform is not None:  # every point scatters (or none)
+            if uniform[1] <= 0:
+                continue
+            sigma_t, sigma_s = uniform
+            inside = None
+        else:
+            sigma_t, sigma_s = medium.coefficients_at(points.T)
+            inside = (sigma_s > 0).nonzero()[0]
+        if inside is not None and len(inside) < len(s):
             if len(inside) == 0:
                 continue
             pp, points, s, sigma_t, sigma_s = (

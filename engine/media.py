@@ -132,6 +132,11 @@ class Medium:
             ids, tc, te = ids[k], tc[k], te[k]
         return t, scattered, n
 
+    @property
+    def uniform_coefficients(self) -> tuple[float, float] | None:
+        """(sigma_t, sigma_s) [1/m] when they are the same at every point of the scene, else None."""
+        return None
+
     def coefficients_at(self, points) -> tuple[np.ndarray, np.ndarray]:
         """(sigma_t, sigma_s) at each point [1/m] (0 outside the medium), in one evaluation."""
         return self._coefficients_at(as_rows(points))
@@ -241,6 +246,10 @@ class HomogeneousMedium(Medium):
             acc[ray] += dtau
             crossed.append(ray)
         return t, scattered, _count(crossed)
+
+    @property
+    def uniform_coefficients(self) -> tuple[float, float] | None:
+        return (self.sigma_t, self.sigma_s) if isinstance(self._region, WholeRegion) else None
 
     def albedo_at(self, points) -> np.ndarray:
         if isinstance(self._region, WholeRegion):  # the same everywhere
