@@ -499,7 +499,11 @@ def _medium_collision(ctx: "_Context", paths: _Paths, rows, t_col, rng) -> _Path
         # over that is (sigma_s,b / sigma_s,c) exp(-tau_c (sigma_t,b / sigma_t,c - 1)) x albedo_c
         mp.ratio = ctx.spectra.scatter(mp.ratio, medium.optical_depth(mp.origins.T, mp.directions.T, t_col))
     mp.lengths = mp.lengths + t_col
-    mp.weights = mp.weights * medium.albedo_at(points.T)
+    uniform = medium.uniform_coefficients
+    if uniform is not None and uniform[0] > 0:  # the same albedo everywhere: a number
+        mp.weights = mp.weights * (uniform[1] / uniform[0])
+    else:
+        mp.weights = mp.weights * medium.albedo_at(points.T)
     mp.s = mp.s + 1
     if ctx.mirrors:  # ... -> x -> mirror -> target: only the collision reaches it (mirrors.py)
         connect_mirrors(ctx, points, points, mp.weights, mp, in_dirs=mp.directions)

@@ -183,7 +183,7 @@ class BatchBuilder:
             return
         plan, n = self.plan, self.n_paths
         # --- per-path moments of every link ------------------------------------------------
-        key = target * n + path
+        key = path if len(self.links) == 1 else target * n + path  # (one target: every index is 0)
         wt = power * delay
         _accumulate(self.abc[0], key, power)
         _accumulate(self.abc[1], key, wt)
