@@ -93,7 +93,7 @@ NOTES = {
     "LinkPublic.direction": "the estimator used for this link (`both`: algorithm 4; `none`: unreachable)",
     "LinkPublic.paths": "Monte Carlo paths behind this link",
     "LinkPublic.dc_gain": "H0 per watt, including power outside the time window",
-    "LinkPublic.dc_gain_stderr": "standard error of H0 (second moments of independent samples: paths, or blocks of quasi-random paths)",
+    "LinkPublic.dc_gain_stderr": "standard error of H0 (from independent samples: paths, or quasi-random blocks)",
     "LinkPublic.path_loss_db": "-10 log10 H0 [dB]; null if H0 = 0",
     "LinkPublic.received_power_w": "H0 x transmitter power [W]",
     "LinkPublic.mean_delay_s": "tau0, power-weighted, absolute (from emission) [s]",
