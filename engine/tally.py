@@ -41,6 +41,10 @@ import numpy as np
 
 #: Number of batch groups kept for per-bin standard errors and the jackknife.
 N_GROUPS = 16
+#: The order split's per-(sample, cell) sums take one bincount when their keys span at most this many
+#: (or KEYS_PER_ESTIMATE per estimate), else rounds over the estimates (BatchBuilder._add_squared_path_sums).
+DIRECT_KEYS = 4096
+KEYS_PER_ESTIMATE = 4
 
 
 @dataclass(frozen=True)
@@ -227,8 +231,25 @@ class BatchBuilder:
         scratch indexed by owner); the estimates in that cell are summed per owner with `np.bincount`
         and squared; the others wait for the next round. An owner has estimates in one to three cells
         per step (the cells of one depth k + s: surface, medium and segment-point estimates), so a
-        step costs a few passes over its estimates instead of a sort (np.unique) of them.
+        step costs a few passes over its estimates instead of a sort (np.unique) of them. With few owners
+        (blocks of quasi-random paths), one bincount over (owner, s) keys does it at once.
         """
+        # One depth k + s per call: within it a cell of an owner is fixed by its scattering order s, so
+        # (owner, s) keys every (owner, cell). When those keys span a small range (blocks of quasi-random
+        # paths: few owners), one bincount sums them all.
+        n_s = self.plan.n_scatter
+        key = owner * n_s + cell % n_s
+        lo, hi = int(key.min()), int(key.max()) + 1
+        if hi - lo <= max(KEYS_PER_ESTIMATE * len(key), DIRECT_KEYS):
+            key -= lo
+            sums = np.bincount(key, p, hi - lo)
+            cell_of = np.empty(hi - lo, np.int64)
+            cell_of[key] = cell
+            touched = np.flatnonzero(sums)  # estimates are >= 0: an owner summing to 0 adds 0 anyway
+            cells, owner_sums = cell_of.take(touched), sums.take(touched)
+            _accumulate(self.order_sumsq, cells, owner_sums**2)
+            _accumulate(self.order_ssum, cells, owner_sums)
+            return
         scratch = self._cell_of_owner
         while len(owner):
             scratch[owner] = cell

@@ -5,6 +5,7 @@ a sample is a path, or a block of quasi-random paths (engine/qmc.py)."""
 import numpy as np
 import pytest
 
+from owcsim.engine import tally as tally_module
 from owcsim.engine.kernel import WorkItem, trace_batch
 from owcsim.engine.scene import build_scene
 from owcsim.engine.simulate import kernel_settings
@@ -28,10 +29,15 @@ CASES = {
 }
 
 
+@pytest.mark.parametrize("direct_keys", [4096, 0], ids=["one bincount", "rounds"])
 @pytest.mark.parametrize("quasi_random", [True, False])
 @pytest.mark.parametrize("case", list(CASES))
 @pytest.mark.parametrize("direction", ["forward", "backward"])
-def test_one_depth_per_step_and_order_sums_of_squares(case, direction, quasi_random, monkeypatch):
+def test_one_depth_per_step_and_order_sums_of_squares(case, direction, quasi_random, direct_keys, monkeypatch):
+    # both ways of summing per (sample, cell): one bincount (512 paths: the keys span at most 4096), or rounds
+    # (no key range is small enough)
+    monkeypatch.setattr(tally_module, "DIRECT_KEYS", direct_keys)
+    monkeypatch.setattr(tally_module, "KEYS_PER_ESTIMATE", 4 if direct_keys else 0)
     doc = CASES[case]()
     doc["simulation"]["quasi_random"] = quasi_random
     spec = SceneSpec.model_validate(doc)
