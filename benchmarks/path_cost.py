@@ -22,7 +22,8 @@ alternately in the same run, best of `--repeats`):
   the smoky room: CPU time, paths, H0, and the CPU time of its pilots (the truncation pilot that chooses
   K / S / the window, the direction pilot) with their share;
 - `--profile`: the split Embree / numpy / interpreter of the cost-per-path runs, from py-spy
-  (`py-spy record --native`, samples classified by their innermost frames: Embree's library,
+  (`py-spy record --native -r 25`: at 500 samples/s its native unwinding stalled the process it samples;
+  samples classified by their innermost frames: Embree's library,
   numpy's or another native library, else the interpreter); without py-spy, cProfile with the
   time inside `Intersector.intersect`/`occluded` as Embree (says which).
 
@@ -161,7 +162,8 @@ def measure_accuracy(case: str) -> dict:
 
         return run
 
-    for name in PILOT_STEPS:
+    timing = all(hasattr(sim_mod, name) for name in PILOT_STEPS)  # an older tree has other pilot steps
+    for name in PILOT_STEPS if timing else ():
         original[name] = getattr(sim_mod, name)
         setattr(sim_mod, name, timed(original[name]))
     try:
@@ -176,7 +178,7 @@ def measure_accuracy(case: str) -> dict:
         "dc_gain": link["dc_gain"],
         "rel_stderr": link["dc_gain_stderr"] / link["dc_gain"],
         "stop": res["run"]["stop_reason"],
-        "pilot_s": spent["pilot"],
+        **({"pilot_s": spent["pilot"]} if timing else {}),
     }
 
 
@@ -298,7 +300,7 @@ def profile_split(python: str, env: dict, case: str) -> dict:
             "record",
             "--native",
             "-r",
-            "500",
+            "25",
             "-f",
             "raw",
             "-o",
@@ -309,7 +311,13 @@ def profile_split(python: str, env: dict, case: str) -> dict:
             "--profile-target",
             case,
         ]
-        subprocess.run(cmd, env=env, check=True, capture_output=True)
+        try:
+            subprocess.run(cmd, env=env, check=True, capture_output=True, timeout=900)
+        except (subprocess.CalledProcessError, subprocess.TimeoutExpired) as e:  # py-spy's native unwinding may stall
+            return {
+                "tool": f"py-spy failed ({type(e).__name__})",
+                **dict.fromkeys(("embree", "numpy", "interpreter"), np.nan),
+            }
         counts = {"embree": 0, "numpy": 0, "interpreter": 0}
         for line in Path(raw).read_text().splitlines():
             stack, _, n = line.rpartition(" ")
@@ -327,9 +335,8 @@ def profile_split(python: str, env: dict, case: str) -> dict:
         "tot = s.total_tt; emb = sum(v[3] for k, v in s.stats.items() if k[2] in ('intersect', 'occluded') "
         "and k[0].endswith('geometry.py')); print(emb / tot)"
     )
-    emb = float(
-        subprocess.run([python, "-c", code], env=env, check=True, capture_output=True, text=True).stdout.split()[-1]
-    )
+    out = subprocess.run([python, "-c", code], env=env, capture_output=True, text=True)
+    emb = float(out.stdout.split()[-1]) if out.returncode == 0 and out.stdout.split() else float("nan")
     return {
         "tool": "cProfile (Embree = time in Intersector.intersect/occluded)",
         "embree": emb,
