@@ -4,10 +4,11 @@ A batch of n = B m paths draws its first `DIMENSIONS` uniforms (emission directi
 free-flight distance 1, first bounce direction 2) from B blocks of m = 2^k Sobol points, each block
 with its own random digital shift (Owen 1995; Dick & Pillichshammer 2010, sec. 12.1):
 
-    u_ij = (x_j XOR e_i) 2^-32 + v_ij 2^-32,   x_j the j-th point (32-bit integers), e_i ~ U{0..2^32-1}^5,
+    u_ij = floor((x_j 2^32 XOR e_i) / 2^11) 2^-53,   x_j the j-th point (32-bit integers), e_i ~ U{0..2^64-1}^5:
 
-and v_ij ~ U[0, 1) filling the bits below 2^-32. Every u_ij is exactly uniform on [0, 1)^5, so every
-path is an unbiased sample, and the blocks are independent; the paths of one block are not. Standard
+the shift covers every bit, so each u_ij is uniform on the same 53-bit grid of [0, 1) as numpy's own
+uniforms, every path is an unbiased sample, and the blocks are independent; the paths of one block
+are not. Standard
 errors therefore treat a block as one sample (tally.py, the sample-sum moments): the B block sums are
 independent and identically distributed, which is what the error formula needs.
 
@@ -87,10 +88,18 @@ def whole_blocks(n_paths: int, block: int) -> int:
 
 def shifted_blocks(n_paths: int, block: int, rng: np.random.Generator) -> np.ndarray:
     """(DIMENSIONS, n_paths) uniforms in [0, 1): n_paths / block blocks of Sobol points, each block with
-    its own random digital shift (module docstring). Path j of the batch is point j % block of block
-    j // block."""
+    its own random digital shift of all 64 bits (module docstring), kept to 53 bits as numpy's own
+    uniforms are. Path j of the batch is point j % block of block j // block."""
     n_blocks = n_paths // block
-    shift = rng.integers(0, 1 << _BITS, size=(n_blocks, 1, DIMENSIONS), dtype=np.uint32)
-    x = (sobol_points(block)[None] ^ shift).reshape(n_paths, DIMENSIONS).T
-    u = (x + rng.random((DIMENSIONS, n_paths))) * 2.0**-_BITS
-    return np.minimum(u, np.nextafter(1.0, 0.0), out=u)  # x + v may round up to 2^32
+    shift = rng.integers(0, np.iinfo(np.uint64).max, size=(DIMENSIONS, n_blocks, 1), dtype=np.uint64, endpoint=True)
+    x = _points_64(block)[:, None, :] ^ shift  # (DIMENSIONS, blocks, block)
+    x >>= np.uint64(11)
+    return x.reshape(DIMENSIONS, n_paths).astype(np.float64) * 2.0**-53
+
+
+@cache
+def _points_64(m: int) -> np.ndarray:
+    """(DIMENSIONS, m) uint64: the Sobol points in the top 32 bits."""
+    x = sobol_points(m).T.astype(np.uint64) << np.uint64(32)
+    x.flags.writeable = False
+    return x
