@@ -34,6 +34,19 @@ BLOCK = 256
 
 #: Joe & Kuo (2008) primitive polynomials (degree s, coefficients a) and initial m_i, dimensions 2-5;
 #: dimension 1 is the van der Corput sequence (m_i = 1)
+#: fewest blocks per source device for a fixed-budget job to use them: its error bars then rest on at least
+#: 64 independent samples (relative noise of a standard error ~1 / sqrt(2 x 63) = 9 %); smaller jobs draw
+#: pseudo-random paths, each its own sample (a 4 096-path job would otherwise have 16)
+MIN_BLOCKS = 64
+
+
+def job_block(quasi_random: bool, paths_per_source: int | None) -> int:
+    """KernelSettings.qmc_block of a job: BLOCK when quasi-random paths are asked and the job runs to an
+    accuracy target (None) or has at least MIN_BLOCKS blocks per source device, else 1."""
+    enough = paths_per_source is None or paths_per_source >= MIN_BLOCKS * BLOCK
+    return BLOCK if quasi_random and enough else 1
+
+
 _JOE_KUO = ((1, 0, (1,)), (2, 1, (1, 3)), (3, 1, (1, 3, 1)), (3, 2, (1, 1, 1)))
 _BITS = 32
 

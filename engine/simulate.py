@@ -142,7 +142,7 @@ def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = N
         max_strata=sim.max_strata,
         equiangular_points=sim.equiangular_points,
         tally_channels=1 + (scene.spectra.n_channels if scene.spectra is not None else 0),
-        qmc_block=qmc.BLOCK if sim.quasi_random else 1,
+        qmc_block=qmc.job_block(sim.quasi_random, sim.n_paths),
         **alg.kernel,
     )
     both = two_sided(spec, scene) if both_devices is None else both_devices

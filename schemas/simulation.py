@@ -97,7 +97,8 @@ class SimulationSpec(SpecModel):
         True,
         description="draw each path's first five numbers (emission direction, first free flight, first bounce) "
         "from randomly shifted Sobol blocks of 256 paths: lower variance per path (about 0.5x), standard errors "
-        "from the independent blocks; false: pseudo-random paths",
+        "from the independent blocks; used by accuracy runs and by jobs of at least 64 blocks (16 384 paths) "
+        "per source device; false: pseudo-random paths",
     )
 
     @model_validator(mode="after")

@@ -2,6 +2,8 @@
 split (tally.BatchBuilder._add_squared_path_sums, no sorting) match a plain computation over the whole batch;
 a sample is a path, or a block of quasi-random paths (engine/qmc.py)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -42,7 +44,7 @@ def test_one_depth_per_step_and_order_sums_of_squares(case, direction, quasi_ran
     doc["simulation"]["quasi_random"] = quasi_random
     spec = SceneSpec.model_validate(doc)
     scene = build_scene(spec)
-    settings = kernel_settings(spec, scene)
+    settings = dataclasses.replace(kernel_settings(spec, scene), qmc_block=256 if quasi_random else 1)  # 512 paths
     calls = []
     real = BatchBuilder.add_step
 

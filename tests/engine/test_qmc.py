@@ -43,6 +43,16 @@ def test_block_rules():
     assert qmc.whole_blocks(5461, 1) == 5461
 
 
+def test_jobs_use_blocks_with_enough_samples():
+    """Accuracy runs and jobs of at least 64 blocks per source use them; smaller jobs get pseudo-random paths."""
+    assert qmc.job_block(True, None) == 256
+    assert qmc.job_block(True, 64 * 256) == 256
+    assert qmc.job_block(True, 64 * 256 - 1) == 1
+    assert qmc.job_block(False, None) == 1
+    small = SceneSpec.model_validate(room_doc(paths=4096))
+    assert kernel_settings(small, build_scene(small)).qmc_block == 1
+
+
 def test_shifted_blocks_are_stratified_and_independent():
     u = qmc.shifted_blocks(4 * 256, 256, np.random.default_rng(3))
     assert u.shape == (qmc.DIMENSIONS, 1024) and u.min() >= 0.0 and u.max() < 1.0
@@ -79,7 +89,7 @@ def test_sample_cov_is_the_cluster_formula():
 
 def _first_bounce_scene(**sim):
     rx, fov = (0.5, 1.0, 0.0), 85.0
-    spec = SceneSpec.model_validate(room_doc(rx=rx, fov_deg=fov, **{"max_reflections": 1, "paths": 4096, **sim}))
+    spec = SceneSpec.model_validate(room_doc(rx=rx, fov_deg=fov, **{"max_reflections": 1, "paths": 16384, **sim}))
     return build_scene(spec), kernel_settings(spec, build_scene(spec)), barry_first_bounce(rx, fov)
 
 
