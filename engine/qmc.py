@@ -8,8 +8,7 @@ with its own random digital shift (Owen 1995; Dick & Pillichshammer 2010, sec. 1
 
 the shift covers every bit, so each u_ij is uniform on the same 53-bit grid of [0, 1) as numpy's own
 uniforms, every path is an unbiased sample, and the blocks are independent; the paths of one block
-are not. Standard
-errors therefore treat a block as one sample (tally.py, the sample-sum moments): the B block sums are
+are not. Standard errors therefore treat a block as one sample (tally.py, the sample-sum moments): the B block sums are
 independent and identically distributed, which is what the error formula needs.
 
 Measured (benchmarks/path_cost.py --what qmc): variance per path of H0 about 0.5x (clear room) and
@@ -32,8 +31,6 @@ DIMENSIONS = 5
 #: (0.5x / 0.4x, against 0.8x / 0.4x with blocks of 64) while giving thousands of samples for errors
 BLOCK = 256
 
-#: Joe & Kuo (2008) primitive polynomials (degree s, coefficients a) and initial m_i, dimensions 2-5;
-#: dimension 1 is the van der Corput sequence (m_i = 1)
 #: fewest blocks per source device for a fixed-budget job to use them: its error bars then rest on at least
 #: 64 independent samples (relative noise of a standard error ~1 / sqrt(2 x 63) = 9 %); smaller jobs draw
 #: pseudo-random paths, each its own sample (a 4 096-path job would otherwise have 16)
@@ -47,6 +44,8 @@ def job_block(quasi_random: bool, paths_per_source: int | None) -> int:
     return BLOCK if quasi_random and enough else 1
 
 
+#: Joe & Kuo (2008) primitive polynomials (degree s, coefficients a) and initial m_i, dimensions 2-5;
+#: dimension 1 is the van der Corput sequence (m_i = 1)
 _JOE_KUO = ((1, 0, (1,)), (2, 1, (1, 3)), (3, 1, (1, 3, 1)), (3, 2, (1, 1, 1)))
 _BITS = 32
 

@@ -177,8 +177,9 @@ class BatchBuilder:
         n_cells = self.n_ord * plan.n_orders * plan.n_scatter
         self.order_sum = np.zeros(n_cells)
         self.order_sumsq = np.zeros(n_cells)
-        #: sum of the same per-sample sums that order_sumsq squares: the variance takes both from one rounding
-        self.order_ssum = np.zeros(n_cells)
+        #: sum of the same per-sample sums that order_sumsq squares, so the variance takes both from one
+        #: rounding (with one estimate per sample and cell, order_sum is that sum)
+        self.order_ssum = np.zeros(n_cells if self.several_per_cell else 0)
         #: scratch of `_add_squared_path_sums`: one representative cell per owner (path, order-split target)
         self._cell_of_owner = np.zeros(n_paths // block * self.n_ord if self.several_per_cell else 0, np.int64)
 
@@ -212,8 +213,7 @@ class BatchBuilder:
                 sample = path // self.block if self.block > 1 else path
                 self._add_squared_path_sums(sample * self.n_ord + slot, cell, power)
             else:
-                _accumulate(self.order_sumsq, cell, power * power)
-                _accumulate(self.order_ssum, cell, power)
+                _accumulate(self.order_sumsq, cell, power * power)  # its sample sums: order_sum itself
 
     def _ranked(self, local, target):
         """(slot of each estimate, the estimates with a slot or None for all): `local` maps the batch's
@@ -340,7 +340,9 @@ class BatchBuilder:
             order_links=self.links.take(ord_sel),
             order_sum=self.order_sum.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
             order_sumsq=self.order_sumsq.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
-            order_ssum=self.order_ssum.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
+            order_ssum=(self.order_ssum if self.several_per_cell else self.order_sum).reshape(
+                self.n_ord, plan.n_orders, plan.n_scatter
+            ),
             channel_s1=ch_s1,
             channel_s2=ch_s2,
             h0_groups=h0_groups,
