@@ -21,7 +21,8 @@ this product stays under `simulate.PATH_TARGET_BUDGET` whatever the number of re
 
 Each path adds to a (target, k, s) cell only in one call of `BatchBuilder.add_step` (the kernel
 hands over the estimates of one depth k + s at a time, estimates of deeper cells made early
-waiting for their step), so per-(path, cell) sums are formed step by step.
+waiting for their step), so per-(path, cell) sums are formed step by step; with few samples
+(quasi-random blocks) a dense (sample, cell) table holds those sums and they are squared once per batch.
 Samples. Standard errors need independent samples. A pseudo-random path is one; the paths of a
 quasi-random block (engine/qmc.py: Sobol points with one random shift per block) are not, the blocks
 are. So a batch of n paths in blocks of m reduces its per-path sums to n / m block sums before the
@@ -45,6 +46,10 @@ N_GROUPS = 16
 #: (or KEYS_PER_ESTIMATE per estimate), else rounds over the estimates (BatchBuilder._add_squared_path_sums).
 DIRECT_KEYS = 4096
 KEYS_PER_ESTIMATE = 4
+#: Most entries of the order split's dense (sample, cell) table: with few samples (blocks of quasi-random
+#: paths) each estimate adds to its (sample, cell) sum with one `np.add.at`, and the squares are taken once
+#: per batch (`BatchBuilder.finish`); 2^20 float64 = 8 MiB per batch. Larger splits sum step by step.
+SAMPLE_TABLE_MAX = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -177,11 +182,19 @@ class BatchBuilder:
         n_cells = self.n_ord * plan.n_orders * plan.n_scatter
         self.order_sum = np.zeros(n_cells)
         self.order_sumsq = np.zeros(n_cells)
+        #: with few samples (blocks), the per-(sample, cell) sums themselves, (n_samples * n_cells,): squared
+        #: and summed over samples once, in `finish` (SAMPLE_TABLE_MAX); else None and the sums are formed
+        #: per step (`_add_squared_path_sums`)
+        n_samples = n_paths // block
+        table = block > 1 and 0 < n_samples * n_cells <= SAMPLE_TABLE_MAX
+        self.sample_cells = np.zeros(n_samples * n_cells) if table else None
+        self._block_shift = block.bit_length() - 1 if block & (block - 1) == 0 else None  # path >> shift = sample
+        stepwise = self.several_per_cell and not table
         #: sum of the same per-sample sums that order_sumsq squares, so the variance takes both from one
         #: rounding (with one estimate per sample and cell, order_sum is that sum)
-        self.order_ssum = np.zeros(n_cells if self.several_per_cell else 0)
+        self.order_ssum = np.zeros(n_cells if stepwise else 0)
         #: scratch of `_add_squared_path_sums`: one representative cell per owner (path, order-split target)
-        self._cell_of_owner = np.zeros(n_paths // block * self.n_ord if self.several_per_cell else 0, np.int64)
+        self._cell_of_owner = np.zeros(n_samples * self.n_ord if stepwise else 0, np.int64)
 
     def add_step(self, target, k, s, delay, power, path) -> None:
         if len(power) == 0:
@@ -208,6 +221,12 @@ class BatchBuilder:
                     return
                 slot, k, s, power, path = slot.take(sel), k.take(sel), s.take(sel), power.take(sel), path.take(sel)
             cell = (slot * plan.n_orders + k) * plan.n_scatter + s
+            if self.sample_cells is not None:  # few samples: their (sample, cell) sums, squared in `finish`
+                sample = path >> self._block_shift if self._block_shift is not None else path // self.block
+                sample *= len(self.order_sum)
+                sample += cell
+                _accumulate(self.sample_cells, sample, power)
+                return
             _accumulate(self.order_sum, cell, power)
             if self.several_per_cell:  # several estimates of one sample in one cell: sum before squaring
                 sample = path // self.block if self.block > 1 else path
@@ -324,6 +343,12 @@ class BatchBuilder:
             ch_s1 = ch.sum(axis=2).T
             ch_s2 = np.einsum("qgn,rgn->gqr", ch, ch)
         bins = plan.bins
+        order_sum, order_sumsq = self.order_sum, self.order_sumsq
+        order_ssum = self.order_ssum if len(self.order_ssum) else order_sum
+        if self.sample_cells is not None:  # the per-(sample, cell) sums: their sum and the sum of their squares
+            sums = self.sample_cells.reshape(n_samples, -1)
+            order_sum = order_ssum = sums.sum(axis=0)
+            order_sumsq = np.einsum("ic,ic->c", sums, sums)
         cir_sel = np.flatnonzero(self.cir_local >= 0)
         ord_sel = np.flatnonzero(self.order_local >= 0)
         return BatchTally(
@@ -338,11 +363,9 @@ class BatchBuilder:
             cir_k=None if self.cir_k is None else self.cir_k.reshape(self.n_cir, plan.n_orders, bins.n),
             cir_s=None if self.cir_s is None else self.cir_s.reshape(self.n_cir, plan.n_scatter, bins.n),
             order_links=self.links.take(ord_sel),
-            order_sum=self.order_sum.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
-            order_sumsq=self.order_sumsq.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
-            order_ssum=(self.order_ssum if self.several_per_cell else self.order_sum).reshape(
-                self.n_ord, plan.n_orders, plan.n_scatter
-            ),
+            order_sum=order_sum.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
+            order_sumsq=order_sumsq.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
+            order_ssum=order_ssum.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
             channel_s1=ch_s1,
             channel_s2=ch_s2,
             h0_groups=h0_groups,

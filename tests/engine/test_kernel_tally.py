@@ -1,6 +1,6 @@
 """The kernel hands the tally one depth k + s at a time, and the per-(sample, cell) squared sums of the order
-split (tally.BatchBuilder._add_squared_path_sums, no sorting) match a plain computation over the whole batch;
-a sample is a path, or a block of quasi-random paths (engine/qmc.py)."""
+split (tally.BatchBuilder: a dense (sample, cell) table with few samples, else per step without sorting) match
+a plain computation over the whole batch; a sample is a path, or a block of quasi-random paths (engine/qmc.py)."""
 
 import dataclasses
 
@@ -31,13 +31,16 @@ CASES = {
 }
 
 
-@pytest.mark.parametrize("direct_keys", [4096, 0], ids=["one bincount", "rounds"])
+@pytest.mark.parametrize(
+    "direct_keys, table", [(4096, 1 << 20), (4096, 0), (0, 0)], ids=["sample table", "one bincount", "rounds"]
+)
 @pytest.mark.parametrize("quasi_random", [True, False])
 @pytest.mark.parametrize("case", list(CASES))
 @pytest.mark.parametrize("direction", ["forward", "backward"])
-def test_one_depth_per_step_and_order_sums_of_squares(case, direction, quasi_random, direct_keys, monkeypatch):
-    # both ways of summing per (sample, cell): one bincount (512 paths: the keys span at most 4096), or rounds
-    # (no key range is small enough)
+def test_one_depth_per_step_and_order_sums_of_squares(case, direction, quasi_random, direct_keys, table, monkeypatch):
+    # the three ways of summing per (sample, cell): the dense table (blocks only: 2 samples), one bincount per
+    # step (512 paths: the keys span at most 4096), or rounds (no key range is small enough)
+    monkeypatch.setattr(tally_module, "SAMPLE_TABLE_MAX", table)
     monkeypatch.setattr(tally_module, "DIRECT_KEYS", direct_keys)
     monkeypatch.setattr(tally_module, "KEYS_PER_ESTIMATE", 4 if direct_keys else 0)
     doc = CASES[case]()
@@ -45,11 +48,12 @@ def test_one_depth_per_step_and_order_sums_of_squares(case, direction, quasi_ran
     spec = SceneSpec.model_validate(doc)
     scene = build_scene(spec)
     settings = dataclasses.replace(kernel_settings(spec, scene), qmc_block=256 if quasi_random else 1)  # 512 paths
-    calls = []
+    calls, tabled = [], set()
     real = BatchBuilder.add_step
 
     def spy(self, target, k, s, delay, power, path):
         calls.append((k.copy(), s.copy(), power.copy(), path.copy(), target.copy()))
+        tabled.add(self.sample_cells is not None)
         return real(self, target, k, s, delay, power, path)
 
     monkeypatch.setattr(BatchBuilder, "add_step", spy)
@@ -58,6 +62,7 @@ def test_one_depth_per_step_and_order_sums_of_squares(case, direction, quasi_ran
     assert all(len(d) == 1 for d in depths)  # one depth per call ...
     assert len({int(d[0]) for d in depths}) == len(depths)  # ... and each depth in one call
     assert tally.block == (256 if quasi_random else 1)  # 512 paths: two blocks of 256, or 512 samples
+    assert tabled == {bool(table) and quasi_random}  # the way under test was taken
     # Reference: per-(sample, k, s) sums over the whole batch by sorting, then squared per cell.
     k, s, p, path = (np.concatenate([c[i] for c in calls]) for i in range(4))
     path = path // tally.block
@@ -70,5 +75,8 @@ def test_one_depth_per_step_and_order_sums_of_squares(case, direction, quasi_ran
     several = np.bincount(inverse).max()
     assert several >= 2 or (case.startswith("mirror") and not quasi_random)  # several estimates per (sample, cell)
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=0.0)
+    plain_sum = np.bincount(cells, p, len(want))
+    np.testing.assert_allclose(tally.order_sum[0].reshape(-1), plain_sum, rtol=1e-12, atol=0.0)
+    np.testing.assert_allclose(tally.order_ssum[0].reshape(-1), plain_sum, rtol=1e-12, atol=0.0)
     # power check: squaring each estimate alone (the error this guards against) differs
     assert not np.allclose(np.bincount(cells, p**2, len(want)), want, rtol=1e-6, atol=0.0) or several == 1
