@@ -14,7 +14,8 @@ alternately in the same run, best of `--repeats`):
 - rays: Barry configuration A, K = 3, backward, batches of 16 384: pipeline rays/s (intersection +
   shadow) over raw Embree rays/s for the same ray counts in batches of the same size (random rays in
   the room, only `EmbreeScene.run` timed), with every shadow ray cast and with shadow rays skipped
-  (the plain empty room, convex);
+  (the plain empty room, convex); each side the least of 5 alternate runs (one run of each moved the
+  ratio by +-0.1 on a loaded host);
 - cost per path [us]: the clear room (algorithm 1, K = 200 with roulette, backward) and the smoky
   room (algorithm 5, K = 200, S = 35, run from both devices as the automatic settings choose);
   paths counted over both devices;
@@ -99,7 +100,8 @@ ACCURACY_CASES = {
 # --- measurements (run inside the tree under test) ------------------------------------------------
 
 
-def measure_rays(paths: int = 200_000) -> dict:
+def measure_rays(paths: int = 200_000, repeats: int = 5) -> dict:
+    """Pipeline and raw Embree `repeats` times each, alternately; the least time of each (host load only adds)."""
     from benchmarks._common import barry_doc, raw_embree
     from owcsim.engine.scene import build_scene
     from owcsim.schemas import SceneSpec
@@ -110,9 +112,12 @@ def measure_rays(paths: int = 200_000) -> dict:
         doc = barry_doc(paths=paths, batch_size=16384, direction="backward", max_reflections=3)
         scene = build_scene(SceneSpec.model_validate(doc))
         scene.all_visible = not cast
-        el, res = _simulate(doc, scene)
-        n_i, n_o = res["run"]["rays_intersect"], res["run"]["rays_occluded"]
-        raw = raw_embree(scene, n_i, n_o, 16384, rng, clock=time.process_time)
+        el = raw = np.inf
+        for _ in range(repeats):
+            t, res = _simulate(doc, scene)
+            n_i, n_o = res["run"]["rays_intersect"], res["run"]["rays_occluded"]
+            el = min(el, t)
+            raw = min(raw, raw_embree(scene, n_i, n_o, 16384, rng, clock=time.process_time))
         out["shadows cast" if cast else "empty room"] = {
             "time_s": el,
             "rays": n_i + n_o,

@@ -255,10 +255,13 @@ class Intersector:
         self.n_intersect += n
         if self.empty or n == 0:
             return np.full(n, -1, np.int64), np.full(n, np.inf)
-        dists = np.full(n, 1e30, np.float32) if t_max is None else np.asarray(t_max, np.float32).copy()
+        dists = np.full(n, 1e30, np.float32) if t_max is None else np.array(t_max, np.float32)  # Embree writes it
         out = self._scene.run(_f32(origins, self.center), _f32(directions), dists=dists, output=1)
         prim = out["primID"].astype(np.int64)
-        t = np.where(prim >= 0, out["tfar"].astype(np.float64), np.inf)
+        t = out["tfar"].astype(np.float64)
+        missed = prim < 0
+        if missed.any():
+            t[missed] = np.inf
         return prim, t
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:
@@ -268,6 +271,6 @@ class Intersector:
         if self.empty or n == 0:
             return np.zeros(n, bool)
         res = self._scene.run(
-            _f32(origins, self.center), _f32(directions), dists=np.asarray(t_max, np.float32).copy(), query="OCCLUDED"
+            _f32(origins, self.center), _f32(directions), dists=np.array(t_max, np.float32), query="OCCLUDED"
         )
         return np.asarray(res) == 0

@@ -314,7 +314,12 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
             sp = paths.gather(surface_rows) if len(surface_rows) < len(paths) else paths
             if forward:
                 surface_power += sp.weights.sum()
-            survivors.append(_surface_vertex(ctx, sp, prim.take(surface_rows), t.take(surface_rows), rng))
+            every = len(surface_rows) == len(paths)
+            survivors.append(
+                _surface_vertex(
+                    ctx, sp, prim if every else prim.take(surface_rows), t if every else t.take(surface_rows), rng
+                )
+            )
         # ====== medium collision (algorithm 5) ==============================================================
         if free_flight and len(medium_rows):
             survivors.append(_medium_collision(ctx, paths, medium_rows, t_col.take(medium_rows), rng))
@@ -652,11 +657,12 @@ class _Context:
                 column_rows = np.tile(columns, hi - lo)
                 y, y_nrm = self.t_pos.take(column_rows, axis=1), self.t_nrm.take(column_rows, axis=1)
                 y_ids = self.tgt.take(column_rows)
-            to = y - _rows(points, vertex_rows)
-            d2 = _dot(to, to)
+            out_dir = y - _rows(points, vertex_rows)
+            d2 = _dot(out_dir, out_dir)
             d = np.sqrt(d2)
-            out_dir = to / d
-            cos_target = -_dot(out_dir, y_nrm)
+            out_dir *= 1.0 / d  # unit, in place (one division)
+            cos_target = _dot(out_dir, y_nrm)
+            np.negative(cos_target, out=cos_target)
             toward = -out_dir.T if self.t_directional else None  # tabulated transmitters need the direction
             if y_ids is None:
                 response = targets.response_one(int(self.tgt[columns[0]]), cos_target, toward)
@@ -700,7 +706,8 @@ class _Context:
                 if len(seen) < len(d):
                     vertex = seen if vertex is None else vertex.take(seen)
                     column, f, d = column.take(seen), f.take(seen), d.take(seen)
-                    out_dir = out_dir.take(seen, axis=1)
+                    if medium is not None or "ratio" in self.out:  # the direction is needed further on
+                        out_dir = out_dir.take(seen, axis=1)
                     if both_sides:
                         response, vertex_factor = response.take(seen), vertex_factor.take(seen)
             if medium is not None:

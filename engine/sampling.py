@@ -163,19 +163,32 @@ def cosine_about_soa(n, u1, u2) -> np.ndarray:
     """
     u1 = _f64(u1)
     phi = (_TWO_PI * _f64(u2)).astype(np.float32)
-    z = 1.0 - 2.0 * u1
-    r = 2.0 * np.sqrt(u1 * (1.0 - u1))
+    r = u1 * (1.0 - u1)
+    np.sqrt(r, out=r)
+    r *= 2.0
     d = np.empty_like(n)
-    d[0] = n[0] + r * np.cos(phi)
-    d[1] = n[1] + r * np.sin(phi)
-    d[2] = n[2] + z
-    norm = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    np.multiply(r, np.cos(phi), out=d[0])
+    d[0] += n[0]
+    np.multiply(r, np.sin(phi), out=d[1])
+    d[1] += n[1]
+    np.multiply(u1, -2.0, out=d[2])  # z = 1 - 2 u1, with n_z
+    d[2] += 1.0
+    d[2] += n[2]
+    norm = _norm_rows(d)
     bad = norm < 1e-12
     if bad.any():  # s = -n: probability zero, mapped to n
         d[:, bad] = n[:, bad]
         norm[bad] = 1.0
     d *= 1.0 / norm
     return d
+
+
+def _norm_rows(d) -> np.ndarray:
+    """Euclidean norms of the columns of a (3, n) array (three products summed in place, one square root)."""
+    norm = d[0] * d[0]
+    norm += d[1] * d[1]
+    norm += d[2] * d[2]
+    return np.sqrt(norm, out=norm)
 
 
 def sample_cosine_about(n, u1, u2) -> np.ndarray:
