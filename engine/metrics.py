@@ -143,7 +143,7 @@ def rms_delay_spread_h2(t_edges, power_per_bin):
     return np.where(ok, tau0, np.nan)[()], np.where(ok, rms, np.nan)[()]
 
 
-def bandwidth_3db(t_edges, power_per_bin, oversample: int = 8) -> float | None:
+def bandwidth_3db(t_edges, power_per_bin, oversample: int = 8):
     """Electrical 3 dB bandwidth of the optical channel, in Hz.
 
     H(f) = sum_k P_k exp(-2 pi i f t_k) (t_k bin centres); returns the smallest
@@ -152,53 +152,73 @@ def bandwidth_3db(t_edges, power_per_bin, oversample: int = 8) -> float | None:
     1/(2 dt); the first crossing is refined by regula falsi on the continuous sum
     to ~1e-12 relative. Returns None (never inf) if |H|^2 stays above the
     threshold up to Nyquist (e.g. a single-bin, pure-LOS response) or if the
-    response is all zero. Bins must be uniform.
+    response is all zero. Bins must be uniform. power_per_bin (n_bins,) gives a
+    float or None; (..., n_bins) an array with NaN for None, every row at once
+    (the jackknife's replicates).
     """
     t, dt = _centres_widths(t_edges)
     if not np.allclose(dt, dt[0], rtol=1e-6, atol=0.0):
         raise ValueError("bandwidth_3db needs uniform bins")
-    dt = float(dt[0])
     p = np.asarray(power_per_bin, float)
-    if p.shape != t.shape:
+    if p.shape[-1:] != t.shape:
         raise ValueError("power_per_bin must have one value per bin")
-    h0 = p.sum()
-    if not h0 > 0:
-        return None
-    thr = 0.5 * h0**2
-    nz = np.flatnonzero(p)
-    p, tk = p[nz[0] : nz[-1] + 1], t[nz[0] : nz[-1] + 1] - t[nz[0]]
-    m_fft = 1 << int(np.ceil(np.log2(max(oversample * p.size, 64))))
-    mag2 = np.abs(np.fft.rfft(p, m_fft)) ** 2  # f_j = j / (m_fft dt), j <= m_fft/2
-    below = np.flatnonzero(mag2[1:] <= thr)
-    if below.size == 0:
-        return None
-    j = below[0] + 1
+    f3 = _bandwidth_rows(t, float(dt[0]), p.reshape(-1, t.size), oversample).reshape(p.shape[:-1])
+    if p.ndim == 1:
+        return None if np.isnan(f3) else float(f3)
+    return f3
+
+
+def _bandwidth_rows(t, dt: float, p, oversample: int) -> np.ndarray:
+    """`bandwidth_3db` of each row of p (m, n_bins), NaN where there is none: one FFT and one Illinois
+    regula falsi for all rows (a row's iterates are those it would have alone, on the rows' common support)."""
+    out = np.full(len(p), np.nan)
+    h0 = p.sum(-1)
+    rows = np.flatnonzero(h0 > 0)
+    if not len(rows):
+        return out
+    p, thr = p[rows], 0.5 * h0[rows] ** 2
+    nz = np.flatnonzero(p.any(axis=0))  # the support of all rows (one row: its own)
+    p, tk = p[:, nz[0] : nz[-1] + 1], t[nz[0] : nz[-1] + 1] - t[nz[0]]
+    m_fft = 1 << int(np.ceil(np.log2(max(oversample * p.shape[-1], 64))))
+    mag2 = np.abs(np.fft.rfft(p, m_fft, axis=-1)) ** 2  # f_j = j / (m_fft dt), j <= m_fft/2
+    below = mag2[:, 1:] <= thr[:, None]
+    crossing = below.any(axis=1)
+    rows, p, thr = rows[crossing], p[crossing], thr[crossing]
+    if not len(rows):
+        return out
+    j = below[crossing].argmax(axis=1) + 1
     df = 1.0 / (m_fft * dt)
     lo, hi = (j - 1) * df, j * df
 
-    def g(f):
-        return np.abs(np.sum(p * np.exp(-2j * np.pi * f * tk))) ** 2 - thr
+    def g(f, at):
+        return np.abs(np.sum(p[at] * np.exp(-2j * np.pi * f[:, None] * tk), axis=-1)) ** 2 - thr[at]
 
-    glo, ghi, side = g(lo), g(hi), 0  # Illinois regula falsi
-    if glo <= 0 or ghi >= 0:  # FFT grid hit the threshold
-        return float(lo if glo <= 0 else hi)
+    every = np.arange(len(rows))
+    glo, ghi, side = g(lo, every), g(hi, every), np.zeros(len(rows))  # Illinois regula falsi
+    grid = (glo <= 0) | (ghi >= 0)  # the FFT grid hit the threshold
+    out[rows[grid]] = np.where(glo <= 0, lo, hi)[grid]
+    live = ~grid
     for _ in range(100):
-        if ghi == 0 or hi - lo <= 1e-13 * hi:
+        live &= (ghi != 0) & (hi - lo > 1e-13 * hi)
+        at = np.flatnonzero(live)
+        if not len(at):
             break
-        x = hi - ghi * (hi - lo) / (ghi - glo)
-        if not lo < x < hi:
-            x = 0.5 * (lo + hi)
-        gx = g(x)
-        if gx > 0:
-            lo, glo = x, gx
-            ghi, side = (0.5 * ghi if side == -1 else ghi), -1
-        else:
-            hi, ghi = x, gx
-            glo, side = (0.5 * glo if side == 1 else glo), 1
-    return float(hi if ghi == 0 else lo - glo * (hi - lo) / (ghi - glo))
+        a, b, ga, gb, sd = lo[at], hi[at], glo[at], ghi[at], side[at]
+        x = b - gb * (b - a) / (gb - ga)
+        x = np.where((a < x) & (x < b), x, 0.5 * (a + b))
+        gx = g(x, at)
+        up = gx > 0  # the root lies above x: x becomes lo (Illinois: halve ghi on a repeated side)
+        lo[at], glo[at] = np.where(up, x, a), np.where(up, gx, np.where(sd == 1, 0.5 * ga, ga))
+        hi[at], ghi[at] = np.where(up, b, x), np.where(up, np.where(sd == -1, 0.5 * gb, gb), gx)
+        side[at] = np.where(up, -1.0, 1.0)
+    refined = ~grid
+    with np.errstate(invalid="ignore", divide="ignore"):
+        root = np.where(ghi == 0, hi, lo - glo * (hi - lo) / (ghi - glo))
+    out[rows[refined]] = root[refined]
+    return out
 
 
-def jackknife(estimator: Callable, groups, n_per_group=None):
+def jackknife(estimator: Callable, groups, n_per_group=None, vectorized: bool = False):
     """Delete-one(-group) jackknife: (estimator(total), stderr).
 
     groups (G, ...) holds per-group tallies (e.g. power per bin summed over the
@@ -210,7 +230,8 @@ def jackknife(estimator: Callable, groups, n_per_group=None):
     with unequal n_per_group the delete-m_j jackknife (Busing et al. 1999).
     The value is the plug-in estimate (not bias-corrected). The estimator may
     return a scalar, an array or None (mapped to NaN); stderr NaN if G < 2
-    or any replicate is NaN.
+    or any replicate is NaN. `vectorized`: the estimator maps a stack (m, ...)
+    of tallies to (m, ...) values (NaN for none) and runs once for all replicates.
     """
     groups = np.asarray(groups, float)
     n_g = groups.shape[0]
@@ -221,11 +242,17 @@ def jackknife(estimator: Callable, groups, n_per_group=None):
         return np.asarray(np.nan if r is None else r, float)
 
     total = groups.sum(0)
-    theta = est(total)
+    n_tot = nj.sum()
+    if vectorized and n_g >= 2:
+        scale = (n_tot / (n_tot - nj)).reshape((-1,) + (1,) * (groups.ndim - 1))
+        values = est(np.concatenate([total[None], (total - groups) * scale]))
+        theta, reps = values[0], values[1:]
+    else:
+        theta = est(total[None])[0] if vectorized else est(total)
     if n_g < 2:
         return theta[()], np.full_like(theta, np.nan)[()]
-    n_tot = nj.sum()
-    reps = np.stack([est((total - groups[j]) * (n_tot / (n_tot - nj[j]))) for j in range(n_g)])
+    if not vectorized:
+        reps = np.stack([est((total - groups[j]) * (n_tot / (n_tot - nj[j]))) for j in range(n_g)])
     hj = (n_tot / nj).reshape((-1,) + (1,) * theta.ndim)
     wj = (1.0 - nj / n_tot).reshape(hj.shape)
     with np.errstate(all="ignore"):

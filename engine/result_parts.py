@@ -112,12 +112,14 @@ def cir_block(
         rms_h2_se = np.nan
         if enough:
             _, rms_h2_se = metrics.jackknife(
-                lambda x: metrics.rms_delay_spread_h2(rel_edges, per_path(x))[1], groups, weight
+                lambda x: metrics.rms_delay_spread_h2(rel_edges, per_path(x))[1], groups, weight, vectorized=True
             )
         bw = metrics.bandwidth_3db(rel_edges, total[r])
         bw_se = None
         if bw is not None and enough:
-            _, bw_se = metrics.jackknife(lambda x: metrics.bandwidth_3db(rel_edges, per_path(x)), groups, weight)
+            _, bw_se = metrics.jackknife(
+                lambda x: metrics.bandwidth_3db(rel_edges, per_path(x)), groups, weight, vectorized=True
+            )
         cols["mean_delay_h2_s"][link] = _num(bins.t_min + t0_h2)
         cols["rms_delay_spread_h2_s"][link] = _num(rms_h2)
         cols["rms_delay_spread_h2_s_stderr"][link] = _num(rms_h2_se)

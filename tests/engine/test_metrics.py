@@ -241,3 +241,24 @@ def test_jackknife_stderr_matches_replicate_spread():
     assert h2[:, 1].mean() == pytest.approx(h2[:, 0].std(ddof=1), rel=0.15)
     assert bw[:, 1].mean() == pytest.approx(bw[:, 0].std(ddof=1), rel=0.15)
     assert pb.mean(0)[:8] == pytest.approx(mean_p.std(0, ddof=1)[:8], rel=0.15)
+
+
+def test_bandwidth_rows_and_vectorized_jackknife_match_one_row_at_a_time():
+    """Rows at once (the jackknife's replicates in one call) give each row's own bandwidth, None as NaN,
+    and the vectorized jackknife the loop's value and error."""
+    rng = np.random.default_rng(11)
+    nb = 200
+    edges = np.arange(nb + 1) * NS
+    k = np.minimum(rng.geometric(0.08, (16, 300)) - 1, nb - 1)
+    groups = np.bincount((np.arange(16)[:, None] * nb + k).ravel(), rng.exponential(1.0, k.size), 16 * nb)
+    groups = groups.reshape(16, nb)
+    rows = np.vstack([groups, np.zeros(nb), np.eye(1, nb, 5)[0]])  # + an empty row and a pure one-bin row (None)
+    want = [bandwidth_3db(edges, r) for r in rows]
+    got = bandwidth_3db(edges, rows)
+    assert got.shape == (18,) and want[-2] is None and want[-1] is None and np.isnan(got[-2:]).all()
+    np.testing.assert_allclose(got[:-2], np.array(want[:-2], float), rtol=1e-12)
+    for est in (lambda s: bandwidth_3db(edges, s), lambda s: rms_delay_spread_h2(edges, s)[1]):
+        loop = jackknife(est, groups, n_per_group=np.arange(16) + 10)
+        rows_at_once = jackknife(est, groups, n_per_group=np.arange(16) + 10, vectorized=True)
+        np.testing.assert_allclose(rows_at_once, loop, rtol=1e-10)
+        assert loop[1] > 0  # a real error to compare
