@@ -421,3 +421,17 @@ def test_polar_about_soa_by_hand():
         ok = sin_t > 1e-3  # the azimuth is defined off the pole
         err = np.abs(np.angle(np.exp(1j * (az[ok] - phi[ok]))))
         assert err.max() < 1e-8
+
+
+def test_azimuth_matches_cos_and_sin():
+    """sampling.azimuth (one float64 tangent) against numpy's cosine and sine of 2 pi u, extremes included."""
+    u = np.concatenate([np.random.default_rng(8).random(200_000), EXTREME_U[:-1], [0.125, 0.375, 0.625, 0.875]])
+    c, s = smp.azimuth(u)
+    assert np.all(np.isfinite(c)) and np.all(np.isfinite(s))
+    np.testing.assert_allclose(c, np.cos(2 * np.pi * u), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(s, np.sin(2 * np.pi * u), rtol=0, atol=2e-8)  # sqrt(1 - c^2) near sin = 0
+    np.testing.assert_allclose(c * c + s * s, 1.0, rtol=0, atol=4e-16)
+    far = np.abs(np.sin(2 * np.pi * u)) > 1e-3  # away from the poles the sine is as exact as the cosine
+    np.testing.assert_allclose(s[far], np.sin(2 * np.pi * u[far]), rtol=0, atol=2e-13)
+    np.testing.assert_array_equal(np.sign(s[far]), np.sign(np.sin(2 * np.pi * u[far])))
+    np.testing.assert_allclose(smp.azimuth(np.array([0.0, 0.25, 0.5, 0.75]))[0], [1, 0, -1, 0], atol=1e-15)
