@@ -162,6 +162,19 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
+def _dot_vector(a: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """dot(a, v) of (3, n) component rows with one vector v (3,), its zero components skipped (devices
+    facing along an axis: one pass instead of five; x * 0 adds exactly nothing to a finite sum)."""
+    terms = [(a[i], float(v[i])) for i in range(3) if v[i] != 0.0]
+    if not terms:
+        return np.zeros(a.shape[1])
+    row, c = terms[0]
+    out = row * c if c != 1.0 else row.copy()
+    for row, c in terms[1:]:
+        out += row * c if c != 1.0 else row
+    return out
+
+
 class _Paths:
     """Path state as a structure of arrays: (3, n) component arrays and (n,) arrays, one row per path.
 
@@ -309,12 +322,13 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
             escaped_power += paths.weights[~hit if collided is None else ~hit & ~collided].sum()
         survivors = []
         # ====== surface vertex =============================================================================
-        surface_rows = (at_surface & (paths.k < K)).nonzero()[0]
-        if len(surface_rows):
-            sp = paths.gather(surface_rows) if len(surface_rows) < len(paths) else paths
+        on_surface = at_surface & (paths.k < K)
+        every = bool(on_surface.all())  # the usual step of a closed room: no index arrays
+        surface_rows = None if every else on_surface.nonzero()[0]
+        if every or len(surface_rows):
+            sp = paths if every else paths.gather(surface_rows)
             if forward:
                 surface_power += sp.weights.sum()
-            every = len(surface_rows) == len(paths)
             survivors.append(
                 _surface_vertex(
                     ctx, sp, prim if every else prim.take(surface_rows), t if every else t.take(surface_rows), rng
@@ -348,10 +362,12 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
     """
     settings, scene = ctx.settings, ctx.scene
     isect, geo = scene.intersector, scene.geometry
-    points = sp.origins + ts * sp.directions
+    points = sp.directions * ts
+    points += sp.origins
     normals = isect.normals_soa.take(prims, axis=1)
     np.negative(normals, out=normals, where=_dot(normals, sp.directions) > 0)  # two-sided: face the arriving ray
-    spawn = points + isect.offset * normals
+    spawn = normals * isect.offset
+    spawn += points
     arriving = sp.directions
     sp = _Paths(
         origins=spawn,
@@ -567,6 +583,7 @@ class _Context:
         self.scene, self.targets, self.tgt, self.settings, self.item = scene, targets, tgt, settings, item
         self.t_pos = np.ascontiguousarray(targets.positions[tgt].T)  # (3, T)
         self.t_nrm = np.ascontiguousarray(targets.normals[tgt].T)
+        self.t_nrm_neg = -self.t_nrm  # (3, T): cos at the target = dot(direction toward it, -normal)
         self.t_total = np.array([targets.total_response(int(t)) for t in tgt], float)
         self.t_directional = targets.directional
         #: spectral scenes: per-band tables; estimates carry their band ratios ("ratio") when paths do
@@ -650,19 +667,18 @@ class _Context:
             if n_tgt == 1:  # one target: every vertex of the chunk, no index arrays
                 vertex_rows = None if (lo, hi) == (0, n_pts) else np.arange(lo, hi)
                 column_rows = None
-                y, y_nrm = self.t_pos[:, columns[0] : columns[0] + 1], self.t_nrm[:, columns[0] : columns[0] + 1]
+                y, y_nrm = self.t_pos[:, columns[0] : columns[0] + 1], self.t_nrm_neg[:, columns[0]]
                 y_ids = None
             else:
                 vertex_rows = np.repeat(np.arange(lo, hi), n_tgt)
                 column_rows = np.tile(columns, hi - lo)
-                y, y_nrm = self.t_pos.take(column_rows, axis=1), self.t_nrm.take(column_rows, axis=1)
+                y, y_nrm = self.t_pos.take(column_rows, axis=1), self.t_nrm_neg.take(column_rows, axis=1)
                 y_ids = self.tgt.take(column_rows)
             out_dir = y - _rows(points, vertex_rows)
             d2 = _dot(out_dir, out_dir)
             d = np.sqrt(d2)
             out_dir *= 1.0 / d  # unit, in place (one division)
-            cos_target = _dot(out_dir, y_nrm)
-            np.negative(cos_target, out=cos_target)
+            cos_target = _dot(out_dir, y_nrm) if y_ids is not None else _dot_vector(out_dir, y_nrm)
             toward = -out_dir.T if self.t_directional else None  # tabulated transmitters need the direction
             if y_ids is None:
                 response = targets.response_one(int(self.tgt[columns[0]]), cos_target, toward)
@@ -671,7 +687,8 @@ class _Context:
             f = response / d2 * _rows(throughput, vertex_rows)
             if normals is not None:  # surface vertex: BRDF x cos
                 n_x = _rows(normals, vertex_rows)
-                vertex_factor = np.maximum(_dot(out_dir, n_x), 0.0)  # cos_x
+                vertex_factor = _dot(out_dir, n_x)  # cos_x
+                np.maximum(vertex_factor, 0.0, out=vertex_factor)
                 if materials is not None:
                     mat, arriving = materials
                     mat = mat if vertex_rows is None else mat.take(vertex_rows)
@@ -693,7 +710,9 @@ class _Context:
             # (then no gathers: in smoke nearly every connection contributes)
             if len(live) < len(f):
                 vertex = live if vertex_rows is None else vertex_rows.take(live)
-                f, d, out_dir = f.take(live), d.take(live), out_dir.take(live, axis=1)
+                f, d = f.take(live), d.take(live)
+                if not scene.all_visible or medium is not None or "ratio" in self.out:  # the direction goes on
+                    out_dir = out_dir.take(live, axis=1)
                 column = np.full(len(live), columns[0]) if column_rows is None else column_rows.take(live)
                 if both_sides:
                     response, vertex_factor = response.take(live), vertex_factor.take(live)

@@ -173,8 +173,10 @@ class BatchBuilder:
         self.early = np.zeros(self.n_cir)
         self.late = np.zeros(self.n_cir)
         split = plan.by_order_cir
-        self.cir_k = np.zeros(self.n_cir * plan.n_orders * bins.n) if split else None
-        self.cir_s = np.zeros(self.n_cir * plan.n_scatter * bins.n) if split else None
+        # one order (K = 0, or S = 0): that split is the CIR itself (`finish`), not tallied twice
+        self.cir_k = np.zeros(self.n_cir * plan.n_orders * bins.n) if split and plan.n_orders > 1 else None
+        self.cir_s = np.zeros(self.n_cir * plan.n_scatter * bins.n) if split and plan.n_scatter > 1 else None
+        self.split = split
         os_ = plan.order_slots(self.links)
         self.order_local = np.full(n_t, -1, np.int64)
         self.order_local[os_ >= 0] = np.arange(int((os_ >= 0).sum()))
@@ -220,7 +222,10 @@ class BatchBuilder:
                 if len(sel) == 0:
                     return
                 slot, k, s, power, path = slot.take(sel), k.take(sel), s.take(sel), power.take(sel), path.take(sel)
-            cell = (slot * plan.n_orders + k) * plan.n_scatter + s
+            if plan.n_scatter == 1 and np.ndim(slot) == 0:  # one cell per k (algorithm 1, one target)
+                cell = k + int(slot) * plan.n_orders if slot else k
+            else:
+                cell = (slot * plan.n_orders + k) * plan.n_scatter + s
             if self.sample_cells is not None:  # few samples: their (sample, cell) sums, squared in `finish`
                 sample = path >> self._block_shift if self._block_shift is not None else path // self.block
                 sample *= len(self.order_sum)
@@ -304,11 +309,11 @@ class BatchBuilder:
                 slot = slot.take(sel)
             k, s, b, power = k.take(sel), s.take(sel), b.take(sel), power.take(sel)
         ib = b.astype(np.int64)
+        splits = ((self.cir_k, k, plan.n_orders), (self.cir_s, s, plan.n_scatter))
         if np.ndim(slot) == 0:  # one slot: its offsets are numbers (fewer passes over the estimates)
             _accumulate(self.cir, ib + int(slot) * bins.n if slot else ib, power)
-            if self.cir_k is not None:
-                assert self.cir_s is not None  # allocated together with cir_k
-                for table, order, n_ord in ((self.cir_k, k, plan.n_orders), (self.cir_s, s, plan.n_scatter)):
+            for table, order, n_ord in splits:
+                if table is not None:
                     idx = order * bins.n
                     idx += ib
                     if slot:
@@ -316,10 +321,18 @@ class BatchBuilder:
                     _accumulate(table, idx, power)
             return
         _accumulate(self.cir, slot * bins.n + ib, power)
-        if self.cir_k is not None:
-            assert self.cir_s is not None  # allocated together with cir_k
-            _accumulate(self.cir_k, (slot * plan.n_orders + k) * bins.n + ib, power)
-            _accumulate(self.cir_s, (slot * plan.n_scatter + s) * bins.n + ib, power)
+        for table, order, n_ord in splits:
+            if table is not None:
+                _accumulate(table, (slot * n_ord + order) * bins.n + ib, power)
+
+    def _split_cir(self, table: np.ndarray | None, n_ord: int) -> np.ndarray | None:
+        """(Tc, n_ord, n_bins) CIR split by an order, None without the split; one order: the CIR itself."""
+        if not self.split:
+            return None
+        bins = self.plan.bins
+        if table is None:  # one order holds every estimate
+            return self.cir.reshape(self.n_cir, 1, bins.n).copy()
+        return table.reshape(self.n_cir, n_ord, bins.n)
 
     def finish(self, channel_weights: np.ndarray | None = None) -> BatchTally:
         """The batch's tally; `channel_weights` (G, T) adds the per-path moments of G channels."""
@@ -360,8 +373,8 @@ class BatchBuilder:
             cir=self.cir.reshape(self.n_cir, bins.n),
             early=self.early,
             late=self.late,
-            cir_k=None if self.cir_k is None else self.cir_k.reshape(self.n_cir, plan.n_orders, bins.n),
-            cir_s=None if self.cir_s is None else self.cir_s.reshape(self.n_cir, plan.n_scatter, bins.n),
+            cir_k=self._split_cir(self.cir_k, plan.n_orders),
+            cir_s=self._split_cir(self.cir_s, plan.n_scatter),
             order_links=self.links.take(ord_sel),
             order_sum=order_sum.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
             order_sumsq=order_sumsq.reshape(self.n_ord, plan.n_orders, plan.n_scatter),

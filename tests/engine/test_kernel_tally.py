@@ -80,3 +80,28 @@ def test_one_depth_per_step_and_order_sums_of_squares(case, direction, quasi_ran
     np.testing.assert_allclose(tally.order_ssum[0].reshape(-1), plain_sum, rtol=1e-12, atol=0.0)
     # power check: squaring each estimate alone (the error this guards against) differs
     assert not np.allclose(np.bincount(cells, p**2, len(want)), want, rtol=1e-6, atol=0.0) or several == 1
+
+
+@pytest.mark.parametrize(
+    "doc",
+    [
+        lambda: room_doc(max_reflections=3, paths=2048),  # S = 0: the scattering split is the CIR itself
+        lambda: room_doc(medium=SMOKE, algorithm=5, max_reflections=3, max_scattering=2, paths=2048),
+    ],
+    ids=["algorithm 1", "algorithm 5"],
+)
+def test_cir_split_by_order_sums_to_the_cir(doc):
+    """The CIR split by reflection order and by scattering order: each split summed over its orders is the CIR
+    (bin by bin), whether the split is tallied or, with one order, is the CIR itself."""
+    d = doc()
+    d["outputs"] = {"cir": True, "orders": True}
+    spec = SceneSpec.model_validate(d)
+    scene = build_scene(spec)
+    settings = kernel_settings(spec, scene)
+    assert settings.tally.by_order_cir
+    tally = trace_batch(scene, WorkItem("backward", 0, (0,), 0, 2048, 5), settings)
+    assert tally.cir_k.shape[1] == settings.tally.n_orders and tally.cir_s.shape[1] == settings.tally.n_scatter
+    assert tally.cir.sum() > 0
+    for split in (tally.cir_k, tally.cir_s):
+        np.testing.assert_allclose(split.sum(axis=1), tally.cir, rtol=1e-12, atol=1e-300)
+    assert np.count_nonzero(tally.cir_k.sum(axis=2)) >= 3  # several reflection orders (the test can fail)
