@@ -191,7 +191,7 @@ def _bandwidth_rows(t, dt: float, p, oversample: int) -> np.ndarray:
     lo, hi = (j - 1) * df, j * df
 
     def g(f, at):
-        return np.abs(np.sum(p[at] * np.exp(-2j * np.pi * f[:, None] * tk), axis=-1)) ** 2 - thr[at]
+        return _power_at(p[at], f[:, None] * tk) - thr[at]
 
     every = np.arange(len(rows))
     glo, ghi, side = g(lo, every), g(hi, every), np.zeros(len(rows))  # Illinois regula falsi
@@ -216,6 +216,24 @@ def _bandwidth_rows(t, dt: float, p, oversample: int) -> np.ndarray:
         root = np.where(ghi == 0, hi, lo - glo * (hi - lo) / (ghi - glo))
     out[rows[refined]] = root[refined]
     return out
+
+
+def _power_at(p, cycles) -> np.ndarray:
+    """|sum_k p_k exp(-2 pi i x_k)|^2 per row, x = `cycles` (f t_k), from one float64 tangent per term:
+    with u the fractional part of x and tau = tan(pi (u - 1/2)) (half-angle substitution about pi),
+        cos 2 pi x = 1 - 2 / (1 + tau^2),   sin 2 pi x = -2 tau / (1 + tau^2).
+    numpy's complex exponential and float64 cos/sin are not vectorized (~20 and ~8 ns per term here)."""
+    tau = cycles - np.floor(cycles)
+    tau -= 0.5
+    tau *= np.pi
+    np.tan(tau, out=tau)
+    w = tau * tau
+    w += 1.0
+    np.divide(p, w, out=w)  # p / (1 + tau^2)
+    tau *= w  # p tau / (1 + tau^2)
+    re = p.sum(axis=-1) - 2.0 * w.sum(axis=-1)  # sum p cos(2 pi x)
+    im = 2.0 * tau.sum(axis=-1)  # -sum p sin(2 pi x)
+    return re * re + im * im
 
 
 def jackknife(estimator: Callable, groups, n_per_group=None, vectorized: bool = False):

@@ -37,11 +37,13 @@ batch-spread standard errors, the jackknife, and the reliability of the error ba
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 #: Number of batch groups kept for per-bin standard errors and the jackknife.
 N_GROUPS = 16
+_GROUP_RANGE = np.arange(N_GROUPS)
 #: The order split's per-(sample, cell) sums take one bincount when their keys span at most this many
 #: (or KEYS_PER_ESTIMATE per estimate), else rounds over the estimates (BatchBuilder._add_squared_path_sums).
 DIRECT_KEYS = 4096
@@ -99,7 +101,7 @@ class TallyPlan:
     def order_slots(self, links) -> np.ndarray:
         return self.slots(links, self.order_rank, self.n_order_rx)
 
-    @property
+    @cached_property
     def by_order_cir(self) -> bool:
         """True when some receiver has both the CIR and the order split (then the CIR is split too)."""
         return bool(np.any((self.cir_rank >= 0) & (self.order_rank >= 0)))
@@ -504,9 +506,9 @@ class Accumulator:
         g = batch_index % N_GROUPS
         assert batch.h0_groups is not None and batch.h0_group_paths is not None  # set by BatchBuilder.finish
         self.group_paths[g, ln] += batch.n_paths
-        shift = group_shift(batch_index, n_samples)
-        self.group_h0[:, ln] += np.roll(batch.h0_groups, shift, axis=1).T
-        self.h0_group_paths[:, ln] += np.roll(batch.h0_group_paths, shift)[:, None]
+        turn = (_GROUP_RANGE - group_shift(batch_index, n_samples)) % N_GROUPS  # np.roll's order, as an index
+        self.group_h0[:, ln] += batch.h0_groups.T.take(turn, axis=0)
+        self.h0_group_paths[:, ln] += batch.h0_group_paths.take(turn)[:, None]
         if len(batch.cir_links):
             cs = self.plan.cir_slots(batch.cir_links)
             self.cir[cs] += batch.cir
