@@ -10,12 +10,12 @@ medium sigma_s 0.2, sigma_a 0 /m, Henyey-Greenstein g 0.5. Everything runs on on
 (SerialExecutor), imports and warm-up excluded.
 
 Figures (each for the code under test and, with `--baseline REV`, for that commit, measured
-alternately in the same run, best of `--repeats`):
+alternately in the same run, figure by figure in one long-lived process per tree, best of `--repeats`):
 - rays: Barry configuration A, K = 3, backward, batches of 16 384: pipeline rays/s (intersection +
   shadow) over raw Embree rays/s for the same ray counts in batches of the same size (random rays in
   the room, only `EmbreeScene.run` timed), with every shadow ray cast and with shadow rays skipped
-  (the plain empty room, convex); each side the least of 5 alternate runs (one run of each moved the
-  ratio by +-0.1 on a loaded host);
+  (the plain empty room, convex); each side the least time of 3 alternate runs per repeat (one run
+  of each moved the ratio by +-0.1 on a loaded host);
 - cost per path [us]: the clear room (algorithm 1, K = 200 with roulette, backward) and the smoky
   room (algorithm 5, K = 200, S = 35, run from both devices as the automatic settings choose);
   paths counted over both devices;
@@ -100,7 +100,7 @@ ACCURACY_CASES = {
 # --- measurements (run inside the tree under test) ------------------------------------------------
 
 
-def measure_rays(paths: int = 200_000, repeats: int = 5) -> dict:
+def measure_rays(paths: int = 200_000, repeats: int = 3) -> dict:
     """Pipeline and raw Embree `repeats` times each, alternately; the least time of each (host load only adds)."""
     from benchmarks._common import barry_doc, raw_embree
     from owcsim.engine.scene import build_scene
@@ -118,15 +118,22 @@ def measure_rays(paths: int = 200_000, repeats: int = 5) -> dict:
             n_i, n_o = res["run"]["rays_intersect"], res["run"]["rays_occluded"]
             el = min(el, t)
             raw = min(raw, raw_embree(scene, n_i, n_o, 16384, rng, clock=time.process_time))
-        out["shadows cast" if cast else "empty room"] = {
-            "time_s": el,
-            "rays": n_i + n_o,
-            "pipeline_Mrays_s": (n_i + n_o) / el / 1e6,
-            "embree_Mrays_s": (n_i + n_o) / raw / 1e6,
-            "ratio": raw / el,
-            "paths_s": paths / el,
-        }
+        out["shadows cast" if cast else "empty room"] = _rays_figures(el, raw, n_i + n_o, paths)
     return out
+
+
+def _rays_figures(el: float, raw: float, rays: int, paths: int) -> dict:
+    """The rays figures of a pipeline time `el` and a raw Embree time `raw` [s] for the same `rays`."""
+    return {
+        "time_s": el,
+        "raw_s": raw,
+        "rays": rays,
+        "paths": paths,
+        "pipeline_Mrays_s": rays / el / 1e6,
+        "embree_Mrays_s": rays / raw / 1e6,
+        "ratio": raw / el,
+        "paths_s": paths / el,
+    }
 
 
 def measure_cost(case: str, paths: int | None = None) -> dict:
@@ -250,8 +257,9 @@ def measure_qmc(replicates: int = 96, paths: int = 4096) -> dict:
     return out
 
 
-def measure(what: list[str]) -> dict:
-    _simulate(COST_CASES["smoky"](2048))  # warm imports and caches
+def measure(what: list[str], warm: bool = True) -> dict:
+    if warm:
+        _simulate(COST_CASES["smoky"](2048))  # warm imports and caches
     from owcsim.engine import kernel
 
     out = {"tree": os.environ.get("OWCSIM_TREE", "this tree"), "kernel": kernel.__file__}
@@ -376,24 +384,57 @@ def baseline_env(rev: str) -> dict:
     return env
 
 
-def run_tree(env: dict, what: list[str]) -> dict:
-    cmd = [sys.executable, __file__, "--measure", ",".join(what)]
-    out = subprocess.run(cmd, env=env, capture_output=True, text=True)
-    if out.returncode:
-        raise RuntimeError(f"{env.get('OWCSIM_TREE', 'this tree')}: {out.stderr[-2000:]}")
-    return json.loads(out.stdout.splitlines()[-1])
+#: Result lines of a measuring process start with this (anything else it prints is passed over).
+RESULT = "RESULT "
+
+
+def serve() -> None:
+    """A measuring process: warm up once, then measure each JSON list of figures read from stdin."""
+    _simulate(COST_CASES["smoky"](2048))  # warm imports and caches
+    for line in sys.stdin:
+        print(RESULT + json.dumps(measure(json.loads(line), warm=False)), flush=True)
+
+
+class TreeProcess:
+    """One long-lived measuring process per tree, so that the trees take turns measure by measure (seconds
+    apart, not a whole run apart: the host's load drifts over seconds)."""
+
+    def __init__(self, env: dict):
+        self.name = env.get("OWCSIM_TREE", "this tree")
+        cmd = [sys.executable, __file__, "--serve"]
+        self.proc = subprocess.Popen(cmd, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+
+    def measure(self, what: list[str]) -> dict:
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        self.proc.stdin.write(json.dumps(what) + "\n")
+        self.proc.stdin.flush()
+        for line in self.proc.stdout:
+            if line.startswith(RESULT):
+                return json.loads(line[len(RESULT) :])
+        raise RuntimeError(f"{self.name}: the measuring process ended (exit code {self.proc.wait()})")
+
+    def close(self) -> None:
+        if self.proc.stdin is not None:
+            self.proc.stdin.close()
+        self.proc.wait()
 
 
 def _best(runs: list[dict]) -> dict:
-    """Per figure, the run with the least time (the others are slowed by host load)."""
-    best = {}
-    for key in runs[0]:
-        if key in ("tree", "kernel", "algorithms", "qmc") or key not in runs[-1]:
-            best[key] = runs[0][key]
-        elif key == "rays":
-            best[key] = {sub: min((r[key][sub] for r in runs), key=lambda v: v["time_s"]) for sub in runs[0][key]}
-        else:
-            best[key] = min((r[key] for r in runs), key=lambda v: v["time_s"])
+    """Per figure, the least time over the runs (the others are slowed by host load); the rays figures from
+    the least pipeline time and the least raw Embree time."""
+    best: dict = {}
+    for run in runs:
+        for key, value in run.items():
+            if key not in best or key in ("tree", "kernel", "algorithms", "qmc"):
+                best.setdefault(key, value)
+            elif key == "rays":
+                for sub, v in value.items():
+                    b = best[key][sub]
+                    best[key][sub] = _rays_figures(
+                        min(b["time_s"], v["time_s"]), min(b["raw_s"], v["raw_s"]), v["rays"], v["paths"]
+                    )
+            elif value["time_s"] < best[key]["time_s"]:
+                best[key] = value
     return best
 
 
@@ -487,14 +528,13 @@ def main() -> None:
     ap.add_argument("--what", default="rays,cost,accuracy")
     ap.add_argument("--profile", action="store_true")
     ap.add_argument("--markdown", action="store_true")
-    ap.add_argument("--measure", help=argparse.SUPPRESS)
+    ap.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--profile-target", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if "OWCSIM_TREE" not in os.environ:  # the baseline's farm holds `benchmarks` (and its own `owcsim`)
         sys.path.insert(0, str(ROOT))
-    if args.measure:
-        print(json.dumps(measure(args.measure.split(","))))
-        return
+    if args.serve:
+        return serve()
     if args.profile_target:
         return _profile_target(args.profile_target)
     trees = {}
@@ -502,10 +542,18 @@ def main() -> None:
         trees[f"before ({args.baseline})"] = baseline_env(args.baseline)
     trees["after (this tree)"] = {k: v for k, v in os.environ.items() if k != "OWCSIM_TREE"}
     what = args.what.split(",")
-    runs = {name: [] for name in trees}
-    for _ in range(args.repeats):  # alternate the trees so that host load hits both alike
-        for name, e in trees.items():
-            runs[name].append(run_tree(e, what))
+    runs: dict[str, list[dict]] = {name: [] for name in trees}
+    procs = {name: TreeProcess(e) for name, e in trees.items()}
+    try:
+        for rep in range(args.repeats):  # the trees take turns figure by figure, so that host load hits both alike
+            for part in what:
+                if part in ("algorithms", "qmc") and rep:  # fixed paths and seeds: not timings, once is enough
+                    continue
+                for name, proc in procs.items():
+                    runs[name].append(proc.measure([part]))
+    finally:
+        for proc in procs.values():
+            proc.close()
     results = {name: _best(r) for name, r in runs.items()}
     profiles = {}
     if args.profile:
