@@ -194,6 +194,12 @@ class BatchBuilder:
         self.sample_cells = np.zeros(n_samples * n_cells) if table else None
         self._block_shift = block.bit_length() - 1 if block & (block - 1) == 0 else None  # path >> shift = sample
         stepwise = self.several_per_cell and not table
+        #: every target has an order slot in target order: the per-sample H0 sums are the table's (`finish`)
+        self.h0_from_table = table and np.array_equal(self.order_local, np.arange(n_t))
+        #: the CIR is the sum of a tallied split over its orders (`finish`), not tallied a third time
+        self._cir_from = next(
+            ((t, n) for t, n in ((self.cir_k, plan.n_orders), (self.cir_s, plan.n_scatter)) if t is not None), None
+        )
         #: sum of the same per-sample sums that order_sumsq squares, so the variance takes both from one
         #: rounding (with one estimate per sample and cell, order_sum is that sum)
         self.order_ssum = np.zeros(n_cells if stepwise else 0)
@@ -207,7 +213,8 @@ class BatchBuilder:
         # --- per-path moments of every link ------------------------------------------------
         key = path if len(self.links) == 1 else target * n + path  # (one target: every index is 0)
         wt = power * delay
-        _accumulate(self.abc[0], key, power)
+        if not self.h0_from_table:
+            _accumulate(self.abc[0], key, power)
         _accumulate(self.abc[1], key, wt)
         _accumulate(self.abc[2], key, wt * delay)
         # --- binned CIR -----------------------------------------------------------------------
@@ -313,7 +320,8 @@ class BatchBuilder:
         ib = b.astype(np.int64)
         splits = ((self.cir_k, k, plan.n_orders), (self.cir_s, s, plan.n_scatter))
         if np.ndim(slot) == 0:  # one slot: its offsets are numbers (fewer passes over the estimates)
-            _accumulate(self.cir, ib + int(slot) * bins.n if slot else ib, power)
+            if self._cir_from is None:
+                _accumulate(self.cir, ib + int(slot) * bins.n if slot else ib, power)
             for table, order, n_ord in splits:
                 if table is not None:
                     idx = order * bins.n
@@ -322,7 +330,8 @@ class BatchBuilder:
                         idx += int(slot) * n_ord * bins.n
                     _accumulate(table, idx, power)
             return
-        _accumulate(self.cir, slot * bins.n + ib, power)
+        if self._cir_from is None:
+            _accumulate(self.cir, slot * bins.n + ib, power)
         for table, order, n_ord in splits:
             if table is not None:
                 _accumulate(table, (slot * n_ord + order) * bins.n + ib, power)
@@ -342,6 +351,11 @@ class BatchBuilder:
         m = self.block
         n_samples = self.n_paths // m
         abc = self.abc.reshape(3, n_t, n_samples, m).sum(axis=3) if m > 1 else self.abc.reshape(3, n_t, n_samples)
+        if self.h0_from_table and self.sample_cells is not None:  # per-sample H0: the table's sums per target
+            abc[0] = self.sample_cells.reshape(n_samples, n_t, -1).sum(axis=2).T
+        if self._cir_from is not None:  # the CIR: a split summed over its orders
+            table, n_ord = self._cir_from
+            self.cir = table.reshape(self.n_cir, n_ord, plan.bins.n).sum(axis=1).reshape(-1)
         s1 = abc.sum(axis=2).T
         # Path groups (sample index mod N_GROUPS): independent sub-samples of this batch for the reliability
         # figures (engine/reliability.py), filled from the first batch whatever the batch count.

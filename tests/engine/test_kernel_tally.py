@@ -90,18 +90,34 @@ def test_one_depth_per_step_and_order_sums_of_squares(case, direction, quasi_ran
     ],
     ids=["algorithm 1", "algorithm 5"],
 )
-def test_cir_split_by_order_sums_to_the_cir(doc):
-    """The CIR split by reflection order and by scattering order: each split summed over its orders is the CIR
-    (bin by bin), whether the split is tallied or, with one order, is the CIR itself."""
+def test_cir_split_by_order_sums_to_the_cir(doc, monkeypatch):
+    """The CIR and its splits by reflection order and by scattering order against a plain binning of the
+    estimates the batch tallied (whether a split is tallied, or the CIR is summed from one, or one order is
+    the CIR itself)."""
     d = doc()
     d["outputs"] = {"cir": True, "orders": True}
     spec = SceneSpec.model_validate(d)
     scene = build_scene(spec)
     settings = kernel_settings(spec, scene)
-    assert settings.tally.by_order_cir
+    plan = settings.tally
+    assert plan.by_order_cir
+    calls = []
+    real = BatchBuilder.add_step
+
+    def spy(self, target, k, s, delay, power, path):
+        calls.append((k.copy(), s.copy(), delay.copy(), power.copy()))
+        return real(self, target, k, s, delay, power, path)
+
+    monkeypatch.setattr(BatchBuilder, "add_step", spy)
     tally = trace_batch(scene, WorkItem("backward", 0, (0,), 0, 2048, 5), settings)
-    assert tally.cir_k.shape[1] == settings.tally.n_orders and tally.cir_s.shape[1] == settings.tally.n_scatter
-    assert tally.cir.sum() > 0
-    for split in (tally.cir_k, tally.cir_s):
-        np.testing.assert_allclose(split.sum(axis=1), tally.cir, rtol=1e-12, atol=1e-300)
-    assert np.count_nonzero(tally.cir_k.sum(axis=2)) >= 3  # several reflection orders (the test can fail)
+    k, s, delay, power = (np.concatenate([c[i] for c in calls]) for i in range(4))
+    b = np.floor((delay - plan.bins.t_min) / plan.bins.dt).astype(np.int64)
+    inside = (b >= 0) & (b < plan.bins.n)
+    k, s, b, power = k[inside], s[inside], b[inside], power[inside]
+    want = np.bincount(b, power, plan.bins.n)
+    assert want.sum() > 0
+    np.testing.assert_allclose(tally.cir[0], want, rtol=1e-12, atol=1e-300)
+    for split, order, n_ord in ((tally.cir_k, k, plan.n_orders), (tally.cir_s, s, plan.n_scatter)):
+        ref = np.bincount(order * plan.bins.n + b, power, n_ord * plan.bins.n).reshape(n_ord, plan.bins.n)
+        np.testing.assert_allclose(split[0], ref, rtol=1e-12, atol=1e-300)
+    assert np.count_nonzero(tally.cir_k[0].sum(axis=1)) >= 3  # several reflection orders (the test can fail)

@@ -95,20 +95,25 @@ def _first_bounce_scene(**sim):
 
 def test_accumulator_moments_come_from_block_sums(monkeypatch):
     """The Accumulator's mean and covariance of (a, b, c) equal the direct formula over the block sums of the
-    per-path sums the batch builder held (blocks of 256, two batches)."""
+    per-path sums of the estimates the batches tallied (blocks of 256, two batches)."""
     scene, settings, _ = _first_bounce_scene()
     held = []
-    real = BatchBuilder.finish
+    real = BatchBuilder.add_step
 
-    def spy(self, *a, **k):
-        held.append(self.abc.reshape(3, self.n_paths).copy())
-        return real(self, *a, **k)
+    def spy(self, target, k, s, delay, power, path):
+        held.append((None, path.copy(), power.copy(), delay.copy()))
+        return real(self, target, k, s, delay, power, path)
 
-    monkeypatch.setattr(BatchBuilder, "finish", spy)
+    monkeypatch.setattr(BatchBuilder, "add_step", spy)
     acc = Accumulator(scene.n_links, settings.tally, backward=True)
+    per_batch = []
     for b in range(2):
+        held.clear()
         acc.add(trace_batch(scene, WorkItem("backward", 0, (0,), b, 2048, 9), settings), b, 0)
-    blocks = np.concatenate([a.reshape(3, -1, 256).sum(axis=2) for a in held], axis=1).T  # (16, 3)
+        path, p, t = (np.concatenate([h[i] for h in held]) for i in (1, 2, 3))
+        per_batch.append(np.stack([np.bincount(path, w, 2048) for w in (p, p * t, p * t * t)]))
+    per_path = np.concatenate(per_batch, axis=1)  # (3, 4096): per-path sums a, b, c
+    blocks = per_path.reshape(3, -1, 256).sum(axis=2).T  # (16, 3)
     n, B = 4096, len(blocks)
     mean, cov = acc.moments()
     H = blocks.sum(0) / n
@@ -116,8 +121,8 @@ def test_accumulator_moments_come_from_block_sums(monkeypatch):
     np.testing.assert_allclose(mean[0], H, rtol=1e-12)
     np.testing.assert_allclose(cov[0], B / (B - 1) * dev.T @ dev / n**2, rtol=1e-9)
     # the per-path formula on the same paths differs (the check has the power to see it)
-    paths = np.concatenate(held, axis=1).T
-    assert not np.isclose(cov[0, 0, 0], paths[:, 0].var(ddof=1) / n, rtol=0.1, atol=0.0)
+    paths = per_path[0]
+    assert not np.isclose(cov[0, 0, 0], paths.var(ddof=1) / n, rtol=0.1, atol=0.0)
 
 
 @pytest.mark.parametrize("direction", ["forward", "backward"])
@@ -127,26 +132,29 @@ def test_first_bounce_with_blocks_and_honest_error_bars(direction, monkeypatch):
     would be if blocks were ignored) falls outside the accepted band: the check has the power to see it."""
     scene, settings, h1 = _first_bounce_scene()
     assert settings.qmc_block == 256
-    naive = []
-    real = BatchBuilder.finish
+    naive, held = [], []
+    real = BatchBuilder.add_step
 
-    def spy(self, *a, **k):
-        a0 = self.abc.reshape(3, self.n_paths)[0]
-        naive.append(a0.var(ddof=1) / self.n_paths)
-        return real(self, *a, **k)
+    def spy(self, target, k, s, delay, power, path):
+        held.append((path.copy(), power.copy()))
+        return real(self, target, k, s, delay, power, path)
 
-    monkeypatch.setattr(BatchBuilder, "finish", spy)
+    monkeypatch.setattr(BatchBuilder, "add_step", spy)
     n, runs = 8192, 160
     means, ses = np.empty(runs), np.empty(runs)
     for r in range(runs):
         acc = Accumulator(scene.n_links, settings.tally, backward=direction == "backward")
+        held.clear()
         acc.add(trace_batch(scene, WorkItem(direction, 0, (0,), r, n, 5), settings), 0, 0)
+        a0 = np.bincount(np.concatenate([h[0] for h in held]), np.concatenate([h[1] for h in held]), n)
+        naive.append(a0.var(ddof=1) / n)  # the per-path formula on this run's per-path H0 sums
         mean, cov = acc.moments()
         means[r], ses[r] = mean[0, 0], np.sqrt(cov[0, 0, 0])
     spread = means.std(ddof=1)
     ratio = spread / np.sqrt(np.mean(ses**2))  # 1 for honest error bars, +-6 % (1 sd) with 160 runs
     print(f"spread / reported: {ratio:.3f}")
     assert 0.75 < ratio < 1.3, ratio
+    assert min(naive) > 0
     naive_ratio = spread / np.sqrt(np.mean(naive))
     print(f"spread / per-path formula: {naive_ratio:.3f}")
     assert not 0.75 < naive_ratio < 1.3, naive_ratio
