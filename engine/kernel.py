@@ -382,10 +382,21 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
         # spectral scenes: rho_b / rho_c of the face, for the NEE from here and the reflected path
         ratio=ctx.spectra.reflect(sp.ratio, prims) if ctx.spectra is not None else sp.ratio,
     )
+    # after reflection K a path still matters if it can scatter (5) or host segment points (2-4)
+    K, S = settings.max_reflections, settings.max_scattering
+    if scene.medium is not None and settings.free_flight:
+        goes_on = (sp.k < K) | (sp.s < S)
+    elif scene.medium is not None and settings.segment_scatter:
+        goes_on = sp.k <= K
+    else:
+        goes_on = sp.k < K
+    last = not goes_on.any()  # every path at its last vertex (e.g. reflection K of algorithm 1): no reflection
     share = 0.5 if settings.mis else None
     if geo.material is None:  # every surface Lambertian
         rho = geo.reflectance.take(prims)
         ctx.connect(points, spawn, sp.weights, sp, normals=normals, reflectance=rho, mis=share)
+        if last:
+            return sp.gather(np.zeros(0, np.int64))
         sp.weights = sp.weights * rho
         u = ctx.bounce_uniforms(sp, rng)
         sp.directions = cosine_about_soa(normals, u[0], u[1])
@@ -396,18 +407,13 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
             connect_mirrors(
                 ctx, points, spawn, sp.weights * (share or 1.0), sp, normals=normals, brdf=(materials, arriving)
             )
+        if last:
+            return sp.gather(np.zeros(0, np.int64))
         u = ctx.bounce_uniforms(sp, rng)
         sp.directions, factor = materials.sample(arriving, normals, u[0], u[1])
         sp.weights = sp.weights * factor
-    # after reflection K a path still matters if it can scatter (5) or host segment points (2-4)
-    K, S = settings.max_reflections, settings.max_scattering
     alive = sp.weights > 0
-    if scene.medium is not None and settings.free_flight:
-        alive &= (sp.k < K) | (sp.s < S)
-    elif scene.medium is not None and settings.segment_scatter:
-        alive &= sp.k <= K
-    else:
-        alive &= sp.k < K
+    alive &= goes_on
     return _roulette(ctx, sp, alive, rng)
 
 
