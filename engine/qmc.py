@@ -104,14 +104,14 @@ def shifted_blocks(n_paths: int, block: int, rng: np.random.Generator) -> np.nda
     uniforms are. Path j of the batch is point j % block of block j // block."""
     n_blocks = n_paths // block
     shift = rng.integers(0, np.iinfo(np.uint64).max, size=(DIMENSIONS, n_blocks, 1), dtype=np.uint64, endpoint=True)
-    x = _points_64(block)[:, None, :] ^ shift  # (DIMENSIONS, blocks, block)
-    x >>= np.uint64(11)
-    return x.reshape(DIMENSIONS, n_paths).astype(np.float64) * 2.0**-53
+    shift >>= np.uint64(11)  # (p ^ s) >> 11 = (p >> 11) ^ (s >> 11): the top 53 bits of the shifted point
+    x = _points_53(block)[:, None, :] ^ shift  # (DIMENSIONS, blocks, block)
+    return np.multiply(x.reshape(DIMENSIONS, n_paths), 2.0**-53)  # exact: 53-bit integers to float64
 
 
 @cache
-def _points_64(m: int) -> np.ndarray:
-    """(DIMENSIONS, m) uint64: the Sobol points in the top 32 bits."""
-    x = sobol_points(m).T.astype(np.uint64) << np.uint64(32)
+def _points_53(m: int) -> np.ndarray:
+    """(DIMENSIONS, m) uint64: the top 53 bits of the Sobol points placed in the top 32 of 64 bits."""
+    x = (sobol_points(m).T.astype(np.uint64) << np.uint64(32)) >> np.uint64(11)
     x.flags.writeable = False
     return x
