@@ -158,8 +158,13 @@ def item_links(scene: Scene, item: WorkItem) -> np.ndarray:
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise dot product of (3, n) component arrays."""
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    """Row-wise dot product of (3, n) component arrays (a[0] b[0] + a[1] b[1] + a[2] b[2], two temporaries)."""
+    out = a[0] * b[0]
+    term = a[1] * b[1]
+    out += term
+    np.multiply(a[2], b[2], out=term)
+    out += term
+    return out
 
 
 def _dot_vector(a: np.ndarray, v: np.ndarray) -> np.ndarray:
