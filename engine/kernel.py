@@ -441,13 +441,18 @@ def _scattering_point_throughput(weights, transmittance, sigma_t, sigma_s, n_e):
 class _EquiangularFrames:
     """Algorithm 5, one step: the segments that may scatter once more (s < S, finite) and, per target,
     their equiangular frame, computed once and shared by the equiangular points and the collision's
-    density n_E."""
+    density n_E. `rows` None: every path's segment (the usual step; no gathers)."""
 
     def __init__(self, ctx: "_Context", paths: _Paths, t_seg):
-        self.rows = ((paths.s < ctx.settings.max_scattering) & np.isfinite(t_seg)).nonzero()[0]
-        self.end = t_seg.take(self.rows)
-        o, w = paths.origins.take(self.rows, axis=1), paths.directions.take(self.rows, axis=1)
+        ok = (paths.s < ctx.settings.max_scattering) & np.isfinite(t_seg)
+        self.rows = None if ok.all() else ok.nonzero()[0]
+        self.end = _rows(t_seg, self.rows)
+        o, w = _rows(paths.origins, self.rows), _rows(paths.directions, self.rows)
         self.frames = [EquiangularFrame(o, w, ctx.t_pos[:, j : j + 1], 0.0, self.end) for j in range(len(ctx.tgt))]
+
+    def segment_of(self, rows):
+        """The frame index of the segments of paths `rows` (each among `self.rows`)."""
+        return rows if self.rows is None else np.searchsorted(self.rows, rows)
 
 
 def _medium_next_events(
@@ -459,20 +464,30 @@ def _medium_next_events(
     with `equiangular_points`, that many stratified equiangular points per target (segments.py);
     all connect with the phase function at (k, s + 1), with the throughput of
     `_scattering_point_throughput`. The path itself continues from the collision only
-    (`_medium_collision`).
+    (`_medium_collision`). The equiangular points of all segments are drawn as one (n_eq, segments)
+    grid, stratum i of every segment in row i (broadcasting, no index arrays).
     """
     settings, medium = ctx.settings, ctx.scene.medium
     n_eq = settings.equiangular_points if eq is not None else 0
-    seg = np.repeat((eq.end > 0).nonzero()[0], n_eq) if eq is not None and n_eq else np.zeros(0, np.int64)
-    xi = np.tile(np.arange(n_eq), len(seg) // n_eq) / n_eq if n_eq else None  # stratum starts
     for j in range(len(ctx.tgt)):
         if eq is not None and n_eq:
             frame = eq.frames[j]
-            s_eq, n_e_eq = frame.sample_with_density(seg, xi + rng.random(len(seg)) / n_eq, eq.end.take(seg), n_eq)
-            rows = np.concatenate([eq.rows.take(seg), collision_rows])
+            n_seg = len(eq.end)
+            # stratum i of [0, 1): (i + u) / n_eq; the uniforms drawn segment by segment (the order of the
+            # equiangular points before the grid: the same numbers reach the same points)
+            xi = np.add(rng.random((n_seg, n_eq)).T, np.arange(n_eq)[:, None], out=np.empty((n_eq, n_seg)))
+            xi *= 1.0 / n_eq
+            s_eq, n_e_eq = frame.sample_with_density(None, xi, eq.end, n_eq)
+            seg_rows = np.arange(n_seg) if eq.rows is None else eq.rows
+            s_eq, n_e_eq, eq_rows = s_eq.ravel(), n_e_eq.ravel(), np.tile(seg_rows, n_eq)
+            empty = frame.span <= 0  # (a segment of length 0 has no equiangular points)
+            if empty.any():
+                keep = np.tile(~empty, n_eq).nonzero()[0]
+                s_eq, n_e_eq, eq_rows = s_eq.take(keep), n_e_eq.take(keep), eq_rows.take(keep)
+            rows = np.concatenate([eq_rows, collision_rows])
             s = np.concatenate([s_eq, t_col])
             # (a collision lies on a finite segment with s < S: its row is in eq.rows, sorted)
-            n_e = np.concatenate([n_e_eq, frame.density(t_col, n_eq, np.searchsorted(eq.rows, collision_rows))])
+            n_e = np.concatenate([n_e_eq, frame.density(t_col, n_eq, eq.segment_of(collision_rows))])
         else:
             rows, s, n_e = collision_rows, t_col, np.zeros(len(collision_rows))
         if len(rows) == 0:

@@ -85,47 +85,68 @@ class EquiangularFrame:
     """The equiangular geometry of segments o + s w, a <= s <= b, toward a target y, computed once.
 
     D = (y - o).w, h = |y - o - D w| (kept >= 1e-9 (1 + |D|): a target on the ray's line keeps a
-    finite pdf), theta_a, theta_b = atan((a - D) / h), atan((b - D) / h). `targets` may be (3, 1)
-    (one target for every segment). Sampling and densities reuse the frame (issue 13: the frame was
-    computed twice per point).
+    finite pdf), c = D - a, r2 = h^2 + c^2 (the squared distance from the start o + a w to y),
+    theta_a, theta_b = atan((a - D) / h), atan((b - D) / h). `targets` may be (3, 1) (one target for
+    every segment); `a` may be a number. Sampling and densities reuse the frame.
+
+    One arctangent per segment, none per point (issue 13): with tan theta_a = -c / h and L = b - a,
+        span = theta_b - theta_a = atan2(L h, r2 - c L)   (tan of a difference; span in [0, pi)),
+    and for theta = theta_a + phi (tan of a sum, t = tan phi)
+        s - a = h (tan theta - tan theta_a) = r2 t / (h + c t),
+    exact, and free of the cancellation of D + h tan(theta) near s = a (tests/engine/test_segments.py).
     """
 
-    __slots__ = ("D", "h", "theta_a", "theta_b")
+    __slots__ = ("a", "D", "c", "h", "h2", "r2", "span", "scale")
 
     def __init__(self, origins, directions, targets, a, b):
         v = targets - origins
         D = v[0] * directions[0] + v[1] * directions[1] + v[2] * directions[2]
         r = v - D * directions
         h = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
-        self.D, self.h = D, np.maximum(h, 1e-9 * (1.0 + np.abs(D)))
-        self.theta_a, self.theta_b = np.arctan2(a - D, self.h), np.arctan2(b - D, self.h)
+        h = np.maximum(h, 1e-9 * (1.0 + np.abs(D)), out=h)
+        zero_a = np.ndim(a) == 0 and a == 0.0
+        c, length = (D, b) if zero_a else (D - a, b - a)
+        h2 = h * h
+        r2 = c * c
+        r2 += h2
+        span = np.arctan2(length * h, r2 - c * length)
+        self.a, self.D, self.c, self.h, self.h2, self.r2, self.span = 0.0 if zero_a else a, D, c, h, h2, r2, span
+        #: h / span (0 where the segment is empty): n_E(s) = n_per scale / (h^2 + (s - D)^2)
+        self.scale = np.divide(h, span, out=np.zeros_like(span), where=span > 0)
+
+    @staticmethod
+    def _at(x, seg):
+        return x if seg is None or np.ndim(x) == 0 else x.take(seg)
 
     def sample(self, seg, xi):
-        """s of the points with stratified uniforms `xi` on the segments `seg` (not clipped)."""
-        D, h, ta, tb = self.D.take(seg), self.h.take(seg), self.theta_a.take(seg), self.theta_b.take(seg)
-        return D + h * np.tan(ta + xi * (tb - ta))
+        """s of the points with stratified uniforms `xi` on the segments `seg` (not clipped to [a, b]).
 
-    def sample_with_density(self, seg, xi, end, n_per: int):
-        """(s, n_E(s)) of points with stratified uniforms `xi` on the segments `seg`, s clipped to [0, end]
-        (`sample` and `density` with one gather of the frame)."""
-        D, h, ta, tb = self.D.take(seg), self.h.take(seg), self.theta_a.take(seg), self.theta_b.take(seg)
-        span = tb - ta
-        s = np.clip(D + h * np.tan(ta + xi * span), 0.0, end)
-        x = s - D
-        pdf = h / (np.where(span > 0, span, 1.0) * (h * h + x * x))
-        return s, np.where(span > 0, n_per * pdf, 0.0)
+        `seg` None: every segment, `xi` of shape (n,) or (k, n) (k points per segment, broadcast)."""
+        at = self._at
+        t = np.tan(xi * at(self.span, seg))
+        num = t * at(self.r2, seg)
+        t *= at(self.c, seg)
+        t += at(self.h, seg)
+        num /= t
+        a = at(self.a, seg)
+        if np.ndim(a) or a != 0.0:
+            num += a
+        return num
 
     def density(self, s, n_per: int, seg=None):
-        """n_E(s) = n_per h / ((theta_b - theta_a) (h^2 + (s - D)^2)) on the segments `seg` (all if None)."""
-        D, h, ta, tb = (
-            (self.D, self.h, self.theta_a, self.theta_b)
-            if seg is None
-            else (self.D.take(seg), self.h.take(seg), self.theta_a.take(seg), self.theta_b.take(seg))
-        )
-        span = tb - ta
-        x = s - D
-        pdf = h / (np.where(span > 0, span, 1.0) * (h * h + x * x))
-        return np.where(span > 0, n_per * pdf, 0.0)
+        """n_E(s) = n_per h / ((theta_b - theta_a) (h^2 + (s - D)^2)) on the segments `seg` (all if None;
+        `s` may then be (k, n): k points per segment)."""
+        at = self._at
+        x = s - at(self.D, seg)
+        x *= x
+        x += at(self.h2, seg)
+        return np.divide(n_per * at(self.scale, seg), x, out=x)
+
+    def sample_with_density(self, seg, xi, end, n_per: int):
+        """(s, n_E(s)) of points with stratified uniforms `xi` on the segments `seg` (None: all, `xi`
+        (k, n)), s clipped to [0, end] (the kernel's segments start at a = 0)."""
+        s = np.clip(self.sample(seg, xi), 0.0, end)
+        return s, self.density(s, n_per, seg)
 
 
 def equiangular(origins, directions, targets, a, b, n_per: int, u, frame: EquiangularFrame | None = None):
