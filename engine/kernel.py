@@ -433,9 +433,17 @@ def _scattering_point_throughput(weights, transmittance, sigma_t, sigma_s, n_e):
     the same formula for both (for the collision it is w x albedo x p_ff / (p_ff + n_E)); without
     equiangular points (n_E = 0) it is the collision's w x albedo.
     """
-    p_ff = sigma_t * transmittance
-    total = p_ff + n_e
-    return np.where(total > 0, weights * transmittance * sigma_s / np.where(total > 0, total, 1.0), 0.0)
+    total = sigma_t * transmittance  # p_ff
+    total += n_e
+    num = weights * transmittance
+    num *= sigma_s
+    # total = 0 only where T = 0 or sigma_t = 0 (then sigma_s = 0): num is 0 there and stays
+    # (a division masked by `where` is ~2.5x slower than a plain one: only when needed)
+    return (
+        np.divide(num, total, out=num)
+        if total.min(initial=1.0) > 0
+        else np.divide(num, total, out=num, where=total > 0)
+    )
 
 
 class _EquiangularFrames:
@@ -465,10 +473,15 @@ def _medium_next_events(
     all connect with the phase function at (k, s + 1), with the throughput of
     `_scattering_point_throughput`. The path itself continues from the collision only
     (`_medium_collision`). The equiangular points of all segments are drawn as one (n_eq, segments)
-    grid, stratum i of every segment in row i (broadcasting, no index arrays).
+    grid, stratum i of every segment in row i (broadcasting, no index arrays). Where
+    `_Context.connect_on_segments` applies (a medium the same everywhere, see there) the points connect
+    through their segment's frame without gathering the paths; else through `connect`.
     """
     settings, medium = ctx.settings, ctx.scene.medium
     n_eq = settings.equiangular_points if eq is not None else 0
+    uniform = medium.uniform_coefficients  # (sigma_t, sigma_s) of a medium the same everywhere, else None
+    if uniform is not None and uniform[1] <= 0:  # no point scatters
+        return
     for j in range(len(ctx.tgt)):
         if eq is not None and n_eq:
             frame = eq.frames[j]
@@ -477,10 +490,12 @@ def _medium_next_events(
             # equiangular points before the grid: the same numbers reach the same points)
             xi = np.add(rng.random((n_seg, n_eq)).T, np.arange(n_eq)[:, None], out=np.empty((n_eq, n_seg)))
             xi *= 1.0 / n_eq
-            s_eq, n_e_eq = frame.sample_with_density(None, xi, eq.end, n_eq)
-            seg_rows = np.arange(n_seg) if eq.rows is None else eq.rows
-            s_eq, n_e_eq, eq_rows = s_eq.ravel(), n_e_eq.ravel(), np.tile(seg_rows, n_eq)
+            s_eq = np.clip(frame.sample(None, xi), 0.0, eq.end)
             empty = frame.span <= 0  # (a segment of length 0 has no equiangular points)
+            if not empty.any() and ctx.connect_on_segments(j, paths, eq, s_eq, collision_rows, t_col):
+                continue
+            seg_rows = np.arange(n_seg) if eq.rows is None else eq.rows
+            s_eq, n_e_eq, eq_rows = s_eq.ravel(), frame.density(s_eq, n_eq).ravel(), np.tile(seg_rows, n_eq)
             if empty.any():
                 keep = np.tile(~empty, n_eq).nonzero()[0]
                 s_eq, n_e_eq, eq_rows = s_eq.take(keep), n_e_eq.take(keep), eq_rows.take(keep)
@@ -494,10 +509,7 @@ def _medium_next_events(
             continue
         pp = paths.gather(rows)
         points = pp.origins + s * pp.directions
-        uniform = medium.uniform_coefficients  # (sigma_t, sigma_s) of a medium the same everywhere, else None
-        if uniform is not None:  # every point scatters (or none)
-            if uniform[1] <= 0:
-                continue
+        if uniform is not None:  # every point scatters
             sigma_t, sigma_s = uniform
             inside = None
         else:
@@ -783,6 +795,110 @@ class _Context:
                     ratio = ratio * self.spectra.phase_ratio(_dot(_rows(in_dirs, vertex), out_dir))
             length *= 1.0 / SPEED_OF_LIGHT
             self.record(column, _rows(paths.k, vertex), s_order, length, f, _rows(paths.path, vertex), ratio)
+
+    def connect_on_segments(self, j: int, paths: _Paths, eq: _EquiangularFrames, s_eq, collision_rows, t_col) -> bool:
+        """The medium branch of `connect` for algorithm 5's scattering points, computed on their segments.
+
+        The points lie at distances s along the segments o + s w of `eq` (equiangular points `s_eq`
+        (n_eq, segments), collisions of the paths `collision_rows` at t_col); toward target j (y, normal
+        n_y) the segment's frame gives, with x = s - D (|w| = 1),
+            d^2 = h^2 + x^2   (also the denominator of the equiangular density n_E(s)),
+            cos_phase = w.(y - p) / d = -x / d,   cos_target = n_y.(p - y) / d = (s n_y.w - n_y.v) / d,
+        so nothing of size (3, points) is formed and no path field is gathered for the equiangular points.
+        The estimate is `connect`'s, with the throughput of `_scattering_point_throughput`:
+            dH = w T(o -> p) sigma_s / (p_ff + n_E) x p(cos_phase) R_y(cos_target) / d^2 T(p -> y) x share,
+        share = medium_nee.connection_weight's a / (a + L rho_n), a = F rho_1 (`_Paths.first`, `first_rho`)
+        for paths of depth >= 2 (two-sided runs). Applies to a medium the same everywhere, grey scenes,
+        every target visible from every point (`Scene.all_visible`), targets whose response needs only the
+        cosine, and in two-sided runs paths of depth k + s >= 2 (the first vertex's factor and the third
+        strategy of the first steps go through `connect`); returns False (nothing done) otherwise.
+        The equiangular points and the collisions are tallied as two groups.
+        """
+        scene, settings = self.scene, self.settings
+        medium = scene.medium
+        uniform = medium.uniform_coefficients
+        if uniform is None or self.spectra is not None or not scene.all_visible or self.t_directional:
+            return False
+        rows = eq.rows
+        k, s_order = _rows(paths.k, rows), _rows(paths.s, rows)
+        share = settings.both_sides
+        if share and len(k) and int((k + s_order).min()) < 2:
+            return False
+        sigma_t, sigma_s = uniform
+        frame = eq.frames[j]
+        o, w = _rows(paths.origins, rows), _rows(paths.directions, rows)
+        y, n_y = self.t_pos[:, j], self.t_nrm[:, j]
+        # per segment: n_y.v = n_y.y - n_y.o, n_y.w
+        n_v = o[0] * n_y[0]
+        n_v += o[1] * n_y[1]
+        n_v += o[2] * n_y[2]
+        np.subtract(float(n_y @ y), n_v, out=n_v)
+        n_w = w[0] * n_y[0]
+        n_w += w[1] * n_y[1]
+        n_w += w[2] * n_y[2]
+        seg = {
+            "D": frame.D,
+            "h2": frame.h2,
+            "n_e": frame.scale * settings.equiangular_points,
+            "n_v": n_v,
+            "n_w": n_w,
+            "w": _rows(paths.weights, rows),
+            "length": _rows(paths.lengths, rows),
+        }
+        if share:
+            seg["a"] = _rows(paths.first, rows) * _rows(paths.first_rho, rows)
+            a_positive = len(seg["a"]) == 0 or seg["a"].min() > 0  # then a + b > 0: a plain division below
+        t_id, inv_w = int(self.tgt[j]), 1.0 / self.t_total[j]
+        phase, targets = scene.phase, self.targets
+        n_eq = len(s_eq)
+        per_path = (k, s_order + 1, _rows(paths.path, rows))
+        col = eq.segment_of(collision_rows)
+        for s, at in ((s_eq, None), (t_col, col)):
+            if s.size == 0:
+                continue
+            g = seg if at is None else {key: v.take(at) for key, v in seg.items()}
+            x = s - g["D"]
+            d2 = x * x
+            d2 += g["h2"]
+            d = np.sqrt(d2)
+            inv_d = np.divide(1.0, d)
+            np.multiply(x, inv_d, out=x)
+            p = phase.eval(np.negative(x, out=x))  # cos_phase
+            cos_t = s * g["n_w"]
+            cos_t -= g["n_v"]
+            cos_t *= inv_d
+            resp = targets.response_one(t_id, cos_t)
+            t_o = np.multiply(s, -sigma_t)
+            np.exp(t_o, out=t_o)  # T(o -> p) = medium.transmittance
+            n_e = np.divide(g["n_e"], d2)  # the equiangular density n_E(s) (segments.EquiangularFrame.density)
+            power = _scattering_point_throughput(g["w"], t_o, sigma_t, sigma_s, n_e)
+            t_c = np.multiply(d, -sigma_t, out=t_o)
+            np.exp(t_c, out=t_c)  # T(p -> y)
+            resp *= p
+            resp *= t_c
+            resp /= d2  # L rho_n W_y: R_y p T(p -> y) / d^2
+            power *= resp
+            if share:  # medium_nee.connection_weight for depth >= 2: a / (a + b), b = R_y / W_y T / d^2 p
+                a = g["a"]
+                resp *= inv_w
+                resp += a
+                if a_positive:
+                    np.divide(a, resp, out=resp)
+                else:
+                    np.divide(a, resp, out=resp, where=resp > 0)  # (a = b = 0: power is 0)
+                power *= resp
+            delay = np.add(s, g["length"])
+            delay += d
+            delay *= 1.0 / SPEED_OF_LIGHT
+            power, delay = power.reshape(-1), delay.reshape(-1)
+            fields = tuple(np.concatenate((v,) * n_eq) if at is None else v.take(at) for v in per_path)
+            n_points = len(power)
+            live = None if power.min() > 0 else power.nonzero()[0]
+            if live is not None:
+                power, delay, fields = power.take(live), delay.take(live), tuple(v.take(live) for v in fields)
+            medium.evaluations += n_points + len(power)  # o -> p of every point, p -> y of those that count
+            self.record(np.full(len(power), j), fields[0], fields[1], delay, power, fields[2])
+        return True
 
     def record(self, target, k, s, delay, power, path, ratio=None) -> None:
         """One group of estimates: local target index, cell (k, s), delay [s], power [W/W], path in the batch,

@@ -112,7 +112,11 @@ class EquiangularFrame:
         span = np.arctan2(length * h, r2 - c * length)
         self.a, self.D, self.c, self.h, self.h2, self.r2, self.span = 0.0 if zero_a else a, D, c, h, h2, r2, span
         #: h / span (0 where the segment is empty): n_E(s) = n_per scale / (h^2 + (s - D)^2)
-        self.scale = np.divide(h, span, out=np.zeros_like(span), where=span > 0)
+        self.scale = (
+            np.divide(h, span)
+            if span.min(initial=1.0) > 0
+            else np.divide(h, span, out=np.zeros_like(span), where=span > 0)
+        )
 
     @staticmethod
     def _at(x, seg):

@@ -1,0 +1,77 @@
+"""Algorithm 5's next-event estimates from scattering points: `_Context.connect_on_segments` (computed on the
+segments' equiangular frames, no gathers) against the general `_Context.connect` on the same points.
+
+Both draw the same random numbers, so a batch traced either way must give the same tallies to rounding; the
+connection itself (measurement equation, balance heuristic of `_scattering_point_throughput`, the share of
+medium_nee.connection_weight) is thus checked estimate by estimate against the general code, whose statistics
+the other tests check against references."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from owcsim.engine import kernel
+from owcsim.engine.kernel import WorkItem, trace_batch
+from owcsim.engine.scene import build_scene
+from owcsim.engine.simulate import kernel_settings
+from owcsim.schemas import SceneSpec
+from tests.scenes import room_doc
+
+REAL = kernel._Context.connect_on_segments
+SMOKE_HG = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.3, "phase": {"type": "hg", "g": 0.6}}
+
+
+def _trace(doc, direction, both, fused: bool, monkeypatch):
+    spec = SceneSpec.model_validate(doc)
+    scene = build_scene(spec)
+    settings = dataclasses.replace(kernel_settings(spec, scene, both_devices=both), qmc_block=1)
+    used = []
+
+    def spy(self, *args):
+        done = REAL(self, *args) if fused else False
+        used.append(done)
+        return done
+
+    monkeypatch.setattr(kernel._Context, "connect_on_segments", spy)
+    tally = trace_batch(scene, WorkItem(direction, 0, (0,), 0, 1024, 5), settings)
+    evaluations = scene.medium.evaluations
+    return tally, evaluations, used
+
+
+@pytest.mark.parametrize("both", [True, False], ids=["both devices", "one side"])
+@pytest.mark.parametrize("direction", ["forward", "backward"])
+def test_segment_frame_connections_equal_the_general_ones(direction, both, monkeypatch):
+    doc = room_doc(medium=SMOKE_HG, algorithm=5, max_reflections=5, max_scattering=4, paths=1024)
+    fused, ev_fused, used = _trace(doc, direction, both, True, monkeypatch)
+    plain, ev_plain, _ = _trace(doc, direction, both, False, monkeypatch)
+    assert sum(used) >= 5  # the frame connections served most steps ...
+    assert not all(used) if both else all(used)  # ... and, from both devices, the first two went through connect
+    np.testing.assert_allclose(fused.s1, plain.s1, rtol=1e-11)
+    np.testing.assert_allclose(fused.s2, plain.s2, rtol=1e-11)
+    np.testing.assert_allclose(fused.order_sum, plain.order_sum, rtol=1e-11, atol=1e-11 * plain.order_sum.max())
+    np.testing.assert_allclose(fused.order_sumsq, plain.order_sumsq, rtol=1e-10, atol=1e-10 * plain.order_sumsq.max())
+    np.testing.assert_allclose(fused.cir, plain.cir, rtol=1e-10, atol=1e-11 * plain.cir.max())
+    assert plain.s1[0, 0] > 0 and (plain.order_sum[0, :, 1:] > 0).sum() >= 10  # scattering orders reached
+    assert ev_fused == ev_plain  # the medium's evaluation count is the same
+
+
+def test_the_comparison_has_power(monkeypatch):
+    """A frame connection off by 1 % (here: its phase function value) is seen by the comparison above."""
+    doc = room_doc(medium=SMOKE_HG, algorithm=5, max_reflections=5, max_scattering=4, paths=1024)
+    plain, *_ = _trace(doc, "forward", True, False, monkeypatch)
+
+    def biased(self, *args):
+        phase = self.scene.phase
+        phase.eval = lambda c, real=phase.eval: 1.01 * real(c)  # only while the frame path runs
+        try:
+            return REAL(self, *args)
+        finally:
+            del phase.eval
+
+    monkeypatch.setattr(kernel._Context, "connect_on_segments", biased)
+    spec = SceneSpec.model_validate(doc)
+    scene = build_scene(spec)
+    settings = dataclasses.replace(kernel_settings(spec, scene, both_devices=True), qmc_block=1)
+    off = trace_batch(scene, WorkItem("forward", 0, (0,), 0, 1024, 5), settings)
+    assert not np.allclose(off.s1[0, 0], plain.s1[0, 0], rtol=1e-3)
