@@ -332,3 +332,51 @@ def test_phase_from_spec():
 def test_construction_errors(make, exc, match):
     with pytest.raises(exc, match=match):
         make()
+
+
+# ----------------------------------------------------------------------------------------
+# The in-place forms of HG (issue 13): eval, the sine from the two sides, the azimuth from tan(psi).
+@pytest.mark.parametrize("g", [0.5, -0.7, 0.95, 0.999999])
+def test_hg_eval_matches_the_textbook_formula(g):
+    """p = (1 - g^2) / (4 pi (1 + g^2 - 2 g c)^(3/2)) (Henyey & Greenstein 1941), in extended precision; a
+    cosine rounded past +-1 gives p(+-1)."""
+    c = np.concatenate([seeded_rng().uniform(-1, 1, 2000), [-1.0, 0.0, 1.0, np.nextafter(1, 0)]])
+    L = np.longdouble
+    gl, cl = L(g), c.astype(L)
+    ref = (1 - gl * gl) / (4 * np.pi * (1 + gl * gl - 2 * gl * cl) ** L(1.5))
+    rel = np.abs(ph.HenyeyGreenstein(g).eval(c) / ref - 1).astype(float)
+    assert rel.max() < (1e-13 if abs(g) < 0.99 else 1e-8)  # (1 + g^2 - 2 g c rounds in the reference near the peak)
+    f = ph.HenyeyGreenstein(g)
+    for edge in (1.0, -1.0):  # within what one rounding of the cosine changes anyway
+        p_past, p_edge, p_in = f.eval(np.array([np.nextafter(edge, 2 * edge), edge, np.nextafter(edge, 0)]))
+        assert np.isfinite(p_past) and abs(p_past / p_edge - 1) <= 2 * abs(p_in / p_edge - 1) + 1e-13
+    assert f.eval(0.3) == pytest.approx(f.eval(np.array([0.3]))[0], rel=0)  # scalars
+
+
+@pytest.mark.parametrize("g", [0.0, 0.5, -0.7, 0.999])
+def test_hg_sine_from_the_two_sides(g):
+    """The sine `sample` uses, sqrt((1 - cos)(1 + cos)) from the two sides of sample_cos, agrees with the sine of
+    the sampled cosine (extended precision) and with cos^2 + sin^2 = 1."""
+    u = np.concatenate([seeded_rng().random(5000), [0.0, 0.5, np.nextafter(1, 0)]])
+    f = ph.HenyeyGreenstein(g)
+    c, s = f._sample_cos_sin(u)
+    np.testing.assert_array_equal(c, f.sample_cos(u))
+    cl = c.astype(np.longdouble)
+    ref = np.sqrt((1 - cl) * (1 + cl))
+    np.testing.assert_allclose(s, ref.astype(float), rtol=1e-7, atol=3e-8)  # (c is rounded: ~1e-16 / sin)
+    far = np.abs(c) < 0.99
+    np.testing.assert_allclose(s[far], ref[far].astype(float), rtol=1e-14)
+    np.testing.assert_allclose(c * c + s * s, 1.0, atol=4e-16)
+
+
+def test_sample_azimuth_quadrants():
+    """phi = 2 pi u2 from tan(pi u2 - pi / 2): about d = z (frame s = x, t = y), u2 = 0, 1/4, 1/2, 3/4 give
+    the directions +x, +y, -x, -y of the tangent plane, exactly to rounding."""
+    f = ph.HenyeyGreenstein(0.3)
+    u1 = np.full(4, 0.4)
+    c = f.sample_cos(u1)
+    sin_t = np.sqrt(1 - c * c)
+    out = f.sample(np.tile([[0.0], [0.0], [1.0]], 4), u1, np.array([0.0, 0.25, 0.5, 0.75]))
+    want = np.array([[1, 0], [0, 1], [-1, 0], [0, -1]], float).T * sin_t
+    np.testing.assert_allclose(out[:2], want, atol=1e-15)
+    np.testing.assert_allclose(out[2], c, atol=1e-15)
