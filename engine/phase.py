@@ -19,6 +19,7 @@ from pydantic import TypeAdapter
 from owcsim.schemas.medium import PhaseSpec
 
 from .errors import SceneError
+from .sampling import azimuth
 
 __all__ = [
     "PhaseFunction",
@@ -85,20 +86,10 @@ class PhaseFunction:
         c, sin_t = self._sample_cos_sin(u1)
         if np.shape(c) != d.shape[1:]:
             c, sin_t = np.broadcast_to(c, d.shape[1:]), np.broadcast_to(sin_t, d.shape[1:])
-        # azimuth phi = 2 pi u2 = pi + 2 psi, psi = pi u2 - pi / 2 in [-pi/2, pi/2): with t = tan psi (numpy's
-        # float64 tan is vectorized, its cos and sin are not: ~10x slower),
-        #     cos phi = (t^2 - 1) / (t^2 + 1),   sin phi = -2 t / (t^2 + 1)
-        # (tan of the half angle; exact to rounding, t^2 <= 2.7e32 at u2 = 0)
-        t = np.multiply(_f64(u2), np.pi)
-        t -= 0.5 * np.pi
-        np.tan(t, out=t)
-        t2 = t * t
-        k = t2 + 1.0
-        np.divide(sin_t, k, out=k)  # sin(theta) / (t^2 + 1)
-        t2 -= 1.0
-        along_s = np.multiply(k, t2, out=t2)  # sin(theta) cos(phi)
-        k *= t
-        along_t = np.multiply(k, -2.0, out=k)  # sin(theta) sin(phi)
+        # azimuth phi = 2 pi u2 (sampling.azimuth: cos and sin from one vectorized tangent)
+        cos_phi, sin_phi = azimuth(np.broadcast_to(_f64(u2), d.shape[1:]))
+        along_s = np.multiply(sin_t, cos_phi, out=cos_phi)  # sin(theta) cos(phi)
+        along_t = np.multiply(sin_t, sin_phi, out=sin_phi)  # sin(theta) sin(phi)
         x, y, z = d
         sgn = np.copysign(1.0, z)
         a = sgn + z
