@@ -806,13 +806,17 @@ class _Context:
             cos_phase = w.(y - p) / d = -x / d,   cos_target = n_y.(p - y) / d = (s n_y.w - n_y.v) / d,
         so nothing of size (3, points) is formed and no path field is gathered for the equiangular points.
         The estimate is `connect`'s, with the throughput of `_scattering_point_throughput`:
-            dH = w T(o -> p) sigma_s / (p_ff + n_E) x p(cos_phase) R_y(cos_target) / d^2 T(p -> y) x share,
-        share = medium_nee.connection_weight's a / (a + L rho_n), a = F rho_1 (`_Paths.first`, `first_rho`)
-        for paths of depth >= 2 (two-sided runs). Applies to a medium the same everywhere, grey scenes,
-        every target visible from every point (`Scene.all_visible`), targets whose response needs only the
-        cosine, and in two-sided runs paths of depth k + s >= 2 (the first vertex's factor and the third
-        strategy of the first steps go through `connect`); returns False (nothing done) otherwise.
-        The equiangular points and the collisions are tallied as two groups.
+            dH = w T(o -> p) sigma_s / (p_ff + n_E) x p(cos_phase) L W_y x share,   L = R_y / W_y T(p -> y) / d^2,
+        and in two-sided runs the share of medium_nee.connection_weight, by the depth k + s of the paths:
+        - 0 (the point is the path's first vertex): F / (F + L), F = R_src / W_src T(o -> p) / r^2
+          (medium_nee.first_medium_factor; r, cos at the source from the segment: r^2 = |u + s w|^2,
+          u = o - source);
+        - >= 1: a / (a + L p + F L / g), a = F rho_1 (`_Paths.first`, `first_rho`), the last term only for
+          Tx -> x_1 -> x_2 -> Rx (k = 0, s = 1 before the point; g = T(o -> p) / s^2, the third strategy).
+        Applies to a medium the same everywhere, grey scenes, every target visible from every point
+        (`Scene.all_visible`), devices whose response needs only the cosine, and paths of one depth class
+        (algorithm 5's steps: all paths of a step have depth = step); returns False (nothing done)
+        otherwise. The equiangular points and the collisions are tallied as two groups.
         """
         scene, settings = self.scene, self.settings
         medium = scene.medium
@@ -822,8 +826,14 @@ class _Context:
         rows = eq.rows
         k, s_order = _rows(paths.k, rows), _rows(paths.s, rows)
         share = settings.both_sides
-        if share and len(k) and int((k + s_order).min()) < 2:
-            return False
+        mode = "deep"  # depth >= 2 (the usual step), "first" (depth 0), "second" (depth 1)
+        if share and len(k):
+            depth = k + s_order
+            lo, hi = int(depth.min()), int(depth.max())
+            if lo < 2:
+                if hi != lo:
+                    return False
+                mode = "first" if lo == 0 else "second"
         sigma_t, sigma_s = uniform
         frame = eq.frames[j]
         o, w = _rows(paths.origins, rows), _rows(paths.directions, rows)
@@ -845,9 +855,21 @@ class _Context:
             "w": _rows(paths.weights, rows),
             "length": _rows(paths.lengths, rows),
         }
-        if share:
+        if mode == "first":  # the source's factor at the points: u = o - source, per segment |u|^2, u.w, n.u, n.w
+            src, _ = device_sets(scene, self.item.direction)
+            i = self.item.source
+            if src.directional:
+                return False
+            u = o - src.positions[i][:, None]
+            n_src = src.normals[i]
+            seg["uu"] = _dot(u, u)
+            seg["uw2"] = 2.0 * _dot(u, w)
+            seg["nu"] = u[0] * n_src[0] + u[1] * n_src[1] + u[2] * n_src[2]
+            seg["nw"] = w[0] * n_src[0] + w[1] * n_src[1] + w[2] * n_src[2]
+        elif share:
             seg["a"] = _rows(paths.first, rows) * _rows(paths.first_rho, rows)
-            a_positive = len(seg["a"]) == 0 or seg["a"].min() > 0  # then a + b > 0: a plain division below
+            if mode == "second":  # Tx -> x_1 -> x_2 -> Rx: F on those segments, 0 on the others
+                seg["F3"] = np.where((k == 0) & (s_order == 1), _rows(paths.first, rows), 0.0)
         t_id, inv_w = int(self.tgt[j]), 1.0 / self.t_total[j]
         phase, targets = scene.phase, self.targets
         n_eq = len(s_eq)
@@ -872,20 +894,43 @@ class _Context:
             np.exp(t_o, out=t_o)  # T(o -> p) = medium.transmittance
             n_e = np.divide(g["n_e"], d2)  # the equiangular density n_E(s) (segments.EquiangularFrame.density)
             power = _scattering_point_throughput(g["w"], t_o, sigma_t, sigma_s, n_e)
-            t_c = np.multiply(d, -sigma_t, out=t_o)
+            if mode == "first":
+                r2 = s + g["uw2"]
+                r2 *= s
+                r2 += g["uu"]  # |u + s w|^2
+                cos_src = s * g["nw"]
+                cos_src += g["nu"]
+                cos_src /= np.sqrt(r2)
+                first = src.response_one(i, cos_src)
+                first *= t_o
+                first /= r2
+                first *= 1.0 / src.total_response(i)  # F
+            t_c = np.multiply(d, -sigma_t, out=t_o if mode != "second" else None)
             np.exp(t_c, out=t_c)  # T(p -> y)
-            resp *= p
             resp *= t_c
-            resp /= d2  # L rho_n W_y: R_y p T(p -> y) / d^2
+            resp /= d2  # L W_y = R_y T(p -> y) / d^2
             power *= resp
-            if share:  # medium_nee.connection_weight for depth >= 2: a / (a + b), b = R_y / W_y T / d^2 p
-                a = g["a"]
-                resp *= inv_w
-                resp += a
-                if a_positive:
-                    np.divide(a, resp, out=resp)
+            power *= p
+            if share:  # medium_nee.connection_weight
+                resp *= inv_w  # L
+                if mode == "first":  # F / (F + L)
+                    resp += first
+                    num = first
+                else:  # a / (a + L p (+ F L / g))
+                    num = g["a"]
+                    if mode == "second":
+                        extra = resp * g["F3"]
+                        extra *= s
+                        extra *= s
+                        np.divide(extra, t_o, out=extra, where=extra > 0)  # F L s^2 / T(o -> p) (0 elsewhere)
+                    resp *= p
+                    resp += num
+                    if mode == "second":
+                        resp += extra
+                if num.min(initial=1.0) > 0:  # then the denominator is > 0
+                    np.divide(num, resp, out=resp)
                 else:
-                    np.divide(a, resp, out=resp, where=resp > 0)  # (a = b = 0: power is 0)
+                    np.divide(num, resp, out=resp, where=resp > 0)  # (all terms 0: power is 0)
                 power *= resp
             delay = np.add(s, g["length"])
             delay += d
