@@ -39,9 +39,11 @@ def _trace(doc, direction, both, fused: bool, monkeypatch):
     return tally, evaluations, used
 
 
+@pytest.mark.parametrize("small_step", [1 << 20, -1], ids=["one group", "two groups"])
 @pytest.mark.parametrize("both", [True, False], ids=["both devices", "one side"])
 @pytest.mark.parametrize("direction", ["forward", "backward"])
-def test_segment_frame_connections_equal_the_general_ones(direction, both, monkeypatch):
+def test_segment_frame_connections_equal_the_general_ones(direction, both, small_step, monkeypatch):
+    monkeypatch.setattr(kernel, "SMALL_STEP", small_step)  # the points of a step as one group or two
     doc = room_doc(medium=SMOKE_HG, algorithm=5, max_reflections=5, max_scattering=4, paths=1024)
     fused, ev_fused, used = _trace(doc, direction, both, True, monkeypatch)
     plain, ev_plain, _ = _trace(doc, direction, both, False, monkeypatch)
