@@ -46,7 +46,10 @@ free flight with its next-event estimates (`_medium_next_events`, whose balance 
 (`_medium_collision`), roulette (`_roulette`, inside each event's one compaction). Every
 next-event estimate toward a target goes through `_Context.connect`: the measurement equation
 in one place (it evaluates the BRDF or the phase function itself; callers pass the path
-throughput and their MIS weight). Path state is a structure of arrays (`_Paths`).
+throughput and their MIS weight); algorithm 5's scattering points in a medium the same everywhere
+take its medium branch on their segments' equiangular frames (`_Context.connect_on_segments`, the
+same equation without gathering the paths; tests/engine/test_medium_next_events.py holds the two
+equal). Path state is a structure of arrays (`_Paths`).
 
 Every loop here is over steps of the paths; all work inside is array operations.
 """
@@ -818,7 +821,8 @@ class _Context:
         Applies to a medium the same everywhere, grey scenes, every target visible from every point
         (`Scene.all_visible`), devices whose response needs only the cosine, and paths of one depth class
         (algorithm 5's steps: all paths of a step have depth = step); returns False (nothing done)
-        otherwise. The equiangular points and the collisions are tallied as two groups.
+        otherwise. The equiangular points and the collisions are tallied as two groups (the grid broadcasting
+        over the segments, the collisions gathering theirs), or in steps of at most SMALL_STEP segments as one.
         """
         scene, settings = self.scene, self.settings
         medium = scene.medium
@@ -877,8 +881,8 @@ class _Context:
         n_eq = len(s_eq)
         per_path = (k, s_order + 1, _rows(paths.path, rows))
         col = eq.segment_of(collision_rows)
-        # Two groups (the grid broadcasts over the segments, the collisions gather theirs), or for a few
-        # segments one (every per-segment value expanded: half the numpy calls, whose fixed cost dominates)
+        # one group for a few segments: every per-segment value expanded, half the numpy calls (whose fixed
+        # cost dominates small steps)
         if len(k) <= SMALL_STEP and len(col):
 
             def expand(v):

@@ -146,12 +146,6 @@ class EquiangularFrame:
         x += at(self.h2, seg)
         return np.divide(n_per * at(self.scale, seg), x, out=x)
 
-    def sample_with_density(self, seg, xi, end, n_per: int):
-        """(s, n_E(s)) of points with stratified uniforms `xi` on the segments `seg` (None: all, `xi`
-        (k, n)), s clipped to [0, end] (the kernel's segments start at a = 0)."""
-        s = np.clip(self.sample(seg, xi), 0.0, end)
-        return s, self.density(s, n_per, seg)
-
 
 def equiangular(origins, directions, targets, a, b, n_per: int, u, frame: EquiangularFrame | None = None):
     """`n_per` stratified equiangular points per segment [a, b] with respect to its target.
