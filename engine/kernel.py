@@ -888,8 +888,10 @@ class _Context:
             def expand(v):
                 return np.concatenate((v,) * n_eq + (v.take(col),))
 
-            blocks = [(np.concatenate((s_eq.reshape(-1), t_col)), {key: expand(v) for key, v in seg.items()})]
-            fields_of = [tuple(expand(v) for v in per_path)]
+            blocks: list[tuple[np.ndarray, dict | None]] = [
+                (np.concatenate((s_eq.reshape(-1), t_col)), {key: expand(v) for key, v in seg.items()})
+            ]
+            fields_of: list[tuple | None] = [tuple(expand(v) for v in per_path)]
         else:
             blocks = [(s_eq, seg), (t_col, None)]
             fields_of = [None, None]
