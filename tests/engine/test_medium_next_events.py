@@ -22,7 +22,7 @@ REAL = kernel._Context.connect_on_segments
 SMOKE_HG = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.3, "phase": {"type": "hg", "g": 0.6}}
 
 
-def _trace(doc, direction, both, fused: bool, monkeypatch):
+def _trace(doc, direction, both, fused: bool, monkeypatch, targets=(0,)):
     spec = SceneSpec.model_validate(doc)
     scene = build_scene(spec)
     settings = dataclasses.replace(kernel_settings(spec, scene, both_devices=both), qmc_block=1)
@@ -34,7 +34,7 @@ def _trace(doc, direction, both, fused: bool, monkeypatch):
         return done
 
     monkeypatch.setattr(kernel._Context, "connect_on_segments", spy)
-    tally = trace_batch(scene, WorkItem(direction, 0, (0,), 0, 1024, 5), settings)
+    tally = trace_batch(scene, WorkItem(direction, 0, targets, 0, 1024, 5), settings)
     evaluations = scene.medium.evaluations
     return tally, evaluations, used
 
@@ -55,6 +55,24 @@ def test_segment_frame_connections_equal_the_general_ones(direction, both, small
     np.testing.assert_allclose(fused.cir, plain.cir, rtol=1e-10, atol=1e-11 * plain.cir.max())
     assert plain.s1[0, 0] > 0 and (plain.order_sum[0, :, 1:] > 0).sum() >= 10  # scattering orders reached
     assert ev_fused == ev_plain  # the medium's evaluation count is the same
+
+
+@pytest.mark.parametrize("direction", ["forward", "backward"])
+def test_narrow_fov_lambertian_order_and_two_receivers(direction, monkeypatch):
+    """Receivers with FOV 50 deg (estimates of zero power dropped), a Lambertian order 3 transmitter, and in
+    forward runs two receivers (the loop over targets): the same tallies as the general connection."""
+    monkeypatch.setattr(kernel, "SMALL_STEP", -1)
+    doc = room_doc(medium=SMOKE_HG, algorithm=5, max_reflections=4, max_scattering=3, paths=1024, m=3.0, fov_deg=50)
+    doc["receivers"].append(
+        {"id": "rx2", "position": [4.0, 2.0, 1.0], "normal": [-1, 0, 0], "area": 1e-4, "fov_deg": 50}
+    )
+    targets = (0, 1) if direction == "forward" else (0,)
+    fused, ev_fused, used = _trace(doc, direction, True, True, monkeypatch, targets)
+    plain, ev_plain, _ = _trace(doc, direction, True, False, monkeypatch, targets)
+    assert len(used) >= 5 and all(used)
+    np.testing.assert_allclose(fused.s1, plain.s1, rtol=1e-11)
+    np.testing.assert_allclose(fused.order_sum, plain.order_sum, rtol=1e-11, atol=1e-11 * plain.order_sum.max())
+    assert (plain.s1[:, 0] > 0).all() and ev_fused == ev_plain
 
 
 def test_the_comparison_has_power(monkeypatch):
