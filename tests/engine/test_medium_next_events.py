@@ -59,13 +59,15 @@ def test_segment_frame_connections_equal_the_general_ones(direction, both, small
 
 @pytest.mark.parametrize("direction", ["forward", "backward"])
 def test_narrow_fov_lambertian_order_and_two_receivers(direction, monkeypatch):
-    """Receivers with FOV 50 deg (estimates of zero power dropped), a Lambertian order 3 transmitter, and in
-    forward runs two receivers (the loop over targets): the same tallies as the general connection."""
+    """Receivers with FOV 50 deg (estimates of zero power dropped), a Lambertian order 3 transmitter, three
+    equiangular points per segment, and in forward runs two receivers (the loop over targets): the same
+    tallies as the general connection."""
     monkeypatch.setattr(kernel, "SMALL_STEP", -1)
     doc = room_doc(medium=SMOKE_HG, algorithm=5, max_reflections=4, max_scattering=3, paths=1024, m=3.0, fov_deg=50)
     doc["receivers"].append(
         {"id": "rx2", "position": [4.0, 2.0, 1.0], "normal": [-1, 0, 0], "area": 1e-4, "fov_deg": 50}
     )
+    doc["simulation"]["equiangular_points"] = 3
     targets = (0, 1) if direction == "forward" else (0,)
     fused, ev_fused, used = _trace(doc, direction, True, True, monkeypatch, targets)
     plain, ev_plain, _ = _trace(doc, direction, True, False, monkeypatch, targets)
