@@ -333,17 +333,15 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         survivors = []
         # ====== surface vertex =============================================================================
         on_surface = at_surface & (paths.k < K)
-        every = bool(on_surface.all())  # the usual step of a closed room: no index arrays
-        surface_rows = None if every else on_surface.nonzero()[0]
-        if every or len(surface_rows):
-            sp = paths if every else paths.gather(surface_rows)
+        if on_surface.all():  # the usual step of a closed room: no index arrays
+            sp, sp_prim, sp_t = paths, prim, t
+        else:
+            surface_rows = on_surface.nonzero()[0]
+            sp, sp_prim, sp_t = paths.gather(surface_rows), prim.take(surface_rows), t.take(surface_rows)
+        if len(sp):
             if forward:
                 surface_power += sp.weights.sum()
-            survivors.append(
-                _surface_vertex(
-                    ctx, sp, prim if every else prim.take(surface_rows), t if every else t.take(surface_rows), rng
-                )
-            )
+            survivors.append(_surface_vertex(ctx, sp, sp_prim, sp_t, rng))
         # ====== medium collision (algorithm 5) ==============================================================
         if free_flight and len(medium_rows):
             survivors.append(_medium_collision(ctx, paths, medium_rows, t_col.take(medium_rows), rng))
