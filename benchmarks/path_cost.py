@@ -22,8 +22,8 @@ alternately in the same run, figure by figure in one long-lived process per tree
 - time to accuracy: the full automatic job (pilots included) to 0.03 % on the clear room and 0.3 % on
   the smoky room: CPU time, paths, H0, and the CPU time of its pilots (the truncation pilot that chooses
   K / S / the window, the direction pilot) with their share;
-- `--profile`: the split Embree / numpy / interpreter of the cost-per-path runs, from py-spy
-  (`py-spy record --native -r 25`: at 500 samples/s its native unwinding stalled the process it samples;
+- `--profile`: the split Embree / numpy / interpreter of the cost-per-path runs (10 s of them per
+  room and tree), from py-spy (`py-spy record --native -r 25`: at 500 samples/s its native unwinding stalled the process it samples;
   samples classified by their innermost frames: Embree's library,
   numpy's or another native library, else the interpreter); without py-spy, cProfile with the
   time inside `Intersector.intersect`/`occluded` as Embree (says which).
@@ -277,10 +277,16 @@ def measure(what: list[str], warm: bool = True) -> dict:
     return out
 
 
+#: CPU seconds of cost-per-path runs a profile records (at 25 samples/s: ~250 samples, +-3 % on a share)
+PROFILE_SECONDS = 10.0
+
+
 def _profile_target(case: str) -> None:
-    """One cost-per-path run (the process py-spy records)."""
+    """Cost-per-path runs for PROFILE_SECONDS (the process py-spy records)."""
     _simulate(COST_CASES[case](2048))
-    measure_cost(case, 4 * COST_PATHS[case])
+    start = time.process_time()
+    while time.process_time() - start < PROFILE_SECONDS:
+        measure_cost(case, 4 * COST_PATHS[case])
 
 
 # --- the profile split --------------------------------------------------------------------------
