@@ -21,7 +21,8 @@ The terms follow the arrays the engine allocates:
   the groups' channels G x n_rx x 18;
 - `batch`: batches in flight (1 serial, 2 x workers in a pool); a batch holds paths x targets capped
   by `simulate.PATH_TARGET_BUDGET` (dense per-path tallies: 3 arrays and temporaries, ~10 numbers
-  per pair) and one step's next-event estimates capped by `simulate.ESTIMATE_BUDGET` (~60 B each);
+  per pair), one step's next-event estimates capped by `simulate.ESTIMATE_BUDGET` (~60 B each) and,
+  with quasi-random blocks, the order split's (sample, cell) table (at most `tally.SAMPLE_TABLE_MAX`);
 - `result`: the result document: ~40 numbers per link (~70 B each as Python floats and JSON text),
   plus the CIR links' bins x (K+S+4) and the maps (~12 quantities per grid point and channel).
 
@@ -39,7 +40,8 @@ from owcsim.schemas.algorithms import ALGORITHMS
 
 from .auto import PILOT_CAP
 from .constants import SPEED_OF_LIGHT
-from .tally import N_GROUPS
+from .qmc import BLOCK
+from .tally import N_GROUPS, SAMPLE_TABLE_MAX
 
 #: The batch caps of engine/simulate.py (copied: simulate imports the whole engine, this module stays light).
 PATH_TARGET_BUDGET = 1 << 20
@@ -134,10 +136,13 @@ def memory_estimate(
         1, min(sim.batch_size, PATH_TARGET_BUDGET // max(targets, 1), ESTIMATE_BUDGET // max(targets * per_segment, 1))
     )
     pairs = batch_paths * targets
+    # the order split's (sample, cell) table of quasi-random batches (tally.BatchBuilder.sample_cells)
+    table = (batch_paths // BLOCK) * min(targets, n_ord) * cells if sim.quasi_random else 0
     per_batch = (
         pairs * 14 * 8
         + min(pairs * per_segment, ESTIMATE_BUDGET) * BYTES_PER_CONTRIBUTION
         + (n_cir * n_bins * 8 * 2 if n_cir else 0)
+        + (8 * table if table <= SAMPLE_TABLE_MAX else 0)
     )
     in_flight = 1 if workers <= 1 else 2 * workers
     geometry = tri * BYTES_PER_TRIANGLE
