@@ -23,8 +23,8 @@ alternately in the same run, figure by figure in one long-lived process per tree
   the smoky room: CPU time, paths, H0, and the CPU time of its pilots (the truncation pilot that chooses
   K / S / the window, the direction pilot) with their share;
 - `--profile`: the split Embree / numpy / interpreter of the cost-per-path runs (10 s of them per
-  room and tree), from py-spy (`py-spy record --native -r 25`: at 500 samples/s its native unwinding stalled the process it samples;
-  samples classified by their innermost frames: Embree's library,
+  room and tree), from py-spy (`py-spy record --native -r 25`: at 500 samples/s its native unwinding
+  stalled the process it samples; samples classified by their innermost frames: Embree's library,
   numpy's or another native library, else the interpreter); without py-spy, cProfile with the
   time inside `Intersector.intersect`/`occluded` as Embree (says which).
 
