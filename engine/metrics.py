@@ -170,7 +170,9 @@ def bandwidth_3db(t_edges, power_per_bin, oversample: int = 8):
 
 def _bandwidth_rows(t, dt: float, p, oversample: int) -> np.ndarray:
     """`bandwidth_3db` of each row of p (m, n_bins), NaN where there is none: one FFT and one Illinois
-    regula falsi for all rows (a row's iterates are those it would have alone, on the rows' common support)."""
+    regula falsi for all rows, on one grid: the FFT of the rows' common support (one row: its own). A row
+    inside a wider support gets a finer grid, which may find a dip of |H|^2 just under the threshold that
+    its own grid steps over (the jackknife's replicates are all evaluated on their total's grid)."""
     out = np.full(len(p), np.nan)
     h0 = p.sum(-1)
     rows = np.flatnonzero(h0 > 0)

@@ -42,7 +42,8 @@ def azimuth(u) -> tuple[np.ndarray, np.ndarray]:
     (the azimuth is then exact to ~1e-16 / |sin phi|, as from np.cos). numpy's float64 tangent is
     vectorized (~1 ns per value here), its float64 cosine and sine are not (~8 ns each).
     """
-    tau = _f64(u) - 0.5
+    u = _f64(u)
+    tau = u.reshape(-1) - 0.5  # an array also for a scalar u (the in-place steps need one)
     tau *= np.pi
     np.tan(tau, out=tau)
     inv = tau * tau
@@ -54,7 +55,7 @@ def azimuth(u) -> tuple[np.ndarray, np.ndarray]:
     np.sqrt(sin_phi, out=sin_phi)
     np.negative(tau, out=tau)
     np.copysign(sin_phi, tau, out=sin_phi)
-    return cos_phi, sin_phi
+    return cos_phi.reshape(u.shape), sin_phi.reshape(u.shape)
 
 
 def _from_polar(cos_t, sin_t, u2) -> np.ndarray:

@@ -435,3 +435,15 @@ def test_azimuth_matches_cos_and_sin():
     np.testing.assert_allclose(s[far], np.sin(2 * np.pi * u[far]), rtol=0, atol=2e-13)
     np.testing.assert_array_equal(np.sign(s[far]), np.sign(np.sin(2 * np.pi * u[far])))
     np.testing.assert_allclose(smp.azimuth(np.array([0.0, 0.25, 0.5, 0.75]))[0], [1, 0, -1, 0], atol=1e-15)
+
+
+def test_scalar_uniforms_give_scalar_shaped_directions():
+    """The samplers and the azimuth take scalar uniforms as before (shape () in, (3,) or () out)."""
+    c, s = smp.azimuth(0.3)
+    assert np.shape(c) == () and np.isclose(c, np.cos(0.6 * np.pi)) and np.isclose(s, np.sin(0.6 * np.pi))
+    for d in (
+        smp.sample_generalized_lambertian(1.0, 0.3, 0.2),
+        smp.sample_uniform_sphere(0.3, 0.2),
+        smp.sample_cosine_cone(0.5, 0.3, 0.2),
+    ):
+        assert d.shape == (3,) and np.isclose(np.linalg.norm(d), 1.0)
