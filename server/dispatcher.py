@@ -149,6 +149,9 @@ class Dispatcher:
         if taken:
             log.warning("requeued %d job(s) left running by the previous server process", len(taken))
         start_forkserver()  # pay the engine's imports now, not with the first job
+        # the first read before the loop runs: health answers from it as soon as the app has started (it
+        # said 503 "has not read the store" to a probe that came before the thread's first pass)
+        self._counts, self._counts_at = self.store.counts(), time.monotonic()
         self._thread = threading.Thread(target=self._loop, name="owcsim-dispatcher", daemon=True)
         self._thread.start()
 
