@@ -594,18 +594,16 @@ def _roulette(ctx: "_Context", paths: _Paths, alive, rng) -> _Paths:
     settings = ctx.settings
     if settings.russian_roulette:
         deep = alive & (paths.k + paths.s >= settings.rr_start_depth)
-        scale = 1.0 / (settings.rr_threshold * ctx.w0)
-        if deep.all():  # every path plays (the usual step past rr_start_depth): no index arrays
-            q = np.minimum(1.0, paths.weights * scale)
+        at = None if deep.all() else deep.nonzero()[0]  # None: every path plays (the usual step), no index arrays
+        if at is None or len(at):
+            w = _rows(paths.weights, at)
+            q = np.minimum(1.0, w * (1.0 / (settings.rr_threshold * ctx.w0)))
             survive = rng.random(len(q)) < q
-            paths.weights = paths.weights / np.where(survive, q, 1.0)
-            alive = survive
-        else:
-            at = deep.nonzero()[0]
-            if len(at):
-                q = np.minimum(1.0, paths.weights.take(at) * scale)
-                survive = rng.random(len(at)) < q
-                paths.weights[at] = paths.weights.take(at) / np.where(survive, q, 1.0)
+            w = w / np.where(survive, q, 1.0)
+            if at is None:
+                paths.weights, alive = w, survive
+            else:
+                paths.weights[at] = w
                 alive[at[~survive]] = False
     return paths.keep_where(alive)
 
@@ -843,13 +841,8 @@ class _Context:
         o, w = _rows(paths.origins, rows), _rows(paths.directions, rows)
         y, n_y = self.t_pos[:, j], self.t_nrm[:, j]
         # per segment: n_y.v = n_y.y - n_y.o, n_y.w
-        n_v = o[0] * n_y[0]
-        n_v += o[1] * n_y[1]
-        n_v += o[2] * n_y[2]
-        np.subtract(float(n_y @ y), n_v, out=n_v)
-        n_w = w[0] * n_y[0]
-        n_w += w[1] * n_y[1]
-        n_w += w[2] * n_y[2]
+        n_v = np.subtract(float(n_y @ y), _dot_vector(o, n_y))
+        n_w = _dot_vector(w, n_y)
         seg = {
             "D": frame.D,
             "h2": frame.h2,
@@ -868,8 +861,8 @@ class _Context:
             n_src = src.normals[i]
             seg["uu"] = _dot(u, u)
             seg["uw2"] = 2.0 * _dot(u, w)
-            seg["nu"] = u[0] * n_src[0] + u[1] * n_src[1] + u[2] * n_src[2]
-            seg["nw"] = w[0] * n_src[0] + w[1] * n_src[1] + w[2] * n_src[2]
+            seg["nu"] = _dot_vector(u, n_src)
+            seg["nw"] = _dot_vector(w, n_src)
         elif share:
             seg["a"] = _rows(paths.first, rows) * _rows(paths.first_rho, rows)
             if mode == "second":  # Tx -> x_1 -> x_2 -> Rx: F on those segments, 0 on the others

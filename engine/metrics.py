@@ -143,7 +143,7 @@ def rms_delay_spread_h2(t_edges, power_per_bin):
     return np.where(ok, tau0, np.nan)[()], np.where(ok, rms, np.nan)[()]
 
 
-def bandwidth_3db(t_edges, power_per_bin, oversample: int = 8):
+def bandwidth_3db(t_edges, power_per_bin, oversample: int = 8) -> float | None | np.ndarray:
     """Electrical 3 dB bandwidth of the optical channel, in Hz.
 
     H(f) = sum_k P_k exp(-2 pi i f t_k) (t_k bin centres); returns the smallest

@@ -19,7 +19,7 @@ from pydantic import TypeAdapter
 from owcsim.schemas.medium import PhaseSpec
 
 from .errors import SceneError
-from .sampling import azimuth
+from .sampling import azimuth, column_norms
 
 __all__ = [
     "PhaseFunction",
@@ -123,13 +123,7 @@ class PhaseFunction:
         o2 -= along_s
         along_t *= y
         o2 -= along_t
-        norm = o0 * o0
-        np.multiply(o1, o1, out=tmp)
-        norm += tmp
-        np.multiply(o2, o2, out=tmp)
-        norm += tmp
-        np.sqrt(norm, out=norm)
-        out /= norm
+        out /= column_norms(out)
         return out
 
     def _sample_cos_sin(self, u):

@@ -14,6 +14,7 @@ import numpy as np
 
 __all__ = [
     "azimuth",
+    "column_norms",
     "orthonormal_basis",
     "to_world",
     "sample_generalized_lambertian",
@@ -198,7 +199,7 @@ def cosine_about_soa(n, u1, u2) -> np.ndarray:
     np.multiply(u1, -2.0, out=d[2])  # z = 1 - 2 u1, with n_z
     d[2] += 1.0
     d[2] += n[2]
-    norm = _norm_rows(d)
+    norm = column_norms(d)
     bad = norm < 1e-12
     if bad.any():  # s = -n: probability zero, mapped to n
         d[:, bad] = n[:, bad]
@@ -207,7 +208,7 @@ def cosine_about_soa(n, u1, u2) -> np.ndarray:
     return d
 
 
-def _norm_rows(d) -> np.ndarray:
+def column_norms(d) -> np.ndarray:
     """Euclidean norms of the columns of a (3, n) array (three products summed in place, one square root)."""
     norm = d[0] * d[0]
     norm += d[1] * d[1]

@@ -34,6 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from .medium_nee import first_segment_branch, first_vertex_factor, side_weight, target_factor
+from .sampling import column_norms
 
 
 def _dot3(a, b):
@@ -102,8 +103,8 @@ class EquiangularFrame:
         v = targets - origins
         D = v[0] * directions[0] + v[1] * directions[1] + v[2] * directions[2]
         r = v - D * directions
-        h = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
-        h = np.maximum(h, 1e-9 * (1.0 + np.abs(D)), out=h)
+        h = column_norms(r)
+        np.maximum(h, 1e-9 * (1.0 + np.abs(D)), out=h)
         zero_a = np.ndim(a) == 0 and a == 0.0
         c, length = (D, b) if zero_a else (D - a, b - a)
         h2 = h * h

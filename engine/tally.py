@@ -178,7 +178,6 @@ class BatchBuilder:
         # one order (K = 0, or S = 0): that split is the CIR itself (`finish`), not tallied twice
         self.cir_k = np.zeros(self.n_cir * plan.n_orders * bins.n) if split and plan.n_orders > 1 else None
         self.cir_s = np.zeros(self.n_cir * plan.n_scatter * bins.n) if split and plan.n_scatter > 1 else None
-        self.split = split
         os_ = plan.order_slots(self.links)
         self.order_local = np.full(n_t, -1, np.int64)
         self.order_local[os_ >= 0] = np.arange(int((os_ >= 0).sum()))
@@ -336,14 +335,13 @@ class BatchBuilder:
             if table is not None:
                 _accumulate(table, (slot * n_ord + order) * bins.n + ib, power)
 
-    def _split_cir(self, table: np.ndarray | None, n_ord: int) -> np.ndarray | None:
+    def _split_cir(self, table: np.ndarray | None, n_ord: int, cir: np.ndarray) -> np.ndarray | None:
         """(Tc, n_ord, n_bins) CIR split by an order, None without the split; one order: the CIR itself."""
-        if not self.split:
+        if not self.plan.by_order_cir:
             return None
-        bins = self.plan.bins
         if table is None:  # one order holds every estimate
-            return self.cir.reshape(self.n_cir, 1, bins.n).copy()
-        return table.reshape(self.n_cir, n_ord, bins.n)
+            return cir.reshape(self.n_cir, 1, -1).copy()
+        return table.reshape(self.n_cir, n_ord, -1)
 
     def finish(self, channel_weights: np.ndarray | None = None) -> BatchTally:
         """The batch's tally; `channel_weights` (G, T) adds the per-path moments of G channels."""
@@ -353,9 +351,10 @@ class BatchBuilder:
         abc = self.abc.reshape(3, n_t, n_samples, m).sum(axis=3) if m > 1 else self.abc.reshape(3, n_t, n_samples)
         if self.h0_from_table and self.sample_cells is not None:  # per-sample H0: the table's sums per target
             abc[0] = self.sample_cells.reshape(n_samples, n_t, -1).sum(axis=2).T
+        cir = self.cir
         if self._cir_from is not None:  # the CIR: a split summed over its orders
             table, n_ord = self._cir_from
-            self.cir = table.reshape(self.n_cir, n_ord, plan.bins.n).sum(axis=1).reshape(-1)
+            cir = table.reshape(self.n_cir, n_ord, plan.bins.n).sum(axis=1).reshape(-1)
         s1 = abc.sum(axis=2).T
         # Path groups (sample index mod N_GROUPS): independent sub-samples of this batch for the reliability
         # figures (engine/reliability.py), filled from the first batch whatever the batch count.
@@ -386,11 +385,11 @@ class BatchBuilder:
             s1=s1,
             s2=s2,
             cir_links=self.links.take(cir_sel),
-            cir=self.cir.reshape(self.n_cir, bins.n),
+            cir=cir.reshape(self.n_cir, bins.n),
             early=self.early,
             late=self.late,
-            cir_k=self._split_cir(self.cir_k, plan.n_orders),
-            cir_s=self._split_cir(self.cir_s, plan.n_scatter),
+            cir_k=self._split_cir(self.cir_k, plan.n_orders, cir),
+            cir_s=self._split_cir(self.cir_s, plan.n_scatter, cir),
             order_links=self.links.take(ord_sel),
             order_sum=order_sum.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
             order_sumsq=order_sumsq.reshape(self.n_ord, plan.n_orders, plan.n_scatter),
