@@ -339,9 +339,10 @@ class BatchBuilder:
         """(Tc, n_ord, n_bins) CIR split by an order, None without the split; one order: the CIR itself."""
         if not self.plan.by_order_cir:
             return None
+        n_bins = self.plan.bins.n
         if table is None:  # one order holds every estimate
-            return cir.reshape(self.n_cir, 1, -1).copy()
-        return table.reshape(self.n_cir, n_ord, -1)
+            return cir.reshape(self.n_cir, 1, n_bins).copy()
+        return table.reshape(self.n_cir, n_ord, n_bins)
 
     def finish(self, channel_weights: np.ndarray | None = None) -> BatchTally:
         """The batch's tally; `channel_weights` (G, T) adds the per-path moments of G channels."""
