@@ -168,6 +168,10 @@ def bandwidth_3db(t_edges, power_per_bin, oversample: int = 8) -> float | None |
     return f3
 
 
+#: Most FFT points (rows x grid) `_bandwidth_rows` transforms at once (~32 MiB of complex output)
+FFT_ELEMENTS = 1 << 21
+
+
 def _bandwidth_rows(t, dt: float, p, oversample: int) -> np.ndarray:
     """`bandwidth_3db` of each row of p (m, n_bins), NaN where there is none: one FFT and one Illinois
     regula falsi for all rows, on one grid: the FFT of the rows' common support (one row: its own). A row
@@ -182,10 +186,22 @@ def _bandwidth_rows(t, dt: float, p, oversample: int) -> np.ndarray:
     nz = np.flatnonzero(p.any(axis=0))  # the support of all rows (one row: its own)
     p, tk = p[:, nz[0] : nz[-1] + 1], t[nz[0] : nz[-1] + 1] - t[nz[0]]
     m_fft = 1 << int(np.ceil(np.log2(max(oversample * p.shape[-1], 64))))
+    per_chunk = max(1, FFT_ELEMENTS // m_fft)  # rows at once: memory bounded whatever the window's bins
+    for lo in range(0, len(rows), per_chunk):
+        out[rows[lo : lo + per_chunk]] = _bandwidth_on_grid(
+            p[lo : lo + per_chunk], thr[lo : lo + per_chunk], tk, m_fft, dt
+        )
+    return out
+
+
+def _bandwidth_on_grid(p, thr, tk, m_fft: int, dt: float) -> np.ndarray:
+    """The first f > 0 with |H(f)|^2 = thr of each row of p (m, k) at delays tk (k,), NaN where |H|^2 stays
+    above it up to Nyquist: the FFT grid of m_fft points brackets it, the Illinois regula falsi refines it."""
+    out = np.full(len(p), np.nan)
     mag2 = np.abs(np.fft.rfft(p, m_fft, axis=-1)) ** 2  # f_j = j / (m_fft dt), j <= m_fft/2
     below = mag2[:, 1:] <= thr[:, None]
     crossing = below.any(axis=1)
-    rows, p, thr = rows[crossing], p[crossing], thr[crossing]
+    rows, p, thr = np.flatnonzero(crossing), p[crossing], thr[crossing]
     if not len(rows):
         return out
     j = below[crossing].argmax(axis=1) + 1

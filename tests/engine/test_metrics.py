@@ -262,3 +262,20 @@ def test_bandwidth_rows_and_vectorized_jackknife_match_one_row_at_a_time():
         rows_at_once = jackknife(est, groups, n_per_group=np.arange(16) + 10, vectorized=True)
         np.testing.assert_allclose(rows_at_once, loop, rtol=1e-10)
         assert loop[1] > 0  # a real error to compare
+
+
+def test_bandwidth_rows_in_chunks_of_bounded_memory_give_the_same_values(monkeypatch):
+    """Rows are transformed in chunks of at most FFT_ELEMENTS grid points (a long window's jackknife stays
+    bounded in memory); chunking changes no value."""
+    from owcsim.engine import metrics
+
+    rng = np.random.default_rng(12)
+    nb = 300
+    edges = np.arange(nb + 1) * NS
+    k = np.minimum(rng.geometric(0.05, (17, 400)) - 1, nb - 1)
+    rows = np.bincount((np.arange(17)[:, None] * nb + k).ravel(), rng.exponential(1.0, k.size), 17 * nb)
+    rows = rows.reshape(17, nb)
+    whole = bandwidth_3db(edges, rows)
+    assert np.isfinite(whole).sum() >= 10  # most rows have a crossing (the comparison has something to compare)
+    monkeypatch.setattr(metrics, "FFT_ELEMENTS", 1)  # one row per chunk
+    np.testing.assert_array_equal(bandwidth_3db(edges, rows), whole)
