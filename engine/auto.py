@@ -335,6 +335,10 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
         update["max_scattering"] = max(alg.scattering_orders, 1)  # field is >= 1 (algorithm 1 tallies S = 0)
     need_k = sim.max_reflections is None
     need_s = alg.scattering_orders is None and sim.max_scattering is None
+    if need_s and scene.medium is None:  # algorithm 5 in clear air (or sigma_t = 0): a surface path tracer
+        update["max_scattering"] = 1  # the field's least; no path scatters, so S changes nothing
+        modeled.max_scattering_reason = "no medium (or sigma_t = 0): no path scatters; S has no effect"
+        need_s = False
     need_t = sim.t_max_s is None
     if need_t and not need_k and not alg.counts_scattering and sim.max_reflections == 0:
         # Line of sight only: every arrival is a direct path, known without a pilot.
@@ -418,7 +422,7 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
     modeled, update = step.modeled.model_copy(), dict(step.update)
     alg = algorithm(update.get("algorithm", sim.algorithm))
     need_k = sim.max_reflections is None
-    need_s = alg.scattering_orders is None and sim.max_scattering is None
+    need_s = "max_scattering" not in update and sim.max_scattering is None
     need_t = "t_max_s" not in update and sim.t_max_s is None
     links = pilot.links
     h0 = max(max(link.dc_gain or 0.0 for link in links), 1e-300)
