@@ -400,10 +400,15 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
 
 def with_receivers(scene: Scene, spec: SceneSpec) -> Scene:
     """The built scene with the receivers of `spec` (same surfaces, transmitters and medium): what
-    build_scene(spec) would give, without building the geometry or the medium again."""
+    build_scene(spec) would give, without building the geometry or the medium again (a spectral scene's
+    receiver tables follow the receivers: spectra.with_receivers)."""
+    from . import spectra
     from .scene import _far_distance, mask_reasons, receivers_from_scene
 
     receivers, grid_slices = receivers_from_scene(spec)
+    tables = scene.spectra
+    if tables is not None:
+        tables = spectra.with_receivers(tables, spec, len(scene.transmitters), len(receivers))
     return dataclasses.replace(
         scene,
         spec=spec,
@@ -411,6 +416,7 @@ def with_receivers(scene: Scene, spec: SceneSpec) -> Scene:
         grid_slices=grid_slices,
         masked=mask_reasons(spec, receivers, len(spec.receivers)),
         medium_far_distance=_far_distance(spec, scene.geometry, scene.medium, receivers.positions),
+        spectra=tables,
     )
 
 
