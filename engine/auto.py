@@ -428,7 +428,7 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
     modeled, update = step.modeled.model_copy(), dict(step.update)
     alg = algorithm(update.get("algorithm", sim.algorithm))
     need_k = sim.max_reflections is None
-    need_s = "max_scattering" not in update and sim.max_scattering is None
+    need_s = alg.scattering_orders is None and sim.max_scattering is None and "max_scattering" not in update
     need_t = "t_max_s" not in update and sim.t_max_s is None
     links = pilot.links
     h0 = max(max(link.dc_gain or 0.0 for link in links), 1e-300)
