@@ -44,7 +44,8 @@ class TransmitterSpec(SpecModel):
     luminous_output: LuminousOutputSpec | None = Field(
         None,
         description="luminous flux [lm] or centre luminous intensity [cd] of the source: gives the "
-        "illuminance on the receivers (the optical power stays `power`)",
+        "illuminance on the receivers (the optical power stays `power`); a `photometry` file's own candela "
+        "give it without this field, and this field, when given, wins",
     )
     photometry: PhotometrySpec | None = Field(None, description="tabulated emission from an IES / EULUMDAT file")
     spectrum: Curve | None = Field(
