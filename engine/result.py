@@ -17,10 +17,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from owcsim import __version__  # the package's one version lookup (owcsim/__init__.py)
 from owcsim.schemas.algorithms import Direction, algorithm
 from owcsim.schemas.results import ModeledPublic, SimulationResultPublic, UnreachablePublic
 from owcsim.schemas.units import unit_warnings
+from owcsim.version import __version__  # the package's one version lookup
 
 from . import metrics, mie, reliability
 from .auto import _max_albedo, _scatters

@@ -269,7 +269,7 @@ def _add_simulation_options(p: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import __version__
+    from .version import __version__
 
     p = argparse.ArgumentParser(prog="owcsim", description="Optical wireless channel simulator.")
     p.add_argument("--version", action="version", version=f"owcsim {__version__}")

@@ -145,6 +145,7 @@ class Preflighter:
 
     def __call__(self, spec: SceneSpec, scene_json: str) -> Preflight:
         """Blocking (call it from a worker thread); raises ProblemError with the refusal."""
+        out: tuple | None
         if is_small(spec):
             out = _run(spec, self.max_triangles, self.workers)
             if out[0] != "ok":
