@@ -761,6 +761,8 @@ class _Context:
             if not scene.all_visible:  # the shadow ray stops short of the device (it may sit on a surface)
                 blocked = isect.occluded(_rows(shadow_origins, vertex).T, out_dir.T, d - 2.0 * isect.offset)
                 seen = (~blocked).nonzero()[0]
+                if len(seen) == 0:  # every shadow ray of the chunk blocked (a furnished room): nothing to record
+                    continue
                 if len(seen) < len(d):
                     vertex = seen if vertex is None else vertex.take(seen)
                     column, f, d = column.take(seen), f.take(seen), d.take(seen)

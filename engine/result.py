@@ -19,6 +19,7 @@ import numpy as np
 
 from owcsim.schemas.algorithms import Direction, algorithm
 from owcsim.schemas.results import ModeledPublic, SimulationResultPublic, UnreachablePublic
+from owcsim.schemas.units import unit_warnings
 from owcsim.version import __version__  # the package's one version lookup
 
 from . import metrics, mie, reliability
@@ -59,7 +60,13 @@ def _warnings(spec, scene) -> list[str]:
     if alg.warning_in_scattering_medium and _scatters(spec.medium):
         out.append(alg.warning_in_scattering_medium)
     out += _size_warnings(scene)
-    return out
+    return out + unit_warnings(spec, surface_extent(scene))
+
+
+def surface_extent(scene) -> float | None:
+    """Largest side [m] of the surfaces' bounding box (None without surfaces)."""
+    v = scene.geometry.vertices
+    return float(np.ptp(v, axis=0).max()) if len(v) else None
 
 
 #: Fraction of H0 outside the time window above which the result warns.

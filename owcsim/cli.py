@@ -41,6 +41,11 @@ def _cmd_validate(args) -> int:
     sim = spec.simulation
     window = f"{sim.n_bins} time bins" if sim.t_max_s is not None else "time window chosen when it runs"
     masked = int((scene.masked != "").sum())
+    from owcsim.engine.result import surface_extent
+    from owcsim.schemas.units import unit_warnings
+
+    for note in unit_warnings(spec, surface_extent(scene)):  # values plausible only in another unit
+        print(f"owcsim: warning: {note}", file=sys.stderr)
     print(
         f"{args.scene}: valid — {len(scene.geometry.faces)} triangles, {len(scene.transmitters)} transmitters, "
         f"{len(scene.receivers)} receivers{f' ({masked} grid points masked)' if masked else ''}, "

@@ -52,7 +52,9 @@ class LightingPublic(PublicModel):
     """Illuminance and link-budget figures of a link or a group's channel (null when not asked)."""
 
     illuminance_lx: float | None = Field(
-        None, description="direct illuminance on the receiver plane [lx] (when the transmitters give a luminous output)"
+        None,
+        description="direct illuminance on the receiver plane [lx] (when the transmitters give a luminous output "
+        "or a photometric file)",
     )
     snr_db: float | None = Field(None, description="electrical SNR [dB] (with `link_budget`)")
     ber: float | None = Field(None, description="bit-error rate of OOK-NRZ (with `link_budget`)")

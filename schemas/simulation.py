@@ -64,12 +64,16 @@ class SimulationSpec(SpecModel):
         "the time strata (2-4) or the free-flight collisions (5) by the balance heuristic",
     )
     time_bin_s: float = Field(
-        0.25e-9, ge=1e-15, description="CIR bin width dt [s] (at least 1 fs: light travels 0.3 um in it)"
+        0.25e-9,
+        ge=1e-15,
+        description="CIR bin width dt [s] (at least 1 fs: light travels 0.3 um in it; over 1 us warns: ns meant?)",
     )
     t_min_s: float = Field(
         0.0, ge=0.0, le=1.0, description="start of the time window [s] (at most 1 s: light travels 300,000 km in it)"
     )
-    t_max_s: float | None = Field(None, gt=0.0, description="end of the time window [s] (default: from the accuracy)")
+    t_max_s: float | None = Field(
+        None, gt=0.0, description="end of the time window [s] (default: from the accuracy; over 1 ms warns)"
+    )
     truncation_tolerance: float | None = Field(
         None,
         gt=0.0,
