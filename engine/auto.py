@@ -331,8 +331,8 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
         number = sim.algorithm
         modeled.algorithm_reason = f"algorithm {number} requested"
     alg = algorithm(number)
-    if alg.scattering_orders is not None:  # S is fixed by the algorithm (schemas/algorithms.py); the document's
-        update["max_scattering"] = max(alg.scattering_orders, 1)  # field is >= 1 (algorithm 1 tallies S = 0)
+    if alg.scattering_orders is not None:  # S fixed by the algorithm, or 4's 1 or 2 (schemas/algorithms.py)
+        update["max_scattering"] = alg.S(sim.max_scattering)
     need_k = sim.max_reflections is None
     need_s = alg.scattering_orders is None and sim.max_scattering is None
     need_t = sim.t_max_s is None

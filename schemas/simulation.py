@@ -34,10 +34,14 @@ class SimulationSpec(SpecModel):
     """How to estimate the channel.
 
     `algorithm` 1..5 names the report's estimators (physics.md section 4); `direction`
-    chooses the transmitter-side ("forward") or receiver-side ("backward") estimator,
-    or lets a pilot run pick per link ("auto"); algorithms 2 and 3 have their own
-    direction (backward and forward) and 4 runs both. Give `paths` (per source
-    device and direction) or `target_rel_error` on H0 (with `time_budget_s`), not both.
+    chooses the transmitter-side ("forward") or receiver-side ("backward") estimator of
+    algorithms 1 and 5, or lets the planner pick per link ("auto": in a medium algorithm 5
+    runs from both devices, else a pilot run or the device counts decide); algorithms 2-4
+    ignore it (in a medium they run from both devices; without one 2 runs backward, 3
+    forward, 4 both). `max_scattering` S: what each algorithm honours is in its record
+    (schemas/algorithms.py: 1: 0, 2-3: 1, 4: 1 or 2, 5: 1..1000); other values are refused.
+    Give `paths` (per source device and direction) or `target_rel_error` on H0 (with
+    `time_budget_s`), not both.
     """
 
     algorithm: Literal[1, 2, 3, 4, 5, "auto"] = "auto"
@@ -47,10 +51,12 @@ class SimulationSpec(SpecModel):
     )
     max_scattering: int | None = Field(
         None,
-        ge=1,
+        ge=0,
         le=1000,
-        description="highest scattering order S of algorithm 5 "
-        "(algorithms 2-3: 1, 4: 2, 1: 0; default: from the accuracy asked)",
+        description="highest scattering order S tallied: algorithm 5 counts orders 1..S (default: from the "
+        "accuracy asked), algorithm 4 single scattering (S = 1) or single and in-then-out double scattering "
+        "(S = 2, the default), algorithms 2-3 S = 1 and algorithm 1 S = 0 only; a value the algorithm cannot "
+        "honour is refused",
     )
     segment_time_step_s: float | None = Field(
         None, ge=1e-15, description="time strata of the points along segments, algorithms 2-4 [s] (default: time_bin_s)"
@@ -105,6 +111,15 @@ class SimulationSpec(SpecModel):
     def _consistent(self) -> "SimulationSpec":
         if self.paths is not None and self.target_rel_error is not None:
             raise ValueError("give `paths` or `target_rel_error`, not both")
+        if self.algorithm != "auto":
+            refusal = algorithm(self.algorithm).scattering_refusal(self.max_scattering)
+            if refusal is not None:
+                raise ValueError(refusal)
+        elif self.max_scattering == 0:
+            raise ValueError(
+                "`max_scattering` 0 (no scattering) needs `algorithm` 1: the automatic choice may pick "
+                "algorithm 5, which counts orders 1 to S"
+            )
         if self.t_max_s is not None and not self.t_max_s > self.t_min_s:
             raise ValueError("`t_max_s` must exceed `t_min_s`")
         if self.t_max_s is not None:
