@@ -359,7 +359,8 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
     )
     cap_k = PILOT_CAP if need_k else resolved.simulation.max_reflections
     cap_s = PILOT_CAP if need_s else resolved.simulation.max_scattering
-    t_long = resolved.simulation.t_max_s or (sim.t_min_s + (cap_k + cap_s + 3) * 1.8 * extent / SPEED_OF_LIGHT)
+    # (S counted as at least 1: algorithm 1's S = 0 keeps the window the rule always gave it)
+    t_long = resolved.simulation.t_max_s or (sim.t_min_s + (cap_k + max(cap_s, 1) + 3) * 1.8 * extent / SPEED_OF_LIGHT)
     usable = np.flatnonzero(scene.masked == "")  # grid points in furniture or outside the room are not run
     if not len(usable):
         usable = np.arange(len(scene.receivers))
