@@ -75,7 +75,11 @@ class SimulationSpec(SpecModel):
     t_min_s: float = Field(
         0.0, ge=0.0, le=1.0, description="start of the time window [s] (at most 1 s: light travels 300,000 km in it)"
     )
-    t_max_s: float | None = Field(None, gt=0.0, description="end of the time window [s] (default: from the accuracy)")
+    t_max_s: float | None = Field(
+        None,
+        gt=0.0,
+        description="end of the time window [s], rounded up to a whole number of bins (default: from the accuracy)",
+    )
     truncation_tolerance: float | None = Field(
         None,
         gt=0.0,
@@ -84,7 +88,13 @@ class SimulationSpec(SpecModel):
         "arrivals after t_max_s) relative to H0 when K, S or t_max_s are chosen automatically (default: 0.1 x "
         "target_rel_error in an accuracy run, 1e-4 otherwise)",
     )
-    paths: int | None = Field(None, ge=1, le=10**12, description="paths per source device")
+    paths: int | None = Field(
+        None,
+        ge=1,
+        le=10**12,
+        description="paths per source device and direction (links run from both devices get it from each); "
+        "default 100 000 unless `target_rel_error` is given",
+    )
     target_rel_error: float | None = Field(
         None, gt=0.0, lt=1.0, description="stop when stderr(H0)/H0 <= this, every link"
     )
