@@ -99,7 +99,13 @@ class SimulationSpec(SpecModel):
         None, gt=0.0, lt=1.0, description="stop when stderr(H0)/H0 <= this, every link"
     )
     time_budget_s: float = Field(600.0, gt=0.0, description="wall-time limit of an accuracy run [s]")
-    seed: int = Field(0, ge=0, lt=2**63)
+    seed: int = Field(
+        0,
+        ge=0,
+        lt=2**63,
+        description="random seed: the same document and seed give the same bits for any number of workers "
+        "(every batch has its own stream, keyed by the seed, the direction, the source device and the batch)",
+    )
     batch_size: int = Field(16384, ge=64, le=1_048_576, description="paths per batch (memory bound)")
     russian_roulette: bool = True
     rr_start_depth: int = Field(
