@@ -131,8 +131,8 @@ def memory_estimate(
     # (at most CIR_GROUPS_MAX: an automatic window may end up shorter than n_bins, within the cap)
     one_batch = sim.n_paths is None or sim.n_paths <= sim.batch_size
     first_groups = min(N_GROUPS * n_cir * n_bins, CIR_GROUPS_MAX) if one_batch else 0
-    accumulators = 2 * 8 * (
-        n_links * 50 + int(n_cir * per_cir_link) + n_ord * 3 * cells + n_groups * n_rx * 18 + first_groups
+    accumulators = (
+        2 * 8 * (n_links * 50 + int(n_cir * per_cir_link) + n_ord * 3 * cells + n_groups * n_rx * 18 + first_groups)
     )
     n_bands = spec.spectral.n_bands if spec.spectral is not None else 0
     if n_bands:  # spectral channel sums per link and direction (engine/spectra.ChannelAccumulator)

@@ -195,8 +195,7 @@ ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
                 outputs=_SCATTERED,
                 scattering_range=(1, 2),
                 scattering_meaning=(
-                    "counts single scattering (S = 1) or single and in-then-out double scattering (S = 2, "
-                    "the default)"
+                    "counts single scattering (S = 1) or single and in-then-out double scattering (S = 2, the default)"
                 ),
                 scattering_fix="give 1 or 2, or use algorithm 5 for higher orders",
                 at_single_scattering=(
