@@ -90,3 +90,14 @@ def test_a_one_batch_cir_too_large_for_path_groups_says_so_by_null_errors():
     res = simulate(spec(room_doc(paths=1024, time_bin_s=1e-12, t_max_s=7e-8)))  # 70 000 bins
     _, total, se = _cir(res)
     assert len(total) == 70_000 and np.isnan(se).all()
+
+
+def test_an_accuracy_run_that_stops_after_one_batch_has_per_bin_errors():
+    """Accuracy runs may stop after their first round: their first batches are binned per path group too."""
+    doc = room_doc(target_rel_error=0.05, t_max_s=6e-8, direction="backward")
+    doc["simulation"].pop("paths")
+    res = simulate(spec(doc))
+    assert res["run"]["batches"] == 1 and res["run"]["stop_reason"] == "target_reached"
+    link, total, se = _cir(res)
+    sampled = (total > 0) & (np.arange(len(total)) != int(link["los_delay_s"] // res["time_bins"]["time_bin_s"]))
+    assert sampled.any() and np.isfinite(se[sampled]).all() and (se[sampled] > 0).all()
