@@ -331,8 +331,8 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
         number = sim.algorithm
         modeled.algorithm_reason = f"algorithm {number} requested"
     alg = algorithm(number)
-    if alg.scattering_orders is not None:  # S is fixed by the algorithm (schemas/algorithms.py); the document's
-        update["max_scattering"] = max(alg.scattering_orders, 1)  # field is >= 1 (algorithm 1 tallies S = 0)
+    if alg.scattering_orders is not None:  # S fixed by the algorithm, or 4's 1 or 2 (schemas/algorithms.py)
+        update["max_scattering"] = alg.S(sim.max_scattering)
     need_k = sim.max_reflections is None
     need_s = alg.scattering_orders is None and sim.max_scattering is None
     if need_s and scene.medium is None:  # algorithm 5 in clear air (or sigma_t = 0): a surface path tracer
@@ -363,7 +363,8 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
     )
     cap_k = PILOT_CAP if need_k else resolved.simulation.max_reflections
     cap_s = PILOT_CAP if need_s else resolved.simulation.max_scattering
-    t_long = resolved.simulation.t_max_s or (sim.t_min_s + (cap_k + cap_s + 3) * 1.8 * extent / SPEED_OF_LIGHT)
+    # (S counted as at least 1: algorithm 1's S = 0 keeps the window the rule always gave it)
+    t_long = resolved.simulation.t_max_s or (sim.t_min_s + (cap_k + max(cap_s, 1) + 3) * 1.8 * extent / SPEED_OF_LIGHT)
     usable = np.flatnonzero(scene.masked == "")  # grid points in furniture or outside the room are not run
     if not len(usable):
         usable = np.arange(len(scene.receivers))

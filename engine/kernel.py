@@ -656,7 +656,9 @@ class _Context:
             or settings.in_then_out
         )
         block = qmc.block_size(item.n_paths, settings.qmc_block)  # paths per independent sample
-        self.builder = BatchBuilder(settings.tally, item_links(self.scene, item), item.n_paths, several, block)
+        self.builder = BatchBuilder(
+            settings.tally, item_links(self.scene, item), item.n_paths, several, block, first_batch=item.batch == 0
+        )
         if self.spectra is not None:  # per-(link, channel) sums (spectra.py)
             self.channels = self.spectra.builder(item, self.tgt, item_links(self.scene, item), block)
 

@@ -124,7 +124,8 @@ def _modeled(spec, scene, modeled: ModeledPublic | None, unreachable, settings) 
     sim = spec.simulation
     alg = algorithm(sim.algorithm)
     chosen = modeled if modeled is not None else ModeledPublic(algorithm_reason=f"algorithm {sim.algorithm} requested")
-    left = list(alg.left_out) if spec.medium is not None and _scatters(spec.medium) else []
+    families, left_out = alg.families_at(sim.scattering_orders)
+    left = list(left_out) if spec.medium is not None and _scatters(spec.medium) else []
     left.append(f"reflection orders above K = {sim.max_reflections}")
     if alg.scattering_orders is None and scene.medium is not None:  # S chosen, not fixed by the algorithm
         left.append(f"scattering orders above S = {sim.max_scattering}")
@@ -136,7 +137,7 @@ def _modeled(spec, scene, modeled: ModeledPublic | None, unreachable, settings) 
     return chosen.model_copy(
         update=dict(
             algorithm=sim.algorithm,
-            families=alg.families if scene.medium is not None else "vacuum paths, reflection orders 0..K",
+            families=families if scene.medium is not None else "vacuum paths, reflection orders 0..K",
             left_out=left,
             medium=mie.medium_report(spec.medium, scene.phase),  # derived coefficients, g, visibility
             max_reflections=sim.max_reflections,

@@ -94,7 +94,8 @@ def _run(spec: SceneSpec, max_triangles: int, workers: int) -> tuple:
                 "batch_size": 64,
                 "direction": "forward",
                 "pilot_paths": 256,
-                "max_scattering": sim.max_scattering or 1,
+                # algorithm 4 left out: its default S = 2 (the double-scattering family runs too)
+                "max_scattering": sim.max_scattering if sim.max_scattering is not None or sim.algorithm == 4 else 1,
             }
         )  # every setting explicit but the algorithm: no pilot
         scene = build_scene(spec, None)
