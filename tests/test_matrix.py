@@ -1,0 +1,223 @@
+"""Issue 22's combination matrix (tests/matrix.py): every cell holds against an independent estimate or is
+refused with one sentence; a fast pairwise tier in the default run, the full matrix in the slow set."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from tests import matrix
+
+#: Cells that fail only because of an item of issue 22 fixed on another branch (strict: the lead removes an
+#: entry when its fix is merged and the cell passes). Keys are `matrix.cell_id`s.
+ITEM_1 = "issue 22 item 1: algorithm 5 in a furnished room, medium_nee.connection_weight on a zero-size array"
+ITEM_2 = "issue 22 item 2: spectral scene, more than 8 receivers, automatic settings (IndexError)"
+ITEM_3 = "issue 22 item 3: algorithm 5 without a medium (AttributeError in auto._max_albedo)"
+ITEM_4 = "issue 22 item 4: automatic K stops at the pilot's cap in a bright room, H0 low without a warning"
+ITEM_5 = "issue 22 item 5: error bars at |g| = 0.999 (forward and backward disagree beyond them, or too wide)"
+KNOWN_FAILURES: dict[str, str] = {
+    "desks-homogeneous-spec-phong-ies-aauto-map40-Tx-Rx1mm": ITEM_2,
+    "desks-mie-grey-mirror-lambertian-aauto-links40-reflectance0.99": ITEM_1,
+    "mesh-homogeneous-grey-mirror-lambertian-a5-map1-g-0.999": ITEM_5,
+    "desks-homogeneous-spec-lambert-lambertian-a3-map1-g+0.999": ITEM_5,
+}
+
+#: Failures the matrix found outside issue 22's list, not fixed here (the report describes each).
+NEAR_CEILING = (
+    "found by the matrix: forward next-event estimation misses the ceiling within millimetres of a receiver "
+    "1 mm below a ceiling light (the diffuse part ~400x low, error bar not covering it, no warning); "
+    "algorithm 4 in vacuum averages in the forward side"
+)
+FOUND: dict[str, str] = {
+    "desks-none-grey-lambert-lambertian-a4-links1-Tx-Rx1mm": NEAR_CEILING,
+}
+
+#: Extremes where a cell may hold with an error bar too wide to see a 10 % error (the result says how wide:
+#: forward-only algorithms with a 1 deg FOV; the scattered light at optical depth 30).
+IMPRECISE_OK = ("FOV 1 deg", "optical depth 30")
+
+
+def _params(cells):
+    out = []
+    for cell in cells:
+        cid = matrix.cell_id(cell)
+        why = KNOWN_FAILURES.get(cid) or FOUND.get(cid)
+        marks = [pytest.mark.xfail(strict=True, reason=why)] if why else []
+        out.append(pytest.param(cell, id=cid, marks=marks))
+    return out
+
+
+FAST = matrix.fast_cells()
+FULL = [c for c in matrix.full_cells() if c not in FAST]
+
+
+def _check(cell):
+    out = matrix.run(cell)
+    assert out.status in ("pass", "refused", "flagged"), f"{out.id}: {out.status}: {out.message}"
+    if out.status == "pass" and not out.power:
+        assert cell["extreme"] in IMPRECISE_OK and out.h0_rel_stderr >= 0.05, (
+            f"{out.id}: a 10 % error on H0 would pass (z_max {out.z_max:.2f}, relative error "
+            f"{out.h0_rel_stderr:.2%}); more paths needed"
+        )
+    return out
+
+
+@pytest.mark.parametrize("cell", _params(FAST))
+def test_fast_tier_cell_holds(cell):
+    _check(cell)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("cell", _params(FULL))
+def test_full_matrix_cell_holds(cell):
+    _check(cell)
+
+
+def test_fast_tier_covers_every_pair_of_axis_values():
+    """Checked here by brute force, not by the generator's own bookkeeping."""
+    names = list(matrix.AXES)
+    for a, b in itertools.combinations(names, 2):
+        for va, vb in itertools.product(matrix.AXES[a], matrix.AXES[b]):
+            if matrix.forbidden((a, va), (b, vb)):
+                continue
+            assert any(c[a] == va and c[b] == vb for c in FAST), f"{a}={va}, {b}={vb} is in no fast cell"
+    assert all(matrix.valid(c) for c in FAST)
+    assert len({matrix.cell_id(c) for c in FAST}) == len(FAST)
+
+
+def test_the_comparison_has_the_stated_false_alarm_rate_and_power():
+    """z <= Z_MAX: two-sided Gaussian tail 6.8e-6; a 10 % error at 1.5 % combined relative error is caught."""
+    from math import erfc, sqrt
+
+    assert erfc(matrix.Z_MAX / sqrt(2)) < 1e-5
+    a, b = np.array([1.0]), np.array([1.0])
+    se = np.array([0.015 / sqrt(2)])
+    assert matrix._z(a, se, b, se)[0] == 0.0
+    assert matrix._z(a * 1.1, se * 1.1, b, se)[0] > matrix.Z_MAX
+    assert matrix._z(np.array([0.0]), np.array([0.0]), np.array([0.0]), np.array([0.0]))[0] == 0.0
+
+
+def test_one_sentence_accepts_located_errors_and_rejects_tracebacks():
+    assert matrix.one_sentence("the scene has 1 problem:\n  room.size.0: Input should be greater than 0")
+    assert not matrix.one_sentence("the scene has 1 problem:\n  a\n  b")
+    assert not matrix.one_sentence('Traceback (most recent call last):\n  File "x.py", line 1')
+    assert not matrix.one_sentence("")
+
+
+#: Combinations refused by design, each with the words its sentence must contain.
+REFUSED = {
+    "spectral surfaces with a mirror": (
+        dict(matrix.fast_cells()[0], spectral="on", surfaces="mirror", extreme="none"),
+        "mirror",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(REFUSED))
+def test_refused_combinations_say_why_in_one_sentence(case):
+    cell, words = REFUSED[case]
+    out = matrix.run(cell)
+    assert out.status == "refused", out.message
+    assert words in out.message
+
+
+def _cli(tmp_path, doc):
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(doc))
+    return subprocess.run(
+        [sys.executable, "-m", "owcsim", "run", str(path), "--out", str(tmp_path / "out")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+CLI_CELLS = {
+    "smoke, desks, algorithm 1": dict(
+        furnishing="desks",
+        medium="homogeneous",
+        spectral="off",
+        surfaces="phong",
+        luminaire="ies",
+        algorithm="1",
+        output="links",
+        receivers="9",
+        extreme="none",
+    ),
+    "spectral map, automatic": dict(
+        furnishing="empty",
+        medium="none",
+        spectral="on",
+        surfaces="lambert",
+        luminaire="lambertian",
+        algorithm="auto",
+        output="map",
+        receivers="1",
+        extreme="area 1e-8 m2",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CLI_CELLS))
+def test_cli_runs_cells_without_a_traceback(tmp_path, case):
+    proc = _cli(tmp_path, matrix.scene(CLI_CELLS[case], paths=2048))
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    result = json.loads((tmp_path / "out" / "result.json").read_text())
+    assert all(np.isfinite(link["dc_gain"]) for link in result["links"])
+
+
+def test_cli_refuses_with_one_sentence_and_no_traceback(tmp_path):
+    proc = _cli(tmp_path, matrix.scene(REFUSED["spectral surfaces with a mirror"][0], paths=2048))
+    assert proc.returncode != 0
+    assert "Traceback" not in proc.stderr and "mirror" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) <= 2, proc.stderr
+
+
+CELLS = st.fixed_dictionaries({axis: st.sampled_from(values) for axis, values in matrix.AXES.items()})
+PROFILE = settings(
+    max_examples=150,
+    derandomize=True,
+    database=None,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
+)
+
+
+@PROFILE
+@given(CELLS)
+def test_every_cell_of_the_product_builds_a_valid_scene(cell):
+    """The generator over the whole product (not only the tiers): a valid cell gives a document the schema
+    accepts, and a cell with a forbidden pair is one the matrix never builds."""
+    from owcsim.schemas import SceneSpec
+
+    if not matrix.valid(cell):
+        return
+    doc = matrix.scene(cell, paths=1024)
+    spec = SceneSpec.model_validate(doc)
+    assert len(spec.transmitters) == 1
+    n = int(cell["receivers"])
+    explicit = len(doc.get("receivers", []))
+    grid = doc.get("receiver_grids", [])
+    points = explicit + sum(
+        round(g["size"][0] / g["spacing"] + 1) * round(g["size"][1] / g["spacing"] + 1) for g in grid
+    )
+    assert points == (n + 1 if cell["output"] == "map" and cell["extreme"] == "Tx-Rx 1 mm" else n)
+
+
+@settings(max_examples=5, derandomize=True, database=None, deadline=None)
+@given(st.integers(0, 10_000))
+def test_any_seed_gives_a_covering_array(seed):
+    cells = matrix.covering(strength=2, seed=seed, candidates=5)
+    names = list(matrix.AXES)
+    seen = {((a, c[a]), (b, c[b])) for c in cells for a, b in itertools.combinations(names, 2)}
+    for a, b in itertools.combinations(names, 2):
+        for va, vb in itertools.product(matrix.AXES[a], matrix.AXES[b]):
+            assert matrix.forbidden((a, va), (b, vb)) or ((a, va), (b, vb)) in seen
+    assert all(matrix.valid(c) for c in cells)
