@@ -615,7 +615,7 @@ def table(outcomes: list[Outcome]) -> str:
         ref = f"{o.ref_h0:.4g}" if np.isfinite(o.ref_h0) else "-"
         rel = f"{o.h0_rel_stderr:.2%}" if np.isfinite(o.h0_rel_stderr) else "-"
         z = f"{o.z_max:.2f}" if np.isfinite(o.z_max) else "-"
-        status = o.status if o.status != "fail" else f"fail: {o.message[:60]}"
+        status = o.status if o.status != "fail" or np.isfinite(o.z_max) else f"fail: {o.message[:60]}"
         lines.append(
             f"| {c['extreme']} | {c['medium']} | {ran} | {status} | {h0} | {rel} | {o.reference or '-'} | {ref} "
             f"| {z} | {len(o.warnings)} |"
