@@ -23,25 +23,65 @@ ITEM_3 = "issue 22 item 3: algorithm 5 without a medium (AttributeError in auto.
 ITEM_4 = "issue 22 item 4: automatic K stops at the pilot's cap in a bright room, H0 low without a warning"
 ITEM_5 = "issue 22 item 5: error bars at |g| = 0.999 (forward and backward disagree beyond them, or too wide)"
 KNOWN_FAILURES: dict[str, str] = {
+    # fast tier
     "desks-homogeneous-spec-phong-ies-aauto-map40-Tx-Rx1mm": ITEM_2,
     "desks-mie-grey-mirror-lambertian-aauto-links40-reflectance0.99": ITEM_1,
     "mesh-homogeneous-grey-mirror-lambertian-a5-map1-g-0.999": ITEM_5,
     "desks-homogeneous-spec-lambert-lambertian-a3-map1-g+0.999": ITEM_5,
+    # full matrix
+    "desks-grid-spec-phong-ies-aauto-map1-opticaldepth30": ITEM_1,
+    "mesh-homogeneous-grey-lambert-lambertian-aauto-links40-g-0.999": ITEM_1,
+    "desks-mie-grey-phong-ies-aauto-map9-area1e-8m2": ITEM_1,
+    "mesh-mixture-spec-phong-lambertian-aauto-map9-FOV1deg": ITEM_2,
+    "desks-grid-spec-phong-ies-aauto-links9-g+0.999": ITEM_2,
+    "empty-none-grey-lambert-lambertian-aauto-links1-reflectance0.99": ITEM_4,
+    "empty-homogeneous-spec-phong-lambertian-a4-map9-g+0.999": ITEM_5,
+    "desks-grid-grey-mirror-ies-a5-map1-g+0.999": ITEM_5,
+    "empty-homogeneous-grey-lambert-lambertian-aauto-links1-g+0.999": ITEM_5,
+    "empty-homogeneous-grey-lambert-lambertian-a5-links1-g+0.999": ITEM_5,
+    "empty-homogeneous-grey-lambert-lambertian-aauto-links1-g-0.999": ITEM_5,
+    "empty-homogeneous-grey-lambert-lambertian-a4-links1-g-0.999": ITEM_5,
+    "empty-homogeneous-grey-lambert-lambertian-a5-links1-g-0.999": ITEM_5,
+    "empty-homogeneous-grey-lambert-lambertian-a2-links1-g+0.999": ITEM_5,
+    "empty-homogeneous-grey-lambert-lambertian-a3-links1-g+0.999": ITEM_5,
+    "empty-homogeneous-grey-lambert-lambertian-a4-links1-g+0.999": ITEM_5,
 }
+
+#: Cells that hold but whose comparison cannot see a 10 % error at the matrix's path counts (the combined
+#: relative error of cell and reference is above 10 % / 4.5): a limit of the matrix, not of owcsim.
+UNDERPOWERED = "the matrix: combined relative error {} at these path counts, a planted 10 % error stays under z = 4.5"
+KNOWN_FAILURES.update(
+    {
+        "empty-mixture-spec-phong-lambertian-a4-links40-reflectance0.99": UNDERPOWERED.format(
+            "2.3 % (40 receivers at 4096 paths, swapped reference on one link)"
+        ),
+        "mesh-homogeneous-grey-lambert-lambertian-a3-map9-opticaldepth30": UNDERPOWERED.format(
+            "1.5 %, the cell 3 % below its reference"
+        ),
+        "empty-homogeneous-grey-lambert-lambertian-a4-links1-FOV1deg": UNDERPOWERED.format(
+            "2.4 % (FOV 1 deg, algorithm 4 at K = 0 against algorithm 5)"
+        ),
+    }
+)
 
 #: Failures the matrix found outside issue 22's list, not fixed here (the report describes each).
 NEAR_CEILING = (
     "found by the matrix: forward next-event estimation misses the ceiling within millimetres of a receiver "
     "1 mm below a ceiling light (the diffuse part ~400x low, error bar not covering it, no warning); "
-    "algorithm 4 in vacuum averages in the forward side"
+    "automatic direction picks forward there; algorithm 4 in vacuum averages in the forward side"
+)
+FOV_1_FORWARD = (
+    "found by the matrix: algorithm 4 without smoke at FOV 1 deg gives half of H0 with a 1 % error bar and no "
+    "warning (its forward half almost never reaches the 1 deg cone)"
 )
 FOUND: dict[str, str] = {
     "desks-none-grey-lambert-lambertian-a4-links1-Tx-Rx1mm": NEAR_CEILING,
+    "desks-none-spec-phong-lambertian-a5-map1-Tx-Rx1mm": NEAR_CEILING,
+    "empty-none-grey-lambert-lambertian-aauto-links1-Tx-Rx1mm": NEAR_CEILING,
+    "empty-none-grey-lambert-lambertian-a1-links1-Tx-Rx1mm": NEAR_CEILING,
+    "empty-none-grey-lambert-lambertian-a5-links1-Tx-Rx1mm": NEAR_CEILING,
+    "mesh-none-grey-phong-lambertian-a4-links1-FOV1deg": FOV_1_FORWARD,
 }
-
-#: Extremes where a cell may hold with an error bar too wide to see a 10 % error (the result says how wide:
-#: forward-only algorithms with a 1 deg FOV; the scattered light at optical depth 30).
-IMPRECISE_OK = ("FOV 1 deg", "optical depth 30")
 
 
 def _params(cells):
@@ -62,9 +102,9 @@ def _check(cell):
     out = matrix.run(cell)
     assert out.status in ("pass", "refused", "flagged"), f"{out.id}: {out.status}: {out.message}"
     if out.status == "pass" and not out.power:
-        assert cell["extreme"] in IMPRECISE_OK and out.h0_rel_stderr >= 0.05, (
-            f"{out.id}: a 10 % error on H0 would pass (z_max {out.z_max:.2f}, relative error "
-            f"{out.h0_rel_stderr:.2%}); more paths needed"
+        assert cell["extreme"] in matrix.IMPRECISE_OK and out.combined_rel_stderr >= 0.05, (
+            f"{out.id}: a 10 % error on H0 would pass (z_max {out.z_max:.2f}, combined relative error "
+            f"{out.combined_rel_stderr:.2%}); more paths needed"
         )
     return out
 
@@ -263,7 +303,10 @@ def test_forward_run_1_mm_below_a_ceiling_light_agrees_with_backward_or_warns():
     fw, bw = (runs[d].links[0] for d in ("forward", "backward"))
     z = abs(fw.dc_gain - bw.dc_gain) / np.hypot(fw.dc_gain_stderr, bw.dc_gain_stderr)
     warned = any("unreliable" in w or "near a surface" in w for w in runs["forward"].warnings)
-    assert z <= matrix.Z_MAX or warned, f"forward {fw.dc_gain:.6e} ± {fw.dc_gain_stderr:.1e}, backward {bw.dc_gain:.6e}"
+    assert z <= matrix.Z_MAX or warned, (
+        f"diffuse part (H0 - LOS) forward {fw.dc_gain - fw.los_gain:.3e} ± {fw.dc_gain_stderr:.1e}, "
+        f"backward {bw.dc_gain - bw.los_gain:.3e} ± {bw.dc_gain_stderr:.1e}"
+    )
 
 
 FOV_1_ZERO = (
