@@ -21,8 +21,8 @@ Python API (`owcsim.simulate`) and checks it against an estimate that does not s
 
 The reference runs with another seed, so even a same-side comparison is two independent estimates.
 Per link, z = |a - b| / sqrt(se_a^2 + se_b^2); a cell holds when every link has z <= Z_MAX. With
-Gaussian errors P(|Z| > 4.5) = 6.8e-6 per link; the full matrix compares about 4 000 links, so the
-expected number of false alarms is 0.03 (and the seeds are fixed, so a cell never flakes). Power:
+Gaussian errors P(|Z| > 4.5) = 6.8e-6 per link; the full matrix compares about 1 000 links, so the
+expected number of false alarms is 0.007 (and the seeds are fixed, so a cell never flakes). Power:
 every cell must also fail when the cell's gains are planted 10 % high (max z of 1.1 a against b above
 Z_MAX), i.e. the combined relative error is below about 2 %; `Outcome.power` records it and the tests
 require it. A cell whose z exceeds Z_MAX while its result warns that the error bar is unreliable is
