@@ -290,7 +290,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         first_rho=np.full(n, 1.0 / np.pi) if two_sided else None,
         ratio=ctx.spectra.initial_ratio(n) if ctx.spectra is not None else np.ones((0, n)),
     )
-    if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each from both devices
+    # source -> mirror -> target (order k = 1, none when K = 0): the same for every path; half each from both devices
+    if ctx.mirrors and K >= 1:
         connect_source_mirrors(ctx, sources, i, w0 * (0.5 if settings.mis or settings.both_sides else 1.0), n)
     surface_power = escaped_power = 0.0
     far = scene.medium_far_distance  # segments that leave the scene run to where the medium has absorbed all

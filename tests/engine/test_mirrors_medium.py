@@ -391,3 +391,19 @@ def test_error_bars_of_the_image_family_are_reliable_near_a_mirror():
     vals, ses = np.array(vals), np.array(ses)
     assert ses.max() / ses.min() < 3.0
     assert vals.std(ddof=1) / ses.mean() < 1.35  # 24 replicates: the ratio's own spread is about 15 %
+
+
+@pytest.mark.parametrize("algorithm", [2, 3, 4, 5])
+def test_no_reflection_order_in_smoke_is_the_same_with_a_mirror(algorithm):
+    """K = 0 in smoke with a mirror wall: the source's image path (k = 1) is left out, so the estimate is the
+    one of the same room with a Lambertian wall, bit for bit (it raised IndexError in the tally; found by the
+    combination matrix, tests/matrix.py)."""
+    gains = []
+    for wall in (mirror(0.85), 0.8):
+        doc = room_doc(algorithm=algorithm, max_reflections=0, paths=2048, medium=medium(0.05, 0.2))
+        if algorithm == 5:
+            doc["simulation"]["max_scattering"] = 2
+        doc["room"]["reflectance"]["wall_x_max"] = wall
+        link = simulate(spec(doc))["links"][0]
+        gains.append((link["dc_gain"], link["dc_gain_stderr"]))
+    assert gains[0] == gains[1] and gains[0][0] > 0
