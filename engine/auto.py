@@ -559,8 +559,11 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
         dt = sim.time_bin_s
         edges = bins.t_min_s + bins.time_bin_s * np.arange(PILOT_BINS + 1)
         t_end = max(_window_end(edges, lk, allowed / 2) for lk in links)
+        # the orders chosen past the pilot, within the pilot's window: the memory estimate of a job with an
+        # automatic window (engine/budget.py) takes that window as its bound; later power is in late_gain
         past_pilot = max(ends, default=0.0)
-        t_end = max(t_end, past_pilot, sim.t_min_s + dt)
+        held = min(past_pilot, run.t_long)
+        t_end = max(t_end, held, sim.t_min_s + dt)
         try:
             check_bin_budget(sim.t_min_s, t_end, dt, automatic=True)
         except ValueError as exc:
@@ -574,8 +577,14 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
             + (
                 "; it holds the orders chosen past the pilot (their mean delays, extrapolated per order, plus 4 "
                 "standard deviations)"
-                if past_pilot >= t_end
-                else ""
+                if 0 < past_pilot <= t_end and past_pilot == held
+                else (
+                    f"; the orders chosen past the pilot arrive until about {past_pilot * 1e9:.1f} ns, but the "
+                    "window stops at the pilot's (the bound of the job's memory estimate, engine/budget.py): "
+                    "their later power is in late_gain and dc_gain, not in the binned CIR; give t_max_s to bin it"
+                    if past_pilot > t_end
+                    else ""
+                )
             )
         )
     modeled.pilot = PilotPublic(

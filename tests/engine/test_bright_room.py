@@ -61,8 +61,12 @@ def test_automatic_k_in_a_bright_room_holds_every_order(rho, paths, reference):
     assert modeled["truncation_within_allowance"] is True
     assert " inf s" not in modeled["max_reflections_reason"]
     assert not any("truncated power" in w or "orders above" in w for w in res["warnings"])
-    # the window holds the long diffuse tail: what arrives after it is counted, and small
-    assert link["late_gain"] <= modeled["pilot"]["allowed_truncation_per_watt"]
+    # the window: the orders past the pilot up to the pilot's own window (the memory estimate's bound); what
+    # arrives later is counted in late_gain and dc_gain, and warned when over 10 % of H0
+    assert modeled["time_window_s"][1] <= modeled["pilot"]["t_max_s"] + res["time_bins"]["time_bin_s"]
+    assert "orders chosen past the pilot" in modeled["time_window_reason"]
+    assert sum(link["cir"]["total"]) + link["early_gain"] + link["late_gain"] == pytest.approx(link["dc_gain"])
+    assert (link["late_gain"] > 0.1 * link["dc_gain"]) == any("outside the time window" in w for w in res["warnings"])
     assert link["cir"]["by_reflection_order"] is None and "cir_by_order" in modeled["outputs_reason"]
     assert link["dc_gain_by_reflection_order"] is not None
 
