@@ -15,7 +15,11 @@ the pilot `plan` asks for between the two, on the job's built scene. Rules (expl
   past the pilot with ratio rho_max, plus two pilot standard errors) stays under half
   the allowed truncated power; S likewise with ratio albedo_max; the window ends where
   the power arriving later is under the other half. Allowed truncated power:
-  `truncation_tolerance` x H0 (default 0.1 x target_rel_error, or 1e-4).
+  `truncation_tolerance` x H0 (default 0.1 x target_rel_error, or 1e-4). When the power past
+  the pilot's cap is over that, K (S) goes on past the pilot along the geometric tail, up to
+  MAX_ORDER (bright rooms; roulette keeps the cost per path), the CIR is then not split by
+  order, and the window holds those orders within the pilot's window; a tail that stays over
+  the allowance sets `truncation_within_allowance` false and the result warns.
 The geometric tail is an estimate, not a proof: it assumes that past the last measured
 order each reflection (scattering) keeps at most rho_max (albedo_max) of the power,
 which holds for the diffuse field of a closed room; the result says so.
