@@ -7,8 +7,9 @@ facing up (issue 22, item 4). Per rho, over `--seeds` independent runs of `--pat
 - "K=40 + tail(rho)": plus the geometric tail H_40 rho / (1 - rho) (the a-priori ratio);
 - "K=40 + tail(fit)": plus H_40 r / (1 - r), r = (H_31 + .. + H_40) / (H_30 + .. + H_39) of the same run.
 It prints the mean H0 against the radiosity reference (tests/reference_radiosity.py, first order exact;
-accurate to ~0.3 %), the spread over seeds, the mean wall time of a run, and the time a run needs for a
-root-mean-square error (spread and bias) of 1 % of H0 (the reference is good to ~0.3 %) (infinite when the bias alone exceeds it).
+about 0.4 % low at its coarse patches, tests/engine/test_bright_room.py), the spread over seeds, the mean
+wall time of a run, and the time a run needs for a root-mean-square error (spread and bias) of 1 % of H0
+(infinite when the bias alone exceeds it).
 Run: .venv/bin/python benchmarks/bright_room.py [--seeds 5] [--paths 20000] [--rho 0.9 0.99]
 """
 
@@ -21,7 +22,6 @@ import sys
 import time
 
 import numpy as np
-
 from _common import ROOT
 
 sys.path.insert(0, str(ROOT))
@@ -68,8 +68,9 @@ def main() -> None:
     ap.add_argument("--rho", type=float, nargs="+", default=[0.9, 0.95, 0.99])
     args = ap.parse_args()
     ref = reference(args.rho)
-    print(f"{'rho':>5s} {'method':18s} {'K':>5s} {'mean H0':>11s} {'bias':>8s} {'spread':>8s} {'time':>7s} "
-          f"{'t(1%)':>9s}")
+    print(
+        f"{'rho':>5s} {'method':18s} {'K':>5s} {'mean H0':>11s} {'bias':>8s} {'spread':>8s} {'time':>7s} {'t(1%)':>9s}"
+    )
     for rho in args.rho:
         rows: dict[str, list] = {"auto": [], "K=40": [], "K=40 + tail(rho)": [], "K=40 + tail(fit)": []}
         times: dict[str, list] = {k: [] for k in rows}
@@ -95,13 +96,13 @@ def main() -> None:
             v = np.asarray(values) / ref[rho]
             bias, spread = v.mean() - 1, v.std(ddof=1)
             t = float(np.mean(times[name]))
-            # time for an rms error of 1e-2 (the reference is good to ~0.3 %): the spread falls as 1/sqrt(time), the bias does not
+            # time for an rms error of 1e-2: the spread falls as 1/sqrt(time), the bias does not
             need = math.inf if abs(bias) >= 1e-2 else t * spread**2 / (1e-4 - bias**2)
             print(
                 f"{rho:5.2f} {name:18s} {ks[name]:5d} {np.mean(values):11.4e} {bias:+8.2%} {spread:8.3%} "
                 f"{t:6.2f}s {need:8.1f}s"
             )
-    print(f"reference (radiosity, first order exact): " + ", ".join(f"{r}: {h:.4e}" for r, h in ref.items()))
+    print("reference (radiosity, first order exact): " + ", ".join(f"{r}: {h:.4e}" for r, h in ref.items()))
 
 
 if __name__ == "__main__":

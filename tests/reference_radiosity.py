@@ -9,9 +9,9 @@ reflection order at once solves (Goral et al. 1984; Cohen & Wallace 1993, ch. 2)
     M = rho (E + F M),   i.e.  (I - rho F) M = rho E,
 and the receiver (a point of area A, FOV 90 deg) gets
     H0 = LOS + A sum_j M_j / pi  int_j cos_j cos_psi / d^2 dA.
-No part of the engine is used. Its accuracy is measured in tests/engine/test_bright_room.py
-(patch size halved, quadrature refined, the first order against tests/reference.py's exact
-patch integral).
+No part of the engine is used. Its accuracy (patch size halved, quadrature refined, the first
+order against tests/reference.py's exact patch integral) is stated in
+tests/engine/test_bright_room.py.
 """
 
 from __future__ import annotations
