@@ -68,6 +68,7 @@ class JobFailed(OwcsimError):
 
 
 def error_for(status: int, problem: Problem) -> ApiError:
+    cls: type[ApiError]
     if status in (401, 403):
         cls = Unauthorized
     elif status == 404:

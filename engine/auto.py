@@ -371,10 +371,14 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
         number = sim.algorithm
         modeled.algorithm_reason = f"algorithm {number} requested"
     alg = algorithm(number)
-    if alg.scattering_orders is not None:  # S is fixed by the algorithm (schemas/algorithms.py); the document's
-        update["max_scattering"] = max(alg.scattering_orders, 1)  # field is >= 1 (algorithm 1 tallies S = 0)
+    if alg.scattering_orders is not None:  # S fixed by the algorithm, or 4's 1 or 2 (schemas/algorithms.py)
+        update["max_scattering"] = alg.S(sim.max_scattering)
     need_k = sim.max_reflections is None
     need_s = alg.scattering_orders is None and sim.max_scattering is None
+    if need_s and scene.medium is None:  # algorithm 5 in clear air (or sigma_t = 0): a surface path tracer
+        update["max_scattering"] = 1  # the field's least; no path scatters, so S changes nothing
+        modeled.max_scattering_reason = "no medium (or sigma_t = 0): no path scatters; S has no effect"
+        need_s = False
     need_t = sim.t_max_s is None
     if need_t and not need_k and not alg.counts_scattering and sim.max_reflections == 0:
         # Line of sight only: every arrival is a direct path, known without a pilot.
@@ -399,7 +403,8 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
     )
     cap_k = PILOT_CAP if need_k else resolved.simulation.max_reflections
     cap_s = PILOT_CAP if need_s else resolved.simulation.max_scattering
-    t_long = resolved.simulation.t_max_s or (sim.t_min_s + (cap_k + cap_s + 3) * 1.8 * extent / SPEED_OF_LIGHT)
+    # (S counted as at least 1: algorithm 1's S = 0 keeps the window the rule always gave it)
+    t_long = resolved.simulation.t_max_s or (sim.t_min_s + (cap_k + max(cap_s, 1) + 3) * 1.8 * extent / SPEED_OF_LIGHT)
     usable = np.flatnonzero(scene.masked == "")  # grid points in furniture or outside the room are not run
     if not len(usable):
         usable = np.arange(len(scene.receivers))
@@ -436,10 +441,15 @@ def plan(spec: SceneSpec, scene: Scene) -> Resolution:
 
 def with_receivers(scene: Scene, spec: SceneSpec) -> Scene:
     """The built scene with the receivers of `spec` (same surfaces, transmitters and medium): what
-    build_scene(spec) would give, without building the geometry or the medium again."""
+    build_scene(spec) would give, without building the geometry or the medium again (a spectral scene's
+    receiver tables follow the receivers: spectra.with_receivers)."""
+    from . import spectra
     from .scene import _far_distance, mask_reasons, receivers_from_scene
 
     receivers, grid_slices = receivers_from_scene(spec)
+    tables = scene.spectra
+    if tables is not None:
+        tables = spectra.with_receivers(tables, spec, len(scene.transmitters), len(receivers))
     return dataclasses.replace(
         scene,
         spec=spec,
@@ -447,6 +457,7 @@ def with_receivers(scene: Scene, spec: SceneSpec) -> Scene:
         grid_slices=grid_slices,
         masked=mask_reasons(spec, receivers, len(spec.receivers)),
         medium_far_distance=_far_distance(spec, scene.geometry, scene.medium, receivers.positions),
+        spectra=tables,
     )
 
 
@@ -458,7 +469,7 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
     modeled, update = step.modeled.model_copy(), dict(step.update)
     alg = algorithm(update.get("algorithm", sim.algorithm))
     need_k = sim.max_reflections is None
-    need_s = alg.scattering_orders is None and sim.max_scattering is None
+    need_s = alg.scattering_orders is None and sim.max_scattering is None and "max_scattering" not in update
     need_t = "t_max_s" not in update and sim.t_max_s is None
     links = pilot.links
     h0 = max(max(link.dc_gain or 0.0 for link in links), 1e-300)

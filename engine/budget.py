@@ -17,7 +17,9 @@ The terms follow the arrays the engine allocates:
   (s1, s2, path and sample counts, the sample sums q1, q0, N_GROUPS path-group and batch-group sums:
   ~50 numbers); per link with a
   binned CIR (the job's `outputs`; by default the explicit receivers only) n_bins x (1 + N_GROUPS,
-  + (K+1) + (S+1) with the order split) numbers; per link with the order split 3 (K+1)(S+1);
+  + (K+1) + (S+1) with the order split) numbers, and in runs that may be one batch the first batch's
+  CIR per path group (at most `tally.CIR_GROUPS_MAX` numbers, in the batch too); per link with the
+  order split 3 (K+1)(S+1);
   the groups' channels G x n_rx x 18;
 - `batch`: batches in flight (1 serial, 2 x workers in a pool); a batch holds paths x targets capped
   by `simulate.PATH_TARGET_BUDGET` (dense per-path tallies: 3 arrays and temporaries, ~10 numbers
@@ -41,7 +43,7 @@ from owcsim.schemas.algorithms import ALGORITHMS
 from .auto import PILOT_CAP
 from .constants import SPEED_OF_LIGHT
 from .qmc import BLOCK
-from .tally import N_GROUPS, SAMPLE_TABLE_MAX
+from .tally import CIR_GROUPS_MAX, N_GROUPS, SAMPLE_TABLE_MAX
 
 #: The batch caps of engine/simulate.py (copied: simulate imports the whole engine, this module stays light).
 PATH_TARGET_BUDGET = 1 << 20
@@ -110,7 +112,7 @@ def memory_estimate(
     elif alg.scattering_orders is None:  # S chosen (algorithm 5)
         s = sim.max_scattering if sim.max_scattering is not None else PILOT_CAP
     else:
-        s = alg.scattering_orders
+        s = alg.S(sim.max_scattering)
     if sim.t_max_s is not None:
         n_bins = sim.n_bins
     else:  # the pilot's window (auto.resolve): the automatic window ends inside it
@@ -125,7 +127,13 @@ def memory_estimate(
     n_split = n_tx * sum(c and o for c, o in zip(cir, orders))
     n_groups = len(spec.transmitter_groups)
     per_cir_link = n_bins * (1 + N_GROUPS) + 2 + n_split / max(n_cir, 1) * n_bins * ((k + 1) + (s + 1))
-    accumulators = 2 * 8 * (n_links * 50 + int(n_cir * per_cir_link) + n_ord * 3 * cells + n_groups * n_rx * 18)
+    # the first batch's CIR per path group (tally.TallyPlan.first_batch_groups: runs that may be one batch)
+    # (at most CIR_GROUPS_MAX: an automatic window may end up shorter than n_bins, within the cap)
+    one_batch = sim.n_paths is None or sim.n_paths <= sim.batch_size
+    first_groups = min(N_GROUPS * n_cir * n_bins, CIR_GROUPS_MAX) if one_batch else 0
+    accumulators = (
+        2 * 8 * (n_links * 50 + int(n_cir * per_cir_link) + n_ord * 3 * cells + n_groups * n_rx * 18 + first_groups)
+    )
     n_bands = spec.spectral.n_bands if spec.spectral is not None else 0
     if n_bands:  # spectral channel sums per link and direction (engine/spectra.ChannelAccumulator)
         accumulators += 2 * 8 * n_links * ((n_bands + 10) * N_GROUPS + 2 * n_bands)
@@ -142,6 +150,7 @@ def memory_estimate(
         pairs * 14 * 8
         + min(pairs * per_segment, ESTIMATE_BUDGET) * BYTES_PER_CONTRIBUTION
         + (n_cir * n_bins * 8 * 2 if n_cir else 0)
+        + 8 * first_groups
         + (8 * table if table <= SAMPLE_TABLE_MAX else 0)
     )
     in_flight = 1 if workers <= 1 else 2 * workers

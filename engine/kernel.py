@@ -656,7 +656,9 @@ class _Context:
             or settings.in_then_out
         )
         block = qmc.block_size(item.n_paths, settings.qmc_block)  # paths per independent sample
-        self.builder = BatchBuilder(settings.tally, item_links(self.scene, item), item.n_paths, several, block)
+        self.builder = BatchBuilder(
+            settings.tally, item_links(self.scene, item), item.n_paths, several, block, first_batch=item.batch == 0
+        )
         if self.spectra is not None:  # per-(link, channel) sums (spectra.py)
             self.channels = self.spectra.builder(item, self.tgt, item_links(self.scene, item), block)
 
@@ -761,6 +763,8 @@ class _Context:
             if not scene.all_visible:  # the shadow ray stops short of the device (it may sit on a surface)
                 blocked = isect.occluded(_rows(shadow_origins, vertex).T, out_dir.T, d - 2.0 * isect.offset)
                 seen = (~blocked).nonzero()[0]
+                if len(seen) == 0:  # every shadow ray of the chunk blocked (a furnished room): nothing to record
+                    continue
                 if len(seen) < len(d):
                     vertex = seen if vertex is None else vertex.take(seen)
                     column, f, d = column.take(seen), f.take(seen), d.take(seen)

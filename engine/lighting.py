@@ -2,7 +2,9 @@
 
 - Illuminance [lx] on the receiver's plane, direct light only (Komine & Nakagawa 2004):
   E = sum_i I0_i cos^m(phi) cos(psi) / d^2 over the transmitters that give a luminous output
-  (link_budget.illuminance_los), blocked by furniture, attenuated by smoke, no FOV limit.
+  (link_budget.illuminance_los), blocked by furniture, attenuated by smoke, no FOV limit. A
+  transmitter with a photometric file and no `luminous_output` lights with the file's own candela,
+  I(gamma, C) (Photometry.luminous_flux); a given `luminous_output` wins (it rescales the file's shape).
 - With `link_budget`: received power P_r = P_t H0 [W], SNR of the Komine-Nakagawa noise model
   (shot noise of signal and background, thermal noise of the preamplifier), BER of OOK-NRZ,
   and the bit rate the delay spread allows, 1 / (10 tau_rms). The signal is the whole received
@@ -33,12 +35,15 @@ class Lighting:
         # for a Lambertian source: link_budget.illuminance_los).
         r_aim = tx.response(np.arange(self.n_tx), np.ones(self.n_tx), tx.normals)
         scale = np.full(self.n_tx, np.nan)  # [lm]: intensity = scale * R(dir)
+        patterns = tx.patterns or [None] * self.n_tx
         for i, t in enumerate(spec.transmitters):  # a loop over transmitters
             out = t.luminous_output
             if out is not None and out.luminous_flux is not None:
                 scale[i] = out.luminous_flux
             elif out is not None and r_aim[i] > 0:
                 scale[i] = out.center_luminous_intensity / r_aim[i]
+            elif out is None and patterns[i] is not None:  # a photometric file: its own candela (given output wins)
+                scale[i] = patterns[i].luminous_flux
         self.has_light = bool(np.isfinite(scale).any())
         self.illuminance = np.full(shape, np.nan)  # per link [lx]
         if self.has_light:

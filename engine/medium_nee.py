@@ -190,6 +190,8 @@ def connection_weight(ctx, paths, vertex, column, d, tr, response, vertex_factor
     first = rows(paths.first)
     k, s = rows(paths.k), rows(paths.s)
     depth = k + s
+    if len(depth) == 0:  # no connection to weigh (the caller had every shadow ray blocked)
+        return np.zeros(0)
     if depth.min() >= 2:  # every path has several vertices (the usual step past the first)
         a = first * rows(paths.first_rho)
         b = last * rho_t

@@ -206,9 +206,12 @@ def lognormal_nodes(
 
 
 def size_window(dg: float, sigma_g: float, wavelength: float, medium_index: float = 1.0) -> tuple[float, float]:
-    """(ln D_lo, ln D_hi): the window holding all but _TAIL of each integrand bound (module docstring)."""
+    """(ln D_lo, ln D_hi): the window holding all but _TAIL of each integrand bound (module docstring); one
+    point for a single size (sigma_g = 1, which `lognormal_nodes` takes as one node)."""
     s = math.log(sigma_g)
     mu = math.log(dg)
+    if s == 0.0:  # monodisperse: no spread to integrate (0/0 in the Gaussian below)
+        return mu, mu
     y = np.linspace(mu - 8 * s, mu + 8 * s + 6 * s * s, 20001)
     x = np.pi * np.exp(y) * medium_index / wavelength
     gauss = np.exp(-0.5 * ((y - mu) / s) ** 2)

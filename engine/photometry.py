@@ -61,6 +61,8 @@ class Photometry:
     intensity: np.ndarray
     flux: float  # int I dOmega of the file's table, in the file's unit [lm] (or [W])
     declared_flux: float | None = None  # what the file states [lm], None for absolute photometry
+    #: factor from the table to the luminaire's intensities [cd] (IES: the ballast factor; EULUMDAT: 1)
+    candela_scale: float = 1.0
     source: str = ""  # "IES LM-63-2002", "EULUMDAT", ...
     symmetry: str = "none"
     #: cumulative cell masses, (n_c-1)*(n_g-1)+1 (`from_table` computes them)
@@ -68,7 +70,16 @@ class Photometry:
 
     @classmethod
     def from_table(
-        cls, gamma_deg, c_deg, candela, *, declared_flux=None, source="", symmetry="none", where="photometry"
+        cls,
+        gamma_deg,
+        c_deg,
+        candela,
+        *,
+        declared_flux=None,
+        source="",
+        symmetry="none",
+        where="photometry",
+        candela_scale=1.0,
     ) -> "Photometry":
         """From a full table: `c_deg` from 0 to 360 inclusive, `candela` (n_c, n_g) [cd]."""
         g = np.radians(np.asarray(gamma_deg, float))
@@ -88,8 +99,16 @@ class Photometry:
             declared_flux=declared_flux,
             source=source,
             symmetry=symmetry,
+            candela_scale=candela_scale,
             _cdf=cdf,
         )
+
+    @property
+    def luminous_flux(self) -> float:
+        """The luminaire's luminous flux [lm]: int I dOmega of its candela (IES: the table x candela multiplier x
+        ballast factor, in absolute and relative photometry alike, relative photometry's candela being those of
+        the rated lamps; EULUMDAT: cd/klm x lamp flux / 1000 x conversion factor, i.e. lamp flux x LOR)."""
+        return self.flux * self.candela_scale
 
     @functools.cached_property
     def max_gamma(self) -> float:
@@ -506,7 +525,9 @@ def parse_ies(data: bytes, where: str = "photometry") -> Photometry:
         )
     c_full, rows = _expand(h, cd * multiplier, symmetry, where)
     declared = None if lumens == -1 else float(n_lamps * lumens * multiplier * ballast)
-    return Photometry.from_table(v, c_full, rows, declared_flux=declared, source=source, symmetry=symmetry, where=where)
+    return Photometry.from_table(
+        v, c_full, rows, declared_flux=declared, source=source, symmetry=symmetry, where=where, candela_scale=ballast
+    )
 
 
 # ----------------------------------------------------------------------------- EULUMDAT

@@ -17,9 +17,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from owcsim import __version__  # the package's one version lookup (owcsim/__init__.py)
 from owcsim.schemas.algorithms import Direction, algorithm
 from owcsim.schemas.results import ModeledPublic, SimulationResultPublic, UnreachablePublic
+from owcsim.schemas.units import unit_warnings
+from owcsim.version import __version__  # the package's one version lookup
 
 from . import metrics, mie, reliability
 from .auto import _max_albedo, _scatters
@@ -59,7 +60,13 @@ def _warnings(spec, scene) -> list[str]:
     if alg.warning_in_scattering_medium and _scatters(spec.medium):
         out.append(alg.warning_in_scattering_medium)
     out += _size_warnings(scene)
-    return out
+    return out + unit_warnings(spec, surface_extent(scene))
+
+
+def surface_extent(scene) -> float | None:
+    """Largest side [m] of the surfaces' bounding box (None without surfaces)."""
+    v = scene.geometry.vertices
+    return float(np.ptp(v, axis=0).max()) if len(v) else None
 
 
 #: Fraction of H0 outside the time window above which the result warns.
@@ -163,7 +170,8 @@ def _modeled(spec, scene, modeled: ModeledPublic | None, unreachable, settings) 
     sim = spec.simulation
     alg = algorithm(sim.algorithm)
     chosen = modeled if modeled is not None else ModeledPublic(algorithm_reason=f"algorithm {sim.algorithm} requested")
-    left = list(alg.left_out) if spec.medium is not None and _scatters(spec.medium) else []
+    families, left_out = alg.families_at(sim.scattering_orders)
+    left = list(left_out) if spec.medium is not None and _scatters(spec.medium) else []
     left.append(f"reflection orders above K = {sim.max_reflections}")
     if alg.scattering_orders is None and scene.medium is not None:  # S chosen, not fixed by the algorithm
         left.append(f"scattering orders above S = {sim.max_scattering}")
@@ -175,7 +183,7 @@ def _modeled(spec, scene, modeled: ModeledPublic | None, unreachable, settings) 
     return chosen.model_copy(
         update=dict(
             algorithm=sim.algorithm,
-            families=alg.families if scene.medium is not None else "vacuum paths, reflection orders 0..K",
+            families=families if scene.medium is not None else "vacuum paths, reflection orders 0..K",
             left_out=left,
             medium=mie.medium_report(spec.medium, scene.phase),  # derived coefficients, g, visibility
             max_reflections=sim.max_reflections,

@@ -54,14 +54,22 @@ def _split(x: np.ndarray | None) -> np.ndarray:
 def _group_estimates(accs, link: int, slot: int):
     """Per batch group: that group's own estimate of the per-path CIR of one link, summed over directions.
 
+    A link that ran one batch per direction has one batch group: its groups are then the path groups of
+    that batch (sample index mod N_GROUPS, tally.TallyPlan.first_batch_groups) where they were tallied.
     Returned as (group sums, group weights) for metrics.jackknife / bin_stderr: sum = estimate x weight.
     """
     serving = [a for a in accs if a.n_paths[link] > 0]
     if not serving:
         return np.zeros((0, 1)), np.zeros(0)
-    used = np.all([a.group_paths[:, link] > 0 for a in serving], axis=0)
-    est = sum(a.groups[used, slot] / a.group_paths[used, link][:, None] for a in serving)
-    weight = sum(a.group_paths[used, link] for a in serving) / len(serving)
+    groups, paths = [a.groups for a in serving], [a.group_paths for a in serving]
+    one_batch = all(
+        a.first_groups is not None and a.first_group_paths[:, link].sum() == a.n_paths[link] for a in serving
+    )
+    if one_batch:  # the first batch is the whole run: its path groups
+        groups, paths = [a.first_groups for a in serving], [a.first_group_paths for a in serving]
+    used = np.all([p[:, link] > 0 for p in paths], axis=0)
+    est = sum(g[used, slot] / p[used, link][:, None] for g, p in zip(groups, paths))
+    weight = sum(p[used, link] for p in paths) / len(serving)
     return est * weight[:, None], weight
 
 

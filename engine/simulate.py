@@ -36,7 +36,7 @@ from .los import line_of_sight, los_geometry
 from .medium_nee import two_sided_settings
 from .result import build_result
 from .scene import Scene, build_scene
-from .tally import Accumulator, TallyPlan, TimeBins
+from .tally import CIR_GROUPS_MAX, N_GROUPS, Accumulator, TallyPlan, TimeBins
 
 #: Heuristic of the auto direction: with this many times more receivers than
 #: transmitters (or the reverse), one side amortizes its paths over so many links
@@ -93,6 +93,10 @@ def tally_plan(spec: SceneSpec, scene: Scene) -> TallyPlan:
     def rank(flags: np.ndarray) -> np.ndarray:
         return np.where(flags, np.cumsum(flags) - 1, -1).astype(np.int64)
 
+    n_cir = len(scene.transmitters) * int(cir.sum())
+    # a run that may be one batch per source (paths <= batch_size, or an accuracy run that stops after its first
+    # round) bins its first batches per path group too: per-bin errors without a second batch (tally.py)
+    one_batch = sim.n_paths is None or sim.n_paths <= sim.batch_size
     return TallyPlan(
         bins=TimeBins(sim.t_min_s, sim.time_bin_s, sim.n_bins),
         n_orders=sim.max_reflections + 1,
@@ -102,6 +106,7 @@ def tally_plan(spec: SceneSpec, scene: Scene) -> TallyPlan:
         order_rank=rank(orders),
         group_weights=group_weights(spec, scene),
         split_cir=spec.outputs.cir_by_order is not False,
+        first_batch_groups=one_batch and 0 < N_GROUPS * n_cir * sim.n_bins <= CIR_GROUPS_MAX,
     )
 
 

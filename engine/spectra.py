@@ -39,7 +39,7 @@ direction by p_b / p_c (`turn`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -359,6 +359,32 @@ def _medium_bands(spec, spectral):
     return np.asarray(bm.sigma_a, float), np.asarray(bm.sigma_s, float), [med.phase] * len(centres)
 
 
+def receiver_bands(spec, n_rx: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rx_electrical (n_rx, B) T_b R_b [A/W], rx_responsive (n_rx,)) of the document's receivers, explicit ones
+    first, then every grid point (grid points share their grid's curves)."""
+    spectral = spec.spectral
+    electrical, responsive = np.zeros((n_rx, spectral.n_bands)), np.zeros(n_rx, bool)
+    rows = [(r, 1) for r in spec.receivers] + [(g, g.count) for g in spec.receiver_grids]
+    start = 0
+    for r, count in rows:  # a loop over receivers and grids
+        if r.responsivity is not None:
+            e = band_average(r.responsivity, spectral)
+            if r.filter_transmission is not None:
+                e = e * band_average(r.filter_transmission, spectral)
+            electrical[start : start + count] = e
+            responsive[start : start + count] = True
+        start += count
+    return electrical, responsive
+
+
+def with_receivers(sp: SceneSpectra, spec, n_tx: int, n_rx: int) -> SceneSpectra:
+    """The tables of a scene whose receivers were replaced by those of `spec` (auto.with_receivers: the
+    truncation pilot's subset, or a job sharing a worker's built geometry): the receivers' rows and the link
+    count follow them; everything else (surfaces, transmitters, medium) is shared."""
+    electrical, responsive = receiver_bands(spec, n_rx)
+    return replace(sp, rx_electrical=electrical, rx_responsive=responsive, n_links=n_tx * n_rx)
+
+
 def attach(scene) -> None:
     """Build `scene.spectra` and make the scene the carrier (largest reflectance, least attenuated band's medium).
 
@@ -382,17 +408,7 @@ def attach(scene) -> None:
     frac, lum = np.zeros((n_tx, B)), np.zeros((n_tx, B))
     for i, t in enumerate(spec.transmitters):  # a loop over transmitters
         frac[i], lum[i] = band_spd(t.spectrum, spectral)
-    electrical, responsive = np.zeros((n_rx, B)), np.zeros(n_rx, bool)
-    rows = [(r, 1) for r in spec.receivers] + [(g, g.count) for g in spec.receiver_grids]
-    start = 0
-    for r, count in rows:  # a loop over receivers and grids (grid points share their grid's curves)
-        if r.responsivity is not None:
-            e = band_average(r.responsivity, spectral)
-            if r.filter_transmission is not None:
-                e = e * band_average(r.filter_transmission, spectral)
-            electrical[start : start + count] = e
-            responsive[start : start + count] = True
-        start += count
+    electrical, responsive = receiver_bands(spec, n_rx)
     out = SceneSpectra(
         edges=np.asarray(spectral.edges(), float),
         centres=np.asarray(spectral.centres(), float),

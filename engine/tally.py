@@ -31,7 +31,10 @@ samples of unequal path counts (one-path samples give the usual per-path formula
 
 Batches are merged in batch order, so results are bit-identical whatever the number of
 workers. Batch groups (batch index mod N_GROUPS) keep per-bin power and per-link H0 for
-batch-spread standard errors, the jackknife, and the reliability of the error bars.
+batch-spread standard errors, the jackknife, and the reliability of the error bars. A run of
+one batch has one batch group: where the plan says so (`TallyPlan.first_batch_groups`), the first
+batch of each source also bins its CIR per path group (sample index mod N_GROUPS, as the H0 path
+groups), and the per-bin errors of a one-batch run come from those (result_parts._group_estimates).
 """
 
 from __future__ import annotations
@@ -52,6 +55,9 @@ KEYS_PER_ESTIMATE = 4
 #: paths) each estimate adds to its (sample, cell) sum with one `np.add.at`, and the squares are taken once
 #: per batch (`BatchBuilder.finish`); 2^20 float64 = 8 MiB per batch. Larger splits sum step by step.
 SAMPLE_TABLE_MAX = 1 << 20
+#: Most entries of the first batch's CIR per path group (N_GROUPS x CIR links x bins, float64: 8 MiB);
+#: a larger CIR keeps batch groups only (no per-bin errors from a one-batch run).
+CIR_GROUPS_MAX = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -82,6 +88,9 @@ class TallyPlan:
     group_weights: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     #: split the CIR by order where a receiver has both (outputs.cir_by_order)
     split_cir: bool = True
+    #: the first batch of each source also bins its CIR per path group (`BatchBuilder`), for the per-bin
+    #: errors of runs of one batch; set by the planner when the run may have one batch (simulate.tally_plan)
+    first_batch_groups: bool = False
 
     @property
     def n_cir_rx(self) -> int:
@@ -129,6 +138,8 @@ class BatchTally:
     order_ssum: np.ndarray  # (To, K+1, S+1) the sum of the sample sums squared in order_sumsq
     h0_groups: np.ndarray | None = None  # (T, N_GROUPS) sum of per-path H0 estimates per path group
     h0_group_paths: np.ndarray | None = None  # (N_GROUPS,) paths per path group
+    #: (N_GROUPS, Tc, n_bins) the CIR per path group (first batch with TallyPlan.first_batch_groups), or None
+    cir_groups: np.ndarray | None = None
     #: paths per independent sample (engine/qmc.py): s2, order_sumsq and channel_s2 are sums over samples
     #: of the outer products of their sums
     block: int = 1
@@ -160,7 +171,15 @@ class BatchBuilder:
     order s, delay [s], power [W/W], path index in the batch.
     """
 
-    def __init__(self, plan: TallyPlan, links: np.ndarray, n_paths: int, several_per_cell: bool, block: int = 1):
+    def __init__(
+        self,
+        plan: TallyPlan,
+        links: np.ndarray,
+        n_paths: int,
+        several_per_cell: bool,
+        block: int = 1,
+        first_batch: bool = False,
+    ):
         self.plan, self.links, self.n_paths = plan, np.asarray(links, np.int64), n_paths
         #: paths per independent sample (engine/qmc.py); n_paths is a multiple of it
         self.block = block
@@ -174,6 +193,10 @@ class BatchBuilder:
         self.cir_local[cs >= 0] = np.arange(int((cs >= 0).sum()))
         self.n_cir = int((cs >= 0).sum())
         self.cir = np.zeros(self.n_cir * bins.n)
+        #: the first batch's CIR per path group (sample index mod N_GROUPS), flat (group, slot, bin)
+        self.cir_groups = (
+            np.zeros(N_GROUPS * self.n_cir * bins.n) if first_batch and plan.first_batch_groups and self.n_cir else None
+        )
         self.early = np.zeros(self.n_cir)
         self.late = np.zeros(self.n_cir)
         split = plan.by_order_cir
@@ -222,9 +245,10 @@ class BatchBuilder:
         if self.n_cir:
             slot, sel = self._ranked(self.cir_local, target)
             if sel is None:
-                self._bin(slot, k, s, delay, power)
+                self._bin(slot, k, s, delay, power, path)
             elif len(sel):
-                self._bin(slot.take(sel), k.take(sel), s.take(sel), delay.take(sel), power.take(sel))
+                grouped = path.take(sel) if self.cir_groups is not None else None  # (first batch only)
+                self._bin(slot.take(sel), k.take(sel), s.take(sel), delay.take(sel), power.take(sel), grouped)
         # --- order split ----------------------------------------------------------------------
         if self.n_ord:
             slot, sel = self._ranked(self.order_local, target)
@@ -302,7 +326,7 @@ class BatchBuilder:
             _accumulate(self.order_sumsq, cells, owner_sums**2)
             _accumulate(self.order_ssum, cells, owner_sums)
 
-    def _bin(self, slot, k, s, delay, power) -> None:
+    def _bin(self, slot, k, s, delay, power, path) -> None:
         bins, plan = self.plan.bins, self.plan
         b = delay - bins.t_min
         b *= 1.0 / bins.dt
@@ -318,7 +342,17 @@ class BatchBuilder:
                 self.late += np.bincount(slot, late, self.n_cir)
                 slot = slot.take(sel)
             k, s, b, power = k.take(sel), s.take(sel), b.take(sel), power.take(sel)
+            if self.cir_groups is not None:
+                path = path.take(sel)
         ib = b.astype(np.int64)
+        if self.cir_groups is not None:  # (group, slot, bin) of each estimate: its sample's path group
+            group = path // self.block if self.block > 1 else path.copy()
+            group %= N_GROUPS
+            group *= self.n_cir
+            group += slot
+            group *= bins.n
+            group += ib
+            _accumulate(self.cir_groups, group, power)
         splits = ((self.cir_k, k, plan.n_orders), (self.cir_s, s, plan.n_scatter))
         if np.ndim(slot) == 0:  # one slot: its offsets are numbers (fewer passes over the estimates)
             if self._cir_from is None:
@@ -401,6 +435,7 @@ class BatchBuilder:
             channel_s2=ch_s2,
             h0_groups=h0_groups,
             h0_group_paths=h0_group_paths,
+            cir_groups=None if self.cir_groups is None else self.cir_groups.reshape(N_GROUPS, self.n_cir, bins.n),
             block=m,
         )
 
@@ -495,6 +530,10 @@ class Accumulator:
         self.order_q1 = np.zeros((n_ord, plan.n_orders, plan.n_scatter))  # sum of n_b S_b
         self.groups = np.zeros((N_GROUPS, n_cir, bins.n))  # per batch group, summed over k, s
         self.group_paths = np.zeros((N_GROUPS, self.n_links), np.int64)
+        #: the first batch's CIR per path group and its paths per group (TallyPlan.first_batch_groups): the
+        #: per-bin errors of a link that ran one batch
+        self.first_groups = np.zeros((N_GROUPS, n_cir, bins.n)) if plan.first_batch_groups and n_cir else None
+        self.first_group_paths = np.zeros((N_GROUPS, self.n_links), np.int64)
         #: per path group (sample index mod N_GROUPS, groups filled in turn: group_shift): sum of per-path H0
         #: estimates, and paths
         self.group_h0 = np.zeros((N_GROUPS, self.n_links))
@@ -531,6 +570,9 @@ class Accumulator:
             self.early[cs] += batch.early
             self.late[cs] += batch.late
             self.groups[g, cs] += batch.cir
+            if batch.cir_groups is not None and self.first_groups is not None:
+                self.first_groups[:, cs] += batch.cir_groups
+                self.first_group_paths[:, ln] += batch.h0_group_paths[:, None]
             if batch.cir_k is not None:
                 assert self.cir_k is not None and self.cir_s is not None and batch.cir_s is not None
                 self.cir_k[cs] += batch.cir_k

@@ -13,13 +13,7 @@ The installed package holds the layers as subpackages: `owcsim.schemas` (wire mo
 
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError
-from importlib.metadata import version as _version
-
-try:
-    __version__ = _version("owcsim")
-except PackageNotFoundError:  # a source tree that was not installed
-    __version__ = "0+unknown"
+from .version import __version__
 
 __all__ = ["__version__", "simulate", "Result", "SceneSpec"]
 

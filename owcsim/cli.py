@@ -41,6 +41,11 @@ def _cmd_validate(args) -> int:
     sim = spec.simulation
     window = f"{sim.n_bins} time bins" if sim.t_max_s is not None else "time window chosen when it runs"
     masked = int((scene.masked != "").sum())
+    from owcsim.engine.result import surface_extent
+    from owcsim.schemas.units import unit_warnings
+
+    for note in unit_warnings(spec, surface_extent(scene)):  # values plausible only in another unit
+        print(f"owcsim: warning: {note}", file=sys.stderr)
     print(
         f"{args.scene}: valid — {len(scene.geometry.faces)} triangles, {len(scene.transmitters)} transmitters, "
         f"{len(scene.receivers)} receivers{f' ({masked} grid points masked)' if masked else ''}, "
@@ -106,12 +111,31 @@ def _scene_overrides(args) -> list[tuple[str, object]]:
         "target_rel_error": args.target_rel_error,
         "direction": args.direction,
     }
-    overrides = [(f"simulation.{k}", v) for k, v in flags.items() if v is not None]
+    overrides: list[tuple[str, object]] = [(f"simulation.{k}", v) for k, v in flags.items() if v is not None]
+    if isinstance(args.algorithm, int):  # the document's S may be another algorithm's: kept only if N honours it
+        overrides.append(("simulation.max_scattering", _scattering_kept_by(args.algorithm)))
     if args.paths is not None:  # the two stopping rules exclude each other: the flag given wins
         overrides.append(("simulation.target_rel_error", None))
     if args.target_rel_error is not None:
         overrides.append(("simulation.paths", None))
     return overrides
+
+
+def _scattering_kept_by(number: int):
+    """The document's `max_scattering` under `--algorithm number`: kept if that algorithm honours it, else
+    left out (the algorithm counts its own orders: 1: s = 0, 2-3: s <= 1, 4: s <= 2), as `--paths` clears
+    `target_rel_error`; a `--set simulation.max_scattering=...` still wins (applied after)."""
+    from owcsim.schemas.algorithms import ALGORITHMS
+
+    def value(doc: dict):
+        sim = doc.get("simulation")
+        given = sim.get("max_scattering") if isinstance(sim, dict) else None
+        alg = ALGORITHMS.get(number)
+        if alg is None or not isinstance(given, int) or alg.scattering_refusal(given) is None:
+            return given
+        return None
+
+    return value
 
 
 def _output_folder(path: str) -> Path:
@@ -251,7 +275,8 @@ def _add_simulation_options(p: argparse.ArgumentParser) -> None:
         "--algorithm",
         type=_algorithm,
         metavar="{1,2,3,4,5,auto}",
-        help="estimator (schemas/algorithms.py); auto: chosen from the scene",
+        help="estimator (schemas/algorithms.py); auto: chosen from the scene. Drops a document max_scattering "
+        "the algorithm cannot honour (it then counts its own orders)",
     )
     p.add_argument("--direction", choices=("auto", "forward", "backward"))
     p.add_argument("--target-rel-error", type=float, help="stop when stderr(H0)/H0 reaches this, every link")
@@ -264,7 +289,7 @@ def _add_simulation_options(p: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import __version__
+    from .version import __version__
 
     p = argparse.ArgumentParser(prog="owcsim", description="Optical wireless channel simulator.")
     p.add_argument("--version", action="version", version=f"owcsim {__version__}")

@@ -69,8 +69,8 @@ def load_scene(
 ) -> tuple[SceneSpec, dict]:
     """Read, override and validate a scene document; returns (spec, raw document).
 
-    `overrides` are (dotted path, value) pairs applied first, then the `--set`
-    style `assignments` ("PATH=JSON").
+    `overrides` are (dotted path, value) pairs applied first (a callable value is called with the
+    document so far and its return value set), then the `--set` style `assignments` ("PATH=JSON").
     """
     path = Path(path)
     try:
@@ -90,7 +90,7 @@ def load_scene(
     if not isinstance(doc, dict):
         raise InputError(f"{path}: a scene document is a JSON object")
     for dotted, value in overrides:
-        set_path(doc, dotted, value)
+        set_path(doc, dotted, value(doc) if callable(value) else value)
     for a in assignments:
         set_path(doc, *parse_assignment(a))
     try:

@@ -62,7 +62,8 @@ class Algorithm:
     families: str  # the path families it estimates, in the report's notation
     left_out: tuple[str, ...]  # scattered families it does not estimate (in a scattering medium)
     kernel: Mapping[str, object]
-    #: highest scattering order S it tallies; None: the scene's `max_scattering` (algorithm 5)
+    #: highest scattering order S it tallies when `max_scattering` is left out; None: chosen automatically
+    #: (algorithm 5)
     scattering_orders: int | None
     #: the direction it always runs in; None: the planner chooses (requested, amortized, or by a pilot)
     direction: Direction | None
@@ -73,10 +74,37 @@ class Algorithm:
     outputs: tuple[str, ...] = field(default=BASE_OUTPUTS)
     #: the result's warning when the scene's medium scatters ("" for none)
     warning_in_scattering_medium: str = ""
+    #: the values of `max_scattering` it honours, lowest and highest (`scattering_refusal`)
+    scattering_range: tuple[int, int] = (1, 1000)
+    #: what its S means and what to do instead, in the words of the refusal (`scattering_refusal`)
+    scattering_meaning: str = ""
+    scattering_fix: str = ""
+    #: (families, left_out) when `max_scattering` asks for single scattering only (algorithm 4 with S = 1)
+    at_single_scattering: tuple[str, tuple[str, ...]] | None = None
 
     def S(self, max_scattering: int | None) -> int:
-        """Highest scattering order tallied, given the scene's max_scattering."""
-        return self.scattering_orders if self.scattering_orders is not None else int(max_scattering or 0)
+        """Highest scattering order tallied: `max_scattering` where the algorithm lets it choose (4: 1 or 2,
+        5: any), else its own (1: 0, 2-3: 1, 4: 2 by default; 5 left out: 0 until chosen automatically)."""
+        lo, hi = self.scattering_range
+        if lo == hi or max_scattering is None:
+            return self.scattering_orders if self.scattering_orders is not None else int(max_scattering or 0)
+        return min(max(int(max_scattering), lo), hi)
+
+    def families_at(self, S: int) -> tuple[str, tuple[str, ...]]:
+        """(families, left_out) of a run that tallies scattering orders up to S."""
+        if S == 1 and self.at_single_scattering is not None:
+            return self.at_single_scattering
+        return self.families, self.left_out
+
+    def scattering_refusal(self, max_scattering: int | None) -> str | None:
+        """The one sentence that refuses a `max_scattering` this algorithm cannot honour, or None."""
+        lo, hi = self.scattering_range
+        if max_scattering is None or lo <= max_scattering <= hi:
+            return None
+        return (
+            f"algorithm {self.number} {self.scattering_meaning}, so `max_scattering` {max_scattering} "
+            f"cannot be honoured: {self.scattering_fix}"
+        )
 
 
 _SCATTERED = BASE_OUTPUTS + ("dc_gain_by_scattering_order",)
@@ -101,6 +129,9 @@ ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
                     "algorithm 1 counts only unscattered light: with sigma_s > 0 it underestimates "
                     "(use algorithm 4 or 5 for scattered light)"
                 ),
+                scattering_range=(0, 0),
+                scattering_meaning="counts only unscattered light (S = 0)",
+                scattering_fix="leave it out (or give 0), or use algorithm 4 or 5 for scattered light",
             ),
             Algorithm(
                 number=2,
@@ -118,6 +149,9 @@ ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
                 two_sided=TwoSided.ALWAYS,
                 counts_scattering=True,
                 outputs=_SCATTERED,
+                scattering_range=(1, 1),
+                scattering_meaning="counts single scattering only (S = 1)",
+                scattering_fix="leave it out (or give 1), or use algorithm 5 for higher orders",
             ),
             Algorithm(
                 number=3,
@@ -135,6 +169,9 @@ ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
                 two_sided=TwoSided.ALWAYS,
                 counts_scattering=True,
                 outputs=_SCATTERED,
+                scattering_range=(1, 1),
+                scattering_meaning="counts single scattering only (S = 1)",
+                scattering_fix="leave it out (or give 1), or use algorithm 5 for higher orders",
             ),
             Algorithm(
                 number=4,
@@ -156,6 +193,19 @@ ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
                 two_sided=TwoSided.ALWAYS,
                 counts_scattering=True,
                 outputs=_SCATTERED,
+                scattering_range=(1, 2),
+                scattering_meaning=(
+                    "counts single scattering (S = 1) or single and in-then-out double scattering (S = 2, the default)"
+                ),
+                scattering_fix="give 1 or 2, or use algorithm 5 for higher orders",
+                at_single_scattering=(
+                    "s = 0 paths up to K reflections, plus Tx -> p -> (k <= K) -> Rx and Tx -> (k <= K) -> p -> Rx, "
+                    "the shared family Tx -> p -> Rx counted once (S = 1: no double scattering)",
+                    (
+                        "single scattering with reflections on both sides of p",
+                        "scattering orders s >= 2 (S = 1 asked)",
+                    ),
+                ),
             ),
             Algorithm(
                 number=5,
@@ -169,6 +219,8 @@ ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
                 two_sided=TwoSided.AUTO_DIRECTION,
                 counts_scattering=True,
                 outputs=_SCATTERED,
+                scattering_meaning="counts scattering orders 1 to S (S >= 1)",
+                scattering_fix="give at least 1, or use algorithm 1 for unscattered light only",
             ),
         )
     }

@@ -18,7 +18,8 @@ Fov = Annotated[
         ge=1e-6,
         le=90.0,
         description=(
-            "field of view, half-angle [deg], in (0, 90] (at least 1e-6 deg: below it a concentrator's gain overflows)"
+            "field of view, half-angle [deg], in (0, 90] (at least 1e-6 deg: below it a concentrator's gain overflows; "
+            "under 2 deg the result warns: radians meant?)"
         ),
     ),
 ]
@@ -37,11 +38,14 @@ class TransmitterSpec(SpecModel):
     normal: Direction
     power: float = Field(1.0, gt=0.0, description="optical power P_t [W]")
     lambertian_order: float | None = Field(None, ge=0.0, le=1e4, description="Lambertian order m")
-    half_power_semi_angle_deg: float | None = Field(None, gt=0.0, lt=90.0, description="Phi_1/2 [deg]")
+    half_power_semi_angle_deg: float | None = Field(
+        None, gt=0.0, lt=90.0, description="Phi_1/2 [deg] (under 2 deg the result warns: radians meant?)"
+    )
     luminous_output: LuminousOutputSpec | None = Field(
         None,
         description="luminous flux [lm] or centre luminous intensity [cd] of the source: gives the "
-        "illuminance on the receivers (the optical power stays `power`)",
+        "illuminance on the receivers (the optical power stays `power`); a `photometry` file's own candela "
+        "give it without this field, and this field, when given, wins",
     )
     photometry: PhotometrySpec | None = Field(None, description="tabulated emission from an IES / EULUMDAT file")
     spectrum: Curve | None = Field(

@@ -52,7 +52,9 @@ class RoomReflectance(SpecModel):
 class RoomSpec(SpecModel):
     """Axis-aligned box room: corner `origin` [m], `size` (L, W, H) [m], z up."""
 
-    size: tuple[float, float, float] = Field(description="length x, width y, height z [m]")
+    size: tuple[float, float, float] = Field(
+        description="length x, width y, height z [m] (a side over 100 m warns: centimetres meant?)"
+    )
     origin: Point = (0.0, 0.0, 0.0)
     reflectance: RoomReflectance
 
@@ -72,7 +74,7 @@ class RoomSpec(SpecModel):
 
 
 class BoxSpec(SpecModel):
-    """A solid axis-aligned box inside the room (furniture): corners `min`, `max` [m]."""
+    """A solid axis-aligned box inside the room (furniture): corners `min`, `max` [m] (a side over 100 m warns)."""
 
     name: str | None = None
     min: Point

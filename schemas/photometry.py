@@ -34,7 +34,11 @@ class PhotometrySpec(SpecModel):
         None, description="world direction of the C = 0 half-plane, made perpendicular to the aiming direction"
     )
     rotation_deg: float = Field(
-        0.0, ge=-360.0, le=360.0, description="rotation of the C-planes about the aiming direction [deg]"
+        0.0,
+        ge=-360.0,
+        le=360.0,
+        description="rotation of the C-planes about the aiming direction [deg]: positive turns C = 0 toward "
+        "C = 90, counter-clockwise seen from behind the luminaire (from above a downlight)",
     )
 
     @model_validator(mode="after")

@@ -39,7 +39,10 @@ class CirPublic(PublicModel):
     """Binned impulse response of one link: power per bin per watt (h(t) = power / dt [1/s])."""
 
     total: list[float]
-    total_stderr: list[float | None]
+    total_stderr: list[float | None] = Field(
+        description="standard error per bin: spread of 16 batch groups, or of the 16 path groups of a run of one "
+        "batch; null where fewer than two groups hold paths (or the one-batch CIR is too large for path groups)"
+    )
     by_reflection_order: list[list[float]] | None = Field(
         None, description="[k][bin], k = 0..max_reflections (when the order split is asked)"
     )
@@ -52,7 +55,9 @@ class LightingPublic(PublicModel):
     """Illuminance and link-budget figures of a link or a group's channel (null when not asked)."""
 
     illuminance_lx: float | None = Field(
-        None, description="direct illuminance on the receiver plane [lx] (when the transmitters give a luminous output)"
+        None,
+        description="direct illuminance on the receiver plane [lx] (when the transmitters give a luminous output "
+        "or a photometric file)",
     )
     snr_db: float | None = Field(None, description="electrical SNR [dB] (with `link_budget`)")
     ber: float | None = Field(None, description="bit-error rate of OOK-NRZ (with `link_budget`)")
@@ -101,7 +106,11 @@ class LinkPublic(LightingPublic):
     dc_gain_by_scattering_order: list[float] | None = None
     dc_gain_by_scattering_order_stderr: list[float | None] | None = None
     early_gain: float | None = Field(None, description="power per watt arriving before t_min_s (not in the CIR)")
-    late_gain: float | None = Field(None, description="power per watt arriving after t_max_s (not in the CIR)")
+    late_gain: float | None = Field(
+        None,
+        description="power per watt arriving after the window's end t_min_s + n_bins time_bin_s (t_max_s rounded "
+        "up to whole bins; not in the CIR)",
+    )
     cir: CirPublic | None = None
 
 

@@ -47,8 +47,9 @@ class SceneSpec(SpecModel):
     medium: MediumSpec | None = None
     transmitter_groups: list[TransmitterGroupSpec] = Field(
         default_factory=list,
-        description="transmitters that carry one signal: each group's channel (their "
-        "summed response) is reported beside the links, and maps are drawn per group",
+        description="transmitters that carry one signal: each group's channel (their summed response, per "
+        "watt of the group's total power: sum_i P_i h_i / sum_i P_i) is reported beside the links, and maps are "
+        "drawn per group",
     )
     outputs: OutputsSpec = Field(
         default_factory=OutputsSpec,

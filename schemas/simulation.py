@@ -34,10 +34,14 @@ class SimulationSpec(SpecModel):
     """How to estimate the channel.
 
     `algorithm` 1..5 names the report's estimators (physics.md section 4); `direction`
-    chooses the transmitter-side ("forward") or receiver-side ("backward") estimator,
-    or lets a pilot run pick per link ("auto"); algorithms 2 and 3 have their own
-    direction (backward and forward) and 4 runs both. Give `paths` (per source
-    device and direction) or `target_rel_error` on H0 (with `time_budget_s`), not both.
+    chooses the transmitter-side ("forward") or receiver-side ("backward") estimator of
+    algorithms 1 and 5, or lets the planner pick per link ("auto": in a medium algorithm 5
+    runs from both devices, else a pilot run or the device counts decide); algorithms 2-4
+    ignore it (in a medium they run from both devices; without one 2 runs backward, 3
+    forward, 4 both). `max_scattering` S: what each algorithm honours is in its record
+    (schemas/algorithms.py: 1: 0, 2-3: 1, 4: 1 or 2, 5: 1..1000); other values are refused.
+    Give `paths` (per source device and direction) or `target_rel_error` on H0 (with
+    `time_budget_s`), not both.
     """
 
     algorithm: Literal[1, 2, 3, 4, 5, "auto"] = "auto"
@@ -47,10 +51,12 @@ class SimulationSpec(SpecModel):
     )
     max_scattering: int | None = Field(
         None,
-        ge=1,
+        ge=0,
         le=1000,
-        description="highest scattering order S of algorithm 5 "
-        "(algorithms 2-3: 1, 4: 2, 1: 0; default: from the accuracy asked)",
+        description="highest scattering order S tallied: algorithm 5 counts orders 1..S (default: from the "
+        "accuracy asked), algorithm 4 single scattering (S = 1) or single and in-then-out double scattering "
+        "(S = 2, the default), algorithms 2-3 S = 1 and algorithm 1 S = 0 only; a value the algorithm cannot "
+        "honour is refused",
     )
     segment_time_step_s: float | None = Field(
         None, ge=1e-15, description="time strata of the points along segments, algorithms 2-4 [s] (default: time_bin_s)"
@@ -64,12 +70,19 @@ class SimulationSpec(SpecModel):
         "the time strata (2-4) or the free-flight collisions (5) by the balance heuristic",
     )
     time_bin_s: float = Field(
-        0.25e-9, ge=1e-15, description="CIR bin width dt [s] (at least 1 fs: light travels 0.3 um in it)"
+        0.25e-9,
+        ge=1e-15,
+        description="CIR bin width dt [s] (at least 1 fs: light travels 0.3 um in it; over 1 us warns: ns meant?)",
     )
     t_min_s: float = Field(
         0.0, ge=0.0, le=1.0, description="start of the time window [s] (at most 1 s: light travels 300,000 km in it)"
     )
-    t_max_s: float | None = Field(None, gt=0.0, description="end of the time window [s] (default: from the accuracy)")
+    t_max_s: float | None = Field(
+        None,
+        gt=0.0,
+        description="end of the time window [s], rounded up to a whole number of bins (default: from the accuracy; "
+        "over 1 ms warns)",
+    )
     truncation_tolerance: float | None = Field(
         None,
         gt=0.0,
@@ -78,12 +91,24 @@ class SimulationSpec(SpecModel):
         "arrivals after t_max_s) relative to H0 when K, S or t_max_s are chosen automatically (default: 0.1 x "
         "target_rel_error in an accuracy run, 1e-4 otherwise)",
     )
-    paths: int | None = Field(None, ge=1, le=10**12, description="paths per source device")
+    paths: int | None = Field(
+        None,
+        ge=1,
+        le=10**12,
+        description="paths per source device and direction (links run from both devices get it from each); "
+        "default 100 000 unless `target_rel_error` is given",
+    )
     target_rel_error: float | None = Field(
         None, gt=0.0, lt=1.0, description="stop when stderr(H0)/H0 <= this, every link"
     )
     time_budget_s: float = Field(600.0, gt=0.0, description="wall-time limit of an accuracy run [s]")
-    seed: int = Field(0, ge=0, lt=2**63)
+    seed: int = Field(
+        0,
+        ge=0,
+        lt=2**63,
+        description="random seed: the same document and seed give the same bits for any number of workers "
+        "(every batch has its own stream, keyed by the seed, the direction, the source device and the batch)",
+    )
     batch_size: int = Field(16384, ge=64, le=1_048_576, description="paths per batch (memory bound)")
     russian_roulette: bool = True
     rr_start_depth: int = Field(
@@ -105,6 +130,15 @@ class SimulationSpec(SpecModel):
     def _consistent(self) -> "SimulationSpec":
         if self.paths is not None and self.target_rel_error is not None:
             raise ValueError("give `paths` or `target_rel_error`, not both")
+        if self.algorithm != "auto":
+            refusal = algorithm(self.algorithm).scattering_refusal(self.max_scattering)
+            if refusal is not None:
+                raise ValueError(refusal)
+        elif self.max_scattering == 0:
+            raise ValueError(
+                "`max_scattering` 0 (no scattering) needs `algorithm` 1: the automatic choice may pick "
+                "algorithm 5, which counts orders 1 to S"
+            )
         if self.t_max_s is not None and not self.t_max_s > self.t_min_s:
             raise ValueError("`t_max_s` must exceed `t_min_s`")
         if self.t_max_s is not None:

@@ -37,10 +37,20 @@ class LambertianSurfaceSpec(SpecModel):
 
 
 class PhongSurfaceSpec(SpecModel):
-    """Diffuse part r_d rho plus a Phong lobe (1 - r_d) rho of exponent n about the mirror direction."""
+    """Diffuse part r_d rho plus a Phong lobe (1 - r_d) rho of exponent n about the mirror direction.
+
+    `reflectance` rho = rho_d + rho_s weighs the two parts of the BRDF (engine/bsdf.py); it is not the
+    albedo: the glossy lobe reflects less than rho_s (its part below the surface is lost), e.g. at normal
+    incidence the albedo is rho_d + rho_s (n + 1) / (n + 2) (docs/luminaires-surfaces.md).
+    """
 
     type: Literal["phong"] = "phong"
-    reflectance: Rho
+    reflectance: float = Field(
+        ge=0.0,
+        le=1.0,
+        description="rho = rho_d + rho_s, the weights of the diffuse part and the glossy lobe, in [0, 1]; not the "
+        "albedo (at normal incidence rho_d + rho_s (n + 1) / (n + 2))",
+    )
     diffuse_fraction: DiffuseFraction
     exponent: float = Field(ge=0.0, le=1e5, description="Phong exponent n of the glossy lobe")
 

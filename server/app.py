@@ -91,7 +91,7 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
     app.add_middleware(RequestLimits, body_timeout_s=settings.body_timeout_s)
     for module in (jobs, results, service, docs):
         app.include_router(module.router, prefix=API_PREFIX)
-    app.openapi = lambda: _openapi(app)
+    app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]  # FastAPI's documented way to customise it
     return app
 
 

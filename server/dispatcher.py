@@ -28,7 +28,7 @@ import signal
 import threading
 import time
 from dataclasses import dataclass
-from multiprocessing.connection import wait
+from multiprocessing.connection import Connection, wait
 
 from .settings import Settings
 from .store import JobStore, is_disk_full
@@ -44,7 +44,7 @@ class _Run:
     process: mp.process.BaseProcess
     token: int
     started: float
-    lifeline: object  # write end of a pipe the worker watches: closed (or the server gone) = stop
+    lifeline: Connection  # write end of a pipe the worker watches: closed (or the server gone) = stop
     memory_bytes: int  # the job's memory estimate [B]
     stop_seen: float | None = None  # when the dispatcher first saw that this run should end
     kill_reason: str | None = None
@@ -113,6 +113,7 @@ class Dispatcher:
         )
         self._ctx = mp.get_context("forkserver")
         self._runs: dict[str, _Run] = {}
+        self._wake_w: int | None  # None once stopped (both ends closed)
         self._wake_r, self._wake_w = os.pipe()  # wake() writes a byte: the loop looks again at once
         os.set_blocking(self._wake_w, False)
         self._wake_lock = threading.Lock()
@@ -140,7 +141,7 @@ class Dispatcher:
 
     def running(self) -> dict[str, int]:
         """{job id: worker pid} of the workers this dispatcher runs now."""
-        return {job_id: run.process.pid for job_id, run in list(self._runs.items())}
+        return {job_id: run.process.pid for job_id, run in list(self._runs.items()) if run.process.pid is not None}
 
     def start(self) -> None:
         taken = self.store.take_back_running(
@@ -174,7 +175,7 @@ class Dispatcher:
             if self._wake_w is not None:
                 os.close(self._wake_r)
                 os.close(self._wake_w)
-                self._wake_r = self._wake_w = None
+                self._wake_w = None
         if not self._runs:
             return
         self.store.take_back_running(

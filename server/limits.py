@@ -110,6 +110,8 @@ class HeaderTimeoutH11Protocol(H11Protocol):
     """h11 protocol that closes a connection whose request head is not complete in time."""
 
     header_timeout_s: float = 10.0
+    _header_timer: asyncio.TimerHandle | None
+    _seen_cycle: object | None
 
     def connection_made(self, transport) -> None:
         super().connection_made(transport)
@@ -122,8 +124,9 @@ class HeaderTimeoutH11Protocol(H11Protocol):
             self.transport.close()  # no request head completed since the timer started
 
     def _cancel_header_timer(self) -> None:
-        if getattr(self, "_header_timer", None) is not None:
-            self._header_timer.cancel()
+        timer = getattr(self, "_header_timer", None)
+        if timer is not None:
+            timer.cancel()
             self._header_timer = None
 
     def handle_events(self) -> None:

@@ -94,7 +94,8 @@ def _run(spec: SceneSpec, max_triangles: int, workers: int) -> tuple:
                 "batch_size": 64,
                 "direction": "forward",
                 "pilot_paths": 256,
-                "max_scattering": sim.max_scattering or 1,
+                # algorithm 4 left out: its default S = 2 (the double-scattering family runs too)
+                "max_scattering": sim.max_scattering if sim.max_scattering is not None or sim.algorithm == 4 else 1,
             }
         )  # every setting explicit but the algorithm: no pilot
         scene = build_scene(spec, None)
@@ -145,6 +146,7 @@ class Preflighter:
 
     def __call__(self, spec: SceneSpec, scene_json: str) -> Preflight:
         """Blocking (call it from a worker thread); raises ProblemError with the refusal."""
+        out: tuple | None
         if is_small(spec):
             out = _run(spec, self.max_triangles, self.workers)
             if out[0] != "ok":

@@ -12,6 +12,7 @@ import logging
 import re
 import sqlite3
 import uuid
+from collections.abc import Mapping, Sequence
 from http import HTTPStatus
 
 from fastapi import FastAPI, Request
@@ -37,7 +38,7 @@ class ProblemError(Exception):
         kind: str,
         detail: str,
         *,
-        errors: list[ProblemField] = (),
+        errors: Sequence[ProblemField] = (),
         headers: dict[str, str] | None = None,
         **extensions,
     ):
@@ -46,7 +47,7 @@ class ProblemError(Exception):
         self.errors, self.headers, self.extensions = list(errors), headers or {}, extensions
 
 
-def field_errors(errors: list[dict], prefix: tuple = ()) -> list[ProblemField]:
+def field_errors(errors: Sequence[Mapping], prefix: tuple = ()) -> list[ProblemField]:
     """pydantic errors -> located fields, e.g. body.receivers.0.fov_deg."""
     return [
         ProblemField(loc=loc or "body", msg=msg, type=e.get("type", "value_error"))
@@ -60,7 +61,7 @@ def problem_response(
     kind: str,
     detail: str | None,
     *,
-    errors: list[ProblemField] = (),
+    errors: Sequence[ProblemField] = (),
     headers: dict | None = None,
     title: str | None = None,
     **extensions,

@@ -25,7 +25,7 @@ def uvicorn_config(settings: Settings, host: str, port: int, log_level: str = "i
         timeout_graceful_shutdown=10,
         server_header=False,
         http=protocol_with_header_timeout(settings.header_timeout_s),
-        timeout_keep_alive=settings.keep_alive_s,
+        timeout_keep_alive=settings.keep_alive_s,  # type: ignore[arg-type]  # uvicorn passes it to call_later: a float works
         limit_concurrency=settings.max_connections,
         h11_max_incomplete_event_size=MAX_HEAD_BYTES,
     )

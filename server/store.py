@@ -16,6 +16,7 @@ turn came longest ago; each owner has its own queue quota.
 
 from __future__ import annotations
 
+import builtins
 import contextlib
 import errno
 import fcntl
@@ -27,6 +28,7 @@ import threading
 import time
 import uuid
 import zlib
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -342,7 +344,8 @@ class JobStore:
             if ref is None:
                 raise KeyError(after)
             before_seq = ref.seq
-        where, args = [], []
+        where: list[str] = []
+        args: list[object] = []
         if owner is not None:
             where.append("owner = ?")
             args.append(owner)
@@ -393,7 +396,7 @@ class JobStore:
 
         return chunks()
 
-    def put_renders(self, job_id: str, renders: dict[str, Path | bytes]) -> None:
+    def put_renders(self, job_id: str, renders: Mapping[str, Path | bytes]) -> None:
         """Keep renders made after the job ended (a plot; a result stored by an older server)."""
         with self._tx() as con:
             self._write_renders(con, job_id, renders)
@@ -412,7 +415,7 @@ class JobStore:
             con.close()
 
     @staticmethod
-    def _write_renders(con, job_id: str, renders: dict[str, Path | bytes]) -> None:
+    def _write_renders(con, job_id: str, renders: Mapping[str, Path | bytes]) -> None:
         """Keep a job's renders: {name: file (copied in chunks) or bytes}."""
         for name, path in renders.items():
             if isinstance(path, bytes):
@@ -486,7 +489,7 @@ class JobStore:
         )
         return {r[0]: (r[1], bool(r[2]), r[3]) for r in rows.fetchall()}
 
-    def take_back_running(self, note: str, max_attempts: int | None = None) -> list[str]:
+    def take_back_running(self, note: str, max_attempts: int | None = None) -> builtins.list[str]:
         """Requeue every running job (server start or stop); a job whose cancel was asked is cancelled,
         one that has started `max_attempts` times already is failed."""
         now = time.time()
@@ -527,6 +530,7 @@ class JobStore:
             ).fetchone()
             if row is None or row[0] != "running" or row[1] != token:
                 return None
+            args: list[object]
             if row[2]:
                 status, sql, args = "cancelled", "status = 'cancelled', finished_at = ?", [now]
             elif retry and row[3] < retries:
@@ -591,8 +595,8 @@ class JobStore:
         *,
         result_json: str | None = None,
         error: str | None = None,
-        warnings: list[str] = (),
-        renders: dict[str, Path] | None = None,
+        warnings: Sequence[str] = (),
+        renders: Mapping[str, Path | bytes] | None = None,
     ) -> bool:
         """Record a run's outcome and its renders ({name: file of gzip bytes}) in one transaction;
         False (nothing written) if the job is no longer this run's."""

@@ -188,6 +188,8 @@ def cancel_job(
     if job.status in ("succeeded", "failed"):
         raise ProblemError(409, "job-finished", f"job {job.id} has already {job.status}", job_status=job.status)
     row = store.request_cancel(job.id, owner)
+    if row is None:  # deleted meanwhile
+        raise ProblemError(404, "job-not-found", f"no job {job.id!r}")
     dispatcher.wake()
     if row.status == "running":
         response.status_code = 202

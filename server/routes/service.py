@@ -6,8 +6,8 @@ from fastapi import APIRouter, Depends
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
-from owcsim import __version__ as owcsim_version  # the package's one version lookup
 from owcsim.schemas.jobs import HealthPublic, VersionPublic
+from owcsim.version import __version__ as owcsim_version  # the package's one version lookup
 
 from ..deps import get_dispatcher, get_settings, get_store
 from ..dispatcher import Dispatcher

@@ -162,6 +162,27 @@ def test_algorithm_flag_takes_auto(tmp_path, capsys):
     assert res["scene"]["simulation"]["algorithm"] == "auto" and res["algorithm"] == 1  # no medium: vacuum paths
 
 
+@pytest.mark.parametrize("algorithm,extra,S", [(4, [], 2), (2, [], 1), (4, ["simulation.max_scattering=1"], 1)])
+def test_algorithm_flag_drops_an_s_the_algorithm_cannot_honour(tmp_path, algorithm, extra, S):
+    """The smoky room's S = 20 is algorithm 5's: `--algorithm N` leaves it out where N cannot honour it (N counts
+    its own orders); a `--set` of S still wins."""
+    out = tmp_path / "o"
+    sets = [arg for e in extra for arg in ("--set", e)]
+    smoky = str(EXAMPLES / "smoky_room.json")
+    args = ["run", smoky, "--out", str(out), "--paths", "300", "--max-reflections", "1", "--no-plot"]
+    assert main(args + ["--algorithm", str(algorithm)] + sets) == 0
+    res = json.loads((out / "result.json").read_text())
+    assert res["modeled"]["max_scattering"] == S and len(res["links"][0]["dc_gain_by_scattering_order"]) == S + 1
+
+
+def test_algorithm_flag_with_an_s_it_cannot_honour_set_is_refused(tmp_path, capsys):
+    smoky = str(EXAMPLES / "smoky_room.json")
+    args = ["run", smoky, "--out", str(tmp_path / "o"), "--algorithm", "4", "--set", "simulation.max_scattering=7"]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "`max_scattering` 7 cannot be honoured: give 1 or 2" in err and "Traceback" not in err
+
+
 def test_no_plot_skips_the_png_and_matplotlib(tmp_path):
     """--no-plot writes every file but cir.png, and the command never imports matplotlib (nor trimesh, scipy)."""
     out = tmp_path / "o"

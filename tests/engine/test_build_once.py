@@ -82,11 +82,12 @@ def test_the_registry_is_what_the_planner_runs(number):
     """Each record's kernel flags and fixed S are the KernelSettings the planner builds for that algorithm."""
     from owcsim.engine.scene import build_scene
 
-    spec = _smoky(algorithm=number, max_reflections=1, max_scattering=3, t_max_s=1e-7, direction="forward")
     alg = ALGORITHMS[number]
+    given = min(3, alg.scattering_range[1])  # the highest S it honours, up to 3 (others are refused)
+    spec = _smoky(algorithm=number, max_reflections=1, max_scattering=given, t_max_s=1e-7, direction="forward")
     settings = simulate_module.kernel_settings(spec, build_scene(spec), both_devices=False)
     assert {k: getattr(settings, k) for k in alg.kernel} == dict(alg.kernel)
-    assert settings.max_scattering == (3 if alg.scattering_orders is None else alg.scattering_orders)
+    assert settings.max_scattering == {1: 0, 2: 1, 3: 1, 4: 2, 5: 3}[number]
 
 
 def test_an_automatic_window_over_the_bin_budget_is_a_located_error():

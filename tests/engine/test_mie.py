@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 
 import miepython
 import numpy as np
@@ -310,3 +311,25 @@ def test_medium_report_for_the_result():
     table = Tabulated([-1, 1], [2, 2])
     rep = mie.medium_report(hom, table)["phase"]
     assert rep["type"] == "tabulated" and rep["normalisation"] == pytest.approx(8 * math.pi) and rep["points"] == 2
+
+
+def test_monodisperse_particles_run_without_warnings_and_equal_one_sphere():
+    """geometric_std = 1 (every particle of diameter D_g) is legitimate: no RuntimeWarning (the size window's
+    Gaussian divided 0 by 0), and the optics are one sphere's (miepython, an independent implementation)."""
+    p = ParticlesSpec(
+        geometric_mean_diameter=1.5e-7,
+        geometric_std=1.0,
+        refractive_index={"real": 1.57, "imag": 0.56},
+        wavelength=8.5e-7,
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any warning fails the test
+        o = mie.particle_optics(p)
+        result = simulate(spec(room_doc(medium=_medium(particles=p.model_dump()), max_reflections=1, paths=512)))
+    assert o.nodes == 1 and result["links"][0]["dc_gain"] > 0
+    x = math.pi * 1.5e-7 / 8.5e-7
+    qext, qsca, _, g = miepython.efficiencies_mx(complex(1.57, -0.56), x)
+    area = math.pi * 1.5e-7**2 / 4
+    assert o.c_ext == pytest.approx(qext * area, rel=1e-9)
+    assert o.c_sca == pytest.approx(qsca * area, rel=1e-9)
+    assert o.g == pytest.approx(g, rel=1e-9)

@@ -163,8 +163,9 @@ def test_4_estimate_terms_follow_the_tally_shapes():
     more_bins = memory_estimate(SceneSpec.model_validate(_grid_doc(10, t_max_s=2e-7)))
     links, orders = 100, (1 + 1) + (0 + 1)  # K = 1, algorithm 1: S = 0; CIR split by k and by s
     # doubling the bins adds the accumulators of the added 100 bins exactly (2 directions, float64): per CIR link
-    # the total, N_GROUPS batch groups and the split by order
-    assert more_bins.accumulators - small.accumulators == 2 * links * (1 + N_GROUPS + orders) * 100 * 8
+    # the total, N_GROUPS batch groups, the split by order and (1 024 paths: a run of one batch) the first
+    # batch's N_GROUPS path groups (tally.TallyPlan.first_batch_groups)
+    assert more_bins.accumulators - small.accumulators == 2 * links * (1 + 2 * N_GROUPS + orders) * 100 * 8
     auto = memory_estimate(SceneSpec.model_validate(_grid_doc(10, t_max_s=None, max_reflections=None)))
     assert auto.accumulators > 10 * small.accumulators  # automatic K and window: the most the engine may choose
 
