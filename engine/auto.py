@@ -15,7 +15,11 @@ the pilot `plan` asks for between the two, on the job's built scene. Rules (expl
   past the pilot with ratio rho_max, plus two pilot standard errors) stays under half
   the allowed truncated power; S likewise with ratio albedo_max; the window ends where
   the power arriving later is under the other half. Allowed truncated power:
-  `truncation_tolerance` x H0 (default 0.1 x target_rel_error, or 1e-4).
+  `truncation_tolerance` x H0 (default 0.1 x target_rel_error, or 1e-4). When the power past
+  the pilot's cap is over that, K (S) goes on past the pilot along the geometric tail, up to
+  MAX_ORDER (bright rooms; roulette keeps the cost per path), the CIR is then not split by
+  order, and the window holds those orders within the pilot's window; a tail that stays over
+  the allowance sets `truncation_within_allowance` false and the result warns.
 The geometric tail is an estimate, not a proof: it assumes that past the last measured
 order each reflection (scattering) keeps at most rho_max (albedo_max) of the power,
 which holds for the diffuse field of a closed room; the result says so.
@@ -45,6 +49,8 @@ if TYPE_CHECKING:
 
 #: Highest orders the truncation pilot measures.
 PILOT_CAP = 40
+#: Highest order K (S) the automatic choice may take: the schema's limit of `max_reflections` (`max_scattering`).
+MAX_ORDER = 1000
 #: Most receivers the truncation pilot traces (evenly chosen; every link runs in the main job).
 PILOT_RECEIVERS = 8
 #: Bins of the pilot's time window.
@@ -229,7 +235,7 @@ def _delay_shift(h0, tau0, tau_rms, p, p1, p2):
     return abs(t0_cut - tau0), abs(rms_cut - tau_rms)
 
 
-def _tail_order(gains, errors, ratio: float, allowed: float, cap: int, delays=None):
+def _tail_order(gains, errors, ratio: float, allowed: float, cap: int, delays=None, limit: int | None = None):
     """Smallest order n whose tail is within its allowance (else the cap), and that tail [per watt].
 
     tail(n) = the pilot's orders above n + the geometric tail past its last measured
@@ -237,25 +243,59 @@ def _tail_order(gains, errors, ratio: float, allowed: float, cap: int, delays=No
     tau_rms, rel) (per-order delay moments, the link's H0 and delays, the relative
     allowance), the order must also keep the shifts of tau0 and tau_rms that dropping
     the tail causes (`_delay_shift`, a late tail weighted by its delay) under
-    rel x tau_rms each. Returns (n, tail power, tau0 shift, tau_rms shift).
+    rel x tau_rms each. With `limit` (> the pilot's orders), a finite ratio < 1 and a
+    power past the pilot's last order over the allowance, the search goes on past the
+    pilot along the geometric tail, tail(n) = g_L r^(n - L + 1)
+    / (1 - r), up to n = limit (returned when even that is not enough), with the
+    allowance and the delays of the full response (the pilot's and the tail past it).
+    Returns (n, tail power, tau0 shift, tau_rms shift, the allowance at n, delay shifts within theirs).
     """
     n_orders = len(gains)
     zeros = np.zeros(n_orders)
     t1, t2 = (delays[0], delays[1]) if delays is not None else (zeros, zeros)
-    last = (math.inf, math.inf, math.inf)
-    for n in range(n_orders):
+    last = (math.inf, math.inf, math.inf, allowed, True)
+    beyond = limit is not None and limit >= n_orders and math.isfinite(ratio) and ratio < 1.0
+    full = (0.0, 0.0, 0.0)
+    allowed_beyond = allowed
+
+    def orders():
+        """The pilot's orders, then (`beyond`, when the power of the orders past the pilot's last one is over
+        the allowance) the orders past it that may meet it."""
+        nonlocal full, allowed_beyond
+        yield from range(n_orders)
+        if not beyond or last[0] <= allowed:  # the pilot's orders meet the power allowance: as they are
+            return
+        assert limit is not None
+        full = _tail_moments(n_orders - 1, gains, errors, t1, t2, ratio)
+        measured = float(np.sum(gains))
+        if measured > 0:  # the allowance is relative to H0: the pilot's, plus the tail it did not reach
+            allowed_beyond = allowed * (1.0 + full[0] / measured)
+        first = n_orders
+        if full[0] > allowed_beyond > 0:  # tail(n) = full r^(n - n_orders + 1): skip the orders that cannot do
+            first = n_orders - 2 + math.ceil(math.log(allowed_beyond / full[0]) / math.log(ratio))
+        yield from range(min(max(first, n_orders), limit), limit + 1)
+
+    extended = False
+    for n in orders():
         p, p1, p2 = _tail_moments(n, gains, errors, t1, t2, ratio)
+        extended = n >= n_orders
+        allow = allowed if n < n_orders else allowed_beyond
         if delays is not None:
             h0, tau0, tau_rms, rel = delays[2:]
+            if n >= n_orders:  # the full response: the pilot's orders and the geometric tail past them
+                m1, m2 = h0 * tau0 + full[1], h0 * (tau_rms**2 + tau0**2) + full[2]
+                h0 += full[0]
+                tau0 = m1 / h0
+                tau_rms = math.sqrt(max(m2 / h0 - tau0**2, 0.0))
             d0, d_rms = _delay_shift(h0, tau0, tau_rms, p, p1, p2)  # the pilot holds every order it reached
             ok_delay = d0 <= rel * tau_rms and d_rms <= rel * tau_rms
         else:
             d0 = d_rms = 0.0
             ok_delay = True
-        last = (p, d0, d_rms)
-        if p <= allowed and ok_delay:
-            return n, p, d0, d_rms
-    return cap, *last
+        last = (p, d0, d_rms, allow, ok_delay)
+        if p <= allow and ok_delay:
+            return n, *last
+    return (limit if extended else cap), *last
 
 
 def validated(doc: dict, what: str) -> SceneSpec:
@@ -460,35 +500,59 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
             if lk.mean_delay_s is not None and lk.rms_delay_spread_s:
                 t1, t2 = _order_moments(getattr(lk.cir, f"by_{key}_order"), t_mid)
                 delays = (t1, t2, lk.dc_gain, lk.mean_delay_s, lk.rms_delay_spread_s, rel)
-            n, tail, d0, d_rms = _tail_order(gains, errors, ratio, allowed / 2, cap, delays)
+            n, tail, d0, d_rms, allow, ok_delay = _tail_order(
+                gains, errors, ratio, allowed / 2, cap, delays, limit=MAX_ORDER
+            )
             n = max(n, extra)
-            cand = (n, tail, d0, d_rms, how.format(what=what), lk.rms_delay_spread_s or 0.0)
+            cand = (n, tail, d0, d_rms, how.format(what=what), allow, ok_delay)
             if best is None or (cand[0], cand[1]) > (best[0], best[1]):
                 best = cand
+            if n > cap and delays is not None:  # past the pilot: the window must hold the orders up to n
+                ends.append(_order_window_end(gains, errors, delays[0], delays[1], n))
         assert best is not None  # the pilot has at least one link
-        n, tail, d0, d_rms, how, tau_rms = best
+        n, tail, d0, d_rms, how, allow, ok_delay = best
         name = {"reflection": "reflection order", "scattering": "scattering order"}[key]
-        if math.isfinite(tail) and tail <= allowed / 2 and d0 <= rel * tau_rms and d_rms <= rel * tau_rms:
+        past = (
+            f", past the pilot's {cap} orders along the geometric tail (Russian roulette ends the paths, so "
+            "the cost per path stays near that of the orders that carry the power)"
+            if n > cap
+            else ""
+        )
+        highest = "the highest allowed" if n >= MAX_ORDER else "the pilot's highest"
+        shifts = (
+            f"dropping them shifts the mean delay by {d0:.2e} s and the RMS delay spread by {d_rms:.2e} s"
+            if math.isfinite(d0) and math.isfinite(d_rms)
+            else "that is at least the pilot's whole H0: the delay shifts cannot be stated"
+        )
+        if math.isfinite(tail) and tail <= allow and ok_delay:
             reason = (
-                f"{name} capped at {n}: estimated power of higher orders {tail:.2e} per watt <= "
-                f"{allowed / 2:.2e} (half the allowed truncation); dropping them shifts the mean delay by "
+                f"{name} capped at {n}{past}: estimated power of higher orders {tail:.2e} per watt <= "
+                f"{allow:.2e} (half the allowed truncation); dropping them shifts the mean delay by "
                 f"{d0:.2e} s and the RMS delay spread by {d_rms:.2e} s (each <= {rel:g} x tau_rms); "
                 f"tail past the pilot's orders: {how}"
             )
+        elif math.isfinite(tail) and tail <= allow:
+            reason = (
+                f"{name} capped at {n}, {highest}{past}: estimated power of higher orders {tail:.2e} per watt "
+                f"<= {allow:.2e} (half the allowed truncation), but {shifts}, more than "
+                f"{rel:g} x tau_rms; tail past the pilot's orders: {how}"
+            )
         elif math.isfinite(tail):
             reason = (
-                f"{name} capped at {n}, the pilot's highest: the tail could not be brought under the "
-                f"allowance (estimated {tail:.2e} per watt against {allowed / 2:.2e}; shifts of the mean "
-                f"delay {d0:.2e} s, of the RMS delay spread {d_rms:.2e} s); tail: {how}"
+                f"{name} capped at {n}, {highest}: the tail could not be brought under the "
+                f"allowance (estimated {tail:.2e} per watt against {allow:.2e}; {shifts}); tail: {how}"
             )
         else:
             reason = (
                 f"{name} capped at {n}, the pilot's highest: no finite bound on the power of higher orders "
                 f"can be stated ({how}); set it explicitly and compare runs"
             )
+        met.append(math.isfinite(tail) and tail <= allow)
         notes.append(f"{what}: {how}")
         return n, tail, reason
 
+    met: list[bool] = []  # per order chosen: its tail is within the allowance
+    ends: list[float] = []  # window ends that hold the orders chosen past the pilot [s]
     if need_k:
         K, k_tail, modeled.max_reflections_reason = choose("rho_max", "reflection", rho_max, run.cap_k)
         update["max_reflections"] = K
@@ -497,11 +561,24 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
             "albedo_max", "scattering", _max_albedo(step.spec), run.cap_s, extra=1
         )
         update["max_scattering"] = S
+    doc_update = dict(step.doc_update)
+    if max(update.get("max_reflections", 0), update.get("max_scattering", 0)) > PILOT_CAP and (
+        spec.outputs.cir_by_order is None
+    ):  # hundreds of orders x a long window: the CIR split by order would hold 1e7+ numbers per link
+        doc_update["outputs"] = spec.outputs.model_copy(update={"cir_by_order": False})
+        modeled.outputs_reason = (
+            "the CIR is not split by order (outputs.cir_by_order false): the orders chosen past the pilot's "
+            f"{PILOT_CAP} would make it orders x bins numbers per link; H0 is still split by order"
+        )
     if need_t:
         dt = sim.time_bin_s
         edges = bins.t_min_s + bins.time_bin_s * np.arange(PILOT_BINS + 1)
         t_end = max(_window_end(edges, lk, allowed / 2) for lk in links)
-        t_end = max(t_end, sim.t_min_s + dt)
+        # the orders chosen past the pilot, within the pilot's window: the memory estimate of a job with an
+        # automatic window (engine/budget.py) takes that window as its bound; later power is in late_gain
+        past_pilot = max(ends, default=0.0)
+        held = min(past_pilot, run.t_long)
+        t_end = max(t_end, held, sim.t_min_s + dt)
         try:
             check_bin_budget(sim.t_min_s, t_end, dt, automatic=True)
         except ValueError as exc:
@@ -512,6 +589,18 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
             f"window ends at {update['t_max_s'] * 1e9:.1f} ns: the power arriving later, extrapolated from the "
             f"pilot's exponential decay, is < {allowed / 2:.2e} per watt (late power is counted in late_gain, "
             "not dropped)"
+            + (
+                "; it holds the orders chosen past the pilot (their mean delays, extrapolated per order, plus 4 "
+                "standard deviations)"
+                if 0 < past_pilot <= t_end and past_pilot == held
+                else (
+                    f"; the orders chosen past the pilot arrive until about {past_pilot * 1e9:.1f} ns, but the "
+                    "window stops at the pilot's (the bound of the job's memory estimate, engine/budget.py): "
+                    "their later power is in late_gain and dc_gain, not in the binned CIR; give t_max_s to bin it"
+                    if past_pilot > t_end
+                    else ""
+                )
+            )
         )
     modeled.pilot = PilotPublic(
         paths=sim.pilot_paths,
@@ -524,14 +613,33 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
     )
     total_tail = float(k_tail + s_tail)
     modeled.truncation_estimate_per_watt = total_tail if math.isfinite(total_tail) else None
+    modeled.truncation_within_allowance = all(met) if met else None
     modeled.truncation_note = (
         "estimated from the pilot: the orders it measured plus a geometric tail past its "
         "last order (" + "; ".join(notes) + "), plus two of its standard errors"
         if notes
         else "no order was chosen automatically"
     )
-    resolved, job_scene = _apply(spec, scene, update, step.doc_update)
+    resolved, job_scene = _apply(spec, scene, update, doc_update)
     return Resolution(spec, resolved, job_scene, modeled)
+
+
+def _order_window_end(gains, errors, t1, t2, n: int) -> float:
+    """End of a window that holds reflection (scattering) orders up to n past the pilot [s].
+
+    Order j > L (the pilot's last order measured to 30 %) arrives on average at t1[L] + (j - L) dt, dt
+    = t1[L] - t1[L - 1] the pilot's per-order step, with a variance growing like the order's number
+    of segments, var_L j / L; the end is order n's mean plus 4 of its standard deviations.
+    """
+    g = np.asarray(gains, float)
+    e = np.asarray([x or 0.0 for x in errors], float)
+    good = np.flatnonzero((g > 0) & (e <= 0.3 * np.where(g > 0, g, 1.0)))
+    if not len(good) or good[-1] < 1:
+        return 0.0
+    L = int(good[-1])
+    step = max(t1[L] - t1[L - 1], 0.0) if g[L - 1] > 0 else 0.0
+    var = max(t2[L] - t1[L] ** 2, 0.0) * n / L
+    return float(t1[L] + (n - L) * step + 4.0 * math.sqrt(var))
 
 
 def _extreme_receivers(spec: SceneSpec):

@@ -91,6 +91,52 @@ def _window_warnings(cols: dict[str, list]) -> list[str]:
     ]
 
 
+#: Estimated fraction of H0 in the orders above a user-given K (S) above which the result warns.
+TRUNCATION_WARNING = 0.1
+
+
+def _truncation_warnings(cols: dict[str, list], modeled: ModeledPublic | None, sim) -> list[str]:
+    """The orders left out carry more than the user may think: automatic K / S that could not meet their
+    allowance (the pilot's estimate), or links whose `truncated_gain_estimate` exceeds TRUNCATION_WARNING of
+    H0 (user-given K / S), or that have no finite estimate at all."""
+    share = [
+        (t / h0 if t is not None else math.inf, i)
+        for i, (h0, t, split) in enumerate(
+            zip(cols["dc_gain"], cols["truncated_gain_estimate"], cols["dc_gain_by_reflection_order"])
+        )
+        if h0 and split is not None
+    ]
+    worst, at = max(share, default=(0.0, -1))
+    where = f" (link {cols['transmitter'][at]}-{cols['receiver'][at]})" if at >= 0 else ""
+    cut = f"K = {sim.max_reflections}" + (f", S = {sim.scattering_orders}" if sim.scattering_orders > 1 else "")
+    if modeled is not None and modeled.truncation_within_allowance is False:
+        est = modeled.truncation_estimate_per_watt
+        size = (
+            f"up to {worst:.2%} of dc_gain{where}"
+            if math.isfinite(worst) and worst > 0
+            else (f"{est:.3g} per watt (pilot)" if est is not None else "an amount no finite bound can be stated for")
+        )
+        return [
+            f"the automatic orders ({cut}) could not keep the truncated power within its allowance of "
+            f"{sim.tolerance:g} x H0: the orders left out carry an estimated {size}, not in dc_gain; "
+            "modeled.max_reflections_reason says why; set max_reflections (max_scattering) and compare runs"
+        ]
+    if not math.isfinite(worst):
+        return [
+            f"no finite bound on the power of the orders above {cut} can be stated{where} (no geometric decay "
+            "measured): dc_gain may miss a large part; raise max_reflections (max_scattering) and compare runs"
+        ]
+    if worst > TRUNCATION_WARNING:
+        n = sum(f > TRUNCATION_WARNING for f, _ in share)
+        return [
+            f"{n} link(s) miss more than {TRUNCATION_WARNING:.0%} of H0 in the orders above {cut}: up to an "
+            f"estimated {worst:.0%} of dc_gain{where} (truncated_gain_estimate: a geometric tail, at the "
+            "largest per-order ratio the scene allows when few orders are measured); raise max_reflections "
+            "(max_scattering) or leave them automatic"
+        ]
+    return []
+
+
 #: A receiver is a point while its side sqrt(area) is below this fraction of its distance to a transmitter.
 POINT_RECEIVER_RATIO = 0.1
 
@@ -272,6 +318,7 @@ def build_result(
         "algorithm": spec.simulation.algorithm,
         "warnings": _warnings(spec, scene)
         + _window_warnings(cols)
+        + _truncation_warnings(cols, modeled, spec.simulation)
         + _mask_warnings(scene)
         + reliability.warnings(
             link_reliability(accs, los_gain), [f"{t}-{r}" for t, r in zip(cols["transmitter"], cols["receiver"])]

@@ -105,6 +105,7 @@ def tally_plan(spec: SceneSpec, scene: Scene) -> TallyPlan:
         cir_rank=rank(cir),
         order_rank=rank(orders),
         group_weights=group_weights(spec, scene),
+        split_cir=spec.outputs.cir_by_order is not False,
         first_batch_groups=one_batch and 0 < N_GROUPS * n_cir * sim.n_bins <= CIR_GROUPS_MAX,
     )
 

@@ -86,6 +86,8 @@ class TallyPlan:
     order_rank: np.ndarray  # (n_rx,) rank among order-split receivers, -1 without
     #: (G, n_tx) weight of each transmitter in each group's channel (P_i / sum of the group's P)
     group_weights: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    #: split the CIR by order where a receiver has both (outputs.cir_by_order)
+    split_cir: bool = True
     #: the first batch of each source also bins its CIR per path group (`BatchBuilder`), for the per-bin
     #: errors of runs of one batch; set by the planner when the run may have one batch (simulate.tally_plan)
     first_batch_groups: bool = False
@@ -113,7 +115,7 @@ class TallyPlan:
     @cached_property
     def by_order_cir(self) -> bool:
         """True when some receiver has both the CIR and the order split (then the CIR is split too)."""
-        return bool(np.any((self.cir_rank >= 0) & (self.order_rank >= 0)))
+        return self.split_cir and bool(np.any((self.cir_rank >= 0) & (self.order_rank >= 0)))
 
 
 @dataclass

@@ -31,6 +31,11 @@ class OutputsSpec(SpecModel):
         description="H0 (and CIR) split by reflection and scattering order "
         "(default: for explicit receivers, not for grid receivers)",
     )
+    cir_by_order: bool | None = Field(
+        None,
+        description="split the CIR by order too, where a receiver has both `cir` and `orders` (default: yes, "
+        "unless K or S is chosen automatically past the pilot's 40 orders: orders x bins numbers per link)",
+    )
 
     def per_receiver(self, explicit: int, gridded: int) -> tuple[list[bool], list[bool]]:
         """(cir, orders) flags for `explicit` receivers followed by `gridded` grid receivers."""

@@ -254,6 +254,12 @@ class ModeledPublic(PublicModel):
         None, description="estimated power per watt of the orders left out (from the pilot)"
     )
     truncation_note: str | None = Field(None, description="how the truncation estimate was made")
+    truncation_within_allowance: bool | None = Field(
+        None,
+        description="whether the automatic K and S keep the estimated truncated power within the allowance "
+        "(false: the result warns; null: no order was chosen automatically)",
+    )
+    outputs_reason: str | None = Field(None, description="why an output asked by default was not computed")
     unreachable_receivers: list[UnreachablePublic] = Field(
         default_factory=list, description="receivers no light can reach, not simulated"
     )

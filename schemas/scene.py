@@ -125,7 +125,7 @@ class SceneSpec(SpecModel):
         cir, orders = self.outputs.per_receiver(len(self.receivers), self.grid_receiver_count())
         n_cir = n_tx * sum(cir)
         n_ord = n_tx * sum(orders)
-        n_both = n_tx * sum(c and o for c, o in zip(cir, orders))
+        n_both = n_tx * sum(c and o for c, o in zip(cir, orders)) if self.outputs.cir_by_order is not False else 0
         k, s = max_reflections + 1, max_scattering + 1
         return n_cir * n_bins + n_both * (k + s) * n_bins + n_ord * k * s
 
