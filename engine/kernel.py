@@ -107,7 +107,7 @@ class KernelSettings:
     both_sides: bool = False
     #: roulette threshold theta: survival min(1, w / (theta w0)); paths above theta w0 always survive
     rr_threshold: float = 0.25  # measured: benchmarks/replicate_study.py --study roulette (docs/smoke-error-bars.md)
-    #: algorithm 5 from both devices with a peaked phase function: each device also samples the phase lobe
+    #: algorithms 2-5 from both devices with a peaked phase function: each device also samples the phase lobe
     #: about the axis toward the other for Tx -> p -> Rx (medium_nee.lobe_connections, balance heuristic)
     phase_lobe: bool = False
     #: paths per block of randomly shifted Sobol points for the first dimensions of each path (emission
@@ -298,8 +298,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     )
     if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each from both devices
         connect_source_mirrors(ctx, sources, i, w0 * (0.5 if settings.mis or settings.both_sides else 1.0), n)
-    if settings.phase_lobe and free_flight and settings.both_sides:  # Tx -> p -> Rx from the lobe (medium_nee)
-        lobe_connections(ctx, n, rng)
+    if settings.phase_lobe and (free_flight and settings.both_sides or points_on_segments and settings.mis):
+        lobe_connections(ctx, n, rng, segments=not free_flight)  # Tx -> p -> Rx from the phase lobe (medium_nee)
     surface_power = escaped_power = 0.0
     far = scene.medium_far_distance  # segments that leave the scene run to where the medium has absorbed all
 

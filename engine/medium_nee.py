@@ -85,8 +85,11 @@ by their own term over the same sum. Every strategy's estimate is then f / (sigm
 at most 4 albedo R_tx,max R_rx,max / D^2 whatever g (for g < 0 the lobe about the axis points away from
 the other device, onto the axis beyond the source, where the backward peak lies). The lobe is drawn when
 the phase function's peak exceeds LOBE_PEAK times the isotropic 1 / (4 pi) (`phase_lobe_wanted`), in
-runs from both devices of algorithm 5 in grey scenes; at lower peaks the weights above are already
-bounded by a moderate p_max and nothing changes.
+runs from both devices of algorithms 2-5 in grey scenes; at lower peaks the weights above are already
+bounded by a moderate p_max and nothing changes. Algorithms 2-4 place points on the emissions' first
+segments (time strata and equiangular points, density n_T + n_E per length) rather than collisions:
+their shares (segments._direction_mis) weigh R / W / r^2 (n_T + n_E) of each device against
+sigma_t Lambda, the lobes' densities per volume (`lobe_volume_density`), and the bound is the same.
 
 Algorithms 2-4 (`first_segment_branch`). The points-on-segments estimators connect a point p of
 the source's k-th segment to the target; the target's own side samples the same single-
@@ -151,7 +154,32 @@ def lobe_source_density(ctx, j: int, points, transmittance):
     return ctx.scene.phase.eval(cos) * transmittance / r2
 
 
-def lobe_connections(ctx, n: int, rng) -> None:
+def lobe_volume_density(ctx, y, points):
+    """sigma_t(p) Lambda(p) [1/m^3]: the two lobe strategies' densities per volume at medium points (3, n)
+    between the item's source and the target at `y` (3,) (algorithms 2-4, whose point densities
+    segments.first_segment_density are per volume); 0 where the devices coincide."""
+    from .kernel import device_sets
+
+    scene = ctx.scene
+    medium, phase = scene.medium, scene.phase
+    src, _ = device_sets(scene, ctx.item.direction)
+    x = src.positions[ctx.item.source]
+    axis = np.asarray(y, float) - x
+    length = float(np.sqrt(axis @ axis))
+    if length == 0.0:
+        return np.zeros(points.shape[1])
+    axis = axis / length
+    out = np.zeros(points.shape[1])
+    for pos, a in ((x, axis), (np.asarray(y, float), -axis)):  # the source's lobe, then the target's
+        v = points - pos[:, None]
+        r2 = _dot(v, v)
+        r = np.sqrt(r2)
+        tr = medium.transmittance(np.repeat(pos[:, None], len(r), axis=1).T, (v / r).T, r)
+        out += phase.eval(_dot(v, a[:, None]) / r) * tr / r2
+    return medium.sigma_t_at(points.T) * out
+
+
+def lobe_connections(ctx, n: int, rng, segments: bool = False) -> None:
     """The source's phase-lobe strategy for Tx -> p -> Rx (algorithm 5 from both devices; module docstring).
 
     Per target j and path of the batch: a direction w with density p(w . a) about the unit axis a toward
@@ -159,7 +187,10 @@ def lobe_connections(ctx, n: int, rng) -> None:
     the connection to the target:
         dH = albedo R_src(w) / p(w . a) x p(cos theta) R_tgt T(p -> y) / d^2 x Lambda_src / (F + L + Lambda),
     (Lambda_src = p(cos alpha) T(source -> p) / r^2, the same share as `connection_weight` gives the
-    emissions), tallied at (k, s) = (0, 1) with the batch's path of the same index.
+    emissions), tallied at (k, s) = (0, 1) with the batch's path of the same index. `segments`
+    (algorithms 2-4): the emissions place points on their first segments instead of collisions, so the
+    share is sigma_t Lambda_src over the sum of both devices' point densities
+    (segments.first_segment_density) and sigma_t Lambda (as segments._direction_mis weighs them).
     """
     from .constants import SPEED_OF_LIGHT
     from .kernel import device_sets
@@ -223,10 +254,19 @@ def lobe_connections(ctx, n: int, rng) -> None:
         lam_src = lobe_source_density(ctx, j, points, t_src)
         v = points - x[:, None]
         r2_src = _dot(v, v)
-        first = r_src / w_src * t_src / r2_src  # F (the source's emission, as first_medium_factor)
-        last = r_tgt / ctx.t_total[j] * t_tgt / d2  # L
         lam_tgt = phase.eval(_dot(out, axis[:, None])) * t_tgt / d2  # the target's lobe: cos beta = out . a
-        total = first + last + lam_src + lam_tgt
+        if segments:  # algorithms 2-4: densities per volume (segments._direction_mis)
+            from .segments import first_segment_density
+
+            sig = sigma_t.take(keep)
+            lam_src, lam_tgt = sig * lam_src, sig * lam_tgt
+            total = first_segment_density(ctx, src, i, y[:, 0], points)
+            total += first_segment_density(ctx, ctx.targets, t_idx, x, points)
+        else:
+            total = r_src / w_src * t_src / r2_src  # F (the source's emission, as first_medium_factor)
+            total += r_tgt / ctx.t_total[j] * t_tgt / d2  # L
+        total += lam_src
+        total += lam_tgt
         sampled = phase.eval(_dot(dirs, axis[:, None]))  # p(w . a), this strategy's direction density
         power = albedo * r_src / sampled * phase.eval(_dot(dirs, out)) * r_tgt * t_tgt / d2
         power *= np.where(total > 0, lam_src / np.where(total > 0, total, 1.0), 0.0)

@@ -149,7 +149,8 @@ def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = N
     if not both:
         return settings
     settings = two_sided_settings(settings, alg.number, scene.medium is not None)
-    if settings.both_sides and scene.spectra is None and phase_lobe_wanted(scene.phase):
+    shared = settings.both_sides or (settings.mis and settings.segment_scatter)  # algorithm 5, algorithms 2-4
+    if shared and scene.medium is not None and scene.spectra is None and phase_lobe_wanted(scene.phase):
         settings = replace(settings, phase_lobe=True)  # a peaked phase function (medium_nee)
     return settings
 

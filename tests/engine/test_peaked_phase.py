@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from benchmarks.peaked_phase import AREA, SIGMA_A, SIGMA_S, D, M, doc, run_seeds
-from owcsim.engine import kernel
+from owcsim.engine import kernel, medium_nee
 from owcsim.engine.scene import build_scene
 from owcsim.engine.simulate import kernel_settings
 from owcsim.schemas import SceneSpec
@@ -57,11 +57,19 @@ def test_reference_quadrature_converges_and_agrees_with_the_spherical_one():
 
 
 @pytest.mark.parametrize(
-    "g, seeds", [(0.999, (0, 1)), (0.99, (2,)), (-0.999, (3,))], ids=["g=0.999", "g=0.99", "g=-0.999"]
+    "g, seeds, algorithm, paths",
+    [
+        (0.999, (0, 1), "auto", 50_000),
+        (0.99, (2,), "auto", 50_000),
+        (-0.999, (3,), "auto", 50_000),
+        (0.999, (4,), 2, 10_000),
+        (0.999, (5,), 3, 10_000),
+    ],
+    ids=["g=0.999", "g=0.99", "g=-0.999", "g=0.999 algorithm 2", "g=0.999 algorithm 3"],
 )
-def test_peaked_single_scattering_error_bars_cover_the_reference(g, seeds):
+def test_peaked_single_scattering_error_bars_cover_the_reference(g, seeds, algorithm, paths):
     ref = _reference(g)
-    for row in run_seeds(g, seeds, 50_000):
+    for row in run_seeds(g, seeds, paths, algorithm):
         assert _holds(row, ref), (row, ref)
 
 
@@ -69,25 +77,30 @@ def _planted(monkeypatch, what: str) -> None:
     if what == "phase value":  # p(cos theta) at the lobe's scattering points 5 % high (the estimate is linear in it)
         real = kernel.lobe_connections
 
-        def lobe(ctx, n, rng):
+        def lobe(ctx, n, rng, **kw):
             record = ctx.record
             ctx.record = lambda *a, **k: record(*a[:4], 1.05 * a[4], *a[5:], **k)
             try:
-                real(ctx, n, rng)
+                real(ctx, n, rng, **kw)
             finally:
                 del ctx.record
 
         monkeypatch.setattr(kernel, "lobe_connections", lobe)
-    else:  # "weight": the emissions' share F / (F + L) without the lobes' densities (paths counted twice)
+    elif what == "weight":  # the emissions' share F / (F + L) without the lobes' densities (paths counted twice)
         real_weight = kernel.connection_weight
         monkeypatch.setattr(kernel, "connection_weight", lambda *a, lobe=None, **k: real_weight(*a, **k))
+    else:  # "points' weight" (algorithms 2-4): segments._direction_mis without the lobes' densities
+        monkeypatch.setattr(medium_nee, "lobe_volume_density", lambda ctx, y, points: np.zeros(points.shape[1]))
 
 
-@pytest.mark.parametrize("what", ["phase value", "weight"])
-def test_the_check_catches_a_planted_error(what, monkeypatch):
+@pytest.mark.parametrize(
+    "what, algorithm, paths",
+    [("phase value", "auto", 50_000), ("weight", "auto", 50_000), ("points' weight", 3, 10_000)],
+)
+def test_the_check_catches_a_planted_error(what, algorithm, paths, monkeypatch):
     _planted(monkeypatch, what)
     ref = _reference(0.999)
-    rows = run_seeds(0.999, (0, 1), 50_000)
+    rows = run_seeds(0.999, (0, 1) if algorithm == "auto" else (5,), paths, algorithm)
     assert not all(_holds(row, ref) for row in rows), rows
 
 
@@ -101,7 +114,7 @@ def test_the_lobe_runs_only_for_peaked_phase_functions_from_both_devices():
     assert settings(0.999).phase_lobe and settings(-0.9).phase_lobe
     assert not settings(0.5).phase_lobe and not settings(0.7).phase_lobe  # the defaults keep their estimator
     assert not settings(0.999, direction="forward").phase_lobe  # one side: no partner run to share with
-    assert not settings(0.999, algorithm=3).phase_lobe  # algorithms 2-4: not yet
+    assert settings(0.999, algorithm=3).phase_lobe and not settings(0.5, algorithm=3).phase_lobe  # 2-4 as well
 
 
 def test_black_room_frame_connections_cover_the_prism_reference(monkeypatch):
