@@ -550,13 +550,13 @@ def _medium_next_events(
                 pp.first[at_first] = first_medium_factor(
                     ctx, points.take(at_first, axis=1), transmittance.take(at_first)
                 )
-                frame = lobe_axis(ctx, j) if settings.phase_lobe else None
-                if frame is not None:  # the source's lobe density at the first vertices (medium_nee)
+                lobe_frame = lobe_axis(ctx, j) if settings.phase_lobe else None
+                if lobe_frame is not None:  # the source's lobe density at the first vertices (medium_nee)
                     lobe_src = np.zeros(len(s))
                     lobe_src[at_first] = lobe_source_density(
                         ctx, j, points.take(at_first, axis=1), transmittance.take(at_first)
                     )
-                    lobe = (lobe_src, frame[1])
+                    lobe = (lobe_src, lobe_frame[1])
             mid_g = transmittance / (s * s)  # edge factor T / r^2 of the edge that reached the point
         pp.s = pp.s + 1
         ctx.connect(

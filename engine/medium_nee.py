@@ -169,14 +169,22 @@ def lobe_volume_density(ctx, y, points):
     if length == 0.0:
         return np.zeros(points.shape[1])
     axis = axis / length
+    uniform = medium.uniform_coefficients  # (sigma_t, sigma_s) of a medium the same everywhere, else None
     out = np.zeros(points.shape[1])
     for pos, a in ((x, axis), (np.asarray(y, float), -axis)):  # the source's lobe, then the target's
         v = points - pos[:, None]
         r2 = _dot(v, v)
         r = np.sqrt(r2)
-        tr = medium.transmittance(np.repeat(pos[:, None], len(r), axis=1).T, (v / r).T, r)
-        out += phase.eval(_dot(v, a[:, None]) / r) * tr / r2
-    return medium.sigma_t_at(points.T) * out
+        if uniform is not None:
+            tr = np.exp(-uniform[0] * r)  # = medium.transmittance
+        else:
+            tr = medium.transmittance(np.broadcast_to(pos, (len(r), 3)), (v / r).T, r)
+        cos = v[0] * a[0] + v[1] * a[1] + v[2] * a[2]
+        cos /= r
+        tr *= phase.eval(cos)
+        tr /= r2
+        out += tr
+    return out * (uniform[0] if uniform is not None else medium.sigma_t_at(points.T))
 
 
 def lobe_connections(ctx, n: int, rng, segments: bool = False) -> None:

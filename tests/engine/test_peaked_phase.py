@@ -18,10 +18,12 @@ import pytest
 
 from benchmarks.peaked_phase import AREA, SIGMA_A, SIGMA_S, D, M, doc, run_seeds
 from owcsim.engine import kernel, medium_nee
+from owcsim.engine import simulate as simulate_module
 from owcsim.engine.scene import build_scene
 from owcsim.engine.simulate import kernel_settings
 from owcsim.schemas import SceneSpec
 from tests.engine.test_medium_next_events import _trace
+from tests.engine.test_replicates import _max_contribution
 from tests.reference_peaked import converged, single_scattering
 from tests.reference_volume import single_scattering as spherical_quadrature
 from tests.results import simulate_document as simulate
@@ -102,6 +104,20 @@ def test_the_check_catches_a_planted_error(what, algorithm, paths, monkeypatch):
     ref = _reference(0.999)
     rows = run_seeds(0.999, (0, 1) if algorithm == "auto" else (5,), paths, algorithm)
     assert not all(_holds(row, ref) for row in rows), rows
+
+
+@pytest.mark.parametrize("algorithm", [5, 3])
+def test_weights_obey_the_bound_whatever_g(algorithm, monkeypatch):
+    """engine/medium_nee.py (the phase lobe): every single-scattering estimate is at most
+    4 albedo R_tx,max R_rx,max / D^2 at g = 0.999 (the bound without the lobe has p_max ~ 1.6e5 / sr in
+    place of R_tx,max = 1 / pi); without the lobe the same run exceeds it."""
+    bound = 4 * (SIGMA_S / SIGMA_T) * ((M + 1) / (2 * np.pi)) * AREA / D**2
+    spec = SceneSpec.model_validate(doc(0.999, 3, 20_000 if algorithm == 5 else 4000, algorithm))
+    with_lobe = _max_contribution(monkeypatch, lambda: simulate(spec))
+    assert 0 < with_lobe <= bound * (1 + 1e-6), (with_lobe, bound)
+    monkeypatch.setattr(simulate_module, "phase_lobe_wanted", lambda phase: False)
+    without = _max_contribution(monkeypatch, lambda: simulate(spec))
+    assert without > bound, (without, bound)  # the bound is not trivially loose
 
 
 def test_the_lobe_runs_only_for_peaked_phase_functions_from_both_devices():
