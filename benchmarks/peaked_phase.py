@@ -13,6 +13,7 @@ coordinates adapted to the peak (its refined grid printed next to it). Per g the
 - flagged: runs carrying engine/reliability.py's "unreliable error bar" warning;
 - worst z: max |H1 - reference| / reported SE over the unflagged runs; >4 SE: how many of them
   lie more than 4 reported standard errors from the reference (the issue asks 0).
+`--direction forward` / `backward`: algorithm 5 from one side only.
 Run: .venv/bin/python benchmarks/peaked_phase.py [--seeds 20] [--paths 100000] [--gs 0.9,0.99,0.999,-0.999]
 """
 
@@ -36,13 +37,14 @@ from tests.reference_peaked import converged  # noqa: E402
 D, M, AREA, SIGMA_S, SIGMA_A = 3.0, 1.0, 1e-4, 0.2, 0.05
 
 
-def doc(g: float, seed: int, paths: int, algorithm: int | str = "auto") -> dict:
+def doc(g: float, seed: int, paths: int, algorithm: int | str = "auto", direction: str = "auto") -> dict:
     return {
         "transmitters": [{"id": "tx", "position": [0, 0, 0], "normal": [1, 0, 0], "lambertian_order": M}],
         "receivers": [{"id": "rx", "position": [D, 0, 0], "normal": [-1, 0, 0], "area": AREA, "fov_deg": 90}],
         "medium": {"type": "homogeneous", "sigma_a": SIGMA_A, "sigma_s": SIGMA_S, "phase": {"type": "hg", "g": g}},
         "simulation": {
             "algorithm": algorithm,
+            "direction": direction,
             "paths": paths,
             "seed": seed,
             "max_reflections": 0,
@@ -53,11 +55,12 @@ def doc(g: float, seed: int, paths: int, algorithm: int | str = "auto") -> dict:
     }
 
 
-def run_seeds(g: float, seeds, paths: int, algorithm: int | str = "auto") -> list[dict]:
+def run_seeds(g: float, seeds, paths: int, algorithm: int | str = "auto", direction: str = "auto") -> list[dict]:
     """Per seed: the single-scattering gain H1 = H0 - LOS, its reported standard error, the flag."""
     rows = []
     for seed in seeds:
-        res = json.loads(engine.simulate(SceneSpec.model_validate(doc(g, seed, paths, algorithm))).model_dump_json())
+        spec = SceneSpec.model_validate(doc(g, seed, paths, algorithm, direction))
+        res = json.loads(engine.simulate(spec).model_dump_json())
         link = res["links"][0]
         rows.append(
             {
@@ -90,11 +93,12 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--paths", type=int, default=100_000)
     ap.add_argument("--gs", default="0.9,0.99,0.999,-0.999")
-    ap.add_argument("--algorithms", default="auto", help="comma-separated: auto, 4, 5")
+    ap.add_argument("--algorithms", default="auto", help="comma-separated: auto, 2, 3, 4, 5")
+    ap.add_argument("--direction", default="auto", help="auto (both devices in smoke), forward or backward (5 only)")
     args = ap.parse_args()
     print(
         f"open medium, D = {D} m, sigma_s {SIGMA_S}, sigma_a {SIGMA_A} /m, K = 0, S = 1; "
-        f"{args.seeds} seeds x {args.paths:,d} paths a side"
+        f"{args.seeds} seeds x {args.paths:,d} paths a side; direction {args.direction}"
     )
     print(
         f"{'g':>7s} {'alg':>4s} {'reference H1':>13s} {'refined':>13s} {'bias':>17s} {'median':>8s} "
@@ -104,7 +108,7 @@ def main() -> None:
         ref, fine = converged(D, M, AREA, SIGMA_S, SIGMA_A + SIGMA_S, g)
         for alg in args.algorithms.split(","):
             t = time.perf_counter()
-            rows = run_seeds(g, range(args.seeds), args.paths, alg if alg == "auto" else int(alg))
+            rows = run_seeds(g, range(args.seeds), args.paths, alg if alg == "auto" else int(alg), args.direction)
             s = summary(rows, ref)
             print(
                 f"{g:7.4g} {alg:>4s} {ref:13.6e} {fine:13.6e} {s['bias']:+8.2%} +- {s['bias_se']:5.2%} "

@@ -33,6 +33,9 @@ serves both directions. Each step intersects the surfaces, then:
   vertices keep w (T / P(no collision) = 1). Run from both
   devices (`both_sides`), every connection is weighted by the partition of unity of
   medium_nee.py (bounded weights near point devices).
+With a peaked phase function (KernelSettings.phase_lobe) the source also samples the phase lobe about
+the axis toward each target for Tx -> p -> Rx, once per path before the first step
+(medium_nee.lobe_connections), and the first vertices' shares make room for it.
 The phase cosine is dot(ray direction, direction to the target) in both directions
 (the phase functions are symmetric). The line-of-sight term (k = s = 0) is exact
 and never sampled (los.py). Russian roulette from `rr_start_depth` (k + s) on, with
@@ -72,6 +75,7 @@ from .medium_nee import (
     lobe_axis,
     lobe_connections,
     lobe_source_density,
+    side_weight,
 )
 from .mirrors import connect_mirrors, connect_source_mirrors
 from .sampling import cosine_about_soa
@@ -107,8 +111,9 @@ class KernelSettings:
     both_sides: bool = False
     #: roulette threshold theta: survival min(1, w / (theta w0)); paths above theta w0 always survive
     rr_threshold: float = 0.25  # measured: benchmarks/replicate_study.py --study roulette (docs/smoke-error-bars.md)
-    #: algorithms 2-5 from both devices with a peaked phase function: each device also samples the phase lobe
-    #: about the axis toward the other for Tx -> p -> Rx (medium_nee.lobe_connections, balance heuristic)
+    #: a peaked phase function: the source also samples the phase lobe about the axis toward each target for
+    #: Tx -> p -> Rx (medium_nee.lobe_connections, balance heuristic): algorithm 5 (from either side or both),
+    #: algorithms 2-4 from both devices
     phase_lobe: bool = False
     #: paths per block of randomly shifted Sobol points for the first dimensions of each path (emission
     #: direction, first free-flight distance, first bounce direction; engine/qmc.py); a batch that is not a
@@ -298,7 +303,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     )
     if ctx.mirrors:  # source -> mirror -> target: the same for every path (no variance); half each from both devices
         connect_source_mirrors(ctx, sources, i, w0 * (0.5 if settings.mis or settings.both_sides else 1.0), n)
-    if settings.phase_lobe and (free_flight and settings.both_sides or points_on_segments and settings.mis):
+    if settings.phase_lobe and (free_flight or points_on_segments and settings.mis):
         lobe_connections(ctx, n, rng, segments=not free_flight)  # Tx -> p -> Rx from the phase lobe (medium_nee)
     surface_power = escaped_power = 0.0
     far = scene.medium_far_distance  # segments that leave the scene run to where the medium has absorbed all
@@ -558,6 +563,14 @@ def _medium_next_events(
                     )
                     lobe = (lobe_src, lobe_frame[1])
             mid_g = transmittance / (s * s)  # edge factor T / r^2 of the edge that reached the point
+        elif settings.phase_lobe:  # one side: its emission shares Tx -> p -> Rx with its lobe, F / (F + Lambda_src)
+            at_first = (pp.k + pp.s == 0).nonzero()[0]
+            if len(at_first) and lobe_axis(ctx, j) is not None:
+                first_points, first_t = points.take(at_first, axis=1), transmittance.take(at_first)
+                share = side_weight(
+                    first_medium_factor(ctx, first_points, first_t), lobe_source_density(ctx, j, first_points, first_t)
+                )
+                throughput[at_first] *= share
         pp.s = pp.s + 1
         ctx.connect(
             points, points, throughput, pp, in_dirs=pp.directions, target=j, extra_length=s, mid_g=mid_g, lobe=lobe
@@ -851,6 +864,8 @@ class _Context:
         rows = eq.rows
         k, s_order = _rows(paths.k, rows), _rows(paths.s, rows)
         share = settings.both_sides
+        if settings.phase_lobe and not share and len(k) and int((k + s_order).min()) == 0:
+            return False  # one side, first vertices: the share with the lobe (`_medium_next_events`)
         mode = "deep"  # depth >= 2 (the usual step), "first" (depth 0), "second" (depth 1)
         if share and len(k):
             depth = k + s_order

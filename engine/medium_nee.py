@@ -85,7 +85,8 @@ by their own term over the same sum. Every strategy's estimate is then f / (sigm
 at most 4 albedo R_tx,max R_rx,max / D^2 whatever g (for g < 0 the lobe about the axis points away from
 the other device, onto the axis beyond the source, where the backward peak lies). The lobe is drawn when
 the phase function's peak exceeds LOBE_PEAK times the isotropic 1 / (4 pi) (`phase_lobe_wanted`), in
-runs from both devices of algorithms 2-5 in grey scenes; at lower peaks the weights above are already
+runs of algorithm 5 (from both devices, or from one: `lobe_connections`) and of algorithms 2-4 from both
+devices, in grey scenes; at lower peaks the weights above are already
 bounded by a moderate p_max and nothing changes. Algorithms 2-4 place points on the emissions' first
 segments (time strata and equiangular points, density n_T + n_E per length) rather than collisions:
 their shares (segments._direction_mis) weigh R / W / r^2 (n_T + n_E) of each device against
@@ -120,8 +121,10 @@ def _dot(a, b):
 
 
 #: The phase lobe is sampled (KernelSettings.phase_lobe) when the phase function's peak exceeds this multiple of
-#: the isotropic 1 / (4 pi): HG |g| >= 0.75 (4 pi p(1) = (1 + g) / (1 - g)^2: 28 at g = 0.75, 19 at g = 0.7)
-LOBE_PEAK = 25.0
+#: the isotropic 1 / (4 pi): HG |g| >= 0.81 (4 pi p(1) = (1 + g) / (1 - g)^2: 45 at g = 0.8, 56 at 0.82, 190
+#: at 0.9). Below it the emissions' weights, bounded with p_max, gave honest error bars (g = 0.7 and 0.9:
+#: docs/smoke-error-bars.md) and such scenes keep their bits.
+LOBE_PEAK = 50.0
 
 
 def phase_lobe_wanted(phase) -> bool:
@@ -199,6 +202,9 @@ def lobe_connections(ctx, n: int, rng, segments: bool = False) -> None:
     (algorithms 2-4): the emissions place points on their first segments instead of collisions, so the
     share is sigma_t Lambda_src over the sum of both devices' point densities
     (segments.first_segment_density) and sigma_t Lambda (as segments._direction_mis weighs them).
+    Algorithm 5 from one side (no partner run): the source's two strategies share the path,
+    Lambda_src / (F + Lambda_src), and its emission F / (F + Lambda_src) (kernel._medium_next_events); the
+    weight then keeps the one-sided 1 / d^2 near the target but no longer grows with the peak.
     """
     from .constants import SPEED_OF_LIGHT
     from .kernel import device_sets
@@ -263,7 +269,9 @@ def lobe_connections(ctx, n: int, rng, segments: bool = False) -> None:
         v = points - x[:, None]
         r2_src = _dot(v, v)
         lam_tgt = phase.eval(_dot(out, axis[:, None])) * t_tgt / d2  # the target's lobe: cos beta = out . a
-        if segments:  # algorithms 2-4: densities per volume (segments._direction_mis)
+        if not (segments or ctx.settings.both_sides):  # algorithm 5 from one side: F / (F + Lambda_src) and back
+            total = r_src / w_src * t_src / r2_src
+        elif segments:  # algorithms 2-4: densities per volume (segments._direction_mis)
             from .segments import first_segment_density
 
             sig = sigma_t.take(keep)
@@ -274,7 +282,8 @@ def lobe_connections(ctx, n: int, rng, segments: bool = False) -> None:
             total = r_src / w_src * t_src / r2_src  # F (the source's emission, as first_medium_factor)
             total += r_tgt / ctx.t_total[j] * t_tgt / d2  # L
         total += lam_src
-        total += lam_tgt
+        if segments or ctx.settings.both_sides:
+            total += lam_tgt
         sampled = phase.eval(_dot(dirs, axis[:, None]))  # p(w . a), this strategy's direction density
         power = albedo * r_src / sampled * phase.eval(_dot(dirs, out)) * r_tgt * t_tgt / d2
         power *= np.where(total > 0, lam_src / np.where(total > 0, total, 1.0), 0.0)

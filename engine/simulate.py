@@ -146,12 +146,12 @@ def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = N
         **alg.kernel,
     )
     both = two_sided(spec, scene) if both_devices is None else both_devices
-    if not both:
-        return settings
-    settings = two_sided_settings(settings, alg.number, scene.medium is not None)
-    shared = settings.both_sides or (settings.mis and settings.segment_scatter)  # algorithm 5, algorithms 2-4
-    if shared and scene.medium is not None and scene.spectra is None and phase_lobe_wanted(scene.phase):
-        settings = replace(settings, phase_lobe=True)  # a peaked phase function (medium_nee)
+    if both:
+        settings = two_sided_settings(settings, alg.number, scene.medium is not None)
+    # the phase lobe (medium_nee): algorithm 5 from either side or both, algorithms 2-4 from both
+    lobe = settings.free_flight or (settings.mis and settings.segment_scatter)
+    if lobe and scene.medium is not None and scene.spectra is None and phase_lobe_wanted(scene.phase):
+        settings = replace(settings, phase_lobe=True)  # a peaked phase function
     return settings
 
 
