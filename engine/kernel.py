@@ -33,6 +33,9 @@ serves both directions. Each step intersects the surfaces, then:
   vertices keep w (T / P(no collision) = 1). Run from both
   devices (`both_sides`), every connection is weighted by the partition of unity of
   medium_nee.py (bounded weights near point devices).
+With a peaked phase function (KernelSettings.phase_lobe) the source also samples the phase lobe about
+the axis toward each target for Tx -> p -> Rx, once per path before the first step
+(medium_nee.lobe_connections), and the first vertices' shares make room for it.
 The phase cosine is dot(ray direction, direction to the target) in both directions
 (the phase functions are symmetric). The line-of-sight term (k = s = 0) is exact
 and never sampled (los.py). Russian roulette from `rr_start_depth` (k + s) on, with
@@ -69,6 +72,10 @@ from .medium_nee import (
     connection_weight,
     first_medium_factor,
     first_vertex_factor,
+    lobe_axis,
+    lobe_connections,
+    lobe_source_density,
+    side_weight,
 )
 from .mirrors import connect_mirrors, connect_source_mirrors
 from .sampling import cosine_about_soa
@@ -104,6 +111,10 @@ class KernelSettings:
     both_sides: bool = False
     #: roulette threshold theta: survival min(1, w / (theta w0)); paths above theta w0 always survive
     rr_threshold: float = 0.25  # measured: benchmarks/replicate_study.py --study roulette (docs/smoke-error-bars.md)
+    #: a peaked phase function: the source also samples the phase lobe about the axis toward each target for
+    #: Tx -> p -> Rx (medium_nee.lobe_connections, balance heuristic): algorithm 5 (from either side or both),
+    #: algorithms 2-4 from both devices
+    phase_lobe: bool = False
     #: paths per block of randomly shifted Sobol points for the first dimensions of each path (emission
     #: direction, first free-flight distance, first bounce direction; engine/qmc.py); a batch that is not a
     #: whole number of blocks, or qmc_block <= 1, draws pseudo-random numbers. Blocks are independent, the
@@ -293,6 +304,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     # source -> mirror -> target (order k = 1, none when K = 0): the same for every path; half each from both devices
     if ctx.mirrors and K >= 1:
         connect_source_mirrors(ctx, sources, i, w0 * (0.5 if settings.mis or settings.both_sides else 1.0), n)
+    if settings.phase_lobe and (free_flight or points_on_segments and settings.mis):
+        lobe_connections(ctx, n, rng, segments=not free_flight)  # Tx -> p -> Rx from the phase lobe (medium_nee)
     surface_power = escaped_power = 0.0
     far = scene.medium_far_distance  # segments that leave the scene run to where the medium has absorbed all
 
@@ -535,7 +548,7 @@ def _medium_next_events(
         if ctx.spectra is not None:  # smoke per band: sigma_s,b T_b over the carrier's at the point (spectra.py)
             pp.ratio = ctx.spectra.scatter(pp.ratio, tau)
         throughput = _scattering_point_throughput(pp.weights, transmittance, sigma_t, sigma_s, n_e)
-        mid_g = None
+        mid_g = lobe = None
         if settings.both_sides:  # a point on the first segment is the path's first vertex (medium_nee)
             at_first = (pp.k + pp.s == 0).nonzero()[0]  # only on the first segment (pp's fields are its own copies)
             if len(at_first):
@@ -543,9 +556,26 @@ def _medium_next_events(
                 pp.first[at_first] = first_medium_factor(
                     ctx, points.take(at_first, axis=1), transmittance.take(at_first)
                 )
+                lobe_frame = lobe_axis(ctx, j) if settings.phase_lobe else None
+                if lobe_frame is not None:  # the source's lobe density at the first vertices (medium_nee)
+                    lobe_src = np.zeros(len(s))
+                    lobe_src[at_first] = lobe_source_density(
+                        ctx, j, points.take(at_first, axis=1), transmittance.take(at_first)
+                    )
+                    lobe = (lobe_src, lobe_frame[1])
             mid_g = transmittance / (s * s)  # edge factor T / r^2 of the edge that reached the point
+        elif settings.phase_lobe:  # one side: its emission shares Tx -> p -> Rx with its lobe, F / (F + Lambda_src)
+            at_first = (pp.k + pp.s == 0).nonzero()[0]
+            if len(at_first) and lobe_axis(ctx, j) is not None:
+                first_points, first_t = points.take(at_first, axis=1), transmittance.take(at_first)
+                share = side_weight(
+                    first_medium_factor(ctx, first_points, first_t), lobe_source_density(ctx, j, first_points, first_t)
+                )
+                throughput[at_first] *= share
         pp.s = pp.s + 1
-        ctx.connect(points, points, throughput, pp, in_dirs=pp.directions, target=j, extra_length=s, mid_g=mid_g)
+        ctx.connect(
+            points, points, throughput, pp, in_dirs=pp.directions, target=j, extra_length=s, mid_g=mid_g, lobe=lobe
+        )
 
 
 def _medium_collision(ctx: "_Context", paths: _Paths, rows, t_col, rng) -> _Paths:
@@ -680,6 +710,7 @@ class _Context:
         extra_length=None,
         mid_g=None,
         brdf=None,
+        lobe=None,
     ) -> None:
         """Next-event estimation from vertices `points` (3, n) to the targets: the measurement equation.
 
@@ -695,7 +726,9 @@ class _Context:
         `scatter_order`); delays: paths.lengths (+ `extra_length`) + d. `mid_g` (per vertex): T / r^2 of
         the edge that reached a medium vertex (medium_nee.connection_weight). `brdf` is `materials`
         under its former name, and a surface vertex with neither takes f = cos_x: the caller folded the
-        BRDF into `throughput` (mirrors.branch_surface calls it so).
+        BRDF into `throughput` (mirrors.branch_surface calls it so). `lobe` (with `target`): (the source's lobe
+        density per vertex, the unit axis toward the target) of KernelSettings.phase_lobe; the target's lobe
+        density p(out . axis) T / d^2 joins it in medium_nee.connection_weight.
         """
         materials = materials if materials is not None else brdf
         scene, targets = self.scene, self.targets
@@ -789,6 +822,9 @@ class _Context:
                         vertex_factor,
                         surface=normals is not None,
                         mid_g=mid_g,
+                        lobe=None
+                        if lobe is None
+                        else _rows(lobe[0], vertex) + scene.phase.eval(_dot_vector(out_dir, lobe[1])) * tr / (d * d),
                     )
             length = _rows(paths.lengths, vertex) + d
             if extra_length is not None:
@@ -833,6 +869,8 @@ class _Context:
         rows = eq.rows
         k, s_order = _rows(paths.k, rows), _rows(paths.s, rows)
         share = settings.both_sides
+        if settings.phase_lobe and not share and len(k) and int((k + s_order).min()) == 0:
+            return False  # one side, first vertices: the share with the lobe (`_medium_next_events`)
         mode = "deep"  # depth >= 2 (the usual step), "first" (depth 0), "second" (depth 1)
         if share and len(k):
             depth = k + s_order
@@ -868,6 +906,12 @@ class _Context:
             seg["uw2"] = 2.0 * _dot(u, w)
             seg["nu"] = _dot_vector(u, n_src)
             seg["nw"] = _dot_vector(w, n_src)
+            lobe = lobe_axis(self, j) if settings.phase_lobe else None
+            if lobe is not None:  # the two lobe densities (medium_nee): per segment u.a, w.a, (y - o).a
+                axis = lobe[1]
+                seg["ua"] = _dot_vector(u, axis)
+                seg["wa"] = _dot_vector(w, axis)
+                seg["ya"] = np.subtract(float(axis @ y), _dot_vector(o, axis))
         elif share:
             seg["a"] = _rows(paths.first, rows) * _rows(paths.first_rho, rows)
             if mode == "second":  # Tx -> x_1 -> x_2 -> Rx: F on those segments, 0 on the others
@@ -923,6 +967,13 @@ class _Context:
                 first *= t_o
                 first /= r2
                 first *= 1.0 / src.total_response(i)  # F
+                if "ua" in g:  # the source's lobe p(cos alpha) T(o -> p) / r^2, cos alpha = (u.a + s w.a) / r
+                    lobe_d = s * g["wa"]
+                    lobe_d += g["ua"]
+                    lobe_d /= np.sqrt(r2)
+                    lobe_d = phase.eval(lobe_d)
+                    lobe_d *= t_o
+                    lobe_d /= r2
             t_c = np.multiply(d, -sigma_t, out=t_o if mode != "second" else None)
             np.exp(t_c, out=t_c)  # T(p -> y)
             resp *= t_c
@@ -931,9 +982,15 @@ class _Context:
             power *= p
             if share:  # medium_nee.connection_weight
                 resp *= inv_w  # L
-                if mode == "first":  # F / (F + L)
+                if mode == "first":  # F / (F + L (+ Lambda))
                     resp += first
                     num = first
+                    if "ua" in g:  # + the target's lobe p(cos beta) T(p -> y) / d^2, cos beta = ((y - o).a - s w.a) / d
+                        cos_b = np.multiply(s, g["wa"])
+                        np.subtract(g["ya"], cos_b, out=cos_b)
+                        cos_b *= inv_d
+                        lobe_d += phase.eval(cos_b) * t_c / d2
+                        resp += lobe_d
                 else:  # a / (a + L p (+ F L / g))
                     num = g["a"]
                     if mode == "second":

@@ -330,34 +330,47 @@ def _direction_mis(ctx, j: int, pp, points, s, density):
     direction pdf times the point density along X's first segment. This run is one
     side (its density is given); the other side's first segment is cast from the
     other device through p. Both sides run the same number of paths (the plan
-    guarantees it), so the weight is q_self / (q_self + q_other).
+    guarantees it), so the weight is q_self / (q_self + q_other). `j`: the target's index in
+    its device set. With KernelSettings.phase_lobe the two phase-lobe strategies join the
+    denominator (medium_nee.lobe_volume_density).
     """
     from .kernel import device_sets
+    from .medium_nee import lobe_volume_density
 
-    scene, settings = ctx.scene, ctx.settings
+    scene = ctx.scene
     src_set, dst_set = device_sets(scene, ctx.item.direction)
     i, n = ctx.item.source, len(s)
     cos_src = _dot3(pp.directions, src_set.normals[i][:, None])
     q_self = src_set.response(np.full(n, i), cos_src, pp.directions.T) / src_set.total_response(i) / (s * s) * density
+    q_other = first_segment_density(ctx, dst_set, j, src_set.positions[i], points)
+    total = q_self + q_other
+    if ctx.settings.phase_lobe:  # the two phase-lobe strategies of medium_nee.lobe_connections
+        total = total + lobe_volume_density(ctx, dst_set.positions[j], points)
+    return np.where(total > 0, q_self / np.where(total > 0, total, 1.0), 1.0)
+
+
+def first_segment_density(ctx, devices, d: int, other, points):
+    """q_X(p) = R_X(cos) / W_X / r^2 (n_T + n_E)(p) [1/m^3]: the density of points at `points` (3, n) placed
+    on device d's first segments (cast from it through them; time strata and equiangular points toward
+    the device at `other` (3,)), per path of that device (`_direction_mis`)."""
+    scene, settings = ctx.scene, ctx.settings
     isect = scene.intersector
-    o = dst_set.positions[j] + isect.offset * dst_set.normals[j]
+    n = points.shape[1]
+    o = devices.positions[d] + isect.offset * devices.normals[d]
     to_p = points - o[:, None]
     r = np.sqrt(_dot3(to_p, to_p))
     w_dir = to_p / r
-    q_other = dst_set.response(
-        np.full(n, j), _dot3(w_dir, dst_set.normals[j][:, None]), w_dir.T
-    ) / dst_set.total_response(j)
-    live = np.flatnonzero(q_other > 0)
+    q = devices.response(np.full(n, d), _dot3(w_dir, devices.normals[d][:, None]), w_dir.T) / devices.total_response(d)
+    live = np.flatnonzero(q > 0)
     if len(live):
         origins = np.repeat(o[:, None], len(live), axis=1)
         dirs = w_dir.take(live, axis=1)
         _, t_hit = isect.intersect(origins.T, dirs.T)
         t_hit = np.where(np.isfinite(t_hit), t_hit, scene.medium_far_distance)
-        src = np.repeat(src_set.positions[i][:, None], len(live), axis=1)
+        tgt = np.repeat(np.asarray(other, float)[:, None], len(live), axis=1)
         zeros, rl = np.zeros(len(live)), r.take(live)
-        other = time_density(
-            zeros, origins, dirs, src, zeros, t_hit, rl, settings.strata_length, settings.max_strata
-        ) + equiangular_density(origins, dirs, src, zeros, t_hit, rl, settings.equiangular_points)
-        q_other[live] = q_other.take(live) / (rl * rl) * other
-    total = q_self + q_other
-    return np.where(total > 0, q_self / np.where(total > 0, total, 1.0), 1.0)
+        dens = time_density(
+            zeros, origins, dirs, tgt, zeros, t_hit, rl, settings.strata_length, settings.max_strata
+        ) + equiangular_density(origins, dirs, tgt, zeros, t_hit, rl, settings.equiangular_points)
+        q[live] = q.take(live) / (rl * rl) * dens
+    return q

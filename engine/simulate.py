@@ -18,7 +18,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +33,7 @@ from .estimates import may_stop, reported_rel_stderr
 from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
 from .kernel import KernelSettings, WorkItem
 from .los import line_of_sight, los_geometry
-from .medium_nee import two_sided_settings
+from .medium_nee import phase_lobe_wanted, two_sided_settings
 from .result import build_result
 from .scene import Scene, build_scene
 from .tally import CIR_GROUPS_MAX, N_GROUPS, Accumulator, TallyPlan, TimeBins
@@ -152,7 +152,13 @@ def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = N
         **alg.kernel,
     )
     both = two_sided(spec, scene) if both_devices is None else both_devices
-    return two_sided_settings(settings, alg.number, scene.medium is not None) if both else settings
+    if both:
+        settings = two_sided_settings(settings, alg.number, scene.medium is not None)
+    # the phase lobe (medium_nee): algorithm 5 from either side or both, algorithms 2-4 from both
+    lobe = settings.free_flight or (settings.mis and settings.segment_scatter)
+    if lobe and scene.medium is not None and scene.spectra is None and phase_lobe_wanted(scene.phase):
+        settings = replace(settings, phase_lobe=True)  # a peaked phase function
+    return settings
 
 
 @contextmanager
