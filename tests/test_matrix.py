@@ -24,8 +24,6 @@ ITEM_4 = "issue 22 item 4: automatic K stops at the pilot's cap in a bright room
 ITEM_5 = "issue 22 item 5: error bars at |g| = 0.999 (forward and backward disagree beyond them, or too wide)"
 KNOWN_FAILURES: dict[str, str] = {
     # fast tier
-    "desks-homogeneous-spec-phong-ies-aauto-map40-Tx-Rx1mm": ITEM_2,
-    "desks-mie-grey-mirror-lambertian-aauto-links40-reflectance0.99": ITEM_1,
     "mesh-homogeneous-grey-mirror-lambertian-a5-map1-g-0.999": ITEM_5,
     "desks-homogeneous-spec-lambert-lambertian-a3-map1-g+0.999": ITEM_5,
     # full matrix
@@ -268,7 +266,6 @@ def test_any_seed_gives_a_covering_array(seed):
     assert all(matrix.valid(c) for c in cells)
 
 
-@pytest.mark.xfail(strict=True, reason=ITEM_3)
 def test_cli_algorithm_5_without_a_medium_runs_or_refuses_in_one_sentence(tmp_path):
     cell = dict(CLI_CELLS["spectral map, automatic"], spectral="off", output="links")
     doc = matrix.scene(cell, paths=2048)
