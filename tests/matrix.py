@@ -565,9 +565,16 @@ def _attempt(cell: dict, seed: int, paths: int) -> Outcome:
         out.h0_rel_stderr = float(se[main] / h[main]) if h[main] > 0 else float("nan")
         out.combined_rel_stderr = float(np.hypot(se[main], sb[main]) / max(h[main], b[main], 1e-300))
     out.seconds = time.perf_counter() - t0
-    if out.z_max <= Z_MAX:
+    warned = any("unreliable error bar" in w for w in out.warnings)
+    if out.z_max <= Z_MAX and not out.power and warned:  # it could not see a 10 % error, and the run said so
+        out.status = "flagged"
+        out.message = (
+            f"z = {out.z_max:.1f} against {out.reference}, no power to see a 10 % error, and the result warns "
+            "the error bar is unreliable"
+        )
+    elif out.z_max <= Z_MAX:
         out.status = "pass"
-    elif any("unreliable error bar" in w for w in out.warnings):
+    elif warned:
         out.status = "flagged"
         out.message = f"z = {out.z_max:.1f} against {out.reference}, and the result warns the error bar is unreliable"
     else:

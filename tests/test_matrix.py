@@ -333,3 +333,29 @@ def test_forward_run_with_fov_1_deg_reports_no_zero_error_bar_without_a_warning(
     counted = [int(w.split()[0]) for w in runs["forward"].warnings if "unreliable error bar" in w]
     assert zero and wide  # what the run reports today: some links never reached, the others from one hit
     assert counted and counted[0] == len(zero) + len(wide), f"{zero} at 0 ± 0 not in {runs['forward'].warnings}"
+
+
+PEAKED = dict(BASE, medium="homogeneous", algorithm="5")
+#: (cell, the words of the peaked-phase warning, or None where the phase lobe covers the run): the cells whose
+#: z reached 7-46 at |g| = 0.999 before the warning (spectral, mirror, backward peak with reflections) and
+#: the ones that held (forward peak, diffuse walls; g = 0.7).
+PEAKED_CASES = {
+    "spectral": (dict(PEAKED, spectral="on", extreme="g +0.999"), "off in spectral scenes"),
+    "mirror": (dict(PEAKED, surfaces="mirror", extreme="g -0.999"), "mirror images"),
+    "backward peak, reflections": (dict(PEAKED, extreme="g -0.999"), "scatter back off the walls"),
+    "forward peak, diffuse walls": (dict(PEAKED, extreme="g +0.999"), None),
+    "g = 0.7, spectral": (dict(PEAKED, spectral="on", extreme="none"), None),
+}
+
+
+@pytest.mark.parametrize("case", sorted(PEAKED_CASES))
+def test_a_peaked_phase_the_lobe_does_not_cover_is_flagged_unreliable(case):
+    import owcsim
+
+    cell, words = PEAKED_CASES[case]
+    result = owcsim.simulate(matrix.scene(cell, paths=1024))
+    peaked = [w for w in result.warnings if "phase function peaks" in w]
+    if words is None:
+        assert not peaked, peaked
+    else:
+        assert len(peaked) == 1 and words in peaked[0] and "unreliable error bar" in peaked[0], result.warnings
