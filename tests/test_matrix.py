@@ -64,6 +64,7 @@ KNOWN_FAILURES.update(
     }
 )
 
+
 def _params(cells):
     out = []
     for cell in cells:

@@ -66,9 +66,7 @@ def ceiling_exitance_2(x, n=400):
 def _doc(receiver, fov_deg, paths, algorithm=1, direction="auto", seed=3):
     return {
         "room": {"size": list(ROOM), "reflectance": dict(RHO)},
-        "transmitters": [
-            {"id": "tx", "position": list(TX), "normal": [0, 0, -1], "power": 1.0, "lambertian_order": 1}
-        ],
+        "transmitters": [{"id": "tx", "position": list(TX), "normal": [0, 0, -1], "power": 1.0, "lambertian_order": 1}],
         "receivers": [{"id": "rx", "position": list(receiver), "normal": [0, 0, 1], "area": 1e-4, "fov_deg": fov_deg}],
         "simulation": {
             "algorithm": algorithm,
