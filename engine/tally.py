@@ -127,6 +127,9 @@ class BatchTally:
     order_ssum: np.ndarray  # (To, K+1, S+1) the sum of the sample sums squared in order_sumsq
     h0_groups: np.ndarray | None = None  # (T, N_GROUPS) sum of per-path H0 estimates per path group
     h0_group_paths: np.ndarray | None = None  # (N_GROUPS,) paths per path group
+    #: (T,) the largest per-path H0 estimate of one independent sample (its sum / its paths): the tail
+    #: diagnostic of the accuracy rule (engine/reliability.py, `sample_shift`)
+    h0_sample_max: np.ndarray | None = None
     #: paths per independent sample (engine/qmc.py): s2, order_sumsq and channel_s2 are sums over samples
     #: of the outer products of their sums
     block: int = 1
@@ -365,6 +368,7 @@ class BatchBuilder:
         h0_groups = abc[0, :, :n_full].reshape(n_t, -1, N_GROUPS).sum(axis=1)
         h0_groups[:, : n_samples - n_full] += abc[0, :, n_full:]
         h0_group_paths = np.bincount(np.arange(n_samples) % N_GROUPS, minlength=N_GROUPS) * m
+        h0_sample_max = abc[0].max(axis=1) / m if n_samples else np.zeros(n_t)
         s2 = np.einsum("qtn,rtn->tqr", abc, abc)
         ch_s1 = ch_s2 = None
         if channel_weights is not None and len(channel_weights):
@@ -399,6 +403,7 @@ class BatchBuilder:
             channel_s2=ch_s2,
             h0_groups=h0_groups,
             h0_group_paths=h0_group_paths,
+            h0_sample_max=h0_sample_max,
             block=m,
         )
 
@@ -497,6 +502,8 @@ class Accumulator:
         #: estimates, and paths
         self.group_h0 = np.zeros((N_GROUPS, self.n_links))
         self.h0_group_paths = np.zeros((N_GROUPS, self.n_links), np.int64)
+        #: the largest per-path H0 estimate of one independent sample so far (BatchTally.h0_sample_max)
+        self.sample_max = np.zeros(self.n_links)
         n_groups = plan.group_weights.shape[0]
         self.channel_n = np.zeros((n_groups, plan.n_rx), np.int64)
         self.channel_samples = np.zeros((n_groups, plan.n_rx), np.int64)
@@ -523,6 +530,8 @@ class Accumulator:
         turn = (_GROUP_RANGE - group_shift(batch_index, n_samples)) % N_GROUPS  # np.roll's order, as an index
         self.group_h0[:, ln] += batch.h0_groups.T.take(turn, axis=0)
         self.h0_group_paths[:, ln] += batch.h0_group_paths.take(turn)[:, None]
+        if batch.h0_sample_max is not None:
+            self.sample_max[ln] = np.maximum(self.sample_max[ln], batch.h0_sample_max)
         if len(batch.cir_links):
             cs = self.plan.cir_slots(batch.cir_links)
             self.cir[cs] += batch.cir
