@@ -138,3 +138,32 @@ def test_target_scope_is_in_the_schema():
     doc["simulation"]["target_scope"] = "every link"
     with pytest.raises(ValueError, match="target_scope"):
         SceneSpec.model_validate(doc)
+
+
+# --- the 60-seed study (slow) -------------------------------------------------------------------------
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ["far", "near"])
+def test_sixty_seeds_at_one_percent(case):
+    """benchmarks/stopping_study.py's after rows: the smoky room at g = 0.9, defaults, 1 %: at least 57 of 60
+    runs within 2 x the target of a long fixed-budget reference (other seeds; fixed paths have no optional
+    stopping), and the mean error below a third of the target. Before the rule (main, same seeds): far 58/60,
+    -0.24 % +- 0.12 %; near 57/60, -0.19 % +- 0.12 %: those rows meet these bounds too, barely, so this test
+    guards the issue's criteria, it does not tell the rules apart (the fast tests above do, on planted spikes).
+    ~6 min per case on one core."""
+    from benchmarks.stopping_study import TARGET, run, scene
+
+    ref = np.array(
+        [
+            run(
+                scene(
+                    case, 1_000_000 + k, algorithm=5, max_reflections=40, max_scattering=40, t_max_s=3e-7, paths=400_000
+                )
+            )["h0"]
+            for k in range(6)
+        ]
+    )
+    h0, ref_se = ref.mean(), ref.std(ddof=1) / np.sqrt(len(ref))
+    assert ref_se / h0 < TARGET / 10
+    err = np.array([run(scene(case, seed, target_rel_error=TARGET))["h0"] / h0 - 1 for seed in range(60)])
+    assert (np.abs(err) <= 2 * TARGET).sum() >= 57
+    assert abs(err.mean()) < TARGET / 3
