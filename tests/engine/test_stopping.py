@@ -88,6 +88,31 @@ def test_the_floor_counts_independent_samples():
     assert ok.tolist() == [False, True, False]
 
 
+def test_sample_shift_from_the_tallies(monkeypatch):
+    """A batch of 16 blocks has one block per path group, so its group sums are the samples: the tally's
+    largest sample (BatchTally.h0_sample_max) and the job's `sample_shift` checked against them."""
+    from owcsim.engine.tally import Accumulator
+
+    seen: dict[int, tuple] = {}
+    real = Accumulator.add
+
+    def spy(self, batch, batch_index, source):
+        seen.setdefault(id(self), (self, []))[1].append(batch)
+        return real(self, batch, batch_index, source)
+
+    monkeypatch.setattr(Accumulator, "add", spy)
+    doc = room_doc(paths=4 * 4096, batch_size=4096, direction="backward", quasi_random=True)
+    simulate(SceneSpec.model_validate(doc))
+    (acc, batches), *_ = [v for v in seen.values() if v[1]]
+    assert all(b.block == 256 and b.n_paths == 4096 for b in batches)
+    samples = np.concatenate([b.h0_groups[0] / 256 for b in batches])  # 64 per-path block means
+    for b in batches:
+        assert b.h0_sample_max[0] == pytest.approx(b.h0_groups[0].max() / 256, rel=1e-12)
+    n, shift = R.sample_shift([acc])
+    assert n[0] == 64
+    assert shift[0] == pytest.approx((samples.max() - samples.mean()) / 64, rel=1e-9)
+
+
 # --- simulation.target_scope ----------------------------------------------------------------------------
 def _grouped(scope: str) -> dict:
     """Two equal transmitters in one group, forward paths (independent per transmitter), one receiver: the
