@@ -15,7 +15,8 @@ stopping: its mean is unbiased.
 
 "before" runs the same seeds on a git worktree of `--baseline` (default main), "after" on this tree,
 alternating seed by seed so host load hits both alike.
-Run: .venv/bin/python benchmarks/stopping_study.py [--seeds 60] [--cases far,near] [--baseline main]
+`--map` adds the coverage map of examples/komine_map.json at 1 % (no medium: the earlier rule, the same paths).
+Run: .venv/bin/python benchmarks/stopping_study.py [--seeds 60] [--cases far,near] [--baseline main] [--map]
 """
 
 from __future__ import annotations
@@ -72,7 +73,8 @@ def run(doc: dict) -> dict:
 def serve() -> None:
     """A measuring process: one JSON document per line in, one result per line out."""
     for line in sys.stdin:
-        print("RESULT " + json.dumps(run(json.loads(line))), flush=True)
+        doc = json.loads(line)
+        print("RESULT " + json.dumps(map_run(doc) if "target" in doc else run(doc)), flush=True)
 
 
 class Tree:
@@ -103,6 +105,17 @@ def reference(tree: Tree, case: str, seeds: int, paths: int) -> tuple[float, flo
     return float(h.mean()), float(h.std(ddof=1) / np.sqrt(seeds))
 
 
+def map_run(doc: dict) -> dict:
+    """examples/komine_map.json at `doc['target']`: paths, wall time, worst error (no medium: the earlier rule)."""
+    from owcsim.docs import load_scene
+    from owcsim.engine.simulate import simulate
+
+    spec, _ = load_scene(ROOT / "examples" / "komine_map.json", [("simulation.target_rel_error", doc["target"])])
+    t = time.perf_counter()
+    res = simulate(spec)
+    return {"paths": res.run.paths_total, "s": time.perf_counter() - t, "worst": res.run.max_dc_gain_rel_stderr}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=60)
@@ -110,6 +123,7 @@ def main() -> None:
     ap.add_argument("--baseline", default="main", help="git revision of 'before' ('' for none)")
     ap.add_argument("--ref-seeds", type=int, default=8)
     ap.add_argument("--ref-paths", type=int, default=400_000)
+    ap.add_argument("--map", action="store_true", help="also the coverage map of examples/komine_map.json at 1 %%")
     ap.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.serve:
@@ -131,7 +145,7 @@ def main() -> None:
         f"{'worst |err|/T':>13s} {'median paths':>12s} {'median s':>8s}"
     )
     try:
-        for case in args.cases.split(","):
+        for case in filter(None, args.cases.split(",")):
             ref, ref_se = reference(trees["after"], case, args.ref_seeds, args.ref_paths)
             print(f"{case}: Rx (2.5, 2.5, {CASES[case]}); reference H0 = {ref:.6e} +- {ref_se / ref:.3%}", flush=True)
             rows: dict[str, list[dict]] = {name: [] for name in trees}
@@ -145,6 +159,14 @@ def main() -> None:
                     f"{case:6s} {name:16s} {int((a <= 2).sum()):4d}/{len(a):<4d} {err.mean():+9.3%} "
                     f"{err.std(ddof=1) / np.sqrt(len(err)):7.3%} {np.median(a):14.2f} {a.max():13.2f} "
                     f"{int(np.median([r['paths'] for r in rs])):12,d} {np.median([r['s'] for r in rs]):8.2f}",
+                    flush=True,
+                )
+        if args.map:
+            for name, tree in trees.items():
+                m = tree.run({"target": TARGET})
+                print(
+                    f"komine map at {TARGET:.0%}, {name}: {m['paths']:,d} paths, {m['s']:.1f} s, "
+                    f"worst stderr(H0)/H0 {m['worst']:.3%}",
                     flush=True,
                 )
     finally:

@@ -100,10 +100,12 @@ def may_stop(
     target: float,
     served: np.ndarray,
     scope: str = "channels",
+    heavy_tails: bool = True,
 ) -> bool:
     """The accuracy rule (reliability.may_stop) on what `scope` names (see `reported_rel_stderr`): every
     group's channel and every link of a transmitter in no group ("channels"), every link ("links"), or
-    both, each on a trusted error bar."""
+    both, each on a trusted error bar; `heavy_tails` adds the floor of samples and the largest sample's
+    shift (reliability.MIN_SAMPLES, SHIFT_FACTOR: the bounds on optional stopping)."""
     w = plan.group_weights
     zeros = np.zeros(len(los_gain))
     mean, cov = link_moments(accs, los_moments(los_gain, zeros))
@@ -112,6 +114,8 @@ def may_stop(
     samples, shift = reliability.sample_shift(accs.values())
     if not len(samples):  # nothing traced yet
         samples, shift = np.zeros(len(los_gain), np.int64), np.zeros(len(los_gain))
+    if not heavy_tails:  # no floor, no shift limit
+        samples, shift = np.full(len(los_gain), reliability.MIN_SAMPLES), np.zeros(len(los_gain))
     if not w.size or scope == "links":
         rel = reliability.group_reliability(means, counts, los_gain)
         return reliability.may_stop(rel_links, rel, target, served, samples, shift)

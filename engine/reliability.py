@@ -29,7 +29,8 @@ Optional stopping. A run that stops when its error bar first looks small selects
 error bar is small by chance; with a heavy right tail those are the runs that have not yet drawn
 a rare large sample, so they stop low (issue 22: -0.2 to -0.4 % of H0 at a 1 % target in g = 0.9
 smoke, every run stopping at its first check; the bias of such a rule is about minus the skewness
-of the estimate at the stop, Woodroofe 1982 ch. 10). Two more conditions bound it:
+of the estimate at the stop, Woodroofe 1982 ch. 10). In a scene with a medium (estimates.may_stop
+`heavy_tails`) two more conditions bound it:
 - at least `MIN_SAMPLES` independent samples per direction (the floor fixed-budget runs use for
   their error bars, schemas/simulation.py `quasi_random`): below it nearly every run may stop at
   its first check, and the selection acts on a handful of samples;

@@ -501,7 +501,14 @@ def _run(
                 (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP
                 and worst <= sim.target_rel_error
                 and may_stop(
-                    accs, los_gain, scene, settings.tally, sim.target_rel_error, directions != SKIP, sim.target_scope
+                    accs,
+                    los_gain,
+                    scene,
+                    settings.tally,
+                    sim.target_rel_error,
+                    directions != SKIP,
+                    sim.target_scope,
+                    heavy_tails=scene.medium is not None,  # reliability.py: optional stopping in smoke
                 )
             ):
                 info.stop_reason = StopReason.TARGET_REACHED
