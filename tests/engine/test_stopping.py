@@ -174,7 +174,7 @@ def test_sixty_seeds_at_one_percent(case):
     stopping), and the mean error below a third of the target. Before the rule (main, same seeds): far 58/60,
     -0.24 % +- 0.12 %; near 57/60, -0.19 % +- 0.12 %: those rows meet these bounds too, barely, so this test
     guards the issue's criteria, it does not tell the rules apart (the fast tests above do, on planted spikes).
-    ~6 min per case on one core."""
+    45-60 s per case on an idle core."""
     from benchmarks.stopping_study import TARGET, run, scene
 
     ref = np.array(
