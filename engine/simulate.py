@@ -490,7 +490,7 @@ def _run(
         if (total_batches is None and end_of_round) or (
             progress is not None and (last or elapsed - state["rel_at"] >= PROGRESS_INTERVAL_S)
         ):
-            rel = reported_rel_stderr(accs, los_gain, scene, settings.tally)
+            rel = reported_rel_stderr(accs, los_gain, scene, settings.tally, sim.target_scope)
             state["worst"] = float(np.max(rel)) if len(rel) else 0.0
             state["rel_at"] = elapsed
         worst = state["worst"]
@@ -523,7 +523,16 @@ def _run(
             if (
                 (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP
                 and worst <= sim.target_rel_error
-                and may_stop(accs, los_gain, scene, settings.tally, sim.target_rel_error, directions != SKIP)
+                and may_stop(
+                    accs,
+                    los_gain,
+                    scene,
+                    settings.tally,
+                    sim.target_rel_error,
+                    directions != SKIP,
+                    sim.target_scope,
+                    heavy_tails=scene.medium is not None,  # reliability.py: optional stopping in smoke
+                )
             ):
                 info.stop_reason = StopReason.TARGET_REACHED
                 return True
