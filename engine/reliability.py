@@ -202,9 +202,11 @@ def warnings(rel: Reliability, ids=None, limit: int = 3, sampled: Reliability | 
     all. A traced link (groups > 0) at 0 +- 0 counts too: no path reached it, which is not a zero with certainty
     (links the engine proves unreachable, masked or exact are not traced).
     """
-    spiky = ~rel.trusted() & (rel.estimate > 0) & (rel.groups > 0)  # groups 0: link not traced
-    if sampled is not None:
-        spiky |= ~sampled.trusted() & (sampled.estimate > 0) & (sampled.groups > 0)
+    whole = ~rel.trusted() & (rel.estimate > 0) & (rel.groups > 0)  # groups 0: link not traced
+    only_sampled = np.zeros_like(whole)
+    if sampled is not None:  # spiky once the exact line of sight is left aside
+        only_sampled = ~whole & ~sampled.trusted() & (sampled.estimate > 0) & (sampled.groups > 0)
+    spiky = whole | only_sampled
     unreached = (rel.estimate == 0) & (rel.groups > 0)
     bad = np.flatnonzero(spiky | unreached)
     if not len(bad):
@@ -214,8 +216,7 @@ def warnings(rel: Reliability, ids=None, limit: int = 3, sampled: Reliability | 
     parts = []
     if spiky.any():
         j = np.flatnonzero(spiky)[0]
-        whole = rel.estimate[j] > 0 and not rel.trusted()[j]
-        fig = rel if whole or sampled is None else sampled
+        fig = sampled if only_sampled[j] and sampled is not None else rel
         parts.append(
             f"{int(fig.groups[j])} batch groups, the largest carries {fig.max_group_share[j]:.0%} of the "
             f"{'estimate' if fig is rel else 'sampled part (line of sight aside)'} "
@@ -225,7 +226,7 @@ def warnings(rel: Reliability, ids=None, limit: int = 3, sampled: Reliability | 
     if unreached.any():
         parts.append(f"{int(unreached.sum())} at 0 +- 0, which no path reached: not a zero with certainty")
     advice = "run more paths (or another seed) before quoting it"
-    if unreached.any() or (sampled is not None and (spiky & ~(~rel.trusted() & (rel.estimate > 0))).any()):
+    if unreached.any() or only_sampled.any():
         advice += (
             ", or run from the other side (simulation.direction: a receiver with a narrow field of view or next "
             "to a surface is best sampled from its own side, 'backward')"
