@@ -194,17 +194,41 @@ def ready(rel_stderr, rel: Reliability, target: float, samples=None, shift=None)
     return ok
 
 
-def warnings(rel: Reliability, ids=None, limit: int = 3) -> list[str]:
-    """Result warnings for links whose H0 error bar is itself unreliable (at most one message)."""
-    bad = np.flatnonzero(~rel.trusted() & (rel.estimate > 0) & (rel.groups > 0))  # groups 0: link not traced
+def warnings(rel: Reliability, ids=None, limit: int = 3, sampled: Reliability | None = None) -> list[str]:
+    """Result warnings for links whose H0 error bar is itself unreliable (at most one message).
+
+    `rel`: figures of H0 (exact line of sight included); `sampled`: the same without it, the part the error bar
+    comes from (`from_accumulators(accs)`), where a strong line of sight no longer hides a few groups holding it
+    all. A traced link (groups > 0) at 0 +- 0 counts too: no path reached it, which is not a zero with certainty
+    (links the engine proves unreachable, masked or exact are not traced).
+    """
+    whole = ~rel.trusted() & (rel.estimate > 0) & (rel.groups > 0)  # groups 0: link not traced
+    only_sampled = np.zeros_like(whole)
+    if sampled is not None:  # spiky once the exact line of sight is left aside
+        only_sampled = ~whole & ~sampled.trusted() & (sampled.estimate > 0) & (sampled.groups > 0)
+    spiky = whole | only_sampled
+    unreached = (rel.estimate == 0) & (rel.groups > 0)
+    bad = np.flatnonzero(spiky | unreached)
     if not len(bad):
         return []
     names = [ids[i] if ids is not None else f"link {i}" for i in bad[:limit]]
-    j = bad[0]
-    return [
-        f"{len(bad)} link(s) have an unreliable error bar on H0 (e.g. {', '.join(names)}): "
-        f"{int(rel.groups[j])} batch groups, the largest carries {rel.max_group_share[j]:.0%} of the estimate "
-        f"(fair share {1 / max(int(rel.groups[j]), 1):.0%}), effective groups {rel.effective_groups[j]:.1f}, "
-        f"the standard error itself is uncertain by ~{rel.stderr_rel_error[j]:.0%}; "
-        "run more paths (or another seed) before quoting it"
-    ]
+    head = f"{len(bad)} link(s) have an unreliable error bar on H0 (e.g. {', '.join(names)})"
+    parts = []
+    if spiky.any():
+        j = np.flatnonzero(spiky)[0]
+        fig = sampled if only_sampled[j] and sampled is not None else rel
+        parts.append(
+            f"{int(fig.groups[j])} batch groups, the largest carries {fig.max_group_share[j]:.0%} of the "
+            f"{'estimate' if fig is rel else 'sampled part (line of sight aside)'} "
+            f"(fair share {1 / max(int(fig.groups[j]), 1):.0%}), effective groups {fig.effective_groups[j]:.1f}, "
+            f"the standard error itself is uncertain by ~{fig.stderr_rel_error[j]:.0%}"
+        )
+    if unreached.any():
+        parts.append(f"{int(unreached.sum())} at 0 +- 0, which no path reached: not a zero with certainty")
+    advice = "run more paths (or another seed) before quoting it"
+    if unreached.any() or only_sampled.any():
+        advice += (
+            ", or run from the other side (simulation.direction: a receiver with a narrow field of view or next "
+            "to a surface is best sampled from its own side, 'backward')"
+        )
+    return [f"{head}: {'; '.join(parts)}; {advice}"]

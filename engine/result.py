@@ -321,7 +321,9 @@ def build_result(
         + _truncation_warnings(cols, modeled, spec.simulation)
         + _mask_warnings(scene)
         + reliability.warnings(
-            link_reliability(accs, los_gain), [f"{t}-{r}" for t, r in zip(cols["transmitter"], cols["receiver"])]
+            link_reliability(accs, los_gain),
+            [f"{t}-{r}" for t, r in zip(cols["transmitter"], cols["receiver"])],
+            sampled=reliability.from_accumulators(accs.values()),
         ),
         "modeled": _modeled(spec, scene, modeled, unreachable, settings),
         "families": algorithm(spec.simulation.algorithm).families,
