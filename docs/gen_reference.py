@@ -118,7 +118,7 @@ NOTES = {
     "TimeBinsPublic.n_bins": "number of bins",
     "RunPublic.stop_reason": "why the run stopped (`nothing_to_simulate`: every receiver unreachable)",
     "RunPublic.target_rel_error": "the accuracy asked, if any",
-    "RunPublic.max_dc_gain_rel_stderr": "worst link's stderr(H0) / H0",
+    "RunPublic.max_dc_gain_rel_stderr": "worst stderr(H0) / H0 of what simulation.target_scope names",
     "RunPublic.wall_time_s": "wall time of the run [s]",
     "RunPublic.workers": "worker processes (or Dask workers at the start)",
     "RunPublic.batches": "batches traced",

@@ -60,24 +60,31 @@ def _rel(mean: np.ndarray, var: np.ndarray) -> np.ndarray:
     return np.where(np.isnan(var), np.inf, rel)
 
 
-def reported_rel_stderr(accs: dict[str, Accumulator], los_gain: np.ndarray, scene, plan: TallyPlan) -> np.ndarray:
-    """Relative standard errors of H0 of what the result reports as channels: every group's channel and
-    every link of a transmitter in no group (accuracy mode stops when all are under the target).
+def reported_rel_stderr(
+    accs: dict[str, Accumulator], los_gain: np.ndarray, scene, plan: TallyPlan, scope: str = "channels"
+) -> np.ndarray:
+    """Relative standard errors of H0 of what `scope` (simulation.target_scope) names: "channels" every
+    group's channel and every link of a transmitter in no group (what the result reports as channels),
+    "links" every link, "both" all of them (accuracy mode stops when all are under the target).
     inf where an estimator has fewer than 2 paths; 0 where H0 = 0 exactly."""
     zeros = np.zeros(len(los_gain))
     los_abc = los_moments(los_gain, zeros)
     mean, cov = link_moments(accs, los_abc)
+    rel_links = _rel(mean[:, 0], cov[:, 0, 0])
     w = plan.group_weights
-    if not w.size:
-        return _rel(mean[:, 0], cov[:, 0, 0])
+    if not w.size or scope == "links":
+        return rel_links
     ch_mean, ch_cov = channel_moments(accs, los_abc, plan)
     simulated = scene.masked == ""
     out = [_rel(ch_mean[:, simulated, 0], ch_cov[:, simulated, 0, 0]).ravel()]
-    solo = ~(w > 0).any(axis=0)  # transmitters in no group
-    if solo.any():
-        rel = _rel(mean[:, 0], cov[:, 0, 0]).reshape(w.shape[1], plan.n_rx)
-        out.append(rel[solo].ravel())
+    links = np.ones(len(rel_links), bool) if scope == "both" else _solo_links(w, plan.n_rx)
+    out.append(rel_links[links])
     return np.concatenate(out)
+
+
+def _solo_links(w: np.ndarray, n_rx: int) -> np.ndarray:
+    """(L,) bool: the links of transmitters in no group (w: (G, n_tx) group weights)."""
+    return np.repeat(~(w > 0).any(axis=0), n_rx)
 
 
 def link_reliability(accs: dict[str, Accumulator], los_gain: np.ndarray) -> reliability.Reliability:
@@ -86,17 +93,32 @@ def link_reliability(accs: dict[str, Accumulator], los_gain: np.ndarray) -> reli
 
 
 def may_stop(
-    accs: dict[str, Accumulator], los_gain: np.ndarray, scene, plan: TallyPlan, target: float, served: np.ndarray
+    accs: dict[str, Accumulator],
+    los_gain: np.ndarray,
+    scene,
+    plan: TallyPlan,
+    target: float,
+    served: np.ndarray,
+    scope: str = "channels",
+    heavy_tails: bool = True,
 ) -> bool:
-    """The accuracy rule (reliability.may_stop) on what the result reports: every group's channel and every
-    link of a transmitter in no group, each on a trusted error bar."""
+    """The accuracy rule (reliability.may_stop) on what `scope` names (see `reported_rel_stderr`): every
+    group's channel and every link of a transmitter in no group ("channels"), every link ("links"), or
+    both, each on a trusted error bar; `heavy_tails` adds the floor of samples and the largest sample's
+    shift (reliability.MIN_SAMPLES, SHIFT_FACTOR: the bounds on optional stopping)."""
     w = plan.group_weights
     zeros = np.zeros(len(los_gain))
     mean, cov = link_moments(accs, los_moments(los_gain, zeros))
     rel_links = _rel(mean[:, 0], cov[:, 0, 0])
     means, counts = reliability.group_means(accs.values())
-    if not w.size:
-        return reliability.may_stop(rel_links, reliability.group_reliability(means, counts, los_gain), target, served)
+    samples, shift = reliability.sample_shift(accs.values())
+    if not len(samples):  # nothing traced yet
+        samples, shift = np.zeros(len(los_gain), np.int64), np.zeros(len(los_gain))
+    if not heavy_tails:  # no floor, no shift limit
+        samples, shift = np.full(len(los_gain), reliability.MIN_SAMPLES), np.zeros(len(los_gain))
+    if not w.size or scope == "links":
+        rel = reliability.group_reliability(means, counts, los_gain)
+        return reliability.may_stop(rel_links, rel, target, served, samples, shift)
     n_tx, n_rx = w.shape[1], plan.n_rx
     ch_mean, ch_cov = channel_moments(accs, los_moments(los_gain, zeros), plan)
     g_means = np.einsum("gi,bir->bgr", w, means.reshape(-1, n_tx, n_rx)).reshape(means.shape[0], -1)
@@ -104,15 +126,22 @@ def may_stop(
     g_counts = np.where(np.isfinite(member_counts), member_counts, 0.0).reshape(means.shape[0], -1)
     g_los = (w @ los_gain.reshape(n_tx, n_rx)).ravel()
     # a group's channel at a receiver runs when one of its members' links does
-    ch_served = ((w > 0)[:, :, None] & served.reshape(1, n_tx, n_rx)).any(axis=1).ravel()
+    member = (w > 0)[:, :, None] & served.reshape(1, n_tx, n_rx)
+    ch_served = member.any(axis=1).ravel()
+    # a channel's samples: its fewest among the served members; its shift: at most the members' weighted sum
+    ch_samples = np.where(member, samples.reshape(1, n_tx, n_rx), np.iinfo(np.int64).max).min(axis=1)
+    ch_samples = np.where(member.any(axis=1), ch_samples, 0).ravel()
+    ch_shift = (w @ shift.reshape(n_tx, n_rx)).ravel()
     ok = reliability.may_stop(
         _rel(ch_mean[..., 0], ch_cov[..., 0, 0]).ravel(),
         reliability.group_reliability(g_means, g_counts, g_los),
         target,
         ch_served,
+        ch_samples,
+        ch_shift,
     )
-    solo = np.repeat(~(w > 0).any(axis=0), n_rx)
-    if ok and solo.any():
-        rel = reliability.group_reliability(means[:, solo], counts[:, solo], los_gain[solo])
-        ok = reliability.may_stop(rel_links[solo], rel, target, served[solo])
+    links = np.ones(len(rel_links), bool) if scope == "both" else _solo_links(w, n_rx)
+    if ok and links.any():
+        rel = reliability.group_reliability(means[:, links], counts[:, links], los_gain[links])
+        ok = reliability.may_stop(rel_links[links], rel, target, served[links], samples[links], shift[links])
     return ok

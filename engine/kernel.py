@@ -317,6 +317,8 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
         # ====== segment points (algorithms 2-4): single scattering at points along the segment ============
         if points_on_segments:
             segment_scatter(ctx, paths, t_seg, rng, first=step == 0, prim=prim)
+        if step == 0 and settings.mis and not points_on_segments:  # no medium: segment_scatter does not set it
+            paths.first = first_vertex_factor(ctx, paths, prim, t, np.zeros(len(t)), np.zeros(len(t), bool))
         # ====== free flight (algorithm 5): collision distance; NEE from the collision and equiangular points =
         collided = None
         ctx.first_bounce_u = first_u[3:5] if first_u is not None and step == 0 else None
@@ -413,10 +415,13 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
     else:
         goes_on = sp.k < K
     last = not goes_on.any()  # every path at its last vertex (e.g. reflection K of algorithm 1): no reflection
-    share = 0.5 if settings.mis else None
+    # algorithms 2-4 from both devices: the unscattered surface paths are shared by the partition A / (A + B)
+    # (`_Context.connect`'s `partition`), not by halves: a half from a side that can hardly sample a path (a
+    # 1 deg FOV cone seen from the transmitter) keeps a 1/r^2 tail whose runs miss it and report half of H0
+    partition = settings.mis and sp.first is not None
     if geo.material is None:  # every surface Lambertian
         rho = geo.reflectance.take(prims)
-        ctx.connect(points, spawn, sp.weights, sp, normals=normals, reflectance=rho, mis=share)
+        ctx.connect(points, spawn, sp.weights, sp, normals=normals, reflectance=rho, partition=partition)
         if last:
             return sp.gather(np.zeros(0, np.int64))
         sp.weights = sp.weights * rho
@@ -424,10 +429,19 @@ def _surface_vertex(ctx: "_Context", sp: _Paths, prims, ts, rng) -> _Paths:
         sp.directions = cosine_about_soa(normals, u[0], u[1])
     else:
         materials = geo.material.take(prims)
-        ctx.connect(points, spawn, sp.weights, sp, normals=normals, materials=(materials, arriving), mis=share)
+        ctx.connect(
+            points, spawn, sp.weights, sp, normals=normals, materials=(materials, arriving), partition=partition
+        )
         if ctx.mirrors:  # ... -> x -> mirror -> target, through the target's mirror images (mirrors.py)
             connect_mirrors(
-                ctx, points, spawn, sp.weights * (share or 1.0), sp, normals=normals, brdf=(materials, arriving)
+                ctx,
+                points,
+                spawn,
+                sp.weights,
+                sp,
+                normals=normals,
+                brdf=(materials, arriving),
+                first_factor=sp.first if partition else None,
             )
         if last:
             return sp.gather(np.zeros(0, np.int64))
@@ -711,6 +725,7 @@ class _Context:
         mid_g=None,
         brdf=None,
         lobe=None,
+        partition=False,
     ) -> None:
         """Next-event estimation from vertices `points` (3, n) to the targets: the measurement equation.
 
@@ -729,6 +744,12 @@ class _Context:
         BRDF into `throughput` (mirrors.branch_surface calls it so). `lobe` (with `target`): (the source's lobe
         density per vertex, the unit axis toward the target) of KernelSettings.phase_lobe; the target's lobe
         density p(out . axis) T / d^2 joins it in medium_nee.connection_weight.
+        `partition` (surface vertices of algorithms 2-4 run from both devices): this run's share
+        A / (A + B) of the path (medium_nee.side_weight), A = `_Paths.first` (the source factor of the
+        path's first vertex) and B = R_target(cos_target) / W_target cos_x / d^2 (the factor with which the
+        target's own rays put their first vertex here); the other run computes the same two factors swapped,
+        so the shares sum to 1 (Veach 1997, ch. 9). Through Lambertian reflections it is the balance
+        heuristic of the two directions (the densities of the inner vertices are the same both ways).
         """
         materials = materials if materials is not None else brdf
         scene, targets = self.scene, self.targets
@@ -777,6 +798,9 @@ class _Context:
                 f *= vertex_factor
             if mis is not None:
                 f *= mis if np.isscalar(mis) else _rows(mis, vertex_rows)
+            if partition:
+                w_tgt = self.t_total[columns[0]] if column_rows is None else self.t_total.take(column_rows)
+                f *= side_weight(_rows(paths.first, vertex_rows), response / w_tgt * vertex_factor / d2)
             live = (f > 0).nonzero()[0]
             if len(live) == 0:
                 continue

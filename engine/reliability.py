@@ -24,6 +24,20 @@ report, per link:
 target is not enough; the group spread must agree (within `GROUP_SLACK`), enough groups
 must be filled, no single group may dominate and the error bar's own relative error
 must be small. `warnings` turns the same figures into result warnings.
+
+Optional stopping. A run that stops when its error bar first looks small selects the runs whose
+error bar is small by chance; with a heavy right tail those are the runs that have not yet drawn
+a rare large sample, so they stop low (issue 22: -0.2 to -0.4 % of H0 at a 1 % target in g = 0.9
+smoke, every run stopping at its first check; the bias of such a rule is about minus the skewness
+of the estimate at the stop, Woodroofe 1982 ch. 10). In a scene with a medium (estimates.may_stop
+`heavy_tails`) two more conditions bound it:
+- at least `MIN_SAMPLES` independent samples per direction (the floor fixed-budget runs use for
+  their error bars, schemas/simulation.py `quasi_random`): below it nearly every run may stop at
+  its first check, and the selection acts on a handful of samples;
+- `sample_shift`: no single sample may move H0 by more than `SHIFT_FACTOR` x the target. A rare
+  contribution that has been seen once moves the estimate by its whole weight; the run goes on
+  until it is one of several, and with it the contributions of its size are resolved.
+benchmarks/stopping_study.py measures the rule (docs/smoke-error-bars.md, "Optional stopping").
 """
 
 from __future__ import annotations
@@ -40,6 +54,11 @@ SHARE_FACTOR = 2.5
 GROUP_SLACK = 1.5
 #: Largest relative error of the standard error for a trusted error bar.
 MAX_STDERR_REL_ERROR = 0.5
+#: Fewest independent samples (paths, or blocks of quasi-random paths: engine/qmc.py) of every direction
+#: serving a link before an accuracy run may stop.
+MIN_SAMPLES = 64
+#: The most one independent sample may move H0, as a fraction of the target, when an accuracy run stops.
+SHIFT_FACTOR = 0.5
 
 
 @dataclass(frozen=True)
@@ -129,31 +148,87 @@ def from_accumulators(accs, los=None) -> Reliability:
     return group_reliability(means, counts, los)
 
 
-def may_stop(rel_stderr, rel: Reliability, target: float, served=None) -> bool:
+def sample_shift(accs) -> tuple[np.ndarray, np.ndarray]:
+    """Per link: (fewest samples of the directions serving it, the most one sample moves H0 [W/W]).
+
+    Replacing a direction's largest sample (per-path estimate x_max, engine/tally.py
+    Accumulator.sample_max) by that direction's mean x_bar moves its estimate by (x_max - x_bar) / B
+    (B its independent samples, all of the same paths); the shift sums this over the directions.
+    Links no direction serves: 0 samples, shift 0.
+    """
+    accs = [a for a in accs if a.n_paths.any()]
+    if not accs:
+        return np.zeros(0, np.int64), np.zeros(0)
+    samples = np.full(accs[0].n_links, np.iinfo(np.int64).max)
+    shift = np.zeros(accs[0].n_links)
+    for a in accs:  # a loop over the (at most two) directions
+        b = a.n_samples
+        mean = a.s1[:, 0] / np.maximum(a.n_paths, 1)
+        shift = shift + np.where(b > 0, np.maximum(a.sample_max - mean, 0.0) / np.maximum(b, 1), 0.0)
+        samples = np.where(b > 0, np.minimum(samples, b), samples)
+    return np.where(samples == np.iinfo(np.int64).max, 0, samples), shift
+
+
+def may_stop(rel_stderr, rel: Reliability, target: float, served=None, samples=None, shift=None) -> bool:
     """The accuracy rule: stop only when every served link meets the target on a trusted error bar.
 
     rel_stderr: (L,) per-path relative standard error of H0 (estimates._rel of the merged moments);
-    served: (L,) bool, links that run (others are ignored).
+    served: (L,) bool, links that run (others are ignored); samples: (L,) fewest independent samples
+    of a direction serving the link (at least MIN_SAMPLES); shift: (L,) the most one sample moves H0
+    [W/W] (`sample_shift`; at most SHIFT_FACTOR x target x H0).
     """
     rel_stderr = np.asarray(rel_stderr, float)
     mask = np.ones(len(rel_stderr), bool) if served is None else np.asarray(served, bool)
     if not mask.any():
         return True
-    ok = (rel_stderr <= target) & (rel.group_rel_stderr <= GROUP_SLACK * target) & rel.trusted()
-    return bool(ok[mask].all())
+    return bool(ready(rel_stderr, rel, target, samples, shift)[mask].all())
 
 
-def warnings(rel: Reliability, ids=None, limit: int = 3) -> list[str]:
-    """Result warnings for links whose H0 error bar is itself unreliable (at most one message)."""
-    bad = np.flatnonzero(~rel.trusted() & (rel.estimate > 0) & (rel.groups > 0))  # groups 0: link not traced
+def ready(rel_stderr, rel: Reliability, target: float, samples=None, shift=None) -> np.ndarray:
+    """(L,) bool: the links that meet the accuracy rule (`may_stop`, its arguments)."""
+    ok = (np.asarray(rel_stderr, float) <= target) & (rel.group_rel_stderr <= GROUP_SLACK * target) & rel.trusted()
+    if samples is not None:
+        ok &= np.asarray(samples) >= MIN_SAMPLES
+    if shift is not None:
+        ok &= np.asarray(shift, float) <= SHIFT_FACTOR * target * np.abs(rel.estimate)
+    return ok
+
+
+def warnings(rel: Reliability, ids=None, limit: int = 3, sampled: Reliability | None = None) -> list[str]:
+    """Result warnings for links whose H0 error bar is itself unreliable (at most one message).
+
+    `rel`: figures of H0 (exact line of sight included); `sampled`: the same without it, the part the error bar
+    comes from (`from_accumulators(accs)`), where a strong line of sight no longer hides a few groups holding it
+    all. A traced link (groups > 0) at 0 +- 0 counts too: no path reached it, which is not a zero with certainty
+    (links the engine proves unreachable, masked or exact are not traced).
+    """
+    whole = ~rel.trusted() & (rel.estimate > 0) & (rel.groups > 0)  # groups 0: link not traced
+    only_sampled = np.zeros_like(whole)
+    if sampled is not None:  # spiky once the exact line of sight is left aside
+        only_sampled = ~whole & ~sampled.trusted() & (sampled.estimate > 0) & (sampled.groups > 0)
+    spiky = whole | only_sampled
+    unreached = (rel.estimate == 0) & (rel.groups > 0)
+    bad = np.flatnonzero(spiky | unreached)
     if not len(bad):
         return []
     names = [ids[i] if ids is not None else f"link {i}" for i in bad[:limit]]
-    j = bad[0]
-    return [
-        f"{len(bad)} link(s) have an unreliable error bar on H0 (e.g. {', '.join(names)}): "
-        f"{int(rel.groups[j])} batch groups, the largest carries {rel.max_group_share[j]:.0%} of the estimate "
-        f"(fair share {1 / max(int(rel.groups[j]), 1):.0%}), effective groups {rel.effective_groups[j]:.1f}, "
-        f"the standard error itself is uncertain by ~{rel.stderr_rel_error[j]:.0%}; "
-        "run more paths (or another seed) before quoting it"
-    ]
+    head = f"{len(bad)} link(s) have an unreliable error bar on H0 (e.g. {', '.join(names)})"
+    parts = []
+    if spiky.any():
+        j = np.flatnonzero(spiky)[0]
+        fig = sampled if only_sampled[j] and sampled is not None else rel
+        parts.append(
+            f"{int(fig.groups[j])} batch groups, the largest carries {fig.max_group_share[j]:.0%} of the "
+            f"{'estimate' if fig is rel else 'sampled part (line of sight aside)'} "
+            f"(fair share {1 / max(int(fig.groups[j]), 1):.0%}), effective groups {fig.effective_groups[j]:.1f}, "
+            f"the standard error itself is uncertain by ~{fig.stderr_rel_error[j]:.0%}"
+        )
+    if unreached.any():
+        parts.append(f"{int(unreached.sum())} at 0 +- 0, which no path reached: not a zero with certainty")
+    advice = "run more paths (or another seed) before quoting it"
+    if unreached.any() or only_sampled.any():
+        advice += (
+            ", or run from the other side (simulation.direction: a receiver with a narrow field of view or next "
+            "to a surface is best sampled from its own side, 'backward')"
+        )
+    return [f"{head}: {'; '.join(parts)}; {advice}"]

@@ -286,7 +286,7 @@ def build_result(
         lighting.add_link_columns(cols, h0, nan_masked["rms_delay_spread_s"], link_masked)
     links = document_rows(cols, scene.n_links)
     channels, channel_cols = _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting)
-    rel = reported_rel_stderr(accs, los_gain, scene, plan)
+    rel = reported_rel_stderr(accs, los_gain, scene, plan, spec.simulation.target_scope)
     all_accs = list(accs.values())
     fwd = accs[Direction.FORWARD]
     run = {
@@ -323,7 +323,9 @@ def build_result(
         + _mask_warnings(scene)
         + _peaked_phase_warnings(scene, settings)
         + reliability.warnings(
-            link_reliability(accs, los_gain), [f"{t}-{r}" for t, r in zip(cols["transmitter"], cols["receiver"])]
+            link_reliability(accs, los_gain),
+            [f"{t}-{r}" for t, r in zip(cols["transmitter"], cols["receiver"])],
+            sampled=reliability.from_accumulators(accs.values()),
         ),
         "modeled": _modeled(spec, scene, modeled, unreachable, settings),
         "families": algorithm(spec.simulation.algorithm).families,

@@ -27,7 +27,7 @@ from owcsim.schemas import SceneSpec, SimulationSpec
 from owcsim.schemas.algorithms import Direction, TwoSided, algorithm
 from owcsim.schemas.results import DirectionChoicePublic, ModeledPublic, SimulationResultPublic, StopReason
 
-from . import auto, qmc, spectra
+from . import auto, qmc, reliability, spectra
 from .constants import SPEED_OF_LIGHT
 from .estimates import may_stop, reported_rel_stderr
 from .execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
@@ -413,7 +413,7 @@ def _choose_directions(
     # rays shared by the links a source serves. Ray counts (not times) keep the choice deterministic.
     # Its paths are not merged into the result: the choice depends on their sample variance (and mean), so
     # the chosen side's pilot paths are a selected sample, not an unbiased one (CHANGELOG, pilot reuse).
-    cost_eff = []
+    cost_eff, sound = [], []
     for direction in (Direction.FORWARD, Direction.BACKWARD):
         runs = _sources(scene, np.full(scene.n_links, direction.code))
         accs = _new_accumulators(scene, settings)
@@ -428,9 +428,20 @@ def _choose_directions(
         with np.errstate(divide="ignore", invalid="ignore"):
             rel_var = np.where(h0 > 0, var / h0**2, np.inf)
             cost_eff.append((rel_var * rays_per_path / links_per_source, np.sqrt(rel_var), rays_per_path))
-    choice = np.where(cost_eff[1][0] < cost_eff[0][0], BACKWARD, FORWARD)
+        # Its variance is only a measure when its paths reached the receiver's surroundings: a side whose
+        # sampled part (LOS left out) is 0 or held by a few path groups has not seen its own tail
+        sampled = reliability.from_accumulators([acc])
+        sound.append(sampled.trusted() & (sampled.estimate > 0))
+    by_variance = np.where(cost_eff[1][0] < cost_eff[0][0], BACKWARD, FORWARD)
+    choice = np.where(sound[1] & ~sound[0], BACKWARD, np.where(sound[0] & ~sound[1], FORWARD, by_variance))
+    overruled = int((choice != by_variance).sum())
     info.pilot = DirectionChoicePublic(
-        rule="pilot: lower relative variance x rays per path, per link",
+        rule="pilot: lower relative variance x rays per path, per link"
+        + (
+            f"; {overruled} link(s) from the only side whose pilot saw a sampled part not held by a few path groups"
+            if overruled
+            else ""
+        ),
         paths_per_direction=sim.pilot_paths,
         rel_std_per_path_forward=_finite_list(cost_eff[0][1]),
         rel_std_per_path_backward=_finite_list(cost_eff[1][1]),
@@ -479,7 +490,7 @@ def _run(
         if (total_batches is None and end_of_round) or (
             progress is not None and (last or elapsed - state["rel_at"] >= PROGRESS_INTERVAL_S)
         ):
-            rel = reported_rel_stderr(accs, los_gain, scene, settings.tally)
+            rel = reported_rel_stderr(accs, los_gain, scene, settings.tally, sim.target_scope)
             state["worst"] = float(np.max(rel)) if len(rel) else 0.0
             state["rel_at"] = elapsed
         worst = state["worst"]
@@ -512,7 +523,16 @@ def _run(
             if (
                 (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP
                 and worst <= sim.target_rel_error
-                and may_stop(accs, los_gain, scene, settings.tally, sim.target_rel_error, directions != SKIP)
+                and may_stop(
+                    accs,
+                    los_gain,
+                    scene,
+                    settings.tally,
+                    sim.target_rel_error,
+                    directions != SKIP,
+                    sim.target_scope,
+                    heavy_tails=scene.medium is not None,  # reliability.py: optional stopping in smoke
+                )
             ):
                 info.stop_reason = StopReason.TARGET_REACHED
                 return True

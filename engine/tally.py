@@ -140,6 +140,9 @@ class BatchTally:
     h0_group_paths: np.ndarray | None = None  # (N_GROUPS,) paths per path group
     #: (N_GROUPS, Tc, n_bins) the CIR per path group (first batch with TallyPlan.first_batch_groups), or None
     cir_groups: np.ndarray | None = None
+    #: (T,) the largest per-path H0 estimate of one independent sample (its sum / its paths): the tail
+    #: diagnostic of the accuracy rule (engine/reliability.py, `sample_shift`)
+    h0_sample_max: np.ndarray | None = None
     #: paths per independent sample (engine/qmc.py): s2, order_sumsq and channel_s2 are sums over samples
     #: of the outer products of their sums
     block: int = 1
@@ -401,6 +404,7 @@ class BatchBuilder:
         h0_groups = abc[0, :, :n_full].reshape(n_t, -1, N_GROUPS).sum(axis=1)
         h0_groups[:, : n_samples - n_full] += abc[0, :, n_full:]
         h0_group_paths = np.bincount(np.arange(n_samples) % N_GROUPS, minlength=N_GROUPS) * m
+        h0_sample_max = abc[0].max(axis=1) / m if n_samples else np.zeros(n_t)
         s2 = np.einsum("qtn,rtn->tqr", abc, abc)
         ch_s1 = ch_s2 = None
         if channel_weights is not None and len(channel_weights):
@@ -436,6 +440,7 @@ class BatchBuilder:
             h0_groups=h0_groups,
             h0_group_paths=h0_group_paths,
             cir_groups=None if self.cir_groups is None else self.cir_groups.reshape(N_GROUPS, self.n_cir, bins.n),
+            h0_sample_max=h0_sample_max,
             block=m,
         )
 
@@ -538,6 +543,8 @@ class Accumulator:
         #: estimates, and paths
         self.group_h0 = np.zeros((N_GROUPS, self.n_links))
         self.h0_group_paths = np.zeros((N_GROUPS, self.n_links), np.int64)
+        #: the largest per-path H0 estimate of one independent sample so far (BatchTally.h0_sample_max)
+        self.sample_max = np.zeros(self.n_links)
         n_groups = plan.group_weights.shape[0]
         self.channel_n = np.zeros((n_groups, plan.n_rx), np.int64)
         self.channel_samples = np.zeros((n_groups, plan.n_rx), np.int64)
@@ -564,6 +571,8 @@ class Accumulator:
         turn = (_GROUP_RANGE - group_shift(batch_index, n_samples)) % N_GROUPS  # np.roll's order, as an index
         self.group_h0[:, ln] += batch.h0_groups.T.take(turn, axis=0)
         self.h0_group_paths[:, ln] += batch.h0_group_paths.take(turn)[:, None]
+        if batch.h0_sample_max is not None:
+            self.sample_max[ln] = np.maximum(self.sample_max[ln], batch.h0_sample_max)
         if len(batch.cir_links):
             cs = self.plan.cir_slots(batch.cir_links)
             self.cir[cs] += batch.cir

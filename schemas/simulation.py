@@ -99,7 +99,17 @@ class SimulationSpec(SpecModel):
         "default 100 000 unless `target_rel_error` is given",
     )
     target_rel_error: float | None = Field(
-        None, gt=0.0, lt=1.0, description="stop when stderr(H0)/H0 <= this, every link"
+        None,
+        gt=0.0,
+        lt=1.0,
+        description="an accuracy run: stop when stderr(H0)/H0 <= this on every quantity `target_scope` names",
+    )
+    target_scope: Literal["channels", "links", "both"] = Field(
+        "channels",
+        description="what `target_rel_error` must hold on: 'channels' (default) what the result reports as "
+        "channels, every transmitter group's summed channel at each receiver (per watt of group power) and "
+        "every link of a transmitter in no group; 'links' every link (transmitter, receiver), grouped or not; "
+        "'both' all of these. Without transmitter_groups the three are the same: every link",
     )
     time_budget_s: float = Field(600.0, gt=0.0, description="wall-time limit of an accuracy run [s]")
     seed: int = Field(

@@ -41,31 +41,12 @@ KNOWN_FAILURES.update(
     }
 )
 
-#: Failures the matrix found outside issue 22's list, not fixed here (the report describes each).
-NEAR_CEILING = (
-    "found by the matrix: forward next-event estimation misses the ceiling within millimetres of a receiver "
-    "1 mm below a ceiling light (the diffuse part ~400x low, error bar not covering it, no warning); "
-    "automatic direction picks forward there; algorithm 4 in vacuum averages in the forward side"
-)
-FOV_1_FORWARD = (
-    "found by the matrix: algorithm 4 without smoke at FOV 1 deg gives half of H0 with a 1 % error bar and no "
-    "warning (its forward half almost never reaches the 1 deg cone)"
-)
-FOUND: dict[str, str] = {
-    "desks-none-grey-lambert-lambertian-a4-links1-Tx-Rx1mm": NEAR_CEILING,
-    "desks-none-spec-phong-lambertian-a5-map1-Tx-Rx1mm": NEAR_CEILING,
-    "empty-none-grey-lambert-lambertian-aauto-links1-Tx-Rx1mm": NEAR_CEILING,
-    "empty-none-grey-lambert-lambertian-a1-links1-Tx-Rx1mm": NEAR_CEILING,
-    "empty-none-grey-lambert-lambertian-a5-links1-Tx-Rx1mm": NEAR_CEILING,
-    "mesh-none-grey-phong-lambertian-a4-links1-FOV1deg": FOV_1_FORWARD,
-}
-
 
 def _params(cells):
     out = []
     for cell in cells:
         cid = matrix.cell_id(cell)
-        why = KNOWN_FAILURES.get(cid) or FOUND.get(cid)
+        why = KNOWN_FAILURES.get(cid)
         marks = [pytest.mark.xfail(strict=True, reason=why)] if why else []
         out.append(pytest.param(cell, id=cid, marks=marks))
     return out
@@ -278,7 +259,6 @@ BASE = dict(
 )
 
 
-@pytest.mark.xfail(strict=True, reason=NEAR_CEILING)
 def test_forward_run_1_mm_below_a_ceiling_light_agrees_with_backward_or_warns():
     runs = _forward_backward(dict(BASE, extreme="Tx-Rx 1 mm"), lambda doc: None)
     fw, bw = (runs[d].links[0] for d in ("forward", "backward"))
@@ -290,14 +270,6 @@ def test_forward_run_1_mm_below_a_ceiling_light_agrees_with_backward_or_warns():
     )
 
 
-FOV_1_ZERO = (
-    "found by the matrix: forced forward runs with FOV 1 deg report links as 0 ± 0 (no path met the 1 deg "
-    "cone), and the unreliable-error-bar warning leaves them out (it counts links with an estimate > 0); the "
-    "backward run gives 2.5e-10 ± 0.6 %"
-)
-
-
-@pytest.mark.xfail(strict=True, reason=FOV_1_ZERO)
 def test_forward_run_with_fov_1_deg_reports_no_zero_error_bar_without_a_warning():
     def nine(doc):
         doc["receivers"] = [

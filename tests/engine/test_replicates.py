@@ -62,6 +62,38 @@ def test_may_stop_needs_a_trusted_error_bar():
     assert R.may_stop([0.5, 0.001], R.group_reliability(np.ones((16, 2)), np.ones((16, 2))), 0.01, served=[False, True])
 
 
+def test_warnings_judge_the_sampled_part_under_a_strong_line_of_sight():
+    """One group holds the sampled part; a LOS 1e6 times larger makes H0's groups look identical (what the
+    forward run 1 mm under a ceiling lamp reported without a warning), the sampled part's figures do not."""
+    x = np.full((16, 1), 1e-9)
+    x[3] = 1e-6
+    counts = np.full((16, 1), 512)
+    with_los = R.group_reliability(x, counts, los=np.array([1.0]))
+    sampled = R.group_reliability(x, counts)
+    assert with_los.trusted()[0] and not sampled.trusted()[0]
+    assert R.warnings(with_los, ["tx-rx"]) == []
+    (w,) = R.warnings(with_los, ["tx-rx"], sampled=sampled)
+    assert w.startswith("1 link(s) have an unreliable error bar") and "sampled part" in w and "backward" in w
+    calm = R.group_reliability(1e-9 * (1 + 0.01 * np.arange(16)[:, None]), counts)
+    assert R.warnings(with_los, ["tx-rx"], sampled=calm) == []
+
+
+def test_warnings_count_traced_links_at_zero_but_not_untraced_ones():
+    """A traced link at 0 +- 0 (no path reached it) is no certain zero; a link not traced (groups 0: proven
+    unreachable, masked or exact) is left alone; counted with the spiky links in the one message."""
+    x = np.ones((16, 4))
+    x[:, 1] = 0.0  # traced, nothing reached
+    x[:, 2] = 0.0  # not traced (no paths)
+    x[:, 3] = 0.0
+    x[5, 3] = 1.0  # one spike
+    counts = np.full((16, 4), 100)
+    counts[:, 2] = 0
+    rel = R.group_reliability(x, counts)
+    (w,) = R.warnings(rel, ["a", "b", "c", "d"])
+    assert w.startswith("2 link(s) have an unreliable error bar on H0 (e.g. b, d)") and "1 at 0 +- 0" in w
+    assert R.warnings(R.group_reliability(x[:, [0, 2]], counts[:, [0, 2]])) == []
+
+
 # --- replicate studies (slow) ------------------------------------------------------------------------
 
 
