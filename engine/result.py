@@ -27,6 +27,7 @@ from .auto import _max_albedo, _scatters
 from .estimates import channel_moments, link_moments, link_reliability, los_moments, reported_rel_stderr
 from .lighting import Lighting
 from .los import los_gain_grey, los_geometry
+from .medium_nee import LOBE_PEAK, phase_lobe_wanted
 from .result_parts import cir_block, column, document_rows, grid_maps, order_block
 
 if TYPE_CHECKING:
@@ -320,6 +321,7 @@ def build_result(
         + _window_warnings(cols)
         + _truncation_warnings(cols, modeled, spec.simulation)
         + _mask_warnings(scene)
+        + _peaked_phase_warnings(scene, settings)
         + reliability.warnings(
             link_reliability(accs, los_gain),
             [f"{t}-{r}" for t, r in zip(cols["transmitter"], cols["receiver"])],
@@ -345,6 +347,33 @@ def build_result(
         doc["spectral"] = result_block(spec, scene, accs, g, los_gain_grey(scene, g), los_delay)
         doc["warnings"] += scene.spectra.warnings
     return SimulationResultPublic.model_validate(doc)
+
+
+def _peaked_phase_warnings(scene, settings: KernelSettings) -> list[str]:
+    """A phase peak above medium_nee.LOBE_PEAK x isotropic (HG |g| >= 0.81) where the phase lobe does not cover
+    the run: the single-scattering needle along Tx -> p -> Rx (or through a mirror image of a device) is missed
+    by most runs, with a small error bar (issue 22 item 5; tests/matrix.py at g = +-0.999: z up to 46 in spectral
+    scenes, with mirrors, and with a backward peak and reflections; forward peaks with diffuse walls held)."""
+    if scene.medium is None or not phase_lobe_wanted(scene.phase):
+        return []
+    peak = 4.0 * math.pi * float(np.max(scene.phase.eval(np.array([1.0, -1.0]))))
+    if scene.spectra is not None:
+        why, fix = "the phase-lobe sampling is off in spectral scenes", "run it grey (no `spectral`)"
+    elif not settings.phase_lobe:
+        why, fix = "this algorithm and direction do not sample the phase lobe", "use algorithm 5"
+    elif scene.mirror_planes and settings.max_reflections > 0:
+        why = "paths through mirror images of the devices are not covered by the phase-lobe sampling"
+        fix = "compare a forward and a backward run"
+    elif settings.max_reflections > 0 and 4.0 * math.pi * float(scene.phase.eval(np.array([-1.0]))[0]) > LOBE_PEAK:
+        why = "paths that scatter back off the walls are not covered by the phase-lobe sampling"
+        fix = "compare a forward and a backward run"
+    else:
+        return []
+    return [
+        f"every link through the smoke has an unreliable error bar on H0: the phase function peaks at "
+        f"{peak:.3g} x isotropic and {why}, so most runs miss the scattering near the device axis (off, with a "
+        f"small error bar); {fix}, or compare several seeds before quoting it"
+    ]
 
 
 def _mask_warnings(scene) -> list[str]:

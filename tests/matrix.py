@@ -424,6 +424,9 @@ def reference_doc(cell: dict, doc: dict, result) -> tuple[dict, str, list[int] |
         sim.update(time_bin_s=1e-9, t_max_s=2e-7)
         if sim["max_scattering"] is None:
             del sim["max_scattering"]
+        # H0 is compared, not the CIR: no CIR split by order at K = S = 1000 (links x 10^6 orders x bins
+        # is past the memory budget); the automatic K does the same past the pilot's 40 orders
+        ref.setdefault("outputs", {})["cir_by_order"] = False
     first = result.links[0].direction
     other = "backward" if first in ("forward", "both") else "forward"
     if cell["extreme"] in BACKWARD_ONLY:
@@ -504,7 +507,7 @@ def run(cell: dict, seed: int = 1, paths: int = PATHS) -> Outcome:
     if cell["receivers"] == "40" and paths == PATHS:
         paths = PATHS_40
     out = _attempt(cell, seed, paths)
-    if out.status == "pass" and not out.power:
+    if out.status in ("pass", "flagged") and not out.power and out.z_max <= Z_MAX:
         out = _attempt(cell, seed, 4 * paths)
     out.seconds = time.perf_counter() - t0
     return out
@@ -562,9 +565,16 @@ def _attempt(cell: dict, seed: int, paths: int) -> Outcome:
         out.h0_rel_stderr = float(se[main] / h[main]) if h[main] > 0 else float("nan")
         out.combined_rel_stderr = float(np.hypot(se[main], sb[main]) / max(h[main], b[main], 1e-300))
     out.seconds = time.perf_counter() - t0
-    if out.z_max <= Z_MAX:
+    warned = any("unreliable error bar" in w for w in out.warnings)
+    if out.z_max <= Z_MAX and not out.power and warned:  # it could not see a 10 % error, and the run said so
+        out.status = "flagged"
+        out.message = (
+            f"z = {out.z_max:.1f} against {out.reference}, no power to see a 10 % error, and the result warns "
+            "the error bar is unreliable"
+        )
+    elif out.z_max <= Z_MAX:
         out.status = "pass"
-    elif any("unreliable error bar" in w for w in out.warnings):
+    elif warned:
         out.status = "flagged"
         out.message = f"z = {out.z_max:.1f} against {out.reference}, and the result warns the error bar is unreliable"
     else:
