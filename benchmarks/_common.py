@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import json
 import time
 from pathlib import Path
@@ -9,6 +10,15 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
+
+
+def engine_module(name: str):
+    """The engine module `name` ("run.simulate"), or its flat name in a baseline tree from before the
+    engine's folders (issue 23: owcsim.engine.simulate)."""
+    try:
+        return importlib.import_module(f"owcsim.engine.{name}")
+    except ModuleNotFoundError:
+        return importlib.import_module(f"owcsim.engine.{name.rsplit('.', 1)[-1]}")
 
 
 def barry_doc(**simulation) -> dict:

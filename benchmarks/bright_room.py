@@ -26,7 +26,7 @@ from _common import ROOT
 
 sys.path.insert(0, str(ROOT))
 
-from owcsim.engine.simulate import simulate  # noqa: E402
+from owcsim.engine.run.simulate import simulate  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 from tests.reference import first_bounce_box_dc_gain  # noqa: E402
 from tests.reference_radiosity import box_dc_gain  # noqa: E402

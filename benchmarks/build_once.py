@@ -4,9 +4,9 @@ The smoky room (examples/smoky_room.json) with a large mesh as furniture: an ico
 radius 0.4 m subdivided `--subdivisions` times (8: 1 310 720 triangles, the size of the
 issue 10 measurement), written as a PLY file next to the scene. Two settings:
 - explicit: algorithm 5, K = 6, S = 20, t_max_s given (no pilot);
-- automatic: algorithm, K, S and the window chosen by engine/auto.py (a truncation pilot runs).
-For each it prints the geometry builds (engine.geometry.build_geometry, one per scene build)
-and medium builds (engine.media.medium_from_spec) counted in one job (in-process `simulate`),
+- automatic: algorithm, K, S and the window chosen by engine/run/auto.py (a truncation pilot runs).
+For each it prints the geometry builds (engine.scene.geometry.build_geometry, one per scene build)
+and medium builds (engine.media.media.medium_from_spec) counted in one job (in-process `simulate`),
 the same counts for the service pre-flight of the automatic scene, and the wall time of the
 whole command `owcsim run SCENE --out DIR` (best of `--repeats`, in a fresh process: imports,
 scene build, pilot, run, files).
@@ -63,7 +63,7 @@ def scene_files(folder: Path, subdivisions: int, paths: int) -> dict[str, Path]:
 CHILD = r"""
 import json, sys
 from pathlib import Path
-import owcsim.engine.simulate, owcsim.server.preflight  # every engine module these import, loaded
+import owcsim.engine.run.simulate, owcsim.server.preflight  # every engine module these import, loaded
 from owcsim.docs import load_scene
 
 counts = {"geometry": 0, "medium": 0}
@@ -72,8 +72,8 @@ def counted(key, real):
         counts[key] += 1
         return real(*a, **k)
     return wrapper
-for mod_name, attr, key in (("owcsim.engine.geometry", "build_geometry", "geometry"),
-                            ("owcsim.engine.media", "medium_from_spec", "medium")):
+for mod_name, attr, key in (("owcsim.engine.scene.geometry", "build_geometry", "geometry"),
+                            ("owcsim.engine.media.media", "medium_from_spec", "medium")):
     real = getattr(sys.modules[mod_name], attr)
     wrap = counted(key, real)
     for name, mod in list(sys.modules.items()):  # every module that imported the builder by name
@@ -83,7 +83,7 @@ out = {}
 for case in sys.argv[1:3]:
     counts.update(geometry=0, medium=0)
     spec, _ = load_scene(case)
-    owcsim.engine.simulate.simulate(spec, base_dir=Path(case).parent)
+    owcsim.engine.run.simulate.simulate(spec, base_dir=Path(case).parent)
     out[Path(case).stem] = dict(counts)
 counts.update(geometry=0, medium=0)
 spec, _ = load_scene(sys.argv[2])  # the pre-flight of the automatic scene (mesh path made absolute)

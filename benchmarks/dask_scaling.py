@@ -9,7 +9,7 @@ Barry et al. 1993 configuration A, backward, 3 reflections, on this machine:
    and the batch size at which it falls under 5 %; and 2 Dask workers against the
    local pool of 2 processes at the same batch sizes.
 Every process runs with the glibc malloc thresholds the Dask workers get from
-engine.execution_dask (the script re-runs itself with MALLOC_MMAP_THRESHOLD_ and
+engine.run.execution_dask (the script re-runs itself with MALLOC_MMAP_THRESHOLD_ and
 MALLOC_TRIM_THRESHOLD_ set), so the comparison measures dispatch, not malloc;
 --glibc-defaults keeps the defaults for the local runs. All executors stay up
 together and each repeat runs every one of them in turn (the best time of each is
@@ -34,8 +34,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks._common import barry_doc  # noqa: E402
-from owcsim.engine.execution import ProcessExecutor  # noqa: E402
-from owcsim.engine.simulate import simulate  # noqa: E402
+from owcsim.engine.run.execution import ProcessExecutor  # noqa: E402
+from owcsim.engine.run.simulate import simulate  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 
 
@@ -111,7 +111,7 @@ def main() -> None:
     ap.add_argument("--window", type=int, default=None, help="Dask tasks in flight (default: the executor's)")
     ap.add_argument("--glibc-defaults", action="store_true", help="local runs keep glibc's malloc thresholds")
     args = ap.parse_args()
-    from owcsim.engine.execution_dask import MALLOC_MMAP_THRESHOLD, MALLOC_TRIM_THRESHOLD, DaskExecutor
+    from owcsim.engine.run.execution_dask import MALLOC_MMAP_THRESHOLD, MALLOC_TRIM_THRESHOLD, DaskExecutor
 
     env = {"MALLOC_MMAP_THRESHOLD_": str(MALLOC_MMAP_THRESHOLD), "MALLOC_TRIM_THRESHOLD_": str(MALLOC_TRIM_THRESHOLD)}
     if not args.glibc_defaults and any(os.environ.get(k) != v for k, v in env.items()):

@@ -1,4 +1,4 @@
-"""A job's memory estimate (engine/budget.py) against the measured peak RSS of real jobs.
+"""A job's memory estimate (engine/run/budget.py) against the measured peak RSS of real jobs.
 
 Each job runs as the service runs it: in a fresh process from a forkserver with the engine
 imported, simulate + the result's JSON + every render (server.formats.render_all). The
@@ -29,7 +29,7 @@ def _peak_rss() -> int:
 
 
 def _child(doc: dict, conn) -> None:
-    from owcsim.engine.simulate import simulate
+    from owcsim.engine.run.simulate import simulate
     from owcsim.schemas import SceneSpec
     from owcsim.server.formats import render_all
 
@@ -76,7 +76,7 @@ def jobs() -> list[tuple[str, dict]]:
 
 
 def main() -> None:
-    from owcsim.engine.budget import memory_estimate
+    from owcsim.engine.run.budget import memory_estimate
     from owcsim.schemas import SceneSpec
     from owcsim.server.dispatcher import start_forkserver
 

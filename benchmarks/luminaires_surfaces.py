@@ -28,7 +28,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks._common import ROOT, barry_doc  # noqa: E402
-from owcsim.engine.simulate import simulate  # noqa: E402
+from owcsim.engine.run.simulate import simulate  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 
 PHONG_FLOOR = {"type": "phong", "reflectance": 0.3, "diffuse_fraction": 0.6, "exponent": 30}

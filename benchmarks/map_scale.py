@@ -45,7 +45,7 @@ def _peak_mb() -> float:
 
 def child(case: dict) -> dict:
     """One measurement in this process (called with --child)."""
-    from owcsim.engine.simulate import simulate
+    from owcsim.engine.run.simulate import simulate
     from owcsim.schemas import SceneSpec
 
     spec = SceneSpec.model_validate(case["doc"])

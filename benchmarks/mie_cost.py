@@ -1,6 +1,6 @@
 """What particle smoke costs: the Mie computation per spec, and sampling a tabulated phase function.
 
-1. Wall time of engine.mie.particle_optics (size nodes, table of 2001 angles) for a few
+1. Wall time of engine.media.mie.particle_optics (size nodes, table of 2001 angles) for a few
    particle specs, from small soot to the largest size parameter the schema accepts
    (the cache is cleared before each).
 2. Phase sampling: sample_cos of HG(0.7) against a 4001-point table of the same HG and
@@ -22,9 +22,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks._common import barry_doc, best_of  # noqa: E402
-from owcsim.engine import mie  # noqa: E402
-from owcsim.engine.phase import HenyeyGreenstein, MiePhase, Tabulated  # noqa: E402
-from owcsim.engine.simulate import simulate  # noqa: E402
+from owcsim.engine.media import mie  # noqa: E402
+from owcsim.engine.media.phase import HenyeyGreenstein, MiePhase, Tabulated  # noqa: E402
+from owcsim.engine.run.simulate import simulate  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 from owcsim.schemas.medium import MAX_SIZE_PARAMETER, SIZE_WINDOW_SIGMAS, ParticlesSpec  # noqa: E402
 

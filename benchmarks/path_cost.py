@@ -56,6 +56,9 @@ if "OWCSIM_TREE" in os.environ:  # a baseline tree: its symlink farm (PYTHONPATH
         and "editable" not in type(f).__module__
         and "editable" not in repr(f)
     ]
+sys.path.append(str(ROOT))  # after a baseline's farm: `benchmarks` is this tree's, `owcsim` the farm's
+from benchmarks._common import engine_module  # noqa: E402
+
 #: The commit this work started from (issue 13's "today").
 DEFAULT_BASELINE = "d42d4e1"
 SMOKE = {"type": "homogeneous", "sigma_a": 0.0, "sigma_s": 0.2, "phase": {"type": "hg", "g": 0.5}}
@@ -72,7 +75,7 @@ def room_doc(smoke: bool, **simulation) -> dict:
 
 
 def _simulate(doc: dict, scene=None):
-    from owcsim.engine.simulate import simulate
+    simulate = engine_module("run.simulate").simulate
     from owcsim.schemas import SceneSpec
 
     spec = SceneSpec.model_validate(doc)
@@ -103,7 +106,8 @@ ACCURACY_CASES = {
 def measure_rays(paths: int = 200_000, repeats: int = 3) -> dict:
     """Pipeline and raw Embree `repeats` times each, alternately; the least time of each (host load only adds)."""
     from benchmarks._common import barry_doc, raw_embree
-    from owcsim.engine.scene import build_scene
+
+    build_scene = engine_module("scene.scene").build_scene
     from owcsim.schemas import SceneSpec
 
     out = {}
@@ -157,7 +161,7 @@ PILOT_STEPS = ("_resolve", "_choose_directions")
 
 def measure_accuracy(case: str) -> dict:
     """The automatic job to its target; `pilot_s` is the CPU time of its pilots (the outermost pilot step)."""
-    from owcsim.engine import simulate as sim_mod
+    sim_mod = engine_module("run.simulate")
 
     spent, depth, original = {"pilot": 0.0}, [0], {}
 
@@ -219,7 +223,7 @@ def measure_algorithms() -> dict:
 
 
 def measure_qmc(replicates: int = 96, paths: int = 4096) -> dict:
-    """Variance per path of H0 with quasi-random first dimensions (engine/qmc.py: Sobol blocks of 256 paths,
+    """Variance per path of H0 with quasi-random first dimensions (engine/core/qmc.py: Sobol blocks of 256 paths,
     one random digital shift each) against pseudo-random ones.
 
     `replicates` independent batches (their own streams) of `paths` paths per side; the variance per
@@ -228,9 +232,10 @@ def measure_qmc(replicates: int = 96, paths: int = 4096) -> dict:
     """
     import dataclasses
 
-    from owcsim.engine.kernel import WorkItem, trace_batch
-    from owcsim.engine.scene import build_scene
-    from owcsim.engine.simulate import kernel_settings
+    kernel_mod = engine_module("integrator.kernel")
+    WorkItem, trace_batch = kernel_mod.WorkItem, kernel_mod.trace_batch
+    kernel_settings = engine_module("run.simulate").kernel_settings
+    build_scene = engine_module("scene.scene").build_scene
     from owcsim.schemas import SceneSpec
 
     out = {}
@@ -260,7 +265,7 @@ def measure_qmc(replicates: int = 96, paths: int = 4096) -> dict:
 def measure(what: list[str], warm: bool = True) -> dict:
     if warm:
         _simulate(COST_CASES["smoky"](2048))  # warm imports and caches
-    from owcsim.engine import kernel
+    kernel = engine_module("integrator.kernel")
 
     out = {"tree": os.environ.get("OWCSIM_TREE", "this tree"), "kernel": kernel.__file__}
     if "rays" in what:

@@ -3,14 +3,14 @@
 Open medium (no walls): Tx at the origin facing +x (Lambertian, m = 1), Rx (1 cm^2, FOV 90 deg) at
 (D, 0, 0) facing it, D = 3 m, sigma_s 0.2 /m, sigma_a 0.05 /m, HG phase with g = 0.9, 0.99, 0.999,
 -0.999; K = 0, S = 1 (the single-scattering family Tx -> p -> Rx only), `--paths` paths a side,
-`--seeds` seeds, algorithm 5 at its defaults (from both devices; engine/medium_nee.py), or those
+`--seeds` seeds, algorithm 5 at its defaults (from both devices; engine/integrator/medium_nee.py), or those
 given by `--algorithms`. Reference: tests/reference_peaked.py, an independent volume quadrature in
 coordinates adapted to the peak (its refined grid printed next to it). Per g the table prints:
 - bias: mean of the runs / reference - 1 (the 20-seed mean's own relative standard error after it);
 - median: the median run's relative error;
 - spread/SE: the sample standard deviation of the runs / their median reported standard error
   (1 when the error bars are honest; the issue asks <= 1.5);
-- flagged: runs carrying engine/reliability.py's "unreliable error bar" warning;
+- flagged: runs carrying engine/tally/reliability.py's "unreliable error bar" warning;
 - worst z: max |H1 - reference| / reported SE over the unflagged runs; >4 SE: how many of them
   lie more than 4 reported standard errors from the reference (the issue asks 0).
 `--direction forward` / `backward`: algorithm 5 from one side only.
@@ -30,7 +30,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from owcsim.engine import simulate as engine  # noqa: E402
+from owcsim.engine.run import simulate as engine  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 from tests.reference_peaked import converged  # noqa: E402
 

@@ -3,13 +3,13 @@
 For each case (the 5 x 5 x 3 m room with smoke sigma_s 0.2 /m, sigma_a 0, and an
 unbounded medium sigma_s 0.2, sigma_a 0.05 /m; HG g = 0, 0.7, 0.9; devices 0.5 m and
 3 m apart) and each estimator (algorithms 2, 3, 5 one-sided as `simulate` runs them,
-and algorithms 2, 3, 4, 5 from both devices, engine/medium_nee.py), the script runs
+and algorithms 2, 3, 4, 5 from both devices, engine/integrator/medium_nee.py), the script runs
 `--seeds` independent seeds of `--paths` paths (per side) and prints:
 - ratio: the spread (sample standard deviation) of H0 over the seeds / the median
   reported standard error (1 when the error bars are honest; the issue asks 0.7-1.5);
 - max z: the largest |H0 - reference| / (its own reported standard error), the reference
   being the mean of the two-sided runs of the same algorithm (leave-one-out for those);
-- flagged: runs whose result would carry engine/reliability.py's warning.
+- flagged: runs whose result would carry engine/tally/reliability.py's warning.
 Room: Tx (2.5, 2.5, 3) down, Rx 0.5 m or 3 m below it facing up, K = 3 (algorithm 5: S = 3).
 Unbounded: Tx at the origin facing +x, Rx at (D, 0, 0) facing it, S = 2.
 Run: .venv/bin/python benchmarks/replicate_study.py [--seeds 10] [--paths 4096] [--json out/replicates.json]
@@ -19,7 +19,7 @@ targets 3 % and 1 % on the smoky rooms (Tx (2.5, 2.5, 3) down, Rx (1, 1, 0) up, 
 sigma_s 0.2, sigma_a 0, g 0.5 and g 0.9; K = S = 8): "before" = algorithm 5 as `simulate`
 runs it on main (one side, chosen by the pilot, roulette theta = 1) stopping on the per-path
 error alone; "after" =
-algorithm 5 from both devices with engine/reliability.py's stopping rule. The true error
+algorithm 5 from both devices with engine/tally/reliability.py's stopping rule. The true error
 is measured against a long two-sided run (`--ref-paths` per side) of the same K, S.
 """
 
@@ -40,7 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from owcsim.engine import (
     medium_nee,  # noqa: E402
 )
-from owcsim.engine import simulate as engine  # noqa: E402
+from owcsim.engine.run import simulate as engine  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 
 
@@ -106,7 +106,7 @@ def smoky_room(g: float, seed: int, **sim) -> dict:
 
 
 def accuracy_study(args) -> None:
-    import owcsim.engine.simulate as sim_mod
+    import owcsim.engine.run.simulate as sim_mod
 
     print(
         f"accuracy mode, {args.seeds} seeds per row; true error against a long two-sided run "
@@ -227,13 +227,13 @@ def roulette_study(args) -> None:
 def speed_study(args) -> None:
     """Paths and wall time to 0.03 % on the clear room (S1) and 0.3 % on the smoky room (g 0.5), accuracy mode,
     before (roulette from depth 3 with survival min(1, w / w0), one side) and after, in the same run."""
-    from owcsim.engine.kernel import KernelSettings
+    from owcsim.engine.integrator.kernel import KernelSettings
 
     after = {"rr_start_depth": args.rr_depth, "rr_threshold": args.rr_theta}
     before = {"rr_start_depth": 3, "rr_threshold": 1.0}
     print(
         f"speed to a target (accuracy mode, batches of 16384 (clear) / 2048 (smoky) paths, "
-        f"engine/reliability.py's stopping rule); after: roulette "
+        f"engine/tally/reliability.py's stopping rule); after: roulette "
         f"from depth {args.rr_depth} with theta {args.rr_theta} (kernel default theta "
         f"{KernelSettings.__dataclass_fields__['rr_threshold'].default}); timings on a shared CPU"
     )

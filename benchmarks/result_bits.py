@@ -33,7 +33,10 @@ EXAMPLES = [
 CHILD = r"""
 import hashlib, json, sys
 from owcsim.docs import load_scene
-from owcsim.engine.simulate import simulate
+try:
+    from owcsim.engine.run.simulate import simulate
+except ModuleNotFoundError:  # an install before the engine's folders (issue 23)
+    from owcsim.engine.simulate import simulate
 
 def document(result):
     if isinstance(result, dict):  # engines before the typed result returned the document

@@ -136,7 +136,7 @@ def main() -> int:
     srv.stop()
     srv.kill()
 
-    from owcsim.engine.simulate import simulate
+    from owcsim.engine.run.simulate import simulate
     from owcsim.schemas import SceneSpec
 
     lost = [i for i in range(args.jobs) if not ids[i]]

@@ -2,7 +2,7 @@
 
 Barry et al.'s configuration A (5 x 5 x 3 m, one LED, one photodiode), algorithm 1, K = 3, a fixed
 number of paths, from the transmitter. Spectral surfaces (a different reflectance per band on the
-walls, floor and ceiling) make the kernel carry one throughput per band and path (engine/spectra.py);
+walls, floor and ceiling) make the kernel carry one throughput per band and path (engine/spectral/spectra.py);
 every band is tallied as its own channel plus the optical, electrical and luminous combinations.
 Cases: the grey scene (no `spectral`), one band, 8 and 32 bands over 400-900 nm; optionally the same
 with smoke per band (algorithm 1: a transmittance ratio per band and segment).
@@ -29,7 +29,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks._common import barry_doc, best_of  # noqa: E402
-from owcsim.engine.simulate import simulate  # noqa: E402
+from owcsim.engine.run.simulate import simulate  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 
 

@@ -55,7 +55,7 @@ def scene(case: str, seed: int, **simulation) -> dict:
 
 
 def run(doc: dict) -> dict:
-    from owcsim.engine.simulate import simulate
+    from owcsim.engine.run.simulate import simulate
     from owcsim.schemas import SceneSpec
 
     t = time.perf_counter()
@@ -108,7 +108,7 @@ def reference(tree: Tree, case: str, seeds: int, paths: int) -> tuple[float, flo
 def map_run(doc: dict) -> dict:
     """examples/komine_map.json at `doc['target']`: paths, wall time, worst error (no medium: the earlier rule)."""
     from owcsim.docs import load_scene
-    from owcsim.engine.simulate import simulate
+    from owcsim.engine.run.simulate import simulate
 
     spec, _ = load_scene(ROOT / "examples" / "komine_map.json", [("simulation.target_rel_error", doc["target"])])
     t = time.perf_counter()

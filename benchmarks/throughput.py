@@ -21,9 +21,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks._common import barry_doc, best_of, raw_embree  # noqa: E402
-from owcsim.engine.execution import ProcessExecutor  # noqa: E402
-from owcsim.engine.scene import build_scene  # noqa: E402
-from owcsim.engine.simulate import simulate  # noqa: E402
+from owcsim.engine.run.execution import ProcessExecutor  # noqa: E402
+from owcsim.engine.run.simulate import simulate  # noqa: E402
+from owcsim.engine.scene.scene import build_scene  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 
 

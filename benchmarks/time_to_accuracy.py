@@ -20,8 +20,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks._common import barry_doc  # noqa: E402
-from owcsim.engine.execution import ProcessExecutor  # noqa: E402
-from owcsim.engine.simulate import simulate  # noqa: E402
+from owcsim.engine.run.execution import ProcessExecutor  # noqa: E402
+from owcsim.engine.run.simulate import simulate  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 
 ANCHOR_S = 0.46

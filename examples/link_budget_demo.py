@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from owcsim.engine.link_budget import (
+from owcsim.engine.results.link_budget import (
     IsiSplit,
     LinkBudget,
     ber_ook,

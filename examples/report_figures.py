@@ -23,7 +23,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from owcsim.engine.simulate import simulate  # noqa: E402
+from owcsim.engine.run.simulate import simulate  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 
 HERE = Path(__file__).resolve().parent

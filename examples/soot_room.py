@@ -29,9 +29,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.optimize import least_squares  # noqa: E402
 
-from owcsim.engine import mie  # noqa: E402
-from owcsim.engine.phase import HenyeyGreenstein  # noqa: E402
-from owcsim.engine.simulate import simulate  # noqa: E402
+from owcsim.engine.media import mie  # noqa: E402
+from owcsim.engine.media.phase import HenyeyGreenstein  # noqa: E402
+from owcsim.engine.run.simulate import simulate  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 
 HERE = Path(__file__).resolve().parent

@@ -25,7 +25,7 @@ import json
 
 import numpy as np
 
-from owcsim.engine.simulate import simulate
+from owcsim.engine.run.simulate import simulate
 from owcsim.schemas import SceneSpec
 
 NM = 1e-9

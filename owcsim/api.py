@@ -17,7 +17,7 @@ from owcsim.schemas import SceneSpec
 from .docs import InputError, format_validation_error, load_scene
 
 if TYPE_CHECKING:
-    from owcsim.engine.simulate import Progress
+    from owcsim.engine.run.simulate import Progress
 
 
 def load(scene: dict | str | Path | SceneSpec) -> tuple[SceneSpec, Path | None]:
@@ -47,12 +47,12 @@ def simulate(
     """Simulate a scene in this process and return its Result (see the module docstring).
 
     `workers` > 1 runs batches in that many processes (same result bits); `progress(p)` is called
-    after batches with an `owcsim.engine.simulate.Progress` (p.fraction, p.paths, p.batches,
+    after batches with an `owcsim.engine.run.simulate.Progress` (p.fraction, p.paths, p.batches,
     p.dc_gain_rel_stderr, p.elapsed_s); `base_dir` resolves relative mesh paths (default: the scene
-    file's folder). Raises InputError for an invalid scene and owcsim.engine.errors.EngineError for
+    file's folder). Raises InputError for an invalid scene and owcsim.engine.core.errors.EngineError for
     one the engine refuses.
     """
-    from owcsim.engine.simulate import simulate as run
+    from owcsim.engine.run.simulate import simulate as run
 
     spec, folder = load(scene)
     result = run(spec, base_dir=base_dir if base_dir is not None else folder, workers=workers, progress=progress)

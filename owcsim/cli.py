@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 from .docs import InputError, load_scene
 
 if TYPE_CHECKING:
-    from owcsim.engine.simulate import Progress
+    from owcsim.engine.run.simulate import Progress
     from owcsim.schemas.results import SimulationResultPublic
 
 
@@ -35,13 +35,13 @@ def _progress_bar(stream=None):
 
 def _cmd_validate(args) -> int:
     spec, _ = load_scene(args.scene, assignments=args.set or [])
-    from owcsim.engine.scene import build_scene  # builds the geometry: catches unreadable meshes too
+    from owcsim.engine.scene.scene import build_scene  # builds the geometry: catches unreadable meshes too
 
     scene = build_scene(spec, Path(args.scene).resolve().parent)
     sim = spec.simulation
     window = f"{sim.n_bins} time bins" if sim.t_max_s is not None else "time window chosen when it runs"
     masked = int((scene.masked != "").sum())
-    from owcsim.engine.result import surface_extent
+    from owcsim.engine.results.result import surface_extent
     from owcsim.schemas.units import unit_warnings
 
     for note in unit_warnings(spec, surface_extent(scene)):  # values plausible only in another unit
@@ -152,12 +152,12 @@ def _cmd_run(args) -> int:
     assignments = args.set or []
     spec, _ = load_scene(args.scene, _scene_overrides(args), assignments)
     from owcsim.clients.output import write_outputs
-    from owcsim.engine.simulate import simulate
+    from owcsim.engine.run.simulate import simulate
 
     out = _output_folder(args.out)
     executor = None
     if args.scheduler:
-        from owcsim.engine.execution_dask import executor_from_scheduler
+        from owcsim.engine.run.execution_dask import executor_from_scheduler
 
         executor = executor_from_scheduler(args.scheduler)
     update, close = _progress_bar()
@@ -348,7 +348,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from owcsim.engine.errors import EngineError
+    from owcsim.engine.core.errors import EngineError
 
     with warnings.catch_warnings():
         warnings.simplefilter("default")

@@ -4,7 +4,7 @@
 estimates and what it leaves out, the KernelSettings flags it sets (by name: this layer does not
 import the engine), the scattering order it fixes, the direction it runs in, whether it runs from
 both devices in a medium, the outputs it fills, the medium it needs and its warning. The engine's planner
-(engine/simulate.py), the automatic settings (engine/auto.py) and the result (engine/result.py)
+(engine/run/simulate.py), the automatic settings (engine/run/auto.py) and the result (engine/results/result.py)
 read these records; nothing else lists per-algorithm facts.
 """
 
@@ -42,7 +42,7 @@ _CODES = {d: i for i, d in enumerate(_MEMBERS)}
 
 
 class TwoSided(StrEnum):
-    """When an algorithm runs every link from both devices in a medium (engine/medium_nee.py)."""
+    """When an algorithm runs every link from both devices in a medium (engine/integrator/medium_nee.py)."""
 
     NEVER = "never"
     ALWAYS = "always"

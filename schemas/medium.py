@@ -157,7 +157,7 @@ class ParticlesSpec(SpecModel):
 
     dN/dlnD = N exp(-(ln D - ln D_g)^2 / (2 ln^2 sigma_g)) / (sqrt(2 pi) ln sigma_g), with D_g the
     geometric mean (count median) diameter and sigma_g >= 1 the geometric standard deviation
-    (1: all particles of diameter D_g). The engine computes their Mie optics (engine/mie.py).
+    (1: all particles of diameter D_g). The engine computes their Mie optics (engine/media/mie.py).
     """
 
     distribution: Literal["lognormal"] = "lognormal"
@@ -365,7 +365,7 @@ class ParticleMediumSpec(SpecModel):
     Give `mass_concentration` [kg/m^3] with `particle_density` [kg/m^3] (the material density,
     e.g. about 1800 for soot), or `number_concentration` [1/m^3]. The engine derives
     sigma_a, sigma_s [1/m] and a tabulated phase function by Mie theory averaged over the
-    size distribution (engine/mie.py) and reports them with albedo, g and the Koschmieder
+    size distribution (engine/media/mie.py) and reports them with albedo, g and the Koschmieder
     visibility 3.912 / sigma_t.
     """
 

@@ -228,7 +228,7 @@ class UnreachablePublic(PublicModel):
 
 
 class ModeledPublic(PublicModel):
-    """What was simulated, what was left out, and why (engine/auto.py; docs/modeled.md). Keys a newer engine
+    """What was simulated, what was left out, and why (engine/run/auto.py; docs/modeled.md). Keys a newer engine
     adds are kept."""
 
     model_config = ConfigDict(extra="allow")

@@ -36,7 +36,7 @@ MAX_CURVE_POINTS = 100_000
 #: Largest responsivity accepted [A/W] (a photodiode without internal gain stays near 1 A/W).
 MAX_RESPONSIVITY = 10.0
 
-#: Tables shipped with owcsim, by kind, and the wavelength range they cover [m] (engine/spectra_tables.py).
+#: Tables shipped with owcsim, by kind, and the wavelength range they cover [m] (engine/spectral/spectra_tables.py).
 NAMED_CURVES: dict[str, tuple[str, float, float]] = {
     "white_led_cool": ("spectrum", 350e-9, 1100e-9),
     "white_led_warm": ("spectrum", 350e-9, 1100e-9),

@@ -7,7 +7,7 @@ one of these materials. Each states its split of the total reflectance rho:
 - `lambertian`: rho_d = rho.
 - `phong`: diffuse rho_d = r_d rho plus a glossy lobe rho_s = (1 - r_d) rho of exponent n
   about the mirror direction (Lomba, Valadas & Duarte 1998; Lee, Park & Barry 2011),
-  made reciprocal and energy-conserving (see engine/bsdf.py). n = 0 is a broad lobe,
+  made reciprocal and energy-conserving (see engine/surfaces/bsdf.py). n = 0 is a broad lobe,
   n of a few hundred a polished floor; as n grows the lobe tends to a mirror.
 - `mirror`: diffuse rho_d = r_d rho plus a perfect mirror rho_m = (1 - r_d) rho
   (glass, metal, whiteboards). Mirror faces must be planar groups (room faces, box faces,
@@ -39,7 +39,7 @@ class LambertianSurfaceSpec(SpecModel):
 class PhongSurfaceSpec(SpecModel):
     """Diffuse part r_d rho plus a Phong lobe (1 - r_d) rho of exponent n about the mirror direction.
 
-    `reflectance` rho = rho_d + rho_s weighs the two parts of the BRDF (engine/bsdf.py); it is not the
+    `reflectance` rho = rho_d + rho_s weighs the two parts of the BRDF (engine/surfaces/bsdf.py); it is not the
     albedo: the glossy lobe reflects less than rho_s (its part below the surface is lost), e.g. at normal
     incidence the albedo is rho_d + rho_s (n + 1) / (n + 2) (docs/luminaires-surfaces.md).
     """
@@ -103,7 +103,7 @@ def split(surface) -> tuple[float, float, float, float]:
     if isinstance(surface, (int, float)):
         return float(surface), 0.0, 0.0, 0.0
     if surface.type == "spectral":
-        raise TypeError("a spectral surface has no single reflectance: engine/spectra.py resolves it per band")
+        raise TypeError("a spectral surface has no single reflectance: engine/spectral/spectra.py resolves it per band")
     rho = surface.reflectance
     if surface.type == "lambertian":
         return rho, 0.0, 0.0, 0.0

@@ -86,8 +86,8 @@ def start_forkserver() -> None:
             "__main__",
             "owcsim.server.worker",
             "owcsim.server.preflight",
-            "owcsim.engine.simulate",
-            "owcsim.engine.budget",
+            "owcsim.engine.run.simulate",
+            "owcsim.engine.run.budget",
         ]
     )
     forkserver.ensure_running()

@@ -18,7 +18,7 @@ thread, which saves the process start. The steps:
    batch). Whatever the engine
    refuses (a SceneError: an input it cannot simulate) becomes a 422 problem
    with the engine's message, instead of a job that fails after waiting in the queue;
-3. the job's memory estimate (engine.budget) is made with the scene's triangles and extent.
+3. the job's memory estimate (engine.run.budget) is made with the scene's triangles and extent.
 """
 
 from __future__ import annotations
@@ -64,11 +64,11 @@ def _run(spec: SceneSpec, max_triangles: int, workers: int) -> tuple:
     """The pre-flight itself (in the pre-flight process): ("ok", triangles, memory) or ("problem", ...)."""
     import numpy as np
 
-    from owcsim.engine.budget import job_memory_bytes
-    from owcsim.engine.errors import EngineError
-    from owcsim.engine.geometry import _load_mesh
-    from owcsim.engine.scene import build_scene
-    from owcsim.engine.simulate import simulate
+    from owcsim.engine.core.errors import EngineError
+    from owcsim.engine.run.budget import job_memory_bytes
+    from owcsim.engine.run.simulate import simulate
+    from owcsim.engine.scene.geometry import _load_mesh
+    from owcsim.engine.scene.scene import build_scene
 
     try:
         counted = (12 if spec.room else 0) + 12 * len(spec.furniture)

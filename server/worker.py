@@ -7,7 +7,7 @@ is gone (its end of the worker's lifeline pipe closed), or the wall-time limit i
 cancelled run stores its partial result. An engine error fails the job with the engine's message.
 
 Memory: before anything else the worker caps its own address space (RLIMIT_AS) at what it
-has mapped already + the job's memory estimate (engine.budget, made at submission) + a
+has mapped already + the job's memory estimate (engine.run.budget, made at submission) + a
 headroom for the thread stacks and allocator arenas Embree/TBB and numpy reserve but do not
 use; an allocation past it raises MemoryError, reported as "ran out of its memory budget".
 At the end it renders the result once (server.formats.render_all: JSON, CSV, NPZ,
@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 from .formats import render_all
 
 if TYPE_CHECKING:
-    from owcsim.engine.simulate import Progress
+    from owcsim.engine.run.simulate import Progress
 
 log = logging.getLogger("owcsim.server.worker")
 
@@ -118,8 +118,8 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
     """Entry point of the worker process. `lifeline`: read end of a pipe only the server writes to;
     `memory_bytes`: the job's memory estimate [B] (0: no cap)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the server decides
-    from owcsim.engine.errors import EngineError
-    from owcsim.engine.simulate import simulate
+    from owcsim.engine.core.errors import EngineError
+    from owcsim.engine.run.simulate import simulate
     from owcsim.schemas import SceneSpec
 
     from .store import JobStore
@@ -134,7 +134,7 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             if limits.scheduler:
-                from owcsim.engine.execution_dask import executor_from_scheduler
+                from owcsim.engine.run.execution_dask import executor_from_scheduler
 
                 executor = executor_from_scheduler(limits.scheduler)
             result = simulate(

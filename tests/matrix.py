@@ -493,7 +493,7 @@ def _los_closed_form(cell: dict, doc: dict, result) -> float:
 
 def _refusal(err: Exception) -> str | None:
     from owcsim.docs import InputError
-    from owcsim.engine.errors import EngineError
+    from owcsim.engine.core.errors import EngineError
 
     if isinstance(err, (InputError, EngineError)) and one_sentence(str(err)):
         return str(err).strip()

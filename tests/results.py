@@ -1,6 +1,6 @@
 """The engine's typed result as its JSON document, for tests written against the document's keys.
 
-`owcsim.engine.simulate.simulate` returns schemas.results.SimulationResultPublic; these wrappers
+`owcsim.engine.run.simulate.simulate` returns schemas.results.SimulationResultPublic; these wrappers
 dump it the way result.json and the service write it (NaN and inf as null), so a test reads
 `doc["links"][0]["dc_gain"]` as a user of the files would.
 """
@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import json
 
-from owcsim.engine.medium_nee import simulate_two_sided as _two_sided
-from owcsim.engine.simulate import simulate as _simulate
+from owcsim.engine.integrator.medium_nee import simulate_two_sided as _two_sided
+from owcsim.engine.run.simulate import simulate as _simulate
 
 
 def simulate_document(*args, **kwargs) -> dict:

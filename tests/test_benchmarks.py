@@ -2,7 +2,7 @@
 
 Timings are not asserted (they belong to the scripts' own comparisons in one run); what is asserted is
 that every figure is printed, and what must hold whatever the host: ratios and costs in their physical
-ranges, and the memory estimate above the measured peak of every job (engine/budget.py must bound it).
+ranges, and the memory estimate above the measured peak of every job (engine/run/budget.py must bound it).
 """
 
 import re

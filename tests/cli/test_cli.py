@@ -200,7 +200,7 @@ def test_progress_bar_draws_the_engines_progress_on_a_terminal_only():
     import io
 
     from owcsim.cli import _progress_bar
-    from owcsim.engine.simulate import Progress
+    from owcsim.engine.run.simulate import Progress
 
     class Terminal(io.StringIO):
         def isatty(self):

@@ -1,4 +1,4 @@
-"""engine/allocator.py: after tune_allocator, numpy temporaries of the kernel's size reuse heap memory.
+"""engine/core/allocator.py: after tune_allocator, numpy temporaries of the kernel's size reuse heap memory.
 
 Measured by minor page faults (deterministic counts, not timings): a loop that allocates and frees
 1.6 MB arrays faults every page in again under glibc's defaults (the power check: the same loop in a
@@ -13,7 +13,7 @@ import pytest
 
 LOOP = """
 import resource, numpy as np
-from owcsim.engine.allocator import tune_allocator
+from owcsim.engine.core.allocator import tune_allocator
 applied = tune_allocator()
 for _ in range(3):
     x = np.ones(200_000); y = x * 2.0; z = y + x; del x, y, z
@@ -45,7 +45,7 @@ def test_tuned_heap_reuses_pages():
 
 
 def test_tune_allocator_once():
-    from owcsim.engine.allocator import tune_allocator
+    from owcsim.engine.core.allocator import tune_allocator
 
     tune_allocator()
     assert tune_allocator() is False  # a second call does nothing

@@ -4,7 +4,7 @@ import warnings
 
 import pytest
 
-from owcsim.engine.errors import SceneError
+from owcsim.engine.core.errors import SceneError
 from tests.results import simulate_document as simulate
 from tests.scenes import barry_doc, room_doc, spec
 

@@ -1,4 +1,4 @@
-"""Surface materials (engine/bsdf.py): Lambertian, modified Phong, mirror.
+"""Surface materials (engine/surfaces/bsdf.py): Lambertian, modified Phong, mirror.
 
 References: closed forms (Lambertian, mirror), hemisphere quadrature written here for the
 albedo and moments of the BRDF, swapped arguments for reciprocity, and chi-square tests of
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from owcsim.engine.bsdf import Materials, mirror_direction
+from owcsim.engine.surfaces.bsdf import Materials, mirror_direction
 
 N = np.array([0.0, 0.0, 1.0])
 
@@ -169,7 +169,7 @@ def test_large_exponent_tends_to_the_mirror():
 
 def test_glossy_lobe_frame_unit_vectors_and_mean_direction():
     """Samples are unit vectors and E[w] = E[cos alpha] r = (n+1)/(n+2) r (uniform azimuth, orthonormal frame)."""
-    from owcsim.engine.bsdf import _lobe_about_soa
+    from owcsim.engine.surfaces.bsdf import _lobe_about_soa
 
     rng = np.random.default_rng(11)
     size, n = 400_000, 7.0

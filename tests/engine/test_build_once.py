@@ -1,7 +1,7 @@
 """Each scene and medium is built once per job: the automatic settings, their pilot and the run share it.
 
-Counters wrap the builders where the engine calls them (engine.simulate.build_scene, the medium
-builder engine.scene.medium_from_spec, and the pre-flight's engine.scene.build_scene). Before this
+Counters wrap the builders where the engine calls them (engine.run.simulate.build_scene, the medium
+builder engine.scene.scene.medium_from_spec, and the pre-flight's engine.scene.scene.build_scene). Before this
 change an automatic job on the smoky room built the scene 3 times and the medium 4 times (issue 10),
 so a counter that missed a build path would show it here as a count above 1.
 """
@@ -12,8 +12,8 @@ import json
 
 import pytest
 
-from owcsim.engine import scene as scene_module
-from owcsim.engine import simulate as simulate_module
+from owcsim.engine.run import simulate as simulate_module
+from owcsim.engine.scene import scene as scene_module
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.algorithms import ALGORITHMS, Direction
 from owcsim.schemas.results import SimulationResultPublic, StopReason
@@ -59,7 +59,7 @@ def test_a_given_scene_is_not_built_again(monkeypatch):
 def test_the_server_preflight_builds_the_scene_once(monkeypatch):
     from owcsim.server.preflight import preflight
 
-    scenes = _count(monkeypatch, scene_module, "build_scene")  # the pre-flight imports it from engine.scene
+    scenes = _count(monkeypatch, scene_module, "build_scene")  # the pre-flight imports it from engine.scene.scene
     inner = _count(monkeypatch, simulate_module, "build_scene")
     media = _count(monkeypatch, scene_module, "medium_from_spec")
     assert preflight(_smoky()) == 12
@@ -80,7 +80,7 @@ def test_typed_result_fields_and_enums():
 @pytest.mark.parametrize("number", sorted(ALGORITHMS))
 def test_the_registry_is_what_the_planner_runs(number):
     """Each record's kernel flags and fixed S are the KernelSettings the planner builds for that algorithm."""
-    from owcsim.engine.scene import build_scene
+    from owcsim.engine.scene.scene import build_scene
 
     alg = ALGORITHMS[number]
     given = min(3, alg.scattering_range[1])  # the highest S it honours, up to 3 (others are refused)
@@ -92,7 +92,7 @@ def test_the_registry_is_what_the_planner_runs(number):
 
 def test_an_automatic_window_over_the_bin_budget_is_a_located_error():
     """The line-of-sight window is chosen without a pilot; the budget is still checked (not by re-validation)."""
-    from owcsim.engine.errors import SceneError
+    from owcsim.engine.core.errors import SceneError
 
     doc = json.loads((EXAMPLES / "barry_config_a.json").read_text())
     doc["simulation"] = {"algorithm": 1, "max_reflections": 0, "time_bin_s": 1e-15, "paths": 64}
@@ -103,7 +103,7 @@ def test_an_automatic_window_over_the_bin_budget_is_a_located_error():
 def test_a_worker_builds_a_job_and_its_pilot_once(monkeypatch, tmp_path):
     """A process worker's scene cache: the pilot's document (other receivers and settings, same surfaces,
     transmitters and medium) reuses the geometry built for the job; another geometry is built."""
-    from owcsim.engine import execution
+    from owcsim.engine.run import execution
 
     monkeypatch.setattr(execution, "_SCENES", type(execution._SCENES)())
     monkeypatch.setattr(execution, "_BUILT", {})

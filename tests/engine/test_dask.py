@@ -25,9 +25,10 @@ import trimesh
 distributed = pytest.importorskip("distributed")
 from dask import config as dask_config  # noqa: E402
 
-from owcsim.engine.errors import EngineError, SceneError  # noqa: E402
-from owcsim.engine.execution import JobRef  # noqa: E402
-from owcsim.engine.execution_dask import (  # noqa: E402
+from owcsim.engine.core.errors import EngineError, SceneError  # noqa: E402
+from owcsim.engine.integrator.kernel import WorkItem  # noqa: E402
+from owcsim.engine.run.execution import JobRef  # noqa: E402
+from owcsim.engine.run.execution_dask import (  # noqa: E402
     ClusterError,
     DaskExecutor,
     DaskUnavailableError,
@@ -35,9 +36,8 @@ from owcsim.engine.execution_dask import (  # noqa: E402
     portable_spec,
     worker_cache_info,
 )
-from owcsim.engine.kernel import WorkItem  # noqa: E402
-from owcsim.engine.scene import build_scene  # noqa: E402
-from owcsim.engine.simulate import kernel_settings  # noqa: E402
+from owcsim.engine.run.simulate import kernel_settings  # noqa: E402
+from owcsim.engine.scene.scene import build_scene  # noqa: E402
 from tests.results import simulate_document as simulate  # noqa: E402
 from tests.scenes import room_doc, spec  # noqa: E402
 
@@ -205,7 +205,7 @@ def test_cancel_reaches_the_cluster(client, dask):
 
 def _fail_first_call():
     """Run on a worker: the next batch this worker traces raises, once."""
-    import owcsim.engine.execution_dask as ed
+    import owcsim.engine.run.execution_dask as ed
 
     original = ed.trace_batch
 
@@ -217,8 +217,8 @@ def _fail_first_call():
 
 
 def _restore_and_report():
-    import owcsim.engine.execution_dask as ed
-    from owcsim.engine.kernel import trace_batch
+    import owcsim.engine.run.execution_dask as ed
+    from owcsim.engine.integrator.kernel import trace_batch
 
     still_armed = ed.trace_batch is not trace_batch
     ed.trace_batch = trace_batch
@@ -270,7 +270,7 @@ def test_errors_without_dask_or_without_a_scheduler(monkeypatch):
     # The engine imports without Dask, and says how to install it.
     code = (
         "import sys; sys.modules['distributed'] = sys.modules['dask'] = None\n"
-        "import owcsim.engine.simulate, owcsim.engine.execution_dask as ed\n"
+        "import owcsim.engine.run.simulate, owcsim.engine.run.execution_dask as ed\n"
         "try:\n    ed.executor_from_scheduler('tcp://127.0.0.1:8786')\n"
         "except ed.DaskUnavailableError as e:\n    print(e)\n"
     )
@@ -327,7 +327,7 @@ def test_command_line_scheduler_flag(client, tmp_path, capsys, monkeypatch):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    from owcsim.engine import execution_dask
+    from owcsim.engine.run import execution_dask
 
     quick = functools.partial(execution_dask.executor_from_scheduler, timeout_s=1.0)  # not the default 30 s
     monkeypatch.setattr(execution_dask, "executor_from_scheduler", quick)

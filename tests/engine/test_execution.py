@@ -4,7 +4,7 @@ import json
 import os
 import time
 
-from owcsim.engine.scene import build_scene
+from owcsim.engine.scene.scene import build_scene
 from tests.results import simulate_document as simulate
 from tests.scenes import room_doc, spec
 
@@ -62,7 +62,7 @@ def test_progress_is_reported_and_cancel_stops():
 
 def test_warm_pool_serves_several_jobs():
     """One long-lived pool, two different scenes: each equals its serial run (scenes cached per job)."""
-    from owcsim.engine.execution import ProcessExecutor
+    from owcsim.engine.run.execution import ProcessExecutor
 
     docs = [
         room_doc(paths=4096, batch_size=1024, direction="forward"),
@@ -81,7 +81,7 @@ def test_warm_pool_serves_several_jobs():
 
 def test_scene_pickles_unused_for_a_week_are_pruned(tmp_path):
     """job_ref writes content-addressed pickles; those untouched for STALE_SCENE_S go when a new one is written."""
-    from owcsim.engine import execution
+    from owcsim.engine.run import execution
 
     scene_a = build_scene(spec(room_doc(paths=100)))
     scene_b = build_scene(spec(room_doc(rx=(4.0, 1.0, 0.0), paths=100)))

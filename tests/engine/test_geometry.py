@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from owcsim.engine.errors import SceneError
-from owcsim.engine.geometry import build_geometry
-from owcsim.engine.scene import build_scene
+from owcsim.engine.core.errors import SceneError
+from owcsim.engine.scene.geometry import build_geometry
+from owcsim.engine.scene.scene import build_scene
 from tests.results import simulate_document as simulate
 from tests.scenes import room_doc, spec, within
 

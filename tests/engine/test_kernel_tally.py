@@ -1,17 +1,17 @@
 """The kernel hands the tally one depth k + s at a time, and the per-(sample, cell) squared sums of the order
 split (tally.BatchBuilder: a dense (sample, cell) table with few samples, else per step without sorting) match
-a plain computation over the whole batch; a sample is a path, or a block of quasi-random paths (engine/qmc.py)."""
+a plain computation over the whole batch; a sample is a path, or a block of quasi-random paths (engine/core/qmc.py)."""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
-from owcsim.engine import tally as tally_module
-from owcsim.engine.kernel import WorkItem, trace_batch
-from owcsim.engine.scene import build_scene
-from owcsim.engine.simulate import kernel_settings
-from owcsim.engine.tally import BatchBuilder
+from owcsim.engine.integrator.kernel import WorkItem, trace_batch
+from owcsim.engine.run.simulate import kernel_settings
+from owcsim.engine.scene.scene import build_scene
+from owcsim.engine.tally import tally as tally_module
+from owcsim.engine.tally.tally import BatchBuilder
 from owcsim.schemas import SceneSpec
 from tests.scenes import SMOKE, room_doc
 

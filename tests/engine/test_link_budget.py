@@ -1,4 +1,4 @@
-"""engine.link_budget against hand computations (Komine & Nakagawa 2004's room and receiver).
+"""engine.results.link_budget against hand computations (Komine & Nakagawa 2004's room and receiver).
 
 Each expected value is written out from the formula and the paper's parameters, or from an
 independent reference (plain loops, numerical convolution, numerical Gaussian tail), never
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from owcsim.engine.link_budget import (
+from owcsim.engine.results.link_budget import (
     IsiSplit,
     LinkBudget,
     ber_ook,

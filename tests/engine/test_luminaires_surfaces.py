@@ -14,7 +14,7 @@ import re
 import numpy as np
 import pytest
 
-from owcsim.engine.errors import SceneError
+from owcsim.engine.core.errors import SceneError
 from tests import reference as ref
 from tests.engine.test_photometry import (
     C_FULL,
@@ -302,8 +302,8 @@ def test_reciprocity_swapping_devices_with_glossy_surfaces():
 def test_lambertian_through_the_material_path_is_bit_identical():
     """A Lambertian scene run through the materials code gives the same numbers as the plain path
     (it consumes the same random numbers); Lambertian scenes themselves never enter that code."""
-    from owcsim.engine.bsdf import Materials
-    from owcsim.engine.scene import build_scene
+    from owcsim.engine.scene.scene import build_scene
+    from owcsim.engine.surfaces.bsdf import Materials
 
     doc = room_doc(max_reflections=3, paths=8192, seed=2, direction="forward")
     plain = simulate(spec(doc))["links"][0]
@@ -359,7 +359,7 @@ def test_forward_backward_agree_per_order_with_a_mirror_floor_and_a_luminaire():
 # ----------------------------------------------------------------------------- files at the edges
 def test_photometry_files_are_inlined_for_clusters_and_clients_and_refused_by_the_server(tmp_path):
     from owcsim.clients.scene import scene_document
-    from owcsim.engine.execution_dask import portable_spec
+    from owcsim.engine.run.execution_dask import portable_spec
     from owcsim.server.problems import ProblemError
     from owcsim.server.settings import Settings
     from owcsim.server.submission import check_limits
@@ -444,8 +444,8 @@ def test_surface_spec_validation(floor, message):
 
 
 def test_materials_per_face_and_rho_max_is_the_total_reflectance():
-    from owcsim.engine.auto import _max_reflectance
-    from owcsim.engine.scene import build_scene
+    from owcsim.engine.run.auto import _max_reflectance
+    from owcsim.engine.scene.scene import build_scene
 
     doc = room_doc(0.5, 0.3, 0.6)
     doc["room"]["reflectance"]["floor"] = phong(0.9, 0.2, 40.0)

@@ -9,10 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from owcsim.engine import simulate as simulate_module
-from owcsim.engine.scene import build_scene
-from owcsim.engine.simulate import PATH_TARGET_BUDGET, batch_size, kernel_settings
-from owcsim.engine.tally import BatchBuilder
+from owcsim.engine.run import simulate as simulate_module
+from owcsim.engine.run.simulate import PATH_TARGET_BUDGET, batch_size, kernel_settings
+from owcsim.engine.scene.scene import build_scene
+from owcsim.engine.tally.tally import BatchBuilder
 from tests.results import simulate_document as simulate
 from tests.scenes import EXAMPLES, room_doc, spec, within
 
@@ -208,9 +208,9 @@ def test_command_line_prints_a_map_summary_and_writes_map_files(tmp_path, capsys
 
 
 def test_memory_estimate_follows_the_batch_cap_and_stays_bounded_for_large_maps():
-    """engine/budget.py copies the batch caps (it must not import the engine's heavy modules): they agree, and
+    """engine/run/budget.py copies the batch caps (it must not import the engine's heavy modules): they agree, and
     a map's estimate grows with receivers only through per-link numbers, not links x bins."""
-    from owcsim.engine import budget
+    from owcsim.engine.run import budget
 
     assert (budget.PATH_TARGET_BUDGET, budget.ESTIMATE_BUDGET) == (
         simulate_module.PATH_TARGET_BUDGET,

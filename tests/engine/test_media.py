@@ -1,4 +1,4 @@
-"""Participating media (engine/media.py, regions.py, grid.py): depth, transmittance, free flight, schemas.
+"""Participating media (engine/media/media.py, regions.py, grid.py): depth, transmittance, free flight, schemas.
 
 References are written here by hand (Beer-Lambert, slab lengths, sphere chords, cell sums)
 or are exact distributions (exponential free flight); statistical checks use fixed seeds.
@@ -15,10 +15,10 @@ from pydantic import ValidationError
 from scipy import stats
 
 from conftest import SEED, seeded_rng  # noqa: F401
-from owcsim.engine.errors import SceneError
-from owcsim.engine.grid import GridMedium
-from owcsim.engine.media import HomogeneousMedium, medium_from_spec
-from owcsim.engine.regions import MeshRegion
+from owcsim.engine.core.errors import SceneError
+from owcsim.engine.media.grid import GridMedium
+from owcsim.engine.media.media import HomogeneousMedium, medium_from_spec
+from owcsim.engine.scene.regions import MeshRegion
 from owcsim.schemas import SceneSpec
 from tests.scenes import room_doc
 

@@ -11,10 +11,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from owcsim.engine import kernel
-from owcsim.engine.kernel import WorkItem, trace_batch
-from owcsim.engine.scene import build_scene
-from owcsim.engine.simulate import kernel_settings
+from owcsim.engine.integrator import kernel
+from owcsim.engine.integrator.kernel import WorkItem, trace_batch
+from owcsim.engine.run.simulate import kernel_settings
+from owcsim.engine.scene.scene import build_scene
 from owcsim.schemas import SceneSpec
 from tests.scenes import room_doc
 

@@ -1,11 +1,18 @@
-"""Tests for engine.metrics against closed-form references and simulation."""
+"""Tests for engine.results.metrics against closed-form references and simulation."""
 
 import warnings
 
 import numpy as np
 import pytest
 
-from owcsim.engine.metrics import bandwidth_3db, bin_stderr, delay_metrics, jackknife, path_loss_db, rms_delay_spread_h2
+from owcsim.engine.results.metrics import (
+    bandwidth_3db,
+    bin_stderr,
+    delay_metrics,
+    jackknife,
+    path_loss_db,
+    rms_delay_spread_h2,
+)
 
 NS = 1e-9
 KEYS = ["dc_gain", "mean_delay_s", "rms_delay_spread_s"]
@@ -267,7 +274,7 @@ def test_bandwidth_rows_and_vectorized_jackknife_match_one_row_at_a_time():
 def test_bandwidth_rows_in_chunks_of_bounded_memory_give_the_same_values(monkeypatch):
     """Rows are transformed in chunks of at most FFT_ELEMENTS grid points (a long window's jackknife stays
     bounded in memory); chunking changes no value."""
-    from owcsim.engine import metrics
+    from owcsim.engine.results import metrics
 
     rng = np.random.default_rng(12)
     nb = 300

@@ -1,4 +1,4 @@
-"""Mie optics of particle smoke (engine/mie.py) and the particle medium spec.
+"""Mie optics of particle smoke (engine/media/mie.py) and the particle medium spec.
 
 References:
 - Wiscombe, W. J. (1979), "Mie scattering calculations: advances in technique and fast,
@@ -27,11 +27,11 @@ import pytest
 from pydantic import ValidationError
 from scipy import integrate
 
-from owcsim.engine import mie
-from owcsim.engine.errors import SceneError
-from owcsim.engine.media import HomogeneousMedium, medium_from_spec
-from owcsim.engine.phase import MiePhase, Tabulated, phase_from_spec
-from owcsim.engine.scene import build_scene
+from owcsim.engine.core.errors import SceneError
+from owcsim.engine.media import mie
+from owcsim.engine.media.media import HomogeneousMedium, medium_from_spec
+from owcsim.engine.media.phase import MiePhase, Tabulated, phase_from_spec
+from owcsim.engine.scene.scene import build_scene
 from owcsim.schemas.medium import KOSCHMIEDER, ParticleMediumSpec, ParticlesSpec
 from tests.results import simulate_document as simulate
 from tests.scenes import room_doc, spec
@@ -298,7 +298,7 @@ def test_soot_examples_build(name):
 
 
 def test_medium_report_for_the_result():
-    from owcsim.engine.phase import HenyeyGreenstein, Tabulated
+    from owcsim.engine.media.phase import HenyeyGreenstein, Tabulated
 
     particles = ParticleMediumSpec.model_validate(_medium())
     assert mie.medium_report(particles) == mie.describe(particles)

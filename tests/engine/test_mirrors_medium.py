@@ -227,7 +227,7 @@ def _check_single(link, algorithm, single):
 @pytest.mark.parametrize("algorithm", [2, 3, 4])
 def test_single_scattering_through_a_mirror_against_quadrature(algorithm, single):
     """Black room, mirror floor, K = 1, S = 1: run by the planner from both devices, the image connections
-    of medium points and of the scattering branch shared by the partition of unity (engine/mirrors.py)."""
+    of medium points and of the scattering branch shared by the partition of unity (engine/integrator/mirrors.py)."""
     link = _link(
         mirror_floor_doc(
             0.9,

@@ -1,4 +1,4 @@
-"""Honest error bars for single scattering in forward-peaked smoke (issue 22, item 5; engine/medium_nee.py,
+"""Honest error bars for single scattering in forward-peaked smoke (issue 22, item 5; engine/integrator/medium_nee.py,
 the phase lobe).
 
 Open medium, Tx and Rx 3 m apart facing each other, HG g up to +-0.999, K = 0, S = 1: the single-scattering
@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from benchmarks.peaked_phase import AREA, SIGMA_A, SIGMA_S, D, M, doc, run_seeds
-from owcsim.engine import kernel, medium_nee
-from owcsim.engine import simulate as simulate_module
-from owcsim.engine.scene import build_scene
-from owcsim.engine.simulate import kernel_settings
+from owcsim.engine.integrator import kernel, medium_nee
+from owcsim.engine.run import simulate as simulate_module
+from owcsim.engine.run.simulate import kernel_settings
+from owcsim.engine.scene.scene import build_scene
 from owcsim.schemas import SceneSpec
 from tests.engine.test_medium_next_events import _trace
 from tests.engine.test_replicates import _max_contribution
@@ -122,7 +122,7 @@ def test_the_check_catches_a_planted_error(what, algorithm, paths, monkeypatch):
 
 @pytest.mark.parametrize("algorithm", [5, 3])
 def test_weights_obey_the_bound_whatever_g(algorithm, monkeypatch):
-    """engine/medium_nee.py (the phase lobe): every single-scattering estimate is at most
+    """engine/integrator/medium_nee.py (the phase lobe): every single-scattering estimate is at most
     4 albedo R_tx,max R_rx,max / D^2 at g = 0.999 (the bound without the lobe has p_max ~ 1.6e5 / sr in
     place of R_tx,max = 1 / pi); without the lobe the same run exceeds it."""
     bound = 4 * (SIGMA_S / SIGMA_T) * ((M + 1) / (2 * np.pi)) * AREA / D**2

@@ -1,4 +1,4 @@
-"""Tests for engine.phase: normalization, exact sampling (chi-square), frames, limits, registry."""
+"""Tests for engine.media.phase: normalization, exact sampling (chi-square), frames, limits, registry."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import pytest
 from scipy import integrate, stats
 
 from conftest import SEED, seeded_rng  # noqa: F401
-from owcsim.engine import phase as ph
-from owcsim.engine.sampling import orthonormal_basis
+from owcsim.engine.core.sampling import orthonormal_basis
+from owcsim.engine.media import phase as ph
 from owcsim.schemas import medium as sm
 
 N_SAMPLES = 100_000

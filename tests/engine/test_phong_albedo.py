@@ -2,7 +2,7 @@
 
 `reflectance` rho = rho_d + rho_s is the sum of the parts' weights, not the albedo
 a(th_i) = int f(w_i, w_o) cos th_o dw_o (the fraction of the incident power reflected). With the
-BRDF of engine/bsdf.py (docs/luminaires-surfaces.md),
+BRDF of engine/surfaces/bsdf.py (docs/luminaires-surfaces.md),
 
     f = rho_d / pi + rho_s (n + 1) / (2 pi) cos^n(alpha) / max(cos th_i, cos th_o),
 
@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from owcsim.engine.bsdf import Materials
+from owcsim.engine.surfaces.bsdf import Materials
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "luminaires-surfaces.md"
 #: The docs' example floor: {"type": "phong", "reflectance": 0.3, "diffuse_fraction": 0.6, "exponent": 30}

@@ -1,6 +1,6 @@
 """Photometric files (IES LM-63, EULUMDAT): parsing, symmetry, normalisation and exact sampling.
 
-References are independent of engine/photometry.py: closed forms (cos^m, constant
+References are independent of engine/sources/photometry.py: closed forms (cos^m, constant
 intensity), a plain bilinear interpolation and a fine midpoint quadrature written here,
 and chi-square tests of the sampled directions against probabilities computed that way.
 """
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from owcsim.engine.photometry import PhotometryError, luminaire_frame, parse_ies, parse_ldt
+from owcsim.engine.sources.photometry import PhotometryError, luminaire_frame, parse_ies, parse_ldt
 
 
 # ----------------------------------------------------------------------------- writers (test fixtures)
@@ -355,7 +355,7 @@ def test_gamma_inversion_is_exact_on_hard_cells():
     at 1e-3 rad, 1e-13 at 0.1 rad.)"""
     from scipy import integrate
 
-    from owcsim.engine.photometry import _invert_gamma_cdf
+    from owcsim.engine.sources.photometry import _invert_gamma_cdf
 
     rng = np.random.default_rng(9)
     cases = [

@@ -1,4 +1,4 @@
-"""Quasi-random blocks (engine/qmc.py) and the standard errors over samples (tally.sample_cov).
+"""Quasi-random blocks (engine/core/qmc.py) and the standard errors over samples (tally.sample_cov).
 
 The Sobol points are checked against scipy's; the block statistics against a direct computation from the
 per-path sums; the whole against the first-bounce integral of the box room (Barry 1993), with the
@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from scipy.stats import qmc as scipy_qmc
 
-from owcsim.engine import qmc
-from owcsim.engine.kernel import WorkItem, trace_batch
-from owcsim.engine.scene import build_scene
-from owcsim.engine.simulate import kernel_settings
-from owcsim.engine.tally import Accumulator, BatchBuilder, per_path_s2, sample_cov
+from owcsim.engine.core import qmc
+from owcsim.engine.integrator.kernel import WorkItem, trace_batch
+from owcsim.engine.run.simulate import kernel_settings
+from owcsim.engine.scene.scene import build_scene
+from owcsim.engine.tally.tally import Accumulator, BatchBuilder, per_path_s2, sample_cov
 from owcsim.schemas import SceneSpec
 from tests.scenes import barry_first_bounce, room_doc, within
 

@@ -1,6 +1,6 @@
 """Error bars a user can trust (issue 12): reliability figures of the error bar, and replicate studies.
 
-The unit tests check engine/reliability.py by hand computations; the slow tests run
+The unit tests check engine/tally/reliability.py by hand computations; the slow tests run
 independent replicates (seeds) and compare the spread of their estimates with the
 standard errors they report (benchmarks/replicate_study.py prints the full table).
 """
@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from owcsim.engine import reliability as R
+from owcsim.engine.tally import reliability as R
 from tests.results import simulate_document as simulate
 from tests.results import simulate_two_sided_document as simulate_two_sided
 from tests.scenes import room_doc, spec
@@ -181,7 +181,7 @@ def test_replicates_unbounded_close_devices(algorithm):
 
 def _max_contribution(monkeypatch, run):
     """Largest single connection (power per path per watt) the kernel tallies during `run()`."""
-    from owcsim.engine.tally import BatchBuilder
+    from owcsim.engine.tally.tally import BatchBuilder
 
     seen = []
     real = BatchBuilder.add_step
@@ -196,7 +196,7 @@ def _max_contribution(monkeypatch, run):
 
 
 def test_single_scattering_weights_obey_the_proven_bound(monkeypatch):
-    """engine/medium_nee.py: from both devices, a single-scattering connection is at most
+    """engine/integrator/medium_nee.py: from both devices, a single-scattering connection is at most
     4 albedo p_max max(R_tx,max W_rx, R_rx,max W_tx) / D^2; from one side it is not bounded."""
     D, g, area = 0.5, 0.7, 1e-4
     albedo = 0.2 / 0.25

@@ -1,4 +1,4 @@
-"""Tests for engine.sampling: frames, exact samplers, pdfs and goodness of fit."""
+"""Tests for engine.core.sampling: frames, exact samplers, pdfs and goodness of fit."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from scipy import integrate, stats
 from scipy.stats import chisquare
 
 from conftest import SEED, seeded_rng  # noqa: F401
-from owcsim.engine import sampling as smp
+from owcsim.engine.core import sampling as smp
 
 N_SAMPLES = 100_000
 ALPHA = 0.01
@@ -399,7 +399,7 @@ def test_polar_about_soa_by_hand():
     """Directions about one normal on component rows: about +z they are (sin t cos phi, sin t sin phi, cos t)
     with phi = 2 pi u2 (written out here); about any normal, unit vectors at angle t from it whose azimuths
     in the normal's frame are 2 pi u2."""
-    from owcsim.engine.sampling import orthonormal_basis, polar_about_soa
+    from owcsim.engine.core.sampling import orthonormal_basis, polar_about_soa
 
     rng = np.random.default_rng(3)
     u1, u2 = rng.random((2, 2000))

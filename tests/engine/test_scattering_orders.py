@@ -112,7 +112,7 @@ def test_an_s_the_algorithm_honours_is_accepted(algorithm, S):
 
 
 def test_algorithm_4_s_1_holds_through_the_automatic_settings():
-    """K and the window chosen by the pilot (engine/auto.py): the run and its pilot keep S = 1."""
+    """K and the window chosen by the pilot (engine/run/auto.py): the run and its pilot keep S = 1."""
     res = simulate(
         spec(open_doc(algorithm=4, max_scattering=1, max_reflections=None, t_max_s=None, paths=2048, **COARSE))
     )

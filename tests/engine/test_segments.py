@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from owcsim.engine.segments import EquiangularFrame
+from owcsim.engine.integrator.segments import EquiangularFrame
 
 
 def _geometries(rng, n):

@@ -1,4 +1,4 @@
-"""Spectral scenes (engine/spectra.py): bands traced together, each against its own reference.
+"""Spectral scenes (engine/spectral/spectra.py): bands traced together, each against its own reference.
 
 - flat spectra give the grey result (same paths, ratios exactly 1);
 - a two-band run equals two one-band runs with the same seed (the geometry is shared; no roulette);
@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from owcsim.engine.errors import SceneError
-from owcsim.engine.simulate import simulate as _simulate
+from owcsim.engine.core.errors import SceneError
+from owcsim.engine.run.simulate import simulate as _simulate
 from tests import reference
 from tests.scenes import room_doc, spec
 
@@ -337,7 +337,7 @@ def test_particle_smoke_per_band_equals_grey_runs_at_each_wavelength():
 
 
 def test_job_memory_estimate_counts_the_channel_sums():
-    from owcsim.engine.budget import memory_estimate
+    from owcsim.engine.run.budget import memory_estimate
 
     doc = room_doc()
     doc["receiver_grids"] = [{"origin": [0.5, 0.5, 0.8], "size": [4, 4], "spacing": 0.1, "area": 1e-4}]
@@ -390,7 +390,7 @@ def test_mie_per_band_carries_the_phase_ratio(monkeypatch, algorithm):
     """Mie per band (phase functions differ: g 0.69 at 450 nm, 0.60 at 850 nm): each band of a two-band run agrees
     with a one-band run at that wavelength within 4 combined standard errors, seen by a receiver below the beam
     (light scattered sideways); without the phase ratio p_b / p_c the blue band misses by more than 4."""
-    from owcsim.engine.spectra import SceneSpectra
+    from owcsim.engine.spectral.spectra import SceneSpectra
 
     particles = {
         "geometric_mean_diameter": 1.5e-7,
@@ -430,7 +430,7 @@ def test_algorithm_5_in_smoke_per_band_against_one_band_runs(monkeypatch):
     band agrees within 4 combined standard errors with a one-band run of its smoke (another seed) and with
     algorithm 4's (single and double scattering: the same family as S = 2). Power: the bands differ by > 8
     standard errors, and leaving out sigma_s,b / sigma_s,c (a factor 2 here) misses by more than 4."""
-    from owcsim.engine.spectra import SceneSpectra
+    from owcsim.engine.spectral.spectra import SceneSpectra
 
     medium = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.3, "phase": {"type": "hg", "g": 0.6}}
     bands = {"wavelengths": [450 * NM, 850 * NM], "medium": {"sigma_a": [0.2, 0.05], "sigma_s": [0.6, 0.3]}}
@@ -486,7 +486,7 @@ def test_algorithm_5_in_smoke_per_band_through_reflections(monkeypatch):
     """Algorithm 5 in a bright room (rho 0.8, K = 2) with smoke per band: the attenuated band agrees with its
     one-band run within 4 combined standard errors, the carrier band equals its one-band run with the same seed;
     leaving out T_b / T_c of the flights that reach a surface uncollided misses by more than 4."""
-    from owcsim.engine.spectra import SceneSpectra
+    from owcsim.engine.spectral.spectra import SceneSpectra
 
     smoke = {"type": "homogeneous", "sigma_a": 0.02, "sigma_s": 0.05, "phase": {"type": "hg", "g": 0.6}}
     bands = {"wavelengths": [450 * NM, 850 * NM], "medium": {"sigma_a": [0.2, 0.02], "sigma_s": [0.1, 0.05]}}
@@ -517,7 +517,7 @@ def test_channel_builder_sums_against_a_plain_loop(carried):
     delay sums; and the optical power it returns. Two targets, estimates in random order."""
     from types import SimpleNamespace
 
-    from owcsim.engine.spectra import N_GROUPS, ChannelBuilder
+    from owcsim.engine.spectral.spectra import N_GROUPS, ChannelBuilder
 
     rng = np.random.default_rng(5)
     B, T, m = 3, 2, 500

@@ -13,8 +13,8 @@ import copy
 import numpy as np
 
 from owcsim.api import simulate
-from owcsim.engine import auto
-from owcsim.engine.scene import build_scene
+from owcsim.engine.run import auto
+from owcsim.engine.scene.scene import build_scene
 from owcsim.schemas import SceneSpec
 from tests.scenes import within
 

@@ -1,4 +1,4 @@
-"""The accuracy rule (engine/reliability.py): no stop before a planted rare spike is seen, a prompt stop on
+"""The accuracy rule (engine/tally/reliability.py): no stop before a planted rare spike is seen, a prompt stop on
 light tails, and `simulation.target_scope` (what the target holds on: channels, links or both)."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from owcsim.engine import reliability as R
-from owcsim.engine.simulate import simulate
+from owcsim.engine.run.simulate import simulate
+from owcsim.engine.tally import reliability as R
 from owcsim.schemas import SceneSpec
 from tests.scenes import room_doc
 
@@ -18,7 +18,7 @@ N_GROUPS = 16
 
 def first_stop(x: np.ndarray, target: float, new: bool = True, check: int = 16) -> tuple[int, float]:
     """(samples at the stop, estimate) of one run whose independent samples are x, checked every `check`
-    samples (groups: sample index mod 16, as engine/tally.py fills them); (len(x), mean) if it never stops."""
+    samples (groups: sample index mod 16, as engine/tally/tally.py fills them); (len(x), mean) if it never stops."""
     cs, cs2, cmax = np.cumsum(x), np.cumsum(x * x), np.maximum.accumulate(x)
     for n in range(check, len(x) + 1, check):
         mean = cs[n - 1] / n
@@ -91,7 +91,7 @@ def test_the_floor_counts_independent_samples():
 def test_sample_shift_from_the_tallies(monkeypatch):
     """A batch of 16 blocks has one block per path group, so its group sums are the samples: the tally's
     largest sample (BatchTally.h0_sample_max) and the job's `sample_shift` checked against them."""
-    from owcsim.engine.tally import Accumulator
+    from owcsim.engine.tally.tally import Accumulator
 
     seen: dict[int, tuple] = {}
     real = Accumulator.add

@@ -1,4 +1,4 @@
-"""Tabulated phase functions (engine.phase.Tabulated, schemas TabulatedPhaseSpec).
+"""Tabulated phase functions (engine.media.phase.Tabulated, schemas TabulatedPhaseSpec).
 
 References written here: the trapezoid rule and the partial-segment integral of a
 piecewise-linear function (numpy), scipy quadrature of np.interp, the closed-form HG.
@@ -15,7 +15,7 @@ import pytest
 from pydantic import ValidationError
 from scipy import integrate, stats
 
-from owcsim.engine import phase as ph
+from owcsim.engine.media import phase as ph
 from owcsim.schemas.medium import TabulatedPhaseSpec
 from tests.results import simulate_document as simulate
 from tests.scenes import spec

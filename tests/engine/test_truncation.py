@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 
-from owcsim.engine.auto import _delay_shift, _tail_moments, tail_ratio
+from owcsim.engine.run.auto import _delay_shift, _tail_moments, tail_ratio
 from tests.results import simulate_document as simulate
 from tests.scenes import room_doc, spec
 

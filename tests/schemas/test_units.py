@@ -111,7 +111,7 @@ def test_the_warnings_reach_the_result_and_the_command_line(tmp_path, capsys):
 
 def test_a_normal_scene_gets_no_unit_warning(tmp_path, capsys):
     result = simulate(barry_doc(paths=2000, max_reflections=1))
-    # K = 1 leaves out a large share of H0, which the result says (engine/result.py); no unit warning
+    # K = 1 leaves out a large share of H0, which the result says (engine/results/result.py); no unit warning
     assert [w for w in result.warnings if "in the orders above K = 1" not in w] == []
     assert main(["validate", str(EXAMPLES / "barry_config_a.json")]) == 0
     assert "warning" not in capsys.readouterr().err

@@ -134,13 +134,13 @@ def test_inline_and_base64_meshes_are_accepted(api):
 
 
 def test_engine_refusal_is_a_422_with_its_message(api, monkeypatch):
-    import owcsim.engine.simulate
-    from owcsim.engine.errors import SceneError
+    import owcsim.engine.run.simulate
+    from owcsim.engine.core.errors import SceneError
 
     def refuse(*a, **k):
         raise SceneError("algorithm 4 is not available in this version; use algorithm 1")
 
-    monkeypatch.setattr(owcsim.engine.simulate, "simulate", refuse)
+    monkeypatch.setattr(owcsim.engine.run.simulate, "simulate", refuse)
     # the pre-flight runs in its own process: here, in this one, so that the patch applies
     from owcsim.server import preflight as pf
 

@@ -67,7 +67,7 @@ def test_1_instancing_bomb_is_refused_from_the_file_structure_at_once(tmp_path):
 
 
 def test_1_triangles_counted_from_structure_equal_the_flattened_count():
-    from owcsim.engine.geometry import _load_mesh
+    from owcsim.engine.scene.geometry import _load_mesh
     from owcsim.schemas.geometry import MeshSpec
 
     glb, flattened = _instancing_glb(7, 1)
@@ -141,7 +141,7 @@ def test_2_csv_ids_that_look_like_formulas_are_escaped():
 
 
 def test_4_a_job_over_the_per_job_memory_limit_is_refused_at_submission(tmp_path):
-    from owcsim.engine.budget import job_memory_bytes
+    from owcsim.engine.run.budget import job_memory_bytes
     from owcsim.schemas import SceneSpec
 
     big = _grid_doc(100, t_max_s=1e-6, batch_size=16384)  # 10 000 links x 1 000 bins
@@ -155,8 +155,8 @@ def test_4_a_job_over_the_per_job_memory_limit_is_refused_at_submission(tmp_path
 
 
 def test_4_estimate_terms_follow_the_tally_shapes():
-    from owcsim.engine.budget import memory_estimate
-    from owcsim.engine.tally import N_GROUPS
+    from owcsim.engine.run.budget import memory_estimate
+    from owcsim.engine.tally.tally import N_GROUPS
     from owcsim.schemas import SceneSpec
 
     small = memory_estimate(SceneSpec.model_validate(_grid_doc(10, t_max_s=1e-7)))
@@ -209,7 +209,7 @@ def test_4_a_worker_killed_in_native_code_names_its_budget():
 
 
 def test_4_jobs_are_admitted_against_the_server_memory_budget(tmp_path):
-    from owcsim.engine.budget import job_memory_bytes
+    from owcsim.engine.run.budget import job_memory_bytes
     from owcsim.schemas import SceneSpec
 
     docs = [quick_doc(paths=60_000, seed=i) for i in range(2)]

@@ -1,0 +1,1 @@
+"""Participating media (homogeneous, grid, particles/Mie) and their phase functions."""

@@ -1,0 +1,1 @@
+"""Result documents and link figures built from the tallies."""

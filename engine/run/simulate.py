@@ -1,0 +1,551 @@
+"""Run a job: build the scene once, choose the automatic settings, plan the batches, execute, merge, stop.
+
+`simulate(spec)` is the engine's entry point and its job runner: it builds the engine
+`Scene` once (or takes a built one), resolves "auto" settings on that scene (engine/run/auto.py
+says what to run; a truncation pilot, when one is needed, runs here on a receiver subset of
+the same scene), then runs the job and returns the typed result (schemas.results
+.SimulationResultPublic). The plan is a function of the scene document only (batches, their
+sizes and their random streams), so the same seed gives bit-identical results with any
+number of workers. In accuracy mode batches are issued in rounds (one batch per source) and
+the run stops after the first round at which every link's relative standard error of H0 is
+at or below the target, or when the time budget is spent (the result says which).
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from owcsim.engine.core import qmc
+from owcsim.engine.core.constants import SPEED_OF_LIGHT
+from owcsim.engine.integrator.kernel import KernelSettings, WorkItem
+from owcsim.engine.integrator.medium_nee import phase_lobe_wanted, two_sided_settings
+from owcsim.engine.results.result import build_result
+from owcsim.engine.run import auto
+from owcsim.engine.run.execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
+from owcsim.engine.scene.los import line_of_sight, los_geometry
+from owcsim.engine.scene.scene import Scene, build_scene
+from owcsim.engine.spectral import spectra
+from owcsim.engine.tally import reliability
+from owcsim.engine.tally.estimates import may_stop, reported_rel_stderr
+from owcsim.engine.tally.tally import CIR_GROUPS_MAX, N_GROUPS, Accumulator, TallyPlan, TimeBins
+from owcsim.schemas import SceneSpec, SimulationSpec
+from owcsim.schemas.algorithms import Direction, TwoSided, algorithm
+from owcsim.schemas.results import DirectionChoicePublic, ModeledPublic, SimulationResultPublic, StopReason
+
+#: Heuristic of the auto direction: with this many times more receivers than
+#: transmitters (or the reverse), one side amortizes its paths over so many links
+#: that no pilot is run.
+AMORTIZATION_RATIO = 8
+#: Least time between two evaluations of every link's error for progress reports [s].
+PROGRESS_INTERVAL_S = 0.25
+#: Accuracy mode checks the target only once each link has this many paths.
+MIN_PATHS_FOR_STOP = 2048
+#: Accuracy runs double their batches every this many rounds, up to the job's batch_size: small first
+#: batches check the target early, later ones pay the per-step fixed cost over more paths (a 4 096-path batch
+#: spends ~half its time in it: benchmarks/path_cost.py). A round is then at most ~1/8 of the paths so far.
+GROWTH_ROUNDS = 4
+#: Per-link direction codes (Direction.code): paths from the transmitter, from the receiver, both, or none.
+FORWARD, BACKWARD, BOTH, SKIP = (d.code for d in Direction)
+#: Most (path, target) pairs, times the estimates per segment, that one batch holds in its dense per-path
+#: tallies and its step's estimate lists (~150 B each): batches shrink as receivers grow, so a batch of a
+#: 100 000-point map needs about as much memory as one of a single link.
+PATH_TARGET_BUDGET = 1 << 20
+#: Most next-event estimates one kernel step of a batch may hold (points along segments multiply them).
+ESTIMATE_BUDGET = 1 << 22
+
+
+@dataclass(frozen=True, slots=True)
+class Progress:
+    """How far a run is, after its latest batch (the server stores it as schemas.jobs.JobProgress)."""
+
+    fraction: float  # estimated fraction done, 0..1
+    paths: int  # paths traced so far by the busiest link
+    batches: int  # batches merged so far
+    dc_gain_rel_stderr: float | None  # current worst relative standard error of H0 (None: not known yet)
+    elapsed_s: float  # since the job started [s]
+
+
+ProgressFn = Callable[[Progress], None]
+
+
+@dataclass
+class RunInfo:
+    stop_reason: StopReason = StopReason.PATHS
+    wall_time_s: float = 0.0
+    workers: int = 1
+    batches: int = 0
+    #: how the directions were chosen (the result's run.direction_choice; a dict is validated into it)
+    pilot: DirectionChoicePublic | dict = field(default_factory=lambda: DirectionChoicePublic(rule=""))
+
+
+def tally_plan(spec: SceneSpec, scene: Scene) -> TallyPlan:
+    """What the job tallies (schemas/outputs.py): CIR and order split per receiver, group weights."""
+    sim = spec.simulation
+    cir, orders = spec.outputs.per_receiver(len(spec.receivers), spec.grid_receiver_count())
+    cir, orders = np.asarray(cir, bool), np.asarray(orders, bool)
+
+    def rank(flags: np.ndarray) -> np.ndarray:
+        return np.where(flags, np.cumsum(flags) - 1, -1).astype(np.int64)
+
+    n_cir = len(scene.transmitters) * int(cir.sum())
+    # a run that may be one batch per source (paths <= batch_size, or an accuracy run that stops after its first
+    # round) bins its first batches per path group too: per-bin errors without a second batch (tally.py)
+    one_batch = sim.n_paths is None or sim.n_paths <= sim.batch_size
+    return TallyPlan(
+        bins=TimeBins(sim.t_min_s, sim.time_bin_s, sim.n_bins),
+        n_orders=sim.max_reflections + 1,
+        n_scatter=sim.scattering_orders + 1,
+        n_rx=len(scene.receivers),
+        cir_rank=rank(cir),
+        order_rank=rank(orders),
+        group_weights=group_weights(spec, scene),
+        split_cir=spec.outputs.cir_by_order is not False,
+        first_batch_groups=one_batch and 0 < N_GROUPS * n_cir * sim.n_bins <= CIR_GROUPS_MAX,
+    )
+
+
+def group_weights(spec: SceneSpec, scene: Scene) -> np.ndarray:
+    """(G, n_tx): weight P_i / sum_group P of each member transmitter in its group's channel."""
+    ids = {t: i for i, t in enumerate(scene.transmitters.ids)}
+    w = np.zeros((len(spec.transmitter_groups), len(scene.transmitters)))
+    for g, group in enumerate(spec.transmitter_groups):
+        members = [ids[t] for t in group.transmitters]
+        power = scene.transmitters.power[members]
+        w[g, members] = power / power.sum()
+    return w
+
+
+def two_sided(spec: SceneSpec, scene: Scene) -> bool:
+    """True when every link runs from both devices under the partition of unity of medium_nee.py: in a
+    medium, algorithms 2-4 always, algorithm 5 unless a direction is requested (bounded weights near point
+    devices); the registry's `two_sided` says which (schemas/algorithms.py)."""
+    rule = algorithm(spec.simulation.algorithm).two_sided
+    return scene.medium is not None and (
+        rule is TwoSided.ALWAYS or (rule is TwoSided.AUTO_DIRECTION and spec.simulation.direction == "auto")
+    )
+
+
+def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = None) -> KernelSettings:
+    """The kernel configuration of the job's algorithm (physics.md section 4; its flags from the registry,
+    schemas/algorithms.py); `both_devices` (default: the planner's rule, `two_sided`) gives the settings of
+    links run from both devices (medium_nee.py)."""
+    sim = spec.simulation
+    alg = algorithm(sim.algorithm)
+    step = sim.segment_time_step_s if sim.segment_time_step_s is not None else sim.time_bin_s
+    settings = KernelSettings(
+        max_reflections=sim.max_reflections,
+        russian_roulette=sim.russian_roulette,
+        rr_start_depth=sim.rr_start_depth,
+        tally=tally_plan(spec, scene),
+        max_scattering=sim.scattering_orders,
+        strata_length=step * SPEED_OF_LIGHT,
+        max_strata=sim.max_strata,
+        equiangular_points=sim.equiangular_points,
+        tally_channels=1 + (scene.spectra.n_channels if scene.spectra is not None else 0),
+        qmc_block=qmc.job_block(sim.quasi_random, sim.n_paths),
+        **alg.kernel,
+    )
+    both = two_sided(spec, scene) if both_devices is None else both_devices
+    if both:
+        settings = two_sided_settings(settings, alg.number, scene.medium is not None)
+    # the phase lobe (medium_nee): algorithm 5 from either side or both, algorithms 2-4 from both
+    lobe = settings.free_flight or (settings.mis and settings.segment_scatter)
+    if lobe and scene.medium is not None and scene.spectra is None and phase_lobe_wanted(scene.phase):
+        settings = replace(settings, phase_lobe=True)  # a peaked phase function
+    return settings
+
+
+@contextmanager
+def _executor(executor: Executor | None, workers: int) -> Iterator[Executor]:
+    """The given executor (left open: a long-lived pool serves many jobs), or one for this job only."""
+    if executor is not None:
+        yield executor
+        return
+    own: Executor = SerialExecutor() if workers <= 1 else ProcessExecutor(workers)
+    try:
+        yield own
+    finally:
+        own.close()
+
+
+def simulate(
+    spec: SceneSpec,
+    *,
+    base_dir: str | Path | None = None,
+    workers: int = 1,
+    progress: ProgressFn | None = None,
+    should_stop: Callable[[], bool] | None = None,
+    scene: Scene | None = None,
+    executor: Executor | None = None,
+) -> SimulationResultPublic:
+    """Simulate the scene document; return its typed result (schemas.results.SimulationResultPublic).
+
+    The scene is built once (`scene`: one already built from `spec`, e.g. by a pre-flight) and every
+    step of the job uses it: the automatic settings, their pilot (on a receiver subset of the same
+    scene) and the run. `workers` > 1 starts a process pool for this call; pass a long-lived
+    `executor` instead to reuse warm workers across jobs (it is not closed here). `progress` gets a
+    `Progress` after batches; `should_stop` is asked after every batch of the run (True stops it:
+    stop reason "cancelled").
+    """
+    t_start = time.perf_counter()
+    scene = scene if scene is not None else build_scene(spec, base_dir)
+    with _executor(executor, workers) as ex:
+        resolved, scene, modeled = _resolve(spec, scene, ex, base_dir)
+        return _run_job(resolved, scene, ex, base_dir, progress, should_stop, t_start, original=spec, modeled=modeled)
+
+
+def _resolve(
+    spec: SceneSpec, scene: Scene, executor: Executor, base_dir: str | Path | None
+) -> tuple[SceneSpec, Scene, ModeledPublic | None]:
+    """Explicit settings for the "auto" ones (engine/run/auto.py), on the built scene: (spec, scene, modeled)."""
+    if spec.simulation.is_resolved:
+        return spec, scene, None
+    step = auto.plan(spec, scene)
+    if step.pilot is not None:  # the truncation pilot: a short run of K, S, window up to their caps
+        pilot = _run_job(step.pilot.spec, step.pilot.scene, executor, base_dir, None, None, time.perf_counter())
+        step = auto.finish(step, pilot)
+    return step.spec, step.scene, step.modeled
+
+
+def _run_job(
+    spec: SceneSpec,
+    scene: Scene,
+    executor: Executor,
+    base_dir: str | Path | None,
+    progress: ProgressFn | None,
+    should_stop: Callable[[], bool] | None,
+    t_start: float,
+    original: SceneSpec | None = None,
+    modeled: ModeledPublic | None = None,
+) -> SimulationResultPublic:
+    """Run a resolved job on its built scene."""
+    settings = kernel_settings(spec, scene)
+    geometry = los_geometry(scene)
+    los_gain, los_delay = line_of_sight(scene, geometry)
+    seen = los_gain.reshape(len(scene.transmitters), len(scene.receivers)).any(axis=0)
+    masked = np.flatnonzero(scene.masked != "")
+    blocked = auto.unreachable_receivers(scene, seen | (scene.masked != ""))  # a direct view proves reachability
+    info = RunInfo(workers=executor.workers)
+    job = (
+        JobRef(scene, "", "", None)
+        if isinstance(executor, SerialExecutor)
+        else job_ref(scene, str(base_dir) if base_dir is not None else None)
+    )
+    directions = _choose_directions(scene, spec, settings, executor, job, los_gain, info)
+    rx_of_link = np.arange(scene.n_links) % len(scene.receivers)
+    directions[np.isin(rx_of_link, np.concatenate([blocked, masked]).astype(np.int64))] = SKIP
+    if exact_los_only(scene, settings):
+        directions[:] = SKIP
+        info.stop_reason = StopReason.EXACT
+        info.pilot = DirectionChoicePublic(
+            rule="max_reflections = 0 without scattering: line of sight only, in closed form"
+        )
+    accs = _run(scene, spec, settings, executor, job, directions, los_gain, info, progress, should_stop, t_start)
+    info.wall_time_s = time.perf_counter() - t_start
+    return build_result(
+        spec,
+        scene,
+        accs,
+        settings,
+        los_gain,
+        los_delay,
+        directions,
+        info,
+        original=original,
+        modeled=modeled,
+        unreachable=blocked,
+        geometry=geometry,
+    )
+
+
+def exact_los_only(scene: Scene, settings: KernelSettings) -> bool:
+    """True when every path the job asks for is a line of sight (computed exactly): no Monte Carlo at all."""
+    scatters = scene.medium is not None and (settings.free_flight or settings.segment_scatter)
+    return settings.max_reflections == 0 and not scatters
+
+
+def batch_size(sim: SimulationSpec, settings: KernelSettings, n_targets: int) -> int:
+    """Paths per batch: the job's batch_size, capped so that paths x targets stay under PATH_TARGET_BUDGET
+    (the dense per-path tallies) and paths x targets x estimates per segment under ESTIMATE_BUDGET (one
+    step's next-event estimates, ~60 B each)."""
+    per_segment = 1
+    if settings.segment_scatter:
+        per_segment += settings.max_strata + settings.equiangular_points
+    if settings.free_flight:
+        per_segment += settings.equiangular_points
+    n_targets = max(1, n_targets)
+    n_targets *= settings.tally_channels  # spectral scenes tally 1 + V channels per target (engine/spectral/spectra.py)
+    size = max(1, min(sim.batch_size, PATH_TARGET_BUDGET // n_targets, ESTIMATE_BUDGET // (n_targets * per_segment)))
+    return qmc.whole_blocks(size, settings.qmc_block)
+
+
+#: A run of batches: (direction, source device, target devices).
+Run = tuple[Direction, int, tuple[int, ...]]
+
+
+def _sources(scene: Scene, directions: np.ndarray) -> list[Run]:
+    """(direction, source, targets) runs that cover every link in its chosen direction(s)."""
+    n_rx = len(scene.receivers)
+    codes = directions.reshape(len(scene.transmitters), n_rx)
+    fwd, bwd = (codes == FORWARD) | (codes == BOTH), (codes == BACKWARD) | (codes == BOTH)
+    runs = [(Direction.FORWARD, i, tuple(np.flatnonzero(fwd[i]).tolist())) for i in range(fwd.shape[0]) if fwd[i].any()]
+    runs += [(Direction.BACKWARD, j, tuple(np.flatnonzero(bwd[:, j]).tolist())) for j in range(n_rx) if bwd[:, j].any()]
+    return runs
+
+
+#: The random-stream phase of WorkItem.rng: the main run's batches and the direction pilot's are independent.
+MAIN_PHASE, PILOT_PHASE = 0, 1
+
+
+def _items(
+    runs: list[Run], sim: SimulationSpec, settings: KernelSettings, phase: int, n_paths: int | None
+) -> Iterator[WorkItem]:
+    """Batches in rounds (one per run per round); endless when n_paths is None.
+
+    Every run of a direction has the same batch size (capped by its largest target count), so the
+    plan, and with it the random streams, depends on the scene document only."""
+    sizes = {
+        d: batch_size(sim, settings, max((len(t) for dd, _, t in runs if dd == d), default=1))
+        for d in (Direction.FORWARD, Direction.BACKWARD)
+    }
+    bs = min(sizes[d] for d in {r[0] for r in runs}) if runs else sim.batch_size
+    if n_paths is None:  # accuracy mode: a round of many sources checks the target sooner: first batches of a
+        # quarter (or 1 / sources) of batch_size, growing to the largest batch the memory caps allow
+        grown = bs
+        bs = qmc.whole_blocks(min(bs, max(MIN_PATHS_FOR_STOP, sim.batch_size // max(len(runs), 4))), settings.qmc_block)
+    rounds = itertools.count() if n_paths is None else range(-(-n_paths // bs))
+    for b in rounds:
+        size = bs if n_paths is None else min(bs, n_paths - b * bs)
+        if n_paths is None:  # accuracy mode: batches double every GROWTH_ROUNDS rounds up to the memory cap
+            size = min(grown, bs << min(b // GROWTH_ROUNDS, 16))
+        for direction, source, targets in runs:
+            yield WorkItem(direction, source, targets, b, size, sim.seed, phase)
+
+
+def _new_accumulators(scene: Scene, settings: KernelSettings) -> dict[Direction, Accumulator]:
+    accs = {
+        d: Accumulator(scene.n_links, settings.tally, backward=d is Direction.BACKWARD)
+        for d in (Direction.FORWARD, Direction.BACKWARD)
+    }
+    spectra.new_accumulators(accs, scene, settings)  # spectral scenes: per-band channel tallies
+    return accs
+
+
+def _merge(
+    accs: dict[Direction, Accumulator],
+    executor: Executor,
+    job: JobRef,
+    items: Iterable[WorkItem],
+    settings: KernelSettings,
+    on_batch: Callable[[WorkItem], bool] | None = None,
+) -> None:
+    """Feed items to the executor and merge their tallies in order; `on_batch` may stop the run."""
+    pulled: deque[WorkItem] = deque()
+
+    def recording() -> Iterator[WorkItem]:
+        for it in items:
+            pulled.append(it)
+            yield it
+
+    results = executor.map(job, recording(), settings)
+    try:
+        for tally in results:
+            item = pulled.popleft()
+            accs[item.direction].add(tally, item.batch, item.source)
+            spectra.add_batch(accs[item.direction], tally, item)
+            if on_batch is not None and on_batch(item):
+                break
+    finally:
+        results.close()
+
+
+def _choose_directions(
+    scene: Scene,
+    spec: SceneSpec,
+    settings: KernelSettings,
+    executor: Executor,
+    job: JobRef,
+    los_gain: np.ndarray,
+    info: RunInfo,
+) -> np.ndarray:
+    """Per link: the Direction.code its paths run in (SKIP is set later for links not simulated)."""
+    sim = spec.simulation
+    alg = algorithm(sim.algorithm)
+    n_tx, n_rx = len(scene.transmitters), len(scene.receivers)
+    if two_sided(spec, scene):
+        info.pilot = DirectionChoicePublic(
+            rule=f"algorithm {sim.algorithm} in a medium: every link from both devices, "
+            "each path weighted by its share (medium_nee.py: bounded weights near "
+            "point devices)"
+        )
+        return np.full(scene.n_links, BOTH)
+    if alg.direction is not None:
+        info.pilot = DirectionChoicePublic(rule=alg.direction_reason)
+        return np.full(scene.n_links, alg.direction.code)
+    if sim.direction != "auto":
+        info.pilot = DirectionChoicePublic(rule=f"requested: {sim.direction}")
+        return np.full(scene.n_links, Direction(sim.direction).code)
+    if sim.max_reflections == 0:
+        info.pilot = DirectionChoicePublic(rule="max_reflections = 0: line of sight only, computed exactly")
+        return np.full(scene.n_links, FORWARD)
+    if n_rx >= AMORTIZATION_RATIO * n_tx:
+        # A map: forward paths serve every receiver at once, but their next-event estimates from wall points
+        # a few cm from a receiver are heavy-tailed, so the map's worst points converge slowly; paths from each
+        # receiver to the few luminaires do not (benchmarks/map_scale.py measures both).
+        info.pilot = DirectionChoicePublic(
+            rule=f"{n_tx} transmitters x {n_rx} receivers (a map): paths from each "
+            "receiver to the few transmitters; no pilot"
+        )
+        return np.full(scene.n_links, BACKWARD)
+    if n_tx >= AMORTIZATION_RATIO * n_rx:
+        info.pilot = DirectionChoicePublic(
+            rule=f"{n_tx} transmitters x {n_rx} receivers: the receiver side "
+            "amortizes its paths over the transmitters, no pilot"
+        )
+        return np.full(scene.n_links, BACKWARD)
+    # Pilot: a short run each way; efficiency = 1 / (relative variance per path x rays per path),
+    # rays shared by the links a source serves. Ray counts (not times) keep the choice deterministic.
+    # Its paths are not merged into the result: the choice depends on their sample variance (and mean), so
+    # the chosen side's pilot paths are a selected sample, not an unbiased one (CHANGELOG, pilot reuse).
+    cost_eff, sound = [], []
+    for direction in (Direction.FORWARD, Direction.BACKWARD):
+        runs = _sources(scene, np.full(scene.n_links, direction.code))
+        accs = _new_accumulators(scene, settings)
+        _merge(accs, executor, job, _items(runs, sim, settings, PILOT_PHASE, sim.pilot_paths), settings)
+        acc = accs[direction]
+        n = acc.n_paths.astype(float)
+        mean = acc.s1[:, 0] / n
+        var = np.maximum(acc.s2[:, 0, 0] / n - mean**2, 0.0)
+        h0 = mean + los_gain
+        rays_per_path = (acc.rays_intersect + acc.rays_occluded) / max(n.sum(), 1)
+        links_per_source = n_rx if direction is Direction.FORWARD else n_tx
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel_var = np.where(h0 > 0, var / h0**2, np.inf)
+            cost_eff.append((rel_var * rays_per_path / links_per_source, np.sqrt(rel_var), rays_per_path))
+        # Its variance is only a measure when its paths reached the receiver's surroundings: a side whose
+        # sampled part (LOS left out) is 0 or held by a few path groups has not seen its own tail
+        sampled = reliability.from_accumulators([acc])
+        sound.append(sampled.trusted() & (sampled.estimate > 0))
+    by_variance = np.where(cost_eff[1][0] < cost_eff[0][0], BACKWARD, FORWARD)
+    choice = np.where(sound[1] & ~sound[0], BACKWARD, np.where(sound[0] & ~sound[1], FORWARD, by_variance))
+    overruled = int((choice != by_variance).sum())
+    info.pilot = DirectionChoicePublic(
+        rule="pilot: lower relative variance x rays per path, per link"
+        + (
+            f"; {overruled} link(s) from the only side whose pilot saw a sampled part not held by a few path groups"
+            if overruled
+            else ""
+        ),
+        paths_per_direction=sim.pilot_paths,
+        rel_std_per_path_forward=_finite_list(cost_eff[0][1]),
+        rel_std_per_path_backward=_finite_list(cost_eff[1][1]),
+        rays_per_path_forward=float(cost_eff[0][2]),
+        rays_per_path_backward=float(cost_eff[1][2]),
+    )
+    return choice
+
+
+def _finite_list(x: np.ndarray) -> list[float | None]:
+    return [float(v) if np.isfinite(v) else None for v in x]
+
+
+def _run(
+    scene: Scene,
+    spec: SceneSpec,
+    settings: KernelSettings,
+    executor: Executor,
+    job: JobRef,
+    directions: np.ndarray,
+    los_gain: np.ndarray,
+    info: RunInfo,
+    progress: ProgressFn | None,
+    should_stop: Callable[[], bool] | None,
+    t_start: float,
+) -> dict[Direction, Accumulator]:
+    """Run the batches of every link in its direction(s), merging as they come; stop by the job's rule."""
+    sim = spec.simulation
+    runs = _sources(scene, directions)
+    accs = _new_accumulators(scene, settings)
+    n_paths = sim.n_paths
+    total_batches = None
+    if n_paths is not None and runs:
+        first = next(_items(runs, sim, settings, MAIN_PHASE, n_paths))
+        total_batches = len(runs) * -(-n_paths // first.n_paths)
+    state: dict[str, float] = {"done": 0, "worst": float("inf"), "rel_at": -PROGRESS_INTERVAL_S}
+
+    def on_batch(item: WorkItem) -> bool:
+        state["done"] += 1
+        info.batches = int(state["done"])
+        end_of_round = state["done"] % max(len(runs), 1) == 0
+        elapsed = time.perf_counter() - t_start
+        last = total_batches is not None and state["done"] == total_batches
+        # The error of every link costs O(links): computed where the stopping rule needs it (end of a round in
+        # accuracy mode) and for progress at most every PROGRESS_INTERVAL_S, not after each of a map's batches.
+        if (total_batches is None and end_of_round) or (
+            progress is not None and (last or elapsed - state["rel_at"] >= PROGRESS_INTERVAL_S)
+        ):
+            rel = reported_rel_stderr(accs, los_gain, scene, settings.tally, sim.target_scope)
+            state["worst"] = float(np.max(rel)) if len(rel) else 0.0
+            state["rel_at"] = elapsed
+        worst = state["worst"]
+        if total_batches is not None:
+            frac = state["done"] / total_batches
+        else:
+            target = sim.target_rel_error
+            frac = min(
+                1.0,
+                max(
+                    elapsed / sim.time_budget_s,
+                    0.0 if not np.isfinite(worst) else (target / worst) ** 2 if worst > 0 else 1.0,
+                ),
+            )
+        if progress is not None:
+            progress(
+                Progress(
+                    fraction=frac,
+                    paths=int(max(a.n_paths.max() for a in accs.values())),
+                    batches=int(state["done"]),
+                    dc_gain_rel_stderr=worst if np.isfinite(worst) else None,
+                    elapsed_s=elapsed,
+                )
+            )
+        if should_stop is not None and should_stop():
+            info.stop_reason = StopReason.CANCELLED
+            return True
+        if total_batches is None and end_of_round:
+            served = np.sum([a.n_paths for a in accs.values()], axis=0)[directions != SKIP]
+            if (
+                (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP
+                and worst <= sim.target_rel_error
+                and may_stop(
+                    accs,
+                    los_gain,
+                    scene,
+                    settings.tally,
+                    sim.target_rel_error,
+                    directions != SKIP,
+                    sim.target_scope,
+                    heavy_tails=scene.medium is not None,  # reliability.py: optional stopping in smoke
+                )
+            ):
+                info.stop_reason = StopReason.TARGET_REACHED
+                return True
+            if elapsed >= sim.time_budget_s:
+                info.stop_reason = StopReason.TIME_BUDGET
+                return True
+        return False
+
+    if not runs:  # every link exact or skipped (unreachable receivers): nothing to run, not an endless loop
+        if info.stop_reason is not StopReason.EXACT:
+            info.stop_reason = StopReason.NOTHING_TO_SIMULATE
+        return accs
+    _merge(accs, executor, job, _items(runs, sim, settings, MAIN_PHASE, n_paths), settings, on_batch)
+    return accs

@@ -1,0 +1,1 @@
+"""The built scene: geometry, regions, intersection and line of sight."""

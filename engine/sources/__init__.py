@@ -1,0 +1,1 @@
+"""Transmitters and receivers: emission patterns (Lambertian, IES/LDT), fields of view, filters."""

@@ -1,0 +1,1 @@
+"""Spectral bands: the band model, band-averaged properties and the shipped tables."""

@@ -1,0 +1,1 @@
+"""Surface scattering models (Lambert, Phong, mirror) behind one interface."""

@@ -1,0 +1,1 @@
+"""Tallies of path contributions and the statistics of their estimates."""
