@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pydantic import PrivateAttr
@@ -14,6 +15,11 @@ from owcsim.formats.plots import plot_cir
 from owcsim.formats.result_files import LINK_COLUMNS, write_outputs
 from owcsim.formats.result_tables import cir_arrays
 from owcsim.schemas.results import LinkPublic, SimulationResultPublic
+
+if TYPE_CHECKING:  # pragma: no cover
+    import pandas
+    import xarray
+    from matplotlib.figure import Figure
 
 
 class Result(SimulationResultPublic):
@@ -51,7 +57,7 @@ class Result(SimulationResultPublic):
         """The receiver grids as `owcsim.formats.maps.GridMap`s (2-D arrays with coordinates, units, masks)."""
         return maps_of_result(self)[0]
 
-    def to_xarray(self, grid: str | None = None):
+    def to_xarray(self, grid: str | None = None) -> xarray.Dataset:
         """One grid's maps (all channels) as an xarray Dataset (dims channel, i, j); the first grid by default."""
         maps = self.grid_maps()
         if not maps:
@@ -62,7 +68,7 @@ class Result(SimulationResultPublic):
             raise KeyError(f"no grid {name!r}; the grids are {sorted({m.grid for m in maps})}")
         return to_xarray(chosen)
 
-    def to_dataframe(self):
+    def to_dataframe(self) -> pandas.DataFrame:
         """The links' scalar figures as a pandas DataFrame (one row per link)."""
         import pandas as pd
 
@@ -77,7 +83,7 @@ class Result(SimulationResultPublic):
         by_reflection_order (n, K + 1, n_bins)."""
         return cir_arrays(self)
 
-    def plot(self, path: str | Path | None = None, link: int | None = None):
+    def plot(self, path: str | Path | None = None, link: int | None = None) -> Figure:
         """h(t) per reflection order and total (formats.plots.plot_cir); saved to `path` if given."""
         return plot_cir(self, path, link)
 
