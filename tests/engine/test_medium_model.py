@@ -6,10 +6,13 @@ arithmetic: sigma_s / (sigma_a + sigma_s), per cell for a grid, Mie coefficients
 the result's `modeled.medium` entry. A spectral scene keeps the model of its grey medium.
 """
 
+import math
+
 import pytest
 
 from owcsim.engine.media import mie
 from owcsim.engine.media.model import MediumKind
+from owcsim.engine.media.phase import HenyeyGreenstein, Tabulated
 from owcsim.engine.scene.scene import build_scene
 from tests.scenes import room_doc, spec
 
@@ -59,3 +62,13 @@ def test_a_spectral_scene_keeps_the_model_of_its_grey_medium():
     scene = build_scene(spec(doc))
     assert scene.medium.sigma_s == 0.1  # the carrier band
     assert scene.medium_model.max_albedo == 0.2 / (0.05 + 0.2)
+
+
+def test_the_report_of_a_homogeneous_medium_names_its_phase_function():
+    """The result's `modeled.medium` entry (was mie.medium_report): the kind and the phase function run."""
+    scene = build_scene(spec(room_doc(medium={"type": "homogeneous", "sigma_a": 0.1, "sigma_s": 0.1})))
+    model = scene.medium_model
+    assert model.report(HenyeyGreenstein(0.3)) == {"model": "homogeneous", "phase": {"type": "hg", "mean_cosine": 0.3}}
+    assert model.report(None) == {"model": "homogeneous", "phase": None}
+    rep = model.report(Tabulated([-1, 1], [2, 2]))["phase"]
+    assert rep["type"] == "tabulated" and rep["normalisation"] == pytest.approx(8 * math.pi) and rep["points"] == 2
