@@ -54,7 +54,6 @@ __all__ = [
     "number_concentration",
     "medium_coefficients",
     "describe",
-    "medium_report",
     "size_window",
     "DEFAULT_ANGLES",
 ]
@@ -339,19 +338,3 @@ def describe(spec: ParticleMediumSpec) -> dict:
         "size_nodes": optics.nodes,
         "phase": table.describe(),
     }
-
-
-def medium_report(medium_spec, phase=None) -> dict | None:
-    """The `modeled["medium"]` entry of a result (for engine/results/result.py), or None without a medium.
-
-    Particle smoke: `describe(medium_spec)`. Other media: the phase function's type, mean
-    cosine and, for tables, points and normalisation (`phase.describe_phase`), when `phase`
-    (the scene's phase function) is given.
-    """
-    if medium_spec is None:
-        return None
-    if medium_spec.type == "particles":
-        return describe(medium_spec)
-    from owcsim.engine.media.phase import describe_phase
-
-    return {"model": medium_spec.type, "phase": describe_phase(phase) if phase is not None else None}

@@ -18,11 +18,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from owcsim.engine.integrator.medium_nee import LOBE_PEAK, phase_lobe_wanted
-from owcsim.engine.media import mie
 from owcsim.engine.results import metrics
 from owcsim.engine.results.lighting import Lighting
 from owcsim.engine.results.result_parts import cir_block, column, document_rows, grid_maps, order_block
-from owcsim.engine.run.auto import _max_albedo, _scatters
 from owcsim.engine.scene.los import los_gain_grey, los_geometry
 from owcsim.engine.tally import reliability
 from owcsim.engine.tally.estimates import (
@@ -64,7 +62,7 @@ def _warnings(spec, scene) -> list[str]:
             "points to point-like devices are heavy-tailed, so the scattered part converges slowly and its "
             "error bars may be too small; compare runs with different seeds"
         )
-    if alg.warning_in_scattering_medium and _scatters(spec.medium):
+    if alg.warning_in_scattering_medium and _scatters(scene):
         out.append(alg.warning_in_scattering_medium)
     out += _size_warnings(scene)
     return out + unit_warnings(spec, surface_extent(scene))
@@ -164,12 +162,13 @@ def _size_warnings(scene) -> list[str]:
     ]
 
 
+def _scatters(scene) -> bool:
+    """The scene's medium scatters (decided once when the scene was built: engine/media/model.py)."""
+    return scene.medium_model is not None and scene.medium_model.scatters
+
+
 def _albedo_max(scene) -> float:
-    return _max_albedo(scene.spec)
-
-
-def _geometric_tail(gain: float, ratio: float) -> float:
-    return gain * ratio / (1.0 - ratio) if ratio < 1.0 else math.inf
+    return scene.medium_model.max_albedo
 
 
 def _modeled(spec, scene, modeled: ModeledPublic | None, unreachable, settings) -> ModeledPublic:
@@ -178,7 +177,7 @@ def _modeled(spec, scene, modeled: ModeledPublic | None, unreachable, settings) 
     alg = algorithm(sim.algorithm)
     chosen = modeled if modeled is not None else ModeledPublic(algorithm_reason=f"algorithm {sim.algorithm} requested")
     families, left_out = alg.families_at(sim.scattering_orders)
-    left = list(left_out) if spec.medium is not None and _scatters(spec.medium) else []
+    left = list(left_out) if _scatters(scene) else []
     left.append(f"reflection orders above K = {sim.max_reflections}")
     if alg.scattering_orders is None and scene.medium is not None:  # S chosen, not fixed by the algorithm
         left.append(f"scattering orders above S = {sim.max_scattering}")
@@ -192,7 +191,7 @@ def _modeled(spec, scene, modeled: ModeledPublic | None, unreachable, settings) 
             algorithm=sim.algorithm,
             families=families if scene.medium is not None else "vacuum paths, reflection orders 0..K",
             left_out=left,
-            medium=mie.medium_report(spec.medium, scene.phase),  # derived coefficients, g, visibility
+            medium=scene.medium_model.report(scene.phase) if scene.medium_model is not None else None,
             max_reflections=sim.max_reflections,
             max_scattering=sim.scattering_orders if scene.medium is not None else 0,
             time_window_s=(settings.bins.t_min, float(settings.bins.edges[-1])),

@@ -15,6 +15,7 @@ from operator import add
 import numpy as np
 
 from owcsim.engine.results import metrics
+from owcsim.engine.results.truncation import geometric_tail, tail_ratio
 from owcsim.engine.tally.tally import Accumulator, TallyPlan
 
 
@@ -167,28 +168,21 @@ def order_block(
     by_s = mean.sum(axis=1)
     by_s[:, 0] += los_gain[order_links]
     by_k_se, by_s_se = np.sqrt(var.sum(axis=2)), np.sqrt(var.sum(axis=1))
-    from owcsim.engine.run.auto import tail_ratio
-
     tail = np.zeros(len(order_links))
     for r in range(len(order_links)):  # the decay past the last order: fitted to the measured orders, capped by
-        if by_k.shape[1] > 1:  # rho_max (albedo_max) when below 1 (auto.tail_ratio)
-            tail[r] += _geometric_tail(by_k[r, -1], tail_ratio(by_k[r], by_k_se[r], rho_max)[0])
-        if albedo_max is not None:  # albedo 1 and no surface: algebraic decay, no geometric bound (as auto.py)
+        if by_k.shape[1] > 1:  # rho_max (albedo_max) when below 1 (truncation.tail_ratio)
+            tail[r] += geometric_tail(by_k[r, -1], tail_ratio(by_k[r], by_k_se[r], rho_max)[0])
+        if (
+            albedo_max is not None
+        ):  # albedo 1 and no surface: algebraic decay, no geometric bound (as engine/run/auto.py)
             ratio = tail_ratio(by_s[r], by_s_se[r], albedo_max)[0] if albedo_max < 1.0 or enclosed else np.inf
-            tail[r] += _geometric_tail(by_s[r, -1], ratio)
+            tail[r] += geometric_tail(by_s[r, -1], ratio)
     for r, link in enumerate(order_links.tolist()):
         cols["dc_gain_by_reflection_order"][link] = by_k[r].tolist()
         cols["dc_gain_by_reflection_order_stderr"][link] = column(by_k_se[r])
         cols["dc_gain_by_scattering_order"][link] = by_s[r].tolist()
         cols["dc_gain_by_scattering_order_stderr"][link] = column(by_s_se[r])
         cols["truncated_gain_estimate"][link] = _num(tail[r])
-
-
-def _geometric_tail(gain: float, ratio: float) -> float:
-    """Power of the orders past the last one, if each keeps at most `ratio` of the one before (inf: no bound)."""
-    if gain == 0:
-        return 0.0
-    return gain * ratio / (1.0 - ratio) if ratio < 1.0 else float("inf")
 
 
 def _num(x) -> float | None:

@@ -29,7 +29,7 @@ The terms follow the arrays the engine allocates:
   plus the CIR links' bins x (K+S+4) and the maps (~12 quantities per grid point and channel).
 
 When K, S or the time window are "auto", the estimate takes the most the engine may choose
-(auto.PILOT_CAP orders; the pilot's longest window), i.e. an upper bound.
+(pilot.PILOT_CAP orders; the pilot's longest window), i.e. an upper bound.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from dataclasses import asdict, dataclass
 
 from owcsim.engine.core.constants import SPEED_OF_LIGHT
 from owcsim.engine.core.qmc import BLOCK
-from owcsim.engine.run.auto import PILOT_CAP
+from owcsim.engine.run.pilot import PILOT_CAP
 from owcsim.engine.tally.tally import CIR_GROUPS_MAX, N_GROUPS, SAMPLE_TABLE_MAX
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.algorithms import ALGORITHMS

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from owcsim.engine.integrator.kernel import KernelSettings, WorkItem, trace_batch
+from owcsim.engine.run.receivers import with_receivers
 from owcsim.engine.scene.scene import Scene, build_scene
 from owcsim.engine.tally.tally import BatchTally
 from owcsim.schemas import SceneSpec
@@ -117,7 +118,7 @@ class SerialExecutor:
 _SCENES: OrderedDict[str, Scene] = OrderedDict()
 #: The fields of a scene document that decide what build_scene builds besides the receivers (surfaces, the
 #: transmitters, the medium): documents that agree on them, as a job and its truncation pilot do, share one
-#: built geometry in a worker (the receivers are set on it: auto.with_receivers).
+#: built geometry in a worker (the receivers are set on it: receivers.with_receivers).
 BUILT_FIELDS = {"room", "furniture", "meshes", "transmitters", "medium"}
 
 
@@ -137,8 +138,6 @@ def _worker_scene(key: str, spec_path: str, base_dir: str | None) -> Scene:
         shared = built_key(spec, base_dir)
         same = next((_SCENES[k] for k, b in reversed(_BUILT.items()) if b == shared and k in _SCENES), None)
         if same is not None:
-            from owcsim.engine.run.auto import with_receivers
-
             scene = with_receivers(same, spec)
         else:
             scene = build_scene(spec, base_dir)

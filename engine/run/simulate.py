@@ -30,6 +30,7 @@ from owcsim.engine.integrator.medium_nee import phase_lobe_wanted, two_sided_set
 from owcsim.engine.results.result import build_result
 from owcsim.engine.run import auto
 from owcsim.engine.run.execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
+from owcsim.engine.run.receivers import unreachable_receivers
 from owcsim.engine.scene.los import line_of_sight, los_geometry
 from owcsim.engine.scene.scene import Scene, build_scene
 from owcsim.engine.spectral import spectra
@@ -232,7 +233,7 @@ def _run_job(
     los_gain, los_delay = line_of_sight(scene, geometry)
     seen = los_gain.reshape(len(scene.transmitters), len(scene.receivers)).any(axis=0)
     masked = np.flatnonzero(scene.masked != "")
-    blocked = auto.unreachable_receivers(scene, seen | (scene.masked != ""))  # a direct view proves reachability
+    blocked = unreachable_receivers(scene, seen | (scene.masked != ""))  # a direct view proves reachability
     info = RunInfo(workers=executor.workers)
     job = (
         JobRef(scene, "", "", None)

@@ -10,6 +10,7 @@ import numpy as np
 
 from owcsim.engine.core.errors import SceneError
 from owcsim.engine.media.media import Medium, medium_from_spec
+from owcsim.engine.media.model import MediumModel, medium_model
 from owcsim.engine.media.phase import phase_from_spec
 from owcsim.engine.scene.geometry import Geometry, Intersector, build_geometry, check_extent
 from owcsim.engine.sources.devices import Devices, concentrator_gain, transmitters_from_specs
@@ -44,6 +45,8 @@ class Scene:
     mirror_planes: list = field(default_factory=list)
     #: per-band tables of a spectral scene (engine/spectral/spectra.py), None when grey
     spectra: SceneSpectra | None = None
+    #: the document's medium as decided once when built: scatters, max_albedo, report (engine/media/model.py)
+    medium_model: MediumModel | None = None
 
     @property
     def n_links(self) -> int:
@@ -84,6 +87,7 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
         masked=mask_reasons(spec, receivers, len(spec.receivers)),
         grid_slices=grid_slices,
         mirror_planes=planes,
+        medium_model=medium_model(spec.medium, medium),
     )
     if spec.spectral is not None:  # per-band tables; the scene becomes the carrier band's (engine/spectral/spectra.py)
         from owcsim.engine.spectral.spectra import attach

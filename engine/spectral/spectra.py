@@ -44,6 +44,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from owcsim.engine.core.errors import SceneError
+from owcsim.engine.media.model import MediumKind
 from owcsim.engine.spectral.spectra_tables import CURVES, K_M, VISIBLE, v_lambda
 from owcsim.engine.tally.tally import N_GROUPS, group_shift
 
@@ -427,7 +428,7 @@ def attach(scene) -> None:
     med = _medium_bands(spec, spectral)
     if med is not None:
         _carrier_medium(scene, out, *med)
-    if spec.medium is not None and spec.medium.type == "particles":
+    if scene.medium_model is not None and scene.medium_model.kind is MediumKind.PARTICLES:
         out.warnings.append(
             f"medium.particles.wavelength ({spec.medium.particles.wavelength:.4g} m) is not used: a "
             "spectral scene computes the Mie optics at each band centre (spectral.medium_bands)"

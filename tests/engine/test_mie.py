@@ -297,22 +297,6 @@ def test_soot_examples_build(name):
     assert (10 < info["visibility_m"] < 40) if name == "light" else (2 < info["visibility_m"] < 8)
 
 
-def test_medium_report_for_the_result():
-    from owcsim.engine.media.phase import HenyeyGreenstein, Tabulated
-
-    particles = ParticleMediumSpec.model_validate(_medium())
-    assert mie.medium_report(particles) == mie.describe(particles)
-    assert mie.medium_report(None) is None
-    hom = spec(room_doc(medium={"type": "homogeneous", "sigma_a": 0.1, "sigma_s": 0.1})).medium
-    assert mie.medium_report(hom, HenyeyGreenstein(0.3)) == {
-        "model": "homogeneous",
-        "phase": {"type": "hg", "mean_cosine": 0.3},
-    }
-    table = Tabulated([-1, 1], [2, 2])
-    rep = mie.medium_report(hom, table)["phase"]
-    assert rep["type"] == "tabulated" and rep["normalisation"] == pytest.approx(8 * math.pi) and rep["points"] == 2
-
-
 def test_monodisperse_particles_run_without_warnings_and_equal_one_sphere():
     """geometric_std = 1 (every particle of diameter D_g) is legitimate: no RuntimeWarning (the size window's
     Gaussian divided 0 by 0), and the optics are one sphere's (miepython, an independent implementation)."""
