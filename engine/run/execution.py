@@ -23,7 +23,7 @@ import pickle
 import tempfile
 import time
 from collections import OrderedDict, deque
-from collections.abc import Generator, Iterable
+from collections.abc import Callable, Generator, Iterable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Protocol
@@ -37,17 +37,26 @@ from owcsim.schemas import SceneSpec
 SCENE_CACHE_SIZE = 4
 
 
+#: A built scene given another document's receivers (same surfaces, transmitters and medium): what
+#: build_scene would build for that document, without building the geometry again (engine/run/auto.py).
+WithReceivers = Callable[[Scene, SceneSpec], Scene]
+
+
 @dataclass
 class JobRef:
-    """What executors need to find a job's scene: the built scene (in this process), or its document."""
+    """What executors need to find a job's scene: the built scene (in this process), or its document;
+    `with_receivers` lets a worker derive it from a cached scene of the same geometry (None: build it)."""
 
     scene: Scene
     key: str
     spec_path: str
     base_dir: str | None
+    with_receivers: WithReceivers | None = None
 
 
-def job_ref(scene: Scene, base_dir: str | None, folder: str | None = None) -> JobRef:
+def job_ref(
+    scene: Scene, base_dir: str | None, folder: str | None = None, with_receivers: WithReceivers | None = None
+) -> JobRef:
     """Write the validated scene document once (pickled, content-addressed) so workers can build it."""
     data = pickle.dumps(scene.spec, protocol=pickle.HIGHEST_PROTOCOL)
     key = hashlib.sha256(scene.spec.model_dump_json().encode() + b"\0" + data + str(base_dir).encode()).hexdigest()[:24]
@@ -61,7 +70,7 @@ def job_ref(scene: Scene, base_dir: str | None, folder: str | None = None) -> Jo
             fh.write(data)
         os.replace(tmp, path)
         _prune(folder)
-    return JobRef(scene, key, path, base_dir)
+    return JobRef(scene, key, path, base_dir, with_receivers)
 
 
 #: Scene documents not used for this long are deleted when a new one is written [s].
@@ -127,8 +136,9 @@ def built_key(spec: SceneSpec, base_dir: str | None) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
-def _worker_scene(key: str, spec_path: str, base_dir: str | None) -> Scene:
-    """The job's scene in this worker: cached; built once per geometry (a job's pilot and its run share it)."""
+def _worker_scene(key: str, spec_path: str, base_dir: str | None, with_receivers: WithReceivers | None) -> Scene:
+    """The job's scene in this worker: cached; built once per geometry (a job's pilot and its run share it,
+    through `with_receivers`)."""
     scene = _SCENES.get(key)
     if scene is None:
         with open(spec_path, "rb") as fh:
@@ -136,9 +146,7 @@ def _worker_scene(key: str, spec_path: str, base_dir: str | None) -> Scene:
         assert isinstance(spec, SceneSpec), spec_path
         shared = built_key(spec, base_dir)
         same = next((_SCENES[k] for k, b in reversed(_BUILT.items()) if b == shared and k in _SCENES), None)
-        if same is not None:
-            from owcsim.engine.run.auto import with_receivers
-
+        if same is not None and with_receivers is not None:
             scene = with_receivers(same, spec)
         else:
             scene = build_scene(spec, base_dir)
@@ -153,8 +161,16 @@ def _worker_scene(key: str, spec_path: str, base_dir: str | None) -> Scene:
 _BUILT: dict[str, str] = {}
 
 
-def _run_item(key: str, spec_path: str, base_dir: str | None, item: WorkItem, settings: KernelSettings):
-    return trace_batch(_worker_scene(key, spec_path, base_dir), item, settings)
+def _run_item(
+    key: str,
+    spec_path: str,
+    base_dir: str | None,
+    with_receivers: WithReceivers | None,
+    item: WorkItem,
+    settings: KernelSettings,
+) -> BatchTally:
+    """A batch in a worker: the JobRef's fields without its scene (the scene travels as its document's path)."""
+    return trace_batch(_worker_scene(key, spec_path, base_dir, with_receivers), item, settings)
 
 
 class ProcessExecutor:
@@ -170,7 +186,8 @@ class ProcessExecutor:
         window: deque = deque()
         try:
             for item in items:
-                window.append(self._pool.submit(_run_item, job.key, job.spec_path, job.base_dir, item, settings))
+                task = (job.key, job.spec_path, job.base_dir, job.with_receivers, item, settings)
+                window.append(self._pool.submit(_run_item, *task))
                 if len(window) >= 2 * self.workers:
                     yield window.popleft().result()
             while window:

@@ -12,6 +12,7 @@ import json
 
 import pytest
 
+from owcsim.engine.run import auto
 from owcsim.engine.run import simulate as simulate_module
 from owcsim.engine.scene import scene as scene_module
 from owcsim.schemas import SceneSpec
@@ -117,7 +118,7 @@ def test_a_worker_builds_a_job_and_its_pilot_once(monkeypatch, tmp_path):
     )
     other = job.model_copy(update={"medium": None})
     refs = [execution.job_ref(scene_module.build_scene(s), None, str(tmp_path)) for s in (job, pilot, other)]
-    scenes = [execution._worker_scene(r.key, r.spec_path, None) for r in refs]
+    scenes = [execution._worker_scene(r.key, r.spec_path, None, auto.with_receivers) for r in refs]
     assert builds[0] == 2  # the job's and the medium-free one's; the pilot's is derived
     assert scenes[1].geometry is scenes[0].geometry and scenes[1].spec is not scenes[0].spec
     fresh = scene_module.build_scene(pilot)
