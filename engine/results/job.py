@@ -28,8 +28,8 @@ class RunInfo:
     wall_time_s: float = 0.0  # [s]
     workers: int = 1
     batches: int = 0
-    #: how the directions were chosen (the result's run.direction_choice)
-    pilot: DirectionChoicePublic = field(default_factory=lambda: DirectionChoicePublic(rule=""))
+    #: how the directions were chosen: the rule, or the direction pilot's measurements
+    direction_choice: DirectionChoicePublic = field(default_factory=lambda: DirectionChoicePublic(rule=""))
 
 
 @dataclass(frozen=True, slots=True)

@@ -323,7 +323,7 @@ def _run_section(job: FinishedJob, los_gain: FloatArray) -> dict:
         "paths_total": _paths_traced(job.accs, len(scene.transmitters), len(scene.receivers)),
         "rays_intersect": sum(a.rays_intersect for a in all_accs),
         "rays_occluded": sum(a.rays_occluded for a in all_accs),
-        "direction_choice": info.pilot,
+        "direction_choice": info.direction_choice,
     }
 
 

@@ -24,7 +24,7 @@ import tempfile
 import time
 from collections import OrderedDict, deque
 from collections.abc import Callable, Generator, Iterable
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -115,7 +115,7 @@ class SerialExecutor:
 
     workers = 1
 
-    def map(self, job: JobRef, items, settings: KernelSettings):
+    def map(self, job: JobRef, items: Iterable[WorkItem], settings: KernelSettings) -> Generator[BatchTally]:
         for item in items:
             yield trace_batch(job.scene, item, settings)
 
@@ -182,8 +182,8 @@ class ProcessExecutor:
         self.workers = workers
         self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
 
-    def map(self, job: JobRef, items, settings: KernelSettings):
-        window: deque = deque()
+    def map(self, job: JobRef, items: Iterable[WorkItem], settings: KernelSettings) -> Generator[BatchTally]:
+        window: deque[Future[BatchTally]] = deque()
         try:
             for item in items:
                 task = (job.key, job.spec_path, job.base_dir, job.with_receivers, item, settings)

@@ -8,7 +8,13 @@ the same scene), then runs the job and returns the typed result (schemas.results
 sizes and their random streams), so the same seed gives bit-identical results with any
 number of workers. In accuracy mode batches are issued in rounds (one batch per source) and
 the run stops after the first round at which every link's relative standard error of H0 is
-at or below the target, or when the time budget is spent (the result says which).
+at or below the target, or when the time budget is spent (the result says which;
+engine/run/stopping.py).
+
+`simulate_two_sided(spec)` runs a resolved job with every link from both devices (studies and
+tests: engine/integrator/medium_nee.py's partition of unity) through the same steps. Each run
+is one `Job` value (engine/run/job.py) read by every step; the result is built from one
+`FinishedJob` (engine/results/job.py).
 """
 
 from __future__ import annotations
@@ -224,7 +230,7 @@ def simulate_two_sided(
     )
     with _executor(executor, 1) as ex:
         job = _start(spec, scene, settings, ex, base_dir, Watch(t_start=t_start))
-        job.info.pilot = DirectionChoicePublic(rule=rule)
+        job.info.direction_choice = DirectionChoicePublic(rule=rule)
         return _finish(job, np.full(scene.n_links, side.code))
 
 
@@ -288,7 +294,7 @@ def _finish(
     if exact_los_only(scene, job.settings):
         directions[:] = SKIP
         job.info.stop_reason = StopReason.EXACT
-        job.info.pilot = DirectionChoicePublic(
+        job.info.direction_choice = DirectionChoicePublic(
             rule="max_reflections = 0 without scattering: line of sight only, in closed form"
         )
     accs = _run(job, directions)
@@ -422,10 +428,10 @@ def _choose_directions(job: Job) -> IntArray:
     ruled = _direction_rule(job)
     if ruled is not None:
         choice, direction = ruled
-        job.info.pilot = choice
+        job.info.direction_choice = choice
         return np.full(job.scene.n_links, direction.code)
     choice, directions = _direction_pilot(job)
-    job.info.pilot = choice
+    job.info.direction_choice = choice
     return directions
 
 
