@@ -82,6 +82,7 @@ from owcsim.engine.integrator.segments import EquiangularFrame, segment_scatter
 from owcsim.engine.scene.scene import Scene
 from owcsim.engine.sources.devices import Devices
 from owcsim.engine.tally.tally import BatchBuilder, BatchTally, TallyPlan, TimeBins
+from owcsim.schemas.algorithms import Direction
 
 #: Upper bound on paths x targets connected in one array operation (memory bound).
 NEE_CHUNK = 1 << 20
@@ -145,7 +146,7 @@ class WorkItem:
     `seed_key` spawns the batch's independent random stream (fixed by the job).
     """
 
-    direction: str  # "forward" or "backward"
+    direction: Direction  # FORWARD or BACKWARD (its value is accepted too)
     source: int
     targets: tuple[int, ...]
     batch: int
@@ -153,14 +154,17 @@ class WorkItem:
     seed: int
     phase: int = 0  # 0 = main run, 1 = pilot
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "direction", Direction(self.direction))  # one spelling: the enum
+
     def rng(self) -> np.random.Generator:
-        key = (self.phase, 0 if self.direction == "forward" else 1, self.source, self.batch)
+        key = (self.phase, self.direction.code, self.source, self.batch)
         return np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=key))
 
 
-def device_sets(scene: Scene, direction: str) -> tuple[Devices, Devices]:
-    """(sources, targets) for a direction."""
-    if direction == "forward":
+def device_sets(scene: Scene, direction: Direction) -> tuple[Devices, Devices]:
+    """(sources, targets) of paths run in `direction` (forward: from the transmitters)."""
+    if direction is Direction.FORWARD:
         return scene.transmitters, scene.receivers
     return scene.receivers, scene.transmitters
 
@@ -168,7 +172,7 @@ def device_sets(scene: Scene, direction: str) -> tuple[Devices, Devices]:
 def item_links(scene: Scene, item: WorkItem) -> np.ndarray:
     """Global link index of each of the item's targets."""
     t = np.asarray(item.targets)
-    if item.direction == "forward":
+    if item.direction is Direction.FORWARD:
         return scene.link(item.source, t)
     return scene.link(t, item.source)
 

@@ -8,7 +8,7 @@ links that asked for a CIR (a handful of explicit receivers by default) get per-
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from functools import reduce
 from operator import add
 
@@ -17,6 +17,7 @@ import numpy as np
 from owcsim.engine.results import metrics
 from owcsim.engine.results.truncation import geometric_tail, tail_ratio
 from owcsim.engine.tally.tally import Accumulator, TallyPlan
+from owcsim.schemas.algorithms import Direction
 
 
 def column(x) -> list:
@@ -75,7 +76,7 @@ def _group_estimates(accs, link: int, slot: int):
 
 
 def cir_block(
-    accs: dict[str, Accumulator], plan: TallyPlan, cir_links: np.ndarray, los_gain, los_delay, cols: dict
+    accs: Mapping[Direction, Accumulator], plan: TallyPlan, cir_links: np.ndarray, los_gain, los_delay, cols: dict
 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """Fill the CIR columns of the links that have one; returns {link: (total per bin, per-group per-path
     estimates (N_GROUPS, bins))} for the groups' channels."""
@@ -148,7 +149,7 @@ def cir_block(
 
 
 def order_block(
-    accs: dict[str, Accumulator],
+    accs: Mapping[Direction, Accumulator],
     plan: TallyPlan,
     order_links: np.ndarray,
     los_gain,

@@ -24,7 +24,7 @@ import tempfile
 import time
 from collections import OrderedDict, deque
 from collections.abc import Generator, Iterable
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -107,7 +107,7 @@ class SerialExecutor:
 
     workers = 1
 
-    def map(self, job: JobRef, items, settings: KernelSettings):
+    def map(self, job: JobRef, items: Iterable[WorkItem], settings: KernelSettings) -> Generator[BatchTally]:
         for item in items:
             yield trace_batch(job.scene, item, settings)
 
@@ -152,7 +152,14 @@ def _worker_scene(key: str, spec_path: str, base_dir: str | None) -> Scene:
 _BUILT: dict[str, str] = {}
 
 
-def _run_item(key: str, spec_path: str, base_dir: str | None, item: WorkItem, settings: KernelSettings):
+def _run_item(
+    key: str,
+    spec_path: str,
+    base_dir: str | None,
+    item: WorkItem,
+    settings: KernelSettings,
+) -> BatchTally:
+    """A batch in a worker: the JobRef's fields without its scene (the scene travels as its document's path)."""
     return trace_batch(_worker_scene(key, spec_path, base_dir), item, settings)
 
 
@@ -165,11 +172,12 @@ class ProcessExecutor:
         self.workers = workers
         self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
 
-    def map(self, job: JobRef, items, settings: KernelSettings):
-        window: deque = deque()
+    def map(self, job: JobRef, items: Iterable[WorkItem], settings: KernelSettings) -> Generator[BatchTally]:
+        window: deque[Future[BatchTally]] = deque()
         try:
             for item in items:
-                window.append(self._pool.submit(_run_item, job.key, job.spec_path, job.base_dir, item, settings))
+                task = (job.key, job.spec_path, job.base_dir, item, settings)
+                window.append(self._pool.submit(_run_item, *task))
                 if len(window) >= 2 * self.workers:
                     yield window.popleft().result()
             while window:
