@@ -57,6 +57,17 @@ class GridMedium(Medium):
         """Largest cell sigma_t [1/m] (the delta-tracking majorant)."""
         return self._sigma_t_max
 
+    @property
+    def scatters(self) -> bool:
+        """True when some cell has sigma_s > 0."""
+        return bool(np.max(self.sigma_s_grid) > 0)
+
+    @property
+    def max_albedo(self) -> float:
+        """Largest cell albedo sigma_s / sigma_t [-] (0 in cells with sigma_t = 0)."""
+        st, ss = self.sigma_t_grid, self.sigma_s_grid
+        return float(np.max(np.where(st > 0, ss / np.where(st > 0, st, 1.0), 0.0)))
+
     def cells(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(cell indices (n, 3), inside the box?) of points (n, 3); points on the box's faces are inside."""
         idx = np.floor((points - self.lo) / self.h).astype(np.int64)

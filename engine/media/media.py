@@ -52,6 +52,16 @@ class Medium:
         """Majorant of sigma_t over the medium [1/m]."""
         raise NotImplementedError
 
+    @property
+    def scatters(self) -> bool:
+        """True when sigma_s > 0 somewhere in the medium (paths can scatter, not only be attenuated)."""
+        raise NotImplementedError
+
+    @property
+    def max_albedo(self) -> float:
+        """Largest single-scattering albedo sigma_s / sigma_t over the medium [-] (0 where sigma_t = 0)."""
+        raise NotImplementedError
+
     # --- to implement ----------------------------------------------------------------
     def _optical_depth(self, o, d, L) -> tuple[np.ndarray, int]:
         """(tau, number of segments crossing the region)."""
@@ -205,6 +215,14 @@ class HomogeneousMedium(Medium):
     def albedo(self) -> float:
         """sigma_s / sigma_t [-], 0 for an empty medium."""
         return self.sigma_s / self.sigma_t if self.sigma_t > 0 else 0.0
+
+    @property
+    def scatters(self) -> bool:
+        return self.sigma_s > 0
+
+    @property
+    def max_albedo(self) -> float:
+        return self.albedo
 
     def length_inside(self, origins, directions, lengths) -> np.ndarray:
         """Length [m] of each segment inside the region (not counted in `evaluations`)."""
