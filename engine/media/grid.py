@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from owcsim.engine.media.media import Medium
-from owcsim.engine.scene.regions import clip_box
+from owcsim.engine.media.medium import Medium
+from owcsim.engine.media.regions import clip_box
 from owcsim.schemas.medium import IsotropicPhaseSpec
 
 

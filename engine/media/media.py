@@ -1,27 +1,8 @@
-"""Participating media: extinction and free-flight sampling along ray segments (physics.md section 3).
+"""Homogeneous media (physics.md section 3): constant coefficients in a region, and the medium built from a document.
 
-Every medium answers the same questions on batches of segments origin + t direction,
-0 <= t <= length (origins, directions: (n, 3) float64 in any memory layout, e.g. the
-transpose of a (3, n) array; unit directions; lengths (n,) [m]):
-
-- `optical_depth(o, d, L)` -> tau (n,): the integral of sigma_t along each segment (exact);
-- `transmittance(o, d, L)` = exp(-tau) (Beer-Lambert, multiplicative along a ray);
-- `sample_distance(o, d, L, u)` -> (t, scattered): free flight, the t with optical depth
-  -ln(1 - u) from the origin; where that exceeds the segment's depth, t = L and
-  scattered = False. "scattered" means a collision (absorption or scattering; the
-  caller weights by `albedo_at`). Exact inversion ("regular tracking") by default;
-  `method="delta", rng=...` does delta (Woodcock) tracking against the majorant
-  `sigma_t_max`, which samples the same distribution;
-- `sigma_t_at(p)`, `sigma_s_at(p)`, `albedo_at(p)` at points (n, 3) [1/m], [1/m], [-]
-  (0 outside the medium; the albedo is 0 where sigma_t = 0, never NaN);
-- `phase_spec` (the phase function, built by the caller), `bounds` ((lo, hi) or None for
-  the whole scene), `sigma_t_max` [1/m].
-
-`evaluations` counts the segments the first three methods were asked about that actually
-cross the medium's region (for the whole-scene medium: every segment). Segments that
-never enter a bounded region are rejected by a bounding-box test and cost nothing else.
-Homogeneous media live here; the 3-D grid of homogeneous cells in `grid.py`, the
-regions (box, closed mesh) in `regions.py`.
+`HomogeneousMedium` implements the `Medium` interface (medium.py) for the whole scene, a box
+or a closed mesh; particle smoke is a homogeneous medium with its Mie coefficients (mie.py).
+`medium_from_spec` builds any medium kind from its document (grid media: grid.py).
 """
 
 from __future__ import annotations
@@ -30,7 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from owcsim.engine.scene.regions import BoxRegion, MeshRegion, WholeRegion, as_rows, clip_box
+from owcsim.engine.media.grid import GridMedium
+from owcsim.engine.media.medium import Medium
+from owcsim.engine.media.mie import medium_coefficients
+from owcsim.engine.media.regions import BoxRegion, MeshRegion, WholeRegion, as_rows
 from owcsim.schemas.medium import (
     GridMediumSpec,
     HomogeneousMediumSpec,
@@ -39,130 +23,7 @@ from owcsim.schemas.medium import (
     PhaseSpec,
 )
 
-
-class Medium:
-    """The interface every medium implements (see the module docstring); subclasses fill the `_` methods."""
-
-    evaluations: int
-    phase_spec: PhaseSpec
-    bounds: tuple[np.ndarray, np.ndarray] | None
-
-    @property
-    def sigma_t_max(self) -> float:
-        """Majorant of sigma_t over the medium [1/m]."""
-        raise NotImplementedError
-
-    @property
-    def scatters(self) -> bool:
-        """True when sigma_s > 0 somewhere in the medium (paths can scatter, not only be attenuated)."""
-        raise NotImplementedError
-
-    @property
-    def max_albedo(self) -> float:
-        """Largest single-scattering albedo sigma_s / sigma_t over the medium [-] (0 where sigma_t = 0)."""
-        raise NotImplementedError
-
-    # --- to implement ----------------------------------------------------------------
-    def _optical_depth(self, o, d, L) -> tuple[np.ndarray, int]:
-        """(tau, number of segments crossing the region)."""
-        raise NotImplementedError
-
-    def _regular(self, o, d, L, need) -> tuple[np.ndarray, np.ndarray, int]:
-        """Regular tracking to optical depth `need`: (t, scattered, number of crossing segments)."""
-        raise NotImplementedError
-
-    def _coefficients_at(self, p) -> tuple[np.ndarray, np.ndarray]:
-        """(sigma_t, sigma_s) at points p (n, 3), 0 outside."""
-        raise NotImplementedError
-
-    def _span(self, o, d, L) -> tuple[np.ndarray, np.ndarray]:
-        """(t_enter, t_exit) of each segment in a box holding the region (delta tracking works inside it)."""
-        if self.bounds is None:
-            return np.zeros(len(L)), L
-        return clip_box(o, d, L, *self.bounds)
-
-    # --- the interface -------------------------------------------------------------------
-    @staticmethod
-    def _inputs(origins, directions, lengths):
-        return as_rows(origins), as_rows(directions), np.asarray(lengths, dtype=np.float64).reshape(-1)
-
-    def optical_depth(self, origins, directions, lengths) -> np.ndarray:
-        """Integral of sigma_t along each segment [-]; counts crossing segments in `evaluations`."""
-        tau, n = self._optical_depth(*self._inputs(origins, directions, lengths))
-        self.evaluations += n
-        return tau
-
-    def transmittance(self, origins, directions, lengths) -> np.ndarray:
-        """T = exp(-optical depth) along each segment [-]; counts crossing segments in `evaluations`."""
-        return np.exp(-self.optical_depth(origins, directions, lengths))
-
-    def sample_distance(self, origins, directions, lengths, u=None, *, method: str = "regular", rng=None):
-        """Free-flight distance along each segment: (t [m], scattered (bool)); see the module docstring.
-
-        `u` (n,) uniforms in [0, 1) drive regular tracking (drawn from `rng` if omitted);
-        delta tracking draws its own numbers from `rng` (a numpy Generator) and ignores `u`.
-        Counts crossing segments in `evaluations`.
-        """
-        o, d, L = self._inputs(origins, directions, lengths)
-        if method == "regular":
-            if u is None:
-                if rng is None:
-                    raise ValueError("sample_distance needs `u` or `rng`")
-                u = rng.random(len(L))
-            t, scattered, n = self._regular(o, d, L, -np.log1p(-np.asarray(u, dtype=np.float64)))
-        elif method == "delta":
-            if rng is None:
-                raise ValueError("delta tracking needs `rng` (a numpy Generator)")
-            t, scattered, n = self._delta(o, d, L, rng)
-        else:
-            raise ValueError(f"unknown free-flight method {method!r} (use 'regular' or 'delta')")
-        self.evaluations += n
-        return t, scattered
-
-    def _delta(self, o, d, L, rng):
-        """Delta tracking: tentative collisions at rate sigma_t_max, real with probability sigma_t / sigma_t_max."""
-        t, scattered = L.copy(), np.zeros(len(L), bool)
-        t0, t1 = self._span(o, d, L)
-        ids = np.flatnonzero(t1 > t0)
-        n = len(ids)
-        majorant = float(self.sigma_t_max)
-        if majorant <= 0.0:
-            return t, scattered, n
-        tc, te = t0[ids], t1[ids]
-        while len(ids):  # ends with probability 1: every tentative step moves on by Exp(majorant)
-            u = rng.random((2, len(ids)))
-            tc = tc - np.log1p(-u[0]) / majorant
-            k = np.flatnonzero(tc < te)
-            ids, tc, te, u1 = ids[k], tc[k], te[k], u[1, k]
-            sigma_t, _ = self._coefficients_at(o[ids] + tc[:, None] * d[ids])
-            real = u1 * majorant < sigma_t
-            t[ids[real]], scattered[ids[real]] = tc[real], True
-            k = np.flatnonzero(~real)
-            ids, tc, te = ids[k], tc[k], te[k]
-        return t, scattered, n
-
-    @property
-    def uniform_coefficients(self) -> tuple[float, float] | None:
-        """(sigma_t, sigma_s) [1/m] when they are the same at every point of the scene, else None."""
-        return None
-
-    def coefficients_at(self, points) -> tuple[np.ndarray, np.ndarray]:
-        """(sigma_t, sigma_s) at each point [1/m] (0 outside the medium), in one evaluation."""
-        return self._coefficients_at(as_rows(points))
-
-    def sigma_t_at(self, points) -> np.ndarray:
-        """Extinction coefficient at each point [1/m] (0 outside the medium)."""
-        return self._coefficients_at(as_rows(points))[0]
-
-    def sigma_s_at(self, points) -> np.ndarray:
-        """Scattering coefficient at each point [1/m] (0 outside the medium)."""
-        return self._coefficients_at(as_rows(points))[1]
-
-    def albedo_at(self, points) -> np.ndarray:
-        """Single-scattering albedo sigma_s / sigma_t at each point [-]; 0 where sigma_t = 0."""
-        sigma_t, sigma_s = self._coefficients_at(as_rows(points))
-        pos = sigma_t > 0
-        return np.where(pos, sigma_s / np.where(pos, sigma_t, 1.0), 0.0)
+__all__ = ["HomogeneousMedium", "Medium", "medium_from_spec"]
 
 
 def _count(rays: list[np.ndarray]) -> int:
@@ -289,13 +150,9 @@ def medium_from_spec(spec: HomogeneousMediumSpec | GridMediumSpec | ParticleMedi
     if spec is None:
         return None
     if spec.type == "grid":
-        from owcsim.engine.media.grid import GridMedium  # grid.py builds on this module
-
         medium = GridMedium(spec.min, spec.max, spec.shape, spec.sigma_a, spec.sigma_s, spec.phase)
         return None if medium.sigma_t_max == 0.0 else medium
     if spec.type == "particles":  # smoke from its particles: Mie coefficients (engine/media/mie.py)
-        from owcsim.engine.media.mie import medium_coefficients
-
         sigma_a, sigma_s = medium_coefficients(spec)
     else:
         sigma_a, sigma_s = spec.coefficients

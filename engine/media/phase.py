@@ -17,7 +17,8 @@ import numpy as np
 from pydantic import TypeAdapter
 
 from owcsim.engine.core.errors import SceneError
-from owcsim.engine.core.sampling import azimuth, column_norms
+from owcsim.engine.core.sampling import GuideTable, azimuth, column_norms
+from owcsim.engine.media.mie import particle_optics
 from owcsim.schemas.medium import PhaseSpec
 
 __all__ = [
@@ -369,43 +370,6 @@ class Mixture(PhaseFunction):
         return f"Mixture({[(float(w), p) for w, p in self._pairs()]!r})"
 
 
-class _Guide:
-    """``searchsorted(edges, keys, "right") - 1`` clipped to the segments, in O(1) per key.
-
-    Guide table (Chen & Asau 1974): keys in [lo, hi] fall in equal buckets; each bucket
-    stores the segment holding its start, and a key moves on by at most ``_GUIDE_STEPS``
-    vectorized steps. Keys in buckets spanning more segments (steep parts of a table), and
-    any key the steps did not settle, take the binary search, so the answer is always exact.
-    """
-
-    def __init__(self, edges: np.ndarray, lo: float, hi: float, per_segment: int = 4):
-        self.edges = edges
-        self.m = len(edges) - 1  # segments
-        self.n = per_segment * self.m  # buckets
-        self.lo, self.scale = lo, self.n / (hi - lo)
-        starts = lo + np.arange(self.n + 1) / self.scale
-        self.start = np.clip(np.searchsorted(edges, starts, side="right") - 1, 0, self.m - 1)
-        self.short = np.diff(self.start) <= _GUIDE_STEPS
-
-    def find(self, keys: np.ndarray) -> np.ndarray:
-        e, m = self.edges, self.m
-        k = np.clip(((keys - self.lo) * self.scale).astype(np.intp), 0, self.n - 1)
-        i = self.start[k]
-        for _ in range(_GUIDE_STEPS):  # loop over steps, vectorized over keys
-            step = (i < m - 1) & (e[np.minimum(i + 1, m)] <= keys)
-            if not step.any():
-                break
-            i = i + step
-        bad = ~self.short[k] | ((i > 0) & (e[i] > keys)) | ((i < m - 1) & (e[np.minimum(i + 1, m)] <= keys))
-        if bad.any():
-            i[bad] = np.clip(np.searchsorted(e, keys[bad], side="right") - 1, 0, m - 1)
-        return i
-
-
-#: Most forward steps of a guide-table lookup before the binary search takes over.
-_GUIDE_STEPS = 3
-
-
 class Tabulated(PhaseFunction):
     """A phase function given at points of cos(theta), linear in cos(theta) between them.
 
@@ -459,8 +423,8 @@ class Tabulated(PhaseFunction):
         cdf[-1] = 1.0
         self._cdf = cdf
         self._mass = np.diff(cdf) / (2.0 * np.pi)  # int p dc per segment
-        self._by_u = _Guide(cdf, 0.0, 1.0)
-        self._by_cos = _Guide(c, -1.0, 1.0)
+        self._by_u = GuideTable(cdf, 0.0, 1.0)
+        self._by_cos = GuideTable(c, -1.0, 1.0)
         a, b = c[:-1], c[1:]
         self._mean = float(
             2.0 * np.pi * np.sum(h * (self.values[:-1] * (2 * a + b) + self.values[1:] * (a + 2 * b))) / 6.0
@@ -516,8 +480,6 @@ class MiePhase(Tabulated):
 
     @classmethod
     def from_spec(cls, spec):
-        from owcsim.engine.media.mie import particle_optics  # mie.py builds on this module
-
         optics = particle_optics(spec.particles)
         return cls(optics.cos_theta, optics.phase)
 

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from owcsim.engine.integrator.medium_nee import LOBE_PEAK, phase_lobe_wanted
-from owcsim.engine.media import mie
+from owcsim.engine.media.report import medium_report
 from owcsim.engine.results import metrics
 from owcsim.engine.results.lighting import Lighting
 from owcsim.engine.results.result_parts import cir_block, column, document_rows, grid_maps, order_block
@@ -192,7 +192,7 @@ def _modeled(spec, scene, modeled: ModeledPublic | None, unreachable, settings) 
             algorithm=sim.algorithm,
             families=families if scene.medium is not None else "vacuum paths, reflection orders 0..K",
             left_out=left,
-            medium=mie.medium_report(spec.medium, scene.phase),  # derived coefficients, g, visibility
+            medium=medium_report(spec.medium, scene.phase),  # derived coefficients, g, visibility
             max_reflections=sim.max_reflections,
             max_scattering=sim.scattering_orders if scene.medium is not None else 0,
             time_window_s=(settings.bins.t_min, float(settings.bins.edges[-1])),

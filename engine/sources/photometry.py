@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from owcsim.engine.core.errors import SceneError
+from owcsim.engine.core.sampling import GuideTable
 
 __all__ = ["Photometry", "PhotometryError", "parse_ies", "parse_ldt", "parse_photometry"]
 
@@ -123,10 +124,8 @@ class Photometry:
 
     @functools.cached_property
     def _guide(self):
-        """O(1) cell lookup by the cumulative masses (phase._Guide: the same cell as a binary search)."""
-        from owcsim.engine.media.phase import _Guide
-
-        return _Guide(self._cdf, 0.0, 1.0)
+        """O(1) cell lookup by the cumulative masses (sampling.GuideTable: the same cell as a binary search)."""
+        return GuideTable(self._cdf, 0.0, 1.0)
 
     @functools.cached_property
     def _inv_steps(self) -> tuple[np.ndarray, np.ndarray]:

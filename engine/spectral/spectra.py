@@ -470,7 +470,7 @@ def _carrier_medium(scene, out: SceneSpectra, sigma_a, sigma_s, phases) -> None:
     if spec_m.region.type == "box":
         box = (np.asarray(spec_m.region.min, float), np.asarray(spec_m.region.max, float))
     elif spec_m.region.type == "mesh":
-        from owcsim.engine.scene.regions import MeshRegion
+        from owcsim.engine.media.regions import MeshRegion
 
         region = MeshRegion(spec_m.region.vertices, spec_m.region.faces, label="medium.region")
     scene.medium = HomogeneousMedium(float(sigma_a[c]), float(sigma_s[c]), box, region=region, phase_spec=phases[c])
