@@ -16,14 +16,17 @@ from owcsim.engine.media.medium import Medium
 from owcsim.engine.media.mie import medium_coefficients
 from owcsim.engine.media.regions import BoxRegion, MeshRegion, WholeRegion, as_rows
 from owcsim.schemas.medium import (
+    BoxRegionSpec,
     GridMediumSpec,
     HomogeneousMediumSpec,
     IsotropicPhaseSpec,
+    MeshRegionSpec,
     ParticleMediumSpec,
     PhaseSpec,
+    SceneRegionSpec,
 )
 
-__all__ = ["HomogeneousMedium", "Medium", "medium_from_spec"]
+__all__ = ["HomogeneousMedium", "Medium", "medium_from_spec", "region_from_spec"]
 
 
 def _count(rays: list[np.ndarray]) -> int:
@@ -158,9 +161,17 @@ def medium_from_spec(spec: HomogeneousMediumSpec | GridMediumSpec | ParticleMedi
         sigma_a, sigma_s = spec.coefficients
     if sigma_a + sigma_s == 0.0:
         return None
-    box = region = None
-    if spec.region.type == "box":
-        box = (np.asarray(spec.region.min, float), np.asarray(spec.region.max, float))
-    elif spec.region.type == "mesh":
-        region = MeshRegion(spec.region.vertices, spec.region.faces, label="medium.region")
+    box, region = region_from_spec(spec.region)
     return HomogeneousMedium(sigma_a, sigma_s, box, region=region, phase_spec=spec.phase)
+
+
+def region_from_spec(
+    region: SceneRegionSpec | BoxRegionSpec | MeshRegionSpec,
+) -> tuple[tuple[np.ndarray, np.ndarray] | None, MeshRegion | None]:
+    """(box (lo, hi) [m] or None, closed-mesh region or None) of a homogeneous medium's region document."""
+    box = mesh = None
+    if region.type == "box":
+        box = (np.asarray(region.min, float), np.asarray(region.max, float))
+    elif region.type == "mesh":
+        mesh = MeshRegion(region.vertices, region.faces, label="medium.region")
+    return box, mesh

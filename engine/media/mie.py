@@ -300,6 +300,7 @@ def number_concentration(spec: ParticleMediumSpec, optics: ParticleOptics | None
     if spec.number_concentration is not None:
         return float(spec.number_concentration)
     optics = optics or particle_optics(spec.particles)
+    assert spec.mass_concentration is not None and spec.particle_density is not None  # (the schema's rule)
     return float(spec.mass_concentration / (spec.particle_density * np.pi / 6 * optics.mean_d3))
 
 

@@ -22,6 +22,7 @@ from owcsim.engine.media.report import medium_report
 from owcsim.engine.results import metrics
 from owcsim.engine.results.lighting import Lighting
 from owcsim.engine.results.result_parts import cir_block, column, document_rows, grid_maps, order_block
+from owcsim.engine.results.spectral import result_block
 from owcsim.engine.run.auto import _max_albedo, _scatters
 from owcsim.engine.scene.los import los_gain_grey, los_geometry
 from owcsim.engine.tally import reliability
@@ -346,9 +347,7 @@ def build_result(
         "diagnostics": diagnostics,
         "scene": original or spec,  # the model itself: not validated again
     }
-    if scene.spectra is not None:  # per band and combined (engine/spectral/spectra.py)
-        from owcsim.engine.spectral.spectra import result_block
-
+    if scene.spectra is not None:  # per band and combined (engine/results/spectral.py)
         g = geometry if geometry is not None else los_geometry(scene)
         doc["spectral"] = result_block(spec, scene, accs, g, los_gain_grey(scene, g), los_delay)
         doc["warnings"] += scene.spectra.warnings
