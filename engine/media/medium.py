@@ -14,7 +14,7 @@ transpose of a (3, n) array; unit directions; lengths (n,) [m]):
   `sigma_t_max`, which samples the same distribution;
 - `sigma_t_at(p)`, `sigma_s_at(p)`, `albedo_at(p)` at points (n, 3) [1/m], [1/m], [-]
   (0 outside the medium; the albedo is 0 where sigma_t = 0, never NaN);
-- `phase_spec` (the phase function, built by the caller), `bounds` ((lo, hi) or None for
+- `phase_spec` and `phase` (the phase function built from it, once), `bounds` ((lo, hi) or None for
   the whole scene), `sigma_t_max` [1/m].
 
 `evaluations` counts the segments the first three methods were asked about that actually
@@ -29,46 +29,55 @@ mesh) in `regions.py`, the phase functions in `phase.py`.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+from functools import cached_property
+
 import numpy as np
 
+from owcsim.engine.media.phase import PhaseFunction, phase_from_spec
 from owcsim.engine.media.regions import as_rows, clip_box
 from owcsim.schemas.medium import PhaseSpec
 
 
-class Medium:
-    """The interface every medium implements (see the module docstring); subclasses fill the `_` methods."""
+class Medium(ABC):
+    """The interface every medium implements (see the module docstring); subclasses fill the abstract members."""
 
     evaluations: int
     phase_spec: PhaseSpec
     bounds: tuple[np.ndarray, np.ndarray] | None
 
     @property
+    @abstractmethod
     def sigma_t_max(self) -> float:
         """Majorant of sigma_t over the medium [1/m]."""
-        raise NotImplementedError
 
     @property
+    @abstractmethod
     def scatters(self) -> bool:
         """True when sigma_s > 0 somewhere in the medium (paths can scatter, not only be attenuated)."""
-        raise NotImplementedError
 
     @property
+    @abstractmethod
     def max_albedo(self) -> float:
         """Largest single-scattering albedo sigma_s / sigma_t over the medium [-] (0 where sigma_t = 0)."""
-        raise NotImplementedError
+
+    @cached_property
+    def phase(self) -> PhaseFunction:
+        """The phase function of `phase_spec` (phase.phase_from_spec), built once per medium."""
+        return phase_from_spec(self.phase_spec)
 
     # --- to implement ----------------------------------------------------------------
+    @abstractmethod
     def _optical_depth(self, o, d, L) -> tuple[np.ndarray, int]:
         """(tau, number of segments crossing the region)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def _regular(self, o, d, L, need) -> tuple[np.ndarray, np.ndarray, int]:
         """Regular tracking to optical depth `need`: (t, scattered, number of crossing segments)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def _coefficients_at(self, p) -> tuple[np.ndarray, np.ndarray]:
         """(sigma_t, sigma_s) at points p (n, 3), 0 outside."""
-        raise NotImplementedError
 
     def _span(self, o, d, L) -> tuple[np.ndarray, np.ndarray]:
         """(t_enter, t_exit) of each segment in a box holding the region (delta tracking works inside it)."""

@@ -10,7 +10,7 @@ import numpy as np
 from owcsim.engine.core.errors import SceneError
 from owcsim.engine.media.media import HomogeneousMedium, medium_from_spec, region_from_spec
 from owcsim.engine.media.medium import Medium
-from owcsim.engine.media.phase import PhaseFunction, phase_from_spec
+from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.scene.geometry import Geometry, Intersector, build_geometry, check_extent
 from owcsim.engine.sources.devices import Devices, concentrator_gain, transmitters_from_specs
 from owcsim.engine.spectral.spectra import SceneSpectra, carrier_bands, medium_bands, scene_tables, unsupported
@@ -78,7 +78,7 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
         receivers=receivers,
         medium=medium,
         all_visible=spec.room is not None and not spec.furniture and not spec.meshes,
-        phase=phase_from_spec(spec.medium.phase) if medium is not None and spec.medium is not None else None,
+        phase=medium.phase if medium is not None else None,
         medium_far_distance=_far_distance(spec, geometry, medium, receivers.positions),
         masked=mask_reasons(spec, receivers, len(spec.receivers)),
         grid_slices=grid_slices,
@@ -108,7 +108,7 @@ def spectral_scene(scene: Scene) -> Scene:
             box, region = region_from_spec(spec.medium.region)
             medium = HomogeneousMedium(float(sigma_a[c]), float(sigma_s[c]), box, region=region, phase_spec=phases[c])
             far = _far_distance(spec, geo, medium, scene.receivers.positions)
-            carrier = {"medium": medium, "phase": phase_from_spec(phases[c]), "medium_far_distance": far}
+            carrier = {"medium": medium, "phase": medium.phase, "medium_far_distance": far}
     if spec.medium is not None and spec.medium.type == "particles":
         tables.warnings.append(
             f"medium.particles.wavelength ({spec.medium.particles.wavelength:.4g} m) is not used: a "

@@ -44,7 +44,7 @@ class ChannelBuilder:
     def __init__(
         self,
         sp: SceneSpectra,
-        direction: Direction,
+        direction: str,  # a Direction (a str enum) or its value
         source: int,
         tgt: np.ndarray,
         links: np.ndarray,
