@@ -10,7 +10,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from owcsim.engine.core.arrays import BoolArray, FloatArray, IntArray
 from owcsim.engine.media.grid import GridMedium
 from owcsim.engine.media.medium import Medium
 from owcsim.engine.media.mie import medium_coefficients
@@ -29,7 +31,7 @@ from owcsim.schemas.medium import (
 __all__ = ["HomogeneousMedium", "Medium", "medium_from_spec", "region_from_spec"]
 
 
-def _count(rays: list[np.ndarray]) -> int:
+def _count(rays: list[IntArray]) -> int:
     """Number of distinct segments in a list of index arrays."""
     if len(rays) <= 1:
         return len(rays[0]) if rays else 0
@@ -46,7 +48,7 @@ class HomogeneousMedium(Medium):
 
     sigma_a: float
     sigma_s: float
-    box: tuple[np.ndarray, np.ndarray] | None = None
+    box: tuple[FloatArray, FloatArray] | None = None
     #: number of segments that crossed the region in the kernel-facing methods (see the module docstring)
     evaluations: int = 0
     region: MeshRegion | None = None
@@ -88,7 +90,7 @@ class HomogeneousMedium(Medium):
     def max_albedo(self) -> float:
         return self.albedo
 
-    def length_inside(self, origins, directions, lengths) -> np.ndarray:
+    def length_inside(self, origins: ArrayLike, directions: ArrayLike, lengths: ArrayLike) -> FloatArray:
         """Length [m] of each segment inside the region (not counted in `evaluations`)."""
         o, d, L = self._inputs(origins, directions, lengths)
         if isinstance(self._region, WholeRegion):
@@ -98,7 +100,7 @@ class HomogeneousMedium(Medium):
             out[ray] += b - a
         return out
 
-    def _optical_depth(self, o, d, L):
+    def _optical_depth(self, o: FloatArray, d: FloatArray, L: FloatArray) -> tuple[FloatArray, int]:
         if isinstance(self._region, WholeRegion):  # (sigma_t = 0 with an infinite L: 0, not NaN)
             return (self.sigma_t * L if self.sigma_t > 0 else np.zeros(len(L))), len(L)
         tau = np.zeros(len(L))
@@ -108,7 +110,9 @@ class HomogeneousMedium(Medium):
             crossed.append(ray)
         return tau, _count(crossed)
 
-    def _regular(self, o, d, L, need):
+    def _regular(
+        self, o: FloatArray, d: FloatArray, L: FloatArray, need: FloatArray
+    ) -> tuple[FloatArray, BoolArray, int]:
         """Exact inversion interval by interval: the collision is where the accumulated depth reaches `need`."""
         if self.sigma_t == 0.0:
             return L.copy(), np.zeros(len(L), bool), 0
@@ -132,12 +136,12 @@ class HomogeneousMedium(Medium):
     def uniform_coefficients(self) -> tuple[float, float] | None:
         return (self.sigma_t, self.sigma_s) if isinstance(self._region, WholeRegion) else None
 
-    def albedo_at(self, points) -> np.ndarray:
+    def albedo_at(self, points: ArrayLike) -> FloatArray:
         if isinstance(self._region, WholeRegion):  # the same everywhere
             return np.full(len(as_rows(points)), self.albedo)
         return super().albedo_at(points)
 
-    def _coefficients_at(self, p):
+    def _coefficients_at(self, p: FloatArray) -> tuple[FloatArray, FloatArray]:
         if isinstance(self._region, WholeRegion):
             return np.full(len(p), self.sigma_t), np.full(len(p), self.sigma_s)
         inside = self._region.contains(p)
@@ -167,7 +171,7 @@ def medium_from_spec(spec: HomogeneousMediumSpec | GridMediumSpec | ParticleMedi
 
 def region_from_spec(
     region: SceneRegionSpec | BoxRegionSpec | MeshRegionSpec,
-) -> tuple[tuple[np.ndarray, np.ndarray] | None, MeshRegion | None]:
+) -> tuple[tuple[FloatArray, FloatArray] | None, MeshRegion | None]:
     """(box (lo, hi) [m] or None, closed-mesh region or None) of a homogeneous medium's region document."""
     box = mesh = None
     if region.type == "box":

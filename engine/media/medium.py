@@ -33,7 +33,9 @@ from abc import ABC, abstractmethod
 from functools import cached_property
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from owcsim.engine.core.arrays import BoolArray, FloatArray
 from owcsim.engine.media.phase import PhaseFunction, phase_from_spec
 from owcsim.engine.media.regions import as_rows, clip_box
 from owcsim.schemas.medium import PhaseSpec
@@ -44,7 +46,7 @@ class Medium(ABC):
 
     evaluations: int
     phase_spec: PhaseSpec
-    bounds: tuple[np.ndarray, np.ndarray] | None
+    bounds: tuple[FloatArray, FloatArray] | None
 
     @property
     @abstractmethod
@@ -68,18 +70,20 @@ class Medium(ABC):
 
     # --- to implement ----------------------------------------------------------------
     @abstractmethod
-    def _optical_depth(self, o, d, L) -> tuple[np.ndarray, int]:
+    def _optical_depth(self, o: FloatArray, d: FloatArray, L: FloatArray) -> tuple[FloatArray, int]:
         """(tau, number of segments crossing the region)."""
 
     @abstractmethod
-    def _regular(self, o, d, L, need) -> tuple[np.ndarray, np.ndarray, int]:
+    def _regular(
+        self, o: FloatArray, d: FloatArray, L: FloatArray, need: FloatArray
+    ) -> tuple[FloatArray, BoolArray, int]:
         """Regular tracking to optical depth `need`: (t, scattered, number of crossing segments)."""
 
     @abstractmethod
-    def _coefficients_at(self, p) -> tuple[np.ndarray, np.ndarray]:
+    def _coefficients_at(self, p: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(sigma_t, sigma_s) at points p (n, 3), 0 outside."""
 
-    def _span(self, o, d, L) -> tuple[np.ndarray, np.ndarray]:
+    def _span(self, o: FloatArray, d: FloatArray, L: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(t_enter, t_exit) of each segment in a box holding the region (delta tracking works inside it)."""
         if self.bounds is None:
             return np.zeros(len(L)), L
@@ -87,20 +91,31 @@ class Medium(ABC):
 
     # --- the interface -------------------------------------------------------------------
     @staticmethod
-    def _inputs(origins, directions, lengths):
+    def _inputs(
+        origins: ArrayLike, directions: ArrayLike, lengths: ArrayLike
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
         return as_rows(origins), as_rows(directions), np.asarray(lengths, dtype=np.float64).reshape(-1)
 
-    def optical_depth(self, origins, directions, lengths) -> np.ndarray:
+    def optical_depth(self, origins: ArrayLike, directions: ArrayLike, lengths: ArrayLike) -> FloatArray:
         """Integral of sigma_t along each segment [-]; counts crossing segments in `evaluations`."""
         tau, n = self._optical_depth(*self._inputs(origins, directions, lengths))
         self.evaluations += n
         return tau
 
-    def transmittance(self, origins, directions, lengths) -> np.ndarray:
+    def transmittance(self, origins: ArrayLike, directions: ArrayLike, lengths: ArrayLike) -> FloatArray:
         """T = exp(-optical depth) along each segment [-]; counts crossing segments in `evaluations`."""
         return np.exp(-self.optical_depth(origins, directions, lengths))
 
-    def sample_distance(self, origins, directions, lengths, u=None, *, method: str = "regular", rng=None):
+    def sample_distance(
+        self,
+        origins: ArrayLike,
+        directions: ArrayLike,
+        lengths: ArrayLike,
+        u: ArrayLike | None = None,
+        *,
+        method: str = "regular",
+        rng: np.random.Generator | None = None,
+    ) -> tuple[FloatArray, BoolArray]:
         """Free-flight distance along each segment: (t [m], scattered (bool)); see the module docstring.
 
         `u` (n,) uniforms in [0, 1) drive regular tracking (drawn from `rng` if omitted);
@@ -123,7 +138,9 @@ class Medium(ABC):
         self.evaluations += n
         return t, scattered
 
-    def _delta(self, o, d, L, rng):
+    def _delta(
+        self, o: FloatArray, d: FloatArray, L: FloatArray, rng: np.random.Generator
+    ) -> tuple[FloatArray, BoolArray, int]:
         """Delta tracking: tentative collisions at rate sigma_t_max, real with probability sigma_t / sigma_t_max."""
         t, scattered = L.copy(), np.zeros(len(L), bool)
         t0, t1 = self._span(o, d, L)
@@ -150,19 +167,19 @@ class Medium(ABC):
         """(sigma_t, sigma_s) [1/m] when they are the same at every point of the scene, else None."""
         return None
 
-    def coefficients_at(self, points) -> tuple[np.ndarray, np.ndarray]:
+    def coefficients_at(self, points: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """(sigma_t, sigma_s) at each point [1/m] (0 outside the medium), in one evaluation."""
         return self._coefficients_at(as_rows(points))
 
-    def sigma_t_at(self, points) -> np.ndarray:
+    def sigma_t_at(self, points: ArrayLike) -> FloatArray:
         """Extinction coefficient at each point [1/m] (0 outside the medium)."""
         return self._coefficients_at(as_rows(points))[0]
 
-    def sigma_s_at(self, points) -> np.ndarray:
+    def sigma_s_at(self, points: ArrayLike) -> FloatArray:
         """Scattering coefficient at each point [1/m] (0 outside the medium)."""
         return self._coefficients_at(as_rows(points))[1]
 
-    def albedo_at(self, points) -> np.ndarray:
+    def albedo_at(self, points: ArrayLike) -> FloatArray:
         """Single-scattering albedo sigma_s / sigma_t at each point [-]; 0 where sigma_t = 0."""
         sigma_t, sigma_s = self._coefficients_at(as_rows(points))
         pos = sigma_t > 0
