@@ -11,11 +11,13 @@ Directions are component arrays of shape (3, n) (rows x, y, z); all float64, vec
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from abc import ABC, abstractmethod
 
 import numpy as np
+from numpy.typing import ArrayLike
 from pydantic import TypeAdapter
 
+from owcsim.engine.core.arrays import FloatArray
 from owcsim.engine.core.errors import SceneError
 from owcsim.engine.core.sampling import GuideTable, azimuth, column_norms
 from owcsim.engine.media.mie import particle_optics
@@ -60,18 +62,25 @@ def _from_sides(a, b):
     return np.where(a <= b, 1.0 - a, b - 1.0)
 
 
-class PhaseFunction:
-    """Base class: ``eval``, ``sample_cos``, ``sample`` (shared) and ``mean_cosine``."""
+class PhaseFunction(ABC):
+    """The interface of every phase function: ``eval`` and ``sample_cos`` (each subclass), ``pdf`` and ``sample``
+    (shared), ``mean_cosine``."""
 
-    eval: Callable[[np.ndarray], np.ndarray]  #: p(cos_theta) [1/sr]
-    sample_cos: Callable[[np.ndarray], np.ndarray]  #: cos_theta = F^{-1}(u), u uniform in [0, 1)
     mean_cosine: float  #: g = <cos_theta> = 2 pi int c p(c) dc (a property in every subclass)
 
-    def pdf(self, cos_theta) -> np.ndarray:
+    @abstractmethod
+    def eval(self, cos_theta: ArrayLike) -> FloatArray:
+        """p(cos_theta) [1/sr]."""
+
+    @abstractmethod
+    def sample_cos(self, u: ArrayLike) -> FloatArray:
+        """cos_theta = F^{-1}(u), u uniform in [0, 1) (the exact inverse of the cos_theta CDF)."""
+
+    def pdf(self, cos_theta: ArrayLike) -> FloatArray:
         """Solid-angle pdf of :meth:`sample` [1/sr]; equals :meth:`eval` (exact sampling)."""
         return self.eval(cos_theta)
 
-    def sample(self, directions, u1, u2) -> np.ndarray:
+    def sample(self, directions: ArrayLike, u1: ArrayLike, u2: ArrayLike) -> FloatArray:
         """New unit directions (3, n) around ``directions`` (3, n): cos = sample_cos(u1), phi = 2 pi u2.
 
         d' = sin(t) cos(phi) s + sin(t) sin(phi) t + cos(t) d, with (s, t, d) the frame of
