@@ -36,9 +36,9 @@ class Scene:
     #: length given to segments that leave the scene: the medium beyond it absorbs everything [m]
     medium_far_distance: float = float("inf")
     #: per receiver: why it is not simulated ("" = simulated): grid points in furniture or outside the room
-    masked: np.ndarray = None  # type: ignore[assignment]
+    masked: np.ndarray = field(default_factory=lambda: np.zeros(0, object))
     #: receiver index range of each grid: (first, shape (nu, nv)) in `spec.receiver_grids` order
-    grid_slices: list = None  # type: ignore[assignment]
+    grid_slices: list[tuple[int, tuple[int, int]]] = field(default_factory=list)
     #: planar groups of perfect-mirror faces (bsdf.MirrorPlane): devices are reached through their images
     mirror_planes: list[MirrorPlane] = field(default_factory=list)
     #: per-band tables of a spectral scene (engine/spectral/spectra.py), None when grey
