@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from owcsim.engine.core.arrays import FloatArray, IntArray
 from owcsim.engine.spectral.spectra import SceneSpectra
 from owcsim.engine.tally.plan import N_GROUPS
 from owcsim.schemas.algorithms import Direction
@@ -24,11 +25,11 @@ from owcsim.schemas.algorithms import Direction
 class ChannelBatch:
     """One batch's channel sums (see ChannelBuilder)."""
 
-    links: np.ndarray  # (T,) global links of the batch's targets
+    links: IntArray  # (T,) global links of the batch's targets
     n_paths: int
-    sums: np.ndarray  # (B + 9, T, N_GROUPS): per band w, then per combination w, w t, w t^2
-    band_bc: np.ndarray  # (2, B, T): per band sums of w t and w t^2
-    group_paths: np.ndarray  # (N_GROUPS,)
+    sums: FloatArray  # (B + 9, T, N_GROUPS): per band w, then per combination w, w t, w t^2
+    band_bc: FloatArray  # (2, B, T): per band sums of w t and w t^2
+    group_paths: IntArray  # (N_GROUPS,)
 
 
 class ChannelBuilder:
@@ -46,8 +47,8 @@ class ChannelBuilder:
         sp: SceneSpectra,
         direction: str,  # a Direction (a str enum) or its value
         source: int,
-        tgt: np.ndarray,
-        links: np.ndarray,
+        tgt: IntArray,
+        links: IntArray,
         n_paths: int,
         block: int = 1,
     ):
@@ -61,7 +62,9 @@ class ChannelBuilder:
         self.sums = np.zeros((self.B + 9) * self.T * N_GROUPS)
         self.band_bc = np.zeros((2, self.B, self.T))
 
-    def add(self, target, delay, power, ratio, path) -> np.ndarray:
+    def add(
+        self, target: IntArray, delay: FloatArray, power: FloatArray, ratio: FloatArray, path: IntArray
+    ) -> FloatArray:
         """Estimates (m,) of local targets `target`, delays [s], carrier powers, band ratios (B, m) or (0, m)
         (all 1), batch path indices; returns their optical (whole-spectrum) power (m,).
 
@@ -115,7 +118,7 @@ class ChannelBuilder:
         )
 
 
-def _group_moments(sums: np.ndarray, paths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _group_moments(sums: FloatArray, paths: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Mean per path (Q, L) of Q quantities and the covariance of those means (L, Q, Q) from group sums
     (Q, L, G) and paths per group (L, G): sum_g (m_g - m)(m_g - m)^T / (G (G - 1)) over the groups with paths."""
     n = paths.sum(axis=1)
@@ -144,7 +147,7 @@ class ChannelAccumulator:
         self.band_bc[:, :, batch.links] += batch.band_bc
         self.paths[batch.links] += np.roll(batch.group_paths, shift)[None, :]
 
-    def moments(self) -> tuple[np.ndarray, np.ndarray]:
+    def moments(self) -> tuple[FloatArray, FloatArray]:
         """Per virtual link (channel-major, V L): mean per path of (a, b, c) (V L, 3) and its covariance
         (V L, 3, 3); for the bands only the variance of a is known (the rest NaN)."""
         B, L = self.B, self.L
