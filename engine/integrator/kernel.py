@@ -81,6 +81,7 @@ from owcsim.engine.integrator.mirrors import connect_mirrors, connect_source_mir
 from owcsim.engine.integrator.segments import EquiangularFrame, segment_scatter
 from owcsim.engine.scene.scene import Scene
 from owcsim.engine.sources.devices import Devices
+from owcsim.engine.tally.spectral import ChannelBuilder
 from owcsim.engine.tally.tally import BatchBuilder, BatchTally, TallyPlan, TimeBins
 from owcsim.schemas.algorithms import Direction
 
@@ -705,11 +706,14 @@ class _Context:
             or settings.in_then_out
         )
         block = qmc.block_size(item.n_paths, settings.qmc_block)  # paths per independent sample
+        links = item_links(self.scene, item)
+        if self.spectra is not None:  # per-(link, channel) sums (tally/spectral.py)
+            self.channels = ChannelBuilder(
+                self.spectra, item.direction, item.source, self.tgt, links, item.n_paths, block
+            )
         self.builder = BatchBuilder(
-            settings.tally, item_links(self.scene, item), item.n_paths, several, block, first_batch=item.batch == 0
+            settings.tally, links, item.n_paths, several, block, first_batch=item.batch == 0, channels=self.channels
         )
-        if self.spectra is not None:  # per-(link, channel) sums (spectra.py)
-            self.channels = self.spectra.builder(item, self.tgt, item_links(self.scene, item), block)
 
     def connect(
         self,
@@ -1087,7 +1091,4 @@ class _Context:
         if self.item.direction == "backward" and self.settings.tally.group_weights.size:
             weights = self.settings.tally.group_weights[:, self.tgt]  # (G, T): targets are transmitters
         assert self.builder is not None
-        tally = self.builder.finish(weights)
-        if self.channels is not None:
-            tally.spectral = self.channels.finish()  # type: ignore[attr-defined]
-        return tally
+        return self.builder.finish(weights)  # (with the channel sums of spectral scenes)

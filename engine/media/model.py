@@ -17,8 +17,8 @@ from enum import StrEnum
 from typing import Any
 
 from owcsim.engine.media.media import Medium
-from owcsim.engine.media.mie import describe
 from owcsim.engine.media.phase import PhaseFunction, describe_phase
+from owcsim.engine.media.report import describe
 from owcsim.schemas.medium import MediumSpec
 
 

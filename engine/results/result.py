@@ -26,9 +26,9 @@ from owcsim.engine.results import metrics
 from owcsim.engine.results.job import FinishedJob
 from owcsim.engine.results.lighting import Lighting
 from owcsim.engine.results.result_parts import cir_block, column, document_rows, grid_maps, order_block
+from owcsim.engine.results.spectral import result_block
 from owcsim.engine.scene.los import los_gain_grey, los_geometry
 from owcsim.engine.scene.scene import Scene
-from owcsim.engine.spectral.spectra import result_block
 from owcsim.engine.tally import reliability
 from owcsim.engine.tally.estimates import (
     channel_moments,
@@ -408,7 +408,7 @@ def build_result(job: FinishedJob) -> SimulationResultPublic:
         "diagnostics": diagnostics,
         "scene": job.original or spec,  # the model itself: not validated again
     }
-    if scene.spectra is not None:  # per band and combined (engine/spectral/spectra.py)
+    if scene.spectra is not None:  # per band and combined (engine/results/spectral.py)
         g = geometry if geometry is not None else los_geometry(scene)
         doc["spectral"] = result_block(spec, scene, job.accs, g, los_gain_grey(scene, g), job.los.delay)
         doc["warnings"] += scene.spectra.warnings

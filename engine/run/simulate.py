@@ -43,8 +43,7 @@ from owcsim.engine.run.job import Job, Progress, ProgressFn, Watch
 from owcsim.engine.run.receivers import unreachable_receivers
 from owcsim.engine.run.stopping import MIN_PATHS_FOR_STOP, BatchWatch
 from owcsim.engine.scene.los import line_of_sight, los_geometry
-from owcsim.engine.scene.scene import Scene, build_scene
-from owcsim.engine.spectral import spectra
+from owcsim.engine.scene.scene import Scene, build_scene, check_spectral
 from owcsim.engine.tally import reliability
 from owcsim.engine.tally.tally import CIR_GROUPS_MAX, N_GROUPS, Accumulator, TallyPlan, TimeBins
 from owcsim.schemas import SceneSpec, SimulationSpec
@@ -381,11 +380,12 @@ def _items(
 
 
 def _new_accumulators(scene: Scene, settings: KernelSettings) -> dict[Direction, Accumulator]:
+    check_spectral(scene, settings.free_flight or settings.segment_scatter)  # the kernel the job chose
+    n_bands = scene.spectra.n_bands if scene.spectra is not None else 0  # spectral scenes: channel tallies too
     accs = {
-        d: Accumulator(scene.n_links, settings.tally, backward=d is Direction.BACKWARD)
+        d: Accumulator(scene.n_links, settings.tally, backward=d is Direction.BACKWARD, n_bands=n_bands)
         for d in (Direction.FORWARD, Direction.BACKWARD)
     }
-    spectra.new_accumulators(accs, scene, settings)  # spectral scenes: per-band channel tallies
     return accs
 
 
@@ -408,7 +408,6 @@ def _merge(
         for tally in results:
             item = pulled.popleft()
             accs[item.direction].add(tally, item.batch, item.source)
-            spectra.add_batch(accs[item.direction], tally, item)
             if on_batch is not None and on_batch(item):
                 break
     finally:

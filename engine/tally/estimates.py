@@ -15,6 +15,7 @@ them into H0, mean delay and RMS delay spread with standard errors.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -28,7 +29,14 @@ def los_moments(los_gain: np.ndarray, los_delay: np.ndarray) -> np.ndarray:
     return np.stack([los_gain, los_gain * los_delay, los_gain * los_delay**2], axis=-1)
 
 
-def link_moments(accs: Mapping[Direction, Accumulator], los_abc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+class Moments(Protocol):
+    """A tally of per-link means: Accumulator, or a spectral scene's ChannelAccumulator (one virtual link per
+    channel and link)."""
+
+    def moments(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+def link_moments(accs: Mapping[Any, Moments], los_abc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per link: mean (L, 3) and covariance (L, 3, 3) of the estimate, both directions and the LOS."""
     mean, cov = los_abc.copy(), np.zeros(los_abc.shape + (3,))
     for acc in accs.values():

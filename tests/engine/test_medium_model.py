@@ -10,7 +10,7 @@ import math
 
 import pytest
 
-from owcsim.engine.media import mie
+from owcsim.engine.media import mie, report
 from owcsim.engine.media.model import MediumKind
 from owcsim.engine.media.phase import HenyeyGreenstein, Tabulated
 from owcsim.engine.scene.scene import build_scene
@@ -47,7 +47,7 @@ def test_particle_smoke_reports_its_mie_optics_once():
     sigma_a, sigma_s = mie.medium_coefficients(s.medium)
     assert model.kind is MediumKind.PARTICLES and model.scatters
     assert model.max_albedo == sigma_s / (sigma_a + sigma_s)
-    assert model.report(scene.phase) == mie.describe(s.medium)
+    assert model.report(scene.phase) == report.describe(s.medium)
 
 
 def test_no_medium_no_model():
