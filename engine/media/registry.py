@@ -1,5 +1,4 @@
-"""The medium kinds, by the `type` of their wire model (schemas/medium.py `MediumSpec`), and the medium a document
-builds.
+"""The medium kinds by the `type` of their wire model (schemas/medium.py), and `medium_from_spec`: a document's medium.
 
 `MEDIUM_BUILDERS` maps each kind to its builder: the document's spec -> its `Medium` (medium.py's interface:
 free-flight sampling, transmittance, phase, `scatters`, `max_albedo`), or None when sigma_t = 0 everywhere (nothing

@@ -1,6 +1,6 @@
-"""Surface reflection models: Lambertian, modified Phong (diffuse + glossy lobe), perfect mirror.
+"""Materials: the per-face mixture of the registered surface models (Lambert, Phong, mirror); mirror planes.
 
-One material is a mixture of three parts, with the reflectance split stated:
+With the built-in models, one material is a mixture of three parts, with the reflectance split stated:
     rho = rho_d + rho_s + rho_m <= 1
 (rho_d diffuse, rho_s glossy Phong lobe of exponent n, rho_m perfect mirror). The BRDF is
 
