@@ -208,19 +208,25 @@ class Materials(SurfaceModel):
         if taken.all():  # every vertex diffuse (a Lambertian scene)
             return w_o, weight
         for k, lobe in enumerate(rest):
-            share = lobe.rho / safe
             last = k == len(rest) - 1
-            chosen = ~taken if last else ~taken & (u1 < below + share)
-            idx = np.flatnonzero(chosen)
+            if last:  # the rest: u1 >= c_(K-1) (and the vertices of rho = 0, weight 0)
+                idx = np.flatnonzero(~taken)
+            elif lobe.rho.any():
+                share = lobe.rho / safe
+                chosen = ~taken & (u1 < below + share)
+                idx = np.flatnonzero(chosen)
+            else:  # weight 0 everywhere: no vertex has c_(k-1) <= u1 < c_(k-1) + 0
+                continue
             if len(idx):
-                v = np.clip((u1.take(idx) - below.take(idx)) / np.where(share, share, 1.0).take(idx), 0.0, 1.0)
-                part = lobe.take(idx).with_rho(rho.take(idx))
+                p_k = lobe.rho.take(idx) / safe.take(idx)
+                v = np.clip((u1.take(idx) - below.take(idx)) / np.where(p_k > 0, p_k, 1.0), 0.0, 1.0)
+                part = lobe.at(idx, rho.take(idx))
                 w, wt = part.sample(d_in.take(idx, axis=1), normals.take(idx, axis=1), v, u2.take(idx))
                 for c in range(3):
                     w_o[c].put(idx, w[c])
                 weight.put(idx, wt)
-            taken = taken | chosen
-            below = below + share
+            if not last:
+                taken, below = taken | chosen, below + share
         return w_o, weight
 
 

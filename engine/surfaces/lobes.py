@@ -178,6 +178,10 @@ class Lobe(SurfaceModel):
         """The lobe on the vertices `idx` (every per-vertex field taken)."""
         return type(self)(*(np.take(getattr(self, f.name), idx) for f in fields(self)))
 
+    def at(self, idx: IntArray, rho: FloatArray) -> Self:
+        """The lobe on the vertices `idx` with weight `rho` (len(idx),): its parameters taken, `rho` given."""
+        return type(self)(rho, *(np.take(getattr(self, f.name), idx) for f in fields(self)[1:]))
+
     def with_rho(self, rho: FloatArray) -> Self:
         """The same lobe with weight `rho` (the mixture samples a chosen lobe with the material's total rho)."""
         return replace(self, rho=rho)
