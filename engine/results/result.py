@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from owcsim.engine.integrator.medium_nee import LOBE_PEAK, phase_lobe_wanted
+from owcsim.engine.integrator.lobe import LOBE_PEAK, phase_lobe_wanted
 from owcsim.engine.media import mie
 from owcsim.engine.results import metrics
 from owcsim.engine.results.lighting import Lighting

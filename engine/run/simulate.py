@@ -26,7 +26,8 @@ import numpy as np
 from owcsim.engine.core import qmc
 from owcsim.engine.core.constants import SPEED_OF_LIGHT
 from owcsim.engine.integrator.kernel import KernelSettings, WorkItem
-from owcsim.engine.integrator.medium_nee import phase_lobe_wanted, two_sided_settings
+from owcsim.engine.integrator.lobe import phase_lobe_wanted
+from owcsim.engine.integrator.medium_nee import two_sided_settings
 from owcsim.engine.results.result import build_result
 from owcsim.engine.run import auto
 from owcsim.engine.run.execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
