@@ -88,16 +88,7 @@ def surface_vertex(ctx: BatchContext, sp: Paths, prims: IntArray, ts: FloatArray
         )
         ctx.connect(vertices)
         if ctx.mirrors:  # ... -> x -> mirror -> target, through the target's mirror images (mirrors.py)
-            connect_mirrors(
-                ctx,
-                points,
-                spawn,
-                sp.weights,
-                sp,
-                normals=normals,
-                brdf=(materials, arriving),
-                first_factor=sp.first if partition else None,
-            )
+            connect_mirrors(ctx, vertices)
         if last:
             return sp.gather(np.zeros(0, np.int64))
         u = ctx.bounce_uniforms(sp, rng)
@@ -279,7 +270,7 @@ def medium_collision(
         mp.weights = mp.weights * medium.albedo_at(points.T)
     mp.s = mp.s + 1
     if ctx.mirrors:  # ... -> x -> mirror -> target: only the collision reaches it (mirrors.py)
-        connect_mirrors(ctx, points, points, mp.weights, mp, in_dirs=mp.directions)
+        connect_mirrors(ctx, Vertices.in_medium(points, mp.weights, mp, mp.directions))
     if settings.both_sides and S >= 2 and ctx.item.direction == "forward":  # third strategy, Tx -> x1 -> x2 -> Rx
         connect_from_target(ctx, mp, points, rng)
     u = ctx.bounce_uniforms(mp, rng)

@@ -66,7 +66,8 @@ class _Image(NamedTuple):
 
 
 class _Vertex(NamedTuple):
-    """What a mirror connection records of its vertices (a stand-in for path.Paths)."""
+    """What a mirror connection records of its vertices: path lengths so far [m] (with the caller's
+    `Vertices.extra_length`), the path in the batch, the cell (k, s) (s: `Vertices.scatter_order` if given)."""
 
     lengths: FloatArray
     path: IntArray
@@ -74,46 +75,42 @@ class _Vertex(NamedTuple):
     s: IntArray
 
 
-def connect_mirrors(
-    ctx: BatchState,
-    points: FloatArray,
-    shadow_origins: FloatArray,
-    weights: FloatArray,
-    paths: Paths | _Vertex,
-    normals: FloatArray | None = None,
-    brdf: tuple[Any, FloatArray] | None = None,
-    in_dirs: FloatArray | None = None,
-    only: int | None = None,
-    first_factor: FloatArray | None = None,
-    share: Share | None = None,
-) -> None:
+def connect_mirrors(ctx: BatchState, v: Vertices, only: int | None = None, share: Share | None = None) -> None:
     """NEE from vertices (3, n) to the targets through one perfect-mirror reflection (image method).
 
     For a mirror plane, the target t seen through it is its image t' (normal and
     C-frame reflected): the connection x -> y -> t has length |t' - x|, leaves x
     toward t', and adds the reflection at y (k + 1) with factor rho_m(y). It counts
     when x and t lie on the same side of the plane, the ray x -> t' first meets a
-    mirror face of that plane (at y), and y sees t. Weights are as for `connect`
-    (Lambertian: rho / pi folded in by the caller; `brdf` = (Materials, arriving dirs);
-    medium vertices: `in_dirs`, factor phase(cos)). `only`: the item's target index to
+    mirror face of that plane (at y), and y sees t. The vertices `v` are described as for
+    `BatchContext.connect` (surface vertices: `Vertices.materials`, or the BRDF folded into the
+    throughput; medium vertices: factor phase(cos)). `only`: the item's target index to
     connect to (default all). Runs from both devices (module docstring): algorithm 5
-    (`settings.both_sides`) weights by its partition from `paths.first`; algorithms 2-4
-    pass the path's source factor A per vertex as `first_factor`, or a `share` of their own.
+    (`settings.both_sides`) weights by its partition from `Paths.first`; algorithms 2-4 by
+    A / (A + B(y)) with A = `Paths.first` (`Vertices.partition`), or by a `share` of their own.
     Paths with two or more consecutive mirror reflections next to the target are not
     estimated (second-order images).
     """
     scene, targets, tgt = ctx.scene, ctx.targets, ctx.tgt
     isect, geo = scene.intersector, scene.geometry
+    points, weights, paths, normals, in_dirs = v.points, v.throughput, v.paths, v.normals, v.in_dirs
     K = ctx.settings.max_reflections
     live = np.flatnonzero(paths.k + 1 <= K)
     if len(live) == 0:
         return
     assert geo.material is not None  # mirror planes are faces of a material
     mat_rho_m = geo.material.rho_m
-    if share is None and first_factor is not None:
-        share = _partition_share(first_factor)
+    if share is None and v.partition:
+        assert paths.first is not None  # runs from both devices carry the source factor
+        share = _partition_share(paths.first)
     elif share is None and ctx.settings.both_sides:
         share = _both_sides_share(ctx, paths, in_dirs)
+    cells = _Vertex(
+        lengths=paths.lengths if v.extra_length is None else paths.lengths + v.extra_length,
+        path=paths.path,
+        k=paths.k,
+        s=paths.s if v.scatter_order is None else v.scatter_order,
+    )
     for plane in ctx.mirrors:
         side_x = _dot(points.take(live, axis=1) - plane.point[:, None], plane.normal[:, None])
         images = plane.reflect_points(ctx.t_pos)  # (3, T)
@@ -139,8 +136,8 @@ def connect_mirrors(
             ok, d, d2, wdir, ct = ok.take(keep), d.take(keep), d2.take(keep), wdir.take(keep, axis=1), ct.take(keep)
             if normals is not None:
                 lobe = cs.take(keep)
-                if brdf is not None:
-                    mat, arriving = brdf
+                if v.materials is not None:
+                    mat, arriving = v.materials
                     lobe = lobe * mat.take(ok).eval(arriving.take(ok, axis=1), normals.take(ok, axis=1), wdir)
             else:
                 assert in_dirs is not None  # a medium vertex
@@ -149,7 +146,7 @@ def connect_mirrors(
             resp = targets.response(np.full(len(ok), tgt[j]), ct, back.T)
             f = weights.take(ok) * lobe * resp / d2
             _record_mirror(
-                ctx, plane, j, points, shadow_origins, ok, f, d, wdir, paths, mat_rho_m, share=share, resp=resp
+                ctx, plane, j, points, v.shadow_origins, ok, f, d, wdir, cells, mat_rho_m, share=share, resp=resp
             )
 
 
@@ -198,7 +195,6 @@ def connect_segment_mirrors(
     """
     if not ctx.settings.other_family(ctx.item.direction == "forward"):
         return
-    vertex = _Vertex(lengths=pp.lengths + s, path=pp.path, k=pp.k, s=np.full(len(pp), order, np.int64))
     src_set, _ = device_sets(ctx.scene, ctx.item.direction)
     i = ctx.item.source
     cos_src = _dot(pp.directions, src_set.normals[i][:, None])
@@ -214,7 +210,10 @@ def connect_segment_mirrors(
         total = q_s + q_o
         return np.where(total > 0, q_s / np.where(total > 0, total, 1.0), 1.0)
 
-    connect_mirrors(ctx, points, points, weights, vertex, in_dirs=pp.directions, only=j, share=share)
+    vertices = Vertices.in_medium(
+        points, weights, pp, pp.directions, scatter_order=np.full(len(pp), order, np.int64), extra_length=s
+    )
+    connect_mirrors(ctx, vertices, only=j, share=share)
 
 
 def _device_origin(ctx: BatchState, devices: Devices, i: int) -> FloatArray:
@@ -364,17 +363,13 @@ def branch_surface(
             else:
                 materials = (mat, br.directions)
                 ctx.connect(Vertices.on_surface(points, spawn, br.weights * part, br, normals, materials=materials), j)
-            if ctx.mirrors:
+            if ctx.mirrors:  # (mirror planes are faces of a material)
+                assert mat is not None
+                materials = (mat, br.directions)
                 connect_mirrors(
                     ctx,
-                    points,
-                    spawn,
-                    br.weights,
-                    br,
-                    normals=normals,
-                    brdf=(mat, br.directions),
-                    only=j,
-                    first_factor=br.first,
+                    Vertices.on_surface(points, spawn, br.weights, br, normals, materials=materials, partition=True),
+                    j,
                 )
     u = rng.random((2, len(br)))
     if mat is None:
@@ -446,7 +441,7 @@ def _record_mirror(
     f: FloatArray,
     d: FloatArray,
     wdir: FloatArray,
-    paths: Paths | _Vertex,
+    paths: _Vertex,
     rho_m: FloatArray,
     share: Share | None = None,
     resp: FloatArray | None = None,

@@ -32,29 +32,32 @@ and the equiangular points (`scattering_point_throughput`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from owcsim.engine.core.arrays import FloatArray
+from owcsim.engine.core.arrays import FloatArray, IntArray
 from owcsim.engine.core.sampling import column_norms
 from owcsim.engine.integrator.path import BatchState, dot3
 from owcsim.engine.sources.devices import Devices
 
 
-def _cut(D, vv, vw):
+def _cut(D: FloatArray, vv: FloatArray, vw: FloatArray) -> FloatArray:
     """s where s + |v - s w| = D (see module docstring); D - v.w > 0 for cuts inside a segment."""
     den = 2.0 * (D - vw)
     return (D * D - vv) / np.where(den > 0, den, 1.0)
 
 
-def path_length(l0, origins, directions, targets, s):
+def path_length(l0: Any, origins: FloatArray, directions: FloatArray, targets: FloatArray, s: Any) -> FloatArray:
     """l(s) = l0 + s + |target - (origin + s direction)| for (3, n) arrays [m]."""
     r = targets - (origins + s * directions)
     return l0 + s + np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
 
 
-def _strata_plan(la, lb, h, max_strata):
+def _strata_plan(
+    la: FloatArray, lb: FloatArray, h: float, max_strata: int
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Per segment: (first cut index, cut spacing, cut origin, number of cuts) in path length."""
     first = np.floor(la / h) + 1.0
     n_cuts = np.maximum(np.ceil(lb / h) - first, 0.0)
@@ -66,7 +69,17 @@ def _strata_plan(la, lb, h, max_strata):
     return first, step, origin_l, n_cuts
 
 
-def time_density(l0, origins, directions, targets, a, b, s, h, max_strata: int = 64):
+def time_density(
+    l0: FloatArray,
+    origins: FloatArray,
+    directions: FloatArray,
+    targets: FloatArray,
+    a: Any,
+    b: FloatArray,
+    s: FloatArray,
+    h: float,
+    max_strata: int = 64,
+) -> FloatArray:
     """n_T(s) = 1 / length of the time stratum of `time_strata` containing s (one point per segment)."""
     la = path_length(l0, origins, directions, targets, a)
     lb = path_length(l0, origins, directions, targets, b)
@@ -99,7 +112,7 @@ class EquiangularFrame:
 
     __slots__ = ("a", "D", "c", "h", "h2", "r2", "span", "scale")
 
-    def __init__(self, origins, directions, targets, a, b):
+    def __init__(self, origins: FloatArray, directions: FloatArray, targets: FloatArray, a: Any, b: FloatArray):
         v = targets - origins
         D = v[0] * directions[0] + v[1] * directions[1] + v[2] * directions[2]
         r = v - D * directions
@@ -120,10 +133,10 @@ class EquiangularFrame:
         )
 
     @staticmethod
-    def _at(x, seg):
+    def _at(x: Any, seg: IntArray | None) -> Any:
         return x if seg is None or np.ndim(x) == 0 else x.take(seg)
 
-    def sample(self, seg, xi):
+    def sample(self, seg: IntArray | None, xi: FloatArray) -> FloatArray:
         """s of the points with stratified uniforms `xi` on the segments `seg` (not clipped to [a, b]).
 
         `seg` None: every segment, `xi` of shape (n,) or (k, n) (k points per segment, broadcast)."""
@@ -138,7 +151,7 @@ class EquiangularFrame:
             num += a
         return num
 
-    def density(self, s, n_per: int, seg=None):
+    def density(self, s: FloatArray, n_per: int, seg: IntArray | None = None) -> FloatArray:
         """n_E(s) = n_per h / ((theta_b - theta_a) (h^2 + (s - D)^2)) on the segments `seg` (all if None;
         `s` may then be (k, n): k points per segment)."""
         at = self._at
@@ -148,7 +161,16 @@ class EquiangularFrame:
         return np.divide(n_per * at(self.scale, seg), x, out=x)
 
 
-def equiangular(origins, directions, targets, a, b, n_per: int, u, frame: EquiangularFrame | None = None):
+def equiangular(
+    origins: FloatArray,
+    directions: FloatArray,
+    targets: FloatArray,
+    a: FloatArray,
+    b: FloatArray,
+    n_per: int,
+    u: Callable[[int], FloatArray],
+    frame: EquiangularFrame | None = None,
+) -> tuple[IntArray, FloatArray]:
     """`n_per` stratified equiangular points per segment [a, b] with respect to its target.
 
     Returns (segment index (m,), s (m,)); `u(m)` gives the uniforms. `frame` reuses a computed
@@ -164,14 +186,26 @@ def equiangular(origins, directions, targets, a, b, n_per: int, u, frame: Equian
     return seg, np.clip(s, a.take(seg), b.take(seg))
 
 
-def equiangular_density(origins, directions, targets, a, b, s, n_per: int):
+def equiangular_density(
+    origins: FloatArray, directions: FloatArray, targets: FloatArray, a: Any, b: FloatArray, s: FloatArray, n_per: int
+) -> FloatArray:
     """n_E(s) = n_per * pdf_E(s) (one point per segment, arrays as `equiangular`)."""
     if n_per == 0:
         return np.zeros(len(s))
     return EquiangularFrame(origins, directions, targets, a, b).density(s, n_per)
 
 
-def time_strata(l0, origins, directions, targets, a, b, h, u, max_strata: int = 64):
+def time_strata(
+    l0: FloatArray,
+    origins: FloatArray,
+    directions: FloatArray,
+    targets: FloatArray,
+    a: FloatArray,
+    b: FloatArray,
+    h: float,
+    u: Callable[[int], FloatArray],
+    max_strata: int = 64,
+) -> tuple[IntArray, FloatArray, FloatArray]:
     """Stratify segments [a, b] in total path length (time bins of length h = c dt [m]).
 
     Arrays: l0, a, b (n,) [m]; origins, directions, targets (3, n). `u` is a
