@@ -3,7 +3,7 @@
 For each case (the 5 x 5 x 3 m room with smoke sigma_s 0.2 /m, sigma_a 0, and an
 unbounded medium sigma_s 0.2, sigma_a 0.05 /m; HG g = 0, 0.7, 0.9; devices 0.5 m and
 3 m apart) and each estimator (algorithms 2, 3, 5 one-sided as `simulate` runs them,
-and algorithms 2, 3, 4, 5 from both devices, engine/integrator/medium_nee.py), the script runs
+and algorithms 2, 3, 4, 5 from both devices, engine/integrator/weights.py), the script runs
 `--seeds` independent seeds of `--paths` paths (per side) and prints:
 - ratio: the spread (sample standard deviation) of H0 over the seeds / the median
   reported standard error (1 when the error bars are honest; the issue asks 0.7-1.5);
@@ -227,7 +227,7 @@ def roulette_study(args) -> None:
 def speed_study(args) -> None:
     """Paths and wall time to 0.03 % on the clear room (S1) and 0.3 % on the smoky room (g 0.5), accuracy mode,
     before (roulette from depth 3 with survival min(1, w / w0), one side) and after, in the same run."""
-    from owcsim.engine.integrator.kernel import KernelSettings
+    from owcsim.engine.integrator.path import KernelSettings
 
     after = {"rr_start_depth": args.rr_depth, "rr_threshold": args.rr_theta}
     before = {"rr_start_depth": 3, "rr_threshold": 1.0}

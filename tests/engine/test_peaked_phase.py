@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from benchmarks.peaked_phase import AREA, SIGMA_A, SIGMA_S, D, M, doc, run_seeds
-from owcsim.engine.integrator import context, kernel, single_scatter
+from owcsim.engine.integrator import context, kernel, single_scatter, uniform_medium
 from owcsim.engine.run import simulate as simulate_module
 from owcsim.engine.run.simulate import kernel_settings
 from owcsim.engine.scene.scene import build_scene
@@ -166,7 +166,7 @@ def test_black_room_frame_connections_cover_the_prism_reference(monkeypatch):
 @pytest.mark.parametrize("direction", ["forward", "backward"])
 def test_frame_connections_equal_the_general_ones_with_the_lobe(direction, monkeypatch):
     """As tests/engine/test_medium_next_events.py, with g = 0.95 (the lobe on): the same tallies to rounding."""
-    monkeypatch.setattr(kernel, "SMALL_STEP", -1)
+    monkeypatch.setattr(uniform_medium, "SMALL_STEP", -1)
     medium = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.3, "phase": {"type": "hg", "g": 0.95}}
     d = room_doc(medium=medium, algorithm=5, max_reflections=3, max_scattering=3, paths=1024)
     spec = SceneSpec.model_validate(d)
