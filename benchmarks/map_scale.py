@@ -67,7 +67,7 @@ def child(case: dict) -> dict:
     out["rel_median"] = rel[len(rel) // 2] if rel else None
     out["rel_max"] = rel[-1] if rel else None
     if case.get("write"):
-        from owcsim.clients.output import write_outputs
+        from owcsim.formats.result_files import write_outputs
 
         folder = Path(tempfile.mkdtemp(prefix="owcsim-map-"))
         t = time.perf_counter()

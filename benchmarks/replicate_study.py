@@ -3,7 +3,7 @@
 For each case (the 5 x 5 x 3 m room with smoke sigma_s 0.2 /m, sigma_a 0, and an
 unbounded medium sigma_s 0.2, sigma_a 0.05 /m; HG g = 0, 0.7, 0.9; devices 0.5 m and
 3 m apart) and each estimator (algorithms 2, 3, 5 one-sided as `simulate` runs them,
-and algorithms 2, 3, 4, 5 from both devices, engine/integrator/weights.py), the script runs
+and algorithms 2, 3, 4, 5 from both devices, engine/run/simulate.simulate_two_sided), the script runs
 `--seeds` independent seeds of `--paths` paths (per side) and prints:
 - ratio: the spread (sample standard deviation) of H0 over the seeds / the median
   reported standard error (1 when the error bars are honest; the issue asks 0.7-1.5);
@@ -37,9 +37,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from owcsim.engine import (
-    medium_nee,  # noqa: E402
-)
 from owcsim.engine.run import simulate as engine  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 
@@ -50,7 +47,7 @@ def simulate(*args, **kwargs) -> dict:
 
 
 def simulate_two_sided(*args, **kwargs) -> dict:
-    return json.loads(medium_nee.simulate_two_sided(*args, **kwargs).model_dump_json())
+    return json.loads(engine.simulate_two_sided(*args, **kwargs).model_dump_json())
 
 
 VARIANTS = [(2, "one"), (3, "one"), (5, "one"), (2, "two"), (3, "two"), (4, "two"), (5, "two")]

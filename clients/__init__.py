@@ -1,8 +1,8 @@
-"""Clients of owcsim: the Python client of the HTTP service, result files and plots.
+"""Clients of owcsim: the Python client of the HTTP service and the result it returns.
 
 `Client`, `AsyncClient` and their exceptions need httpx (`pip install owcsim[client]`);
-they are imported on first use, so `clients.output` and `clients.plot` work without it.
-Depends on schemas only, never on engine or server.
+they are imported on first use, so `clients.result` works without it. Result files and plots
+are owcsim.formats'. Depends on formats and schemas only, never on engine or server.
 """
 
 from __future__ import annotations

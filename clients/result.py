@@ -4,11 +4,22 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pydantic import PrivateAttr
 
+from owcsim.formats.map_files import to_xarray
+from owcsim.formats.maps import GridMap, maps_of_result
+from owcsim.formats.plots import plot_cir
+from owcsim.formats.result_files import LINK_COLUMNS, write_outputs
+from owcsim.formats.result_tables import cir_arrays
 from owcsim.schemas.results import LinkPublic, SimulationResultPublic
+
+if TYPE_CHECKING:  # pragma: no cover
+    import pandas
+    import xarray
+    from matplotlib.figure import Figure
 
 
 class Result(SimulationResultPublic):
@@ -42,16 +53,12 @@ class Result(SimulationResultPublic):
                 return lk
         raise KeyError(f"no link {transmitter} -> {receiver}")
 
-    def grid_maps(self):
-        """The receiver grids as `owcsim.schemas.maps.GridMap`s (2-D arrays with coordinates, units, masks)."""
-        from owcsim.schemas.maps import maps_of_result
-
+    def grid_maps(self) -> list[GridMap]:
+        """The receiver grids as `owcsim.formats.maps.GridMap`s (2-D arrays with coordinates, units, masks)."""
         return maps_of_result(self)[0]
 
-    def to_xarray(self, grid: str | None = None):
+    def to_xarray(self, grid: str | None = None) -> xarray.Dataset:
         """One grid's maps (all channels) as an xarray Dataset (dims channel, i, j); the first grid by default."""
-        from owcsim.schemas.maps import to_xarray
-
         maps = self.grid_maps()
         if not maps:
             raise ValueError("this result has no receiver grid")
@@ -61,11 +68,9 @@ class Result(SimulationResultPublic):
             raise KeyError(f"no grid {name!r}; the grids are {sorted({m.grid for m in maps})}")
         return to_xarray(chosen)
 
-    def to_dataframe(self):
+    def to_dataframe(self) -> pandas.DataFrame:
         """The links' scalar figures as a pandas DataFrame (one row per link)."""
         import pandas as pd
-
-        from .output import LINK_COLUMNS
 
         return pd.DataFrame(
             [lk.model_dump(mode="json", include=set(LINK_COLUMNS)) for lk in self.links], columns=list(LINK_COLUMNS)
@@ -76,20 +81,14 @@ class Result(SimulationResultPublic):
         order) dc_gain, dc_gain_stderr, transmitter, receiver; per link with a binned CIR (its index in
         `links` is cir_link) cir and cir_stderr (n, n_bins) [power per bin per watt; NaN = no error bar] and
         by_reflection_order (n, K + 1, n_bins)."""
-        from owcsim.schemas.result_tables import cir_arrays
-
         return cir_arrays(self)
 
-    def plot(self, path: str | Path | None = None, link: int | None = None):
-        """h(t) per reflection order and total (clients.plot.plot_cir); saved to `path` if given."""
-        from .plot import plot_cir
-
+    def plot(self, path: str | Path | None = None, link: int | None = None) -> Figure:
+        """h(t) per reflection order and total (formats.plots.plot_cir); saved to `path` if given."""
         return plot_cir(self, path, link)
 
     def save(self, folder: str | Path) -> list[Path]:
         """Write result.json, cir.csv and cir.png, as `owcsim run` does."""
-        from .output import write_outputs
-
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         return write_outputs(self, folder, self._raw)

@@ -14,7 +14,8 @@ import json
 from pathlib import Path
 
 import owcsim
-from owcsim.schemas.maps import MapDecor, format_summary, heatmap_png
+from owcsim.formats.heatmap import heatmap_png
+from owcsim.formats.maps import MapDecor, format_summary
 
 SCENE = Path(__file__).with_name("komine_map.json")
 FIGURES = ("illuminance_lx", "received_power_dbm", "rms_delay_spread_s", "snr_db")

@@ -29,7 +29,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.optimize import least_squares  # noqa: E402
 
-from owcsim.engine.media import mie  # noqa: E402
+from owcsim.engine.media import mie, report  # noqa: E402
 from owcsim.engine.media.phase import HenyeyGreenstein  # noqa: E402
 from owcsim.engine.run.simulate import simulate  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
@@ -72,7 +72,7 @@ def main() -> None:
     for ax, name in zip(axes, ("light", "dense")):
         doc = json.loads((HERE / f"soot_room_{name}.json").read_text())
         spec = SceneSpec.model_validate(doc)
-        info = mie.describe(spec.medium)
+        info = report.describe(spec.medium)
         optics = mie.particle_optics(spec.medium.particles)
         w, g1, g2 = two_hg_fit(optics.cos_theta, optics.phase)
         print(f"\n{doc['name']}")

@@ -6,8 +6,8 @@
     from owcsim import build                                       # box_room, lamp, photodiode, work_plane, scene
 
 The installed package holds the layers as subpackages: `owcsim.schemas` (wire models),
-`owcsim.engine` (simulation core), `owcsim.server` (HTTP service), `owcsim.clients`
-(HTTP client) and this package's command line. Heavy modules load on first use, so
+`owcsim.formats` (result files and plots), `owcsim.engine` (simulation core), `owcsim.server`
+(HTTP service), `owcsim.clients` (HTTP client) and this package's command line. Heavy modules load on first use, so
 `import owcsim` and `owcsim --version` stay fast.
 """
 

@@ -64,7 +64,7 @@ def _print_links(result: SimulationResultPublic) -> None:
     for note in result.warnings:
         print(f"owcsim: warning: {note}", file=sys.stderr)
     if result.maps or len(result.links) > MAX_LINES:
-        from owcsim.schemas.maps import format_summary, maps_of_result
+        from owcsim.formats.maps import format_summary, maps_of_result
 
         maps, _ = maps_of_result(result)
         if maps:
@@ -151,8 +151,8 @@ def _output_folder(path: str) -> Path:
 def _cmd_run(args) -> int:
     assignments = args.set or []
     spec, _ = load_scene(args.scene, _scene_overrides(args), assignments)
-    from owcsim.clients.output import write_outputs
     from owcsim.engine.run.simulate import simulate
+    from owcsim.formats.result_files import write_outputs
 
     out = _output_folder(args.out)
     executor = None

@@ -49,6 +49,16 @@ class TwoSided(StrEnum):
     AUTO_DIRECTION = "when direction is auto"  # unless a direction is requested
 
 
+@dataclass(frozen=True)
+class BothDevicesKernel:
+    """The KernelSettings flags (field name -> value) a run of every link from both devices sets on top of
+    `Algorithm.kernel` (engine/integrator/medium_nee.py: the partition of unity between the two sides; the
+    planner must then run every such link both ways, or it counts about half)."""
+
+    in_medium: Mapping[str, object]
+    in_vacuum: Mapping[str, object]
+
+
 #: Outputs every algorithm fills.
 BASE_OUTPUTS = ("dc_gain", "delays", "cir", "dc_gain_by_reflection_order")
 
@@ -81,6 +91,8 @@ class Algorithm:
     scattering_fix: str = ""
     #: (families, left_out) when `max_scattering` asks for single scattering only (algorithm 4 with S = 1)
     at_single_scattering: tuple[str, tuple[str, ...]] | None = None
+    #: the flags of its run from both devices; None: it has none (it runs one side only)
+    both_devices: BothDevicesKernel | None = None
 
     def S(self, max_scattering: int | None) -> int:
         """Highest scattering order tallied: `max_scattering` where the algorithm lets it choose (4: 1 or 2,
@@ -89,6 +101,12 @@ class Algorithm:
         if lo == hi or max_scattering is None:
             return self.scattering_orders if self.scattering_orders is not None else int(max_scattering or 0)
         return min(max(int(max_scattering), lo), hi)
+
+    def both_devices_kernel(self, has_medium: bool) -> Mapping[str, object]:
+        """KernelSettings flags of a run of every link from both devices (in a medium or not)."""
+        if self.both_devices is None:
+            raise ValueError(f"algorithm {self.number} has no two-sided form")
+        return self.both_devices.in_medium if has_medium else self.both_devices.in_vacuum
 
     def families_at(self, S: int) -> tuple[str, tuple[str, ...]]:
         """(families, left_out) of a run that tallies scattering orders up to S."""
@@ -105,6 +123,17 @@ class Algorithm:
             f"algorithm {self.number} {self.scattering_meaning}, so `max_scattering` {max_scattering} "
             f"cannot be honoured: {self.scattering_fix}"
         )
+
+
+def _mis_on_families(scatter_then_reflect: bool, reflect_then_scatter: bool) -> BothDevicesKernel:
+    """Algorithms 2-4 from both devices, with a medium or without: the balance heuristic on the family both
+    sides sample, the partition of unity on the others, and which single-scattering families are estimated:
+    Tx -> p -> (k) -> Rx (`scatter_then_reflect`, algorithm 2's), Tx -> (k) -> p -> Rx (`reflect_then_scatter`,
+    algorithm 3's)."""
+    flags = MappingProxyType(
+        {"mis": True, "scatter_then_reflect": scatter_then_reflect, "reflect_then_scatter": reflect_then_scatter}
+    )
+    return BothDevicesKernel(in_medium=flags, in_vacuum=flags)
 
 
 _SCATTERED = BASE_OUTPUTS + ("dc_gain_by_scattering_order",)
@@ -147,6 +176,7 @@ ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
                 direction=Direction.BACKWARD,
                 direction_reason="algorithm 2 samples in-scattering from the receiver side",
                 two_sided=TwoSided.ALWAYS,
+                both_devices=_mis_on_families(scatter_then_reflect=True, reflect_then_scatter=False),
                 counts_scattering=True,
                 outputs=_SCATTERED,
                 scattering_range=(1, 1),
@@ -167,6 +197,7 @@ ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
                 direction=Direction.FORWARD,
                 direction_reason="algorithm 3 samples out-scattering from the transmitter side",
                 two_sided=TwoSided.ALWAYS,
+                both_devices=_mis_on_families(scatter_then_reflect=False, reflect_then_scatter=True),
                 counts_scattering=True,
                 outputs=_SCATTERED,
                 scattering_range=(1, 1),
@@ -191,6 +222,7 @@ ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
                 direction=Direction.BOTH,
                 direction_reason="algorithm 4 runs both sides and weights their shared family by MIS",
                 two_sided=TwoSided.ALWAYS,
+                both_devices=_mis_on_families(scatter_then_reflect=True, reflect_then_scatter=True),
                 counts_scattering=True,
                 outputs=_SCATTERED,
                 scattering_range=(1, 2),
@@ -217,6 +249,8 @@ ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
                 direction=None,
                 direction_reason="",
                 two_sided=TwoSided.AUTO_DIRECTION,
+                # in a medium the partition weights every connection; in vacuum each side counts half (mis)
+                both_devices=BothDevicesKernel(in_medium={"both_sides": True}, in_vacuum={"mis": True}),
                 counts_scattering=True,
                 outputs=_SCATTERED,
                 scattering_meaning="counts scattering orders 1 to S (S >= 1)",

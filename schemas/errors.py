@@ -6,6 +6,9 @@ by its dotted path (e.g. `receivers.0.fov_deg`), the same paths `owcsim validate
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+from typing import Any
+
 from pydantic import BaseModel, ConfigDict, Field
 
 #: Media type of a problem document.
@@ -38,7 +41,7 @@ class Problem(BaseModel):
     errors: list[ProblemField] = Field(default_factory=list, description="each wrong field, located")
 
 
-def located(errors: list[dict], prefix: tuple = ()) -> list[tuple[str, str]]:
+def located(errors: Sequence[Mapping[str, Any]], prefix: tuple = ()) -> list[tuple[str, str]]:
     """pydantic error dicts -> (dotted location, message without pydantic's "Value error, " prefix)."""
     return [
         (

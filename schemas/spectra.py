@@ -20,12 +20,13 @@ taken at each wavelength (the SPD at a wavelength times the width between the mi
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, Discriminator, Field, Tag, model_validator
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
 
 from .base import SpecModel
-from .medium import MAX_COEFFICIENT, ComplexIndexSpec
+from .medium import MAX_COEFFICIENT, MAX_SIZE_PARAMETER, SIZE_WINDOW_SIGMAS, ComplexIndexSpec
 
 #: Shortest and longest wavelength a band may reach [m] (UV-C to far infrared).
 MIN_WAVELENGTH, MAX_WAVELENGTH = 100e-9, 20e-6
@@ -295,10 +296,6 @@ def check_scene(scene) -> None:
                 if len(getattr(bm, name)) != n:
                     raise ValueError(f"spectral.medium.{name}: {len(getattr(bm, name))} values for {n} bands")
     if scene.medium is not None and scene.medium.type == "particles":
-        import math
-
-        from .medium import MAX_SIZE_PARAMETER, SIZE_WINDOW_SIGMAS
-
         p = scene.medium.particles
         s = math.log(p.geometric_std)
         d_max = p.geometric_mean_diameter * math.exp(2 * s * s + SIZE_WINDOW_SIGMAS * s)
@@ -343,7 +340,6 @@ def _surfaces(scene):
 
 
 # --- the result's `spectral` section -------------------------------------------------------------------------------
-from pydantic import ConfigDict  # noqa: E402
 
 
 class _Out(BaseModel):

@@ -6,7 +6,7 @@ and NPZ once, in the job's worker, when the job ends (`render_all`: compressed f
 store keeps and the routes send as they are). Plots are drawn from the stored .npz
 (`npz_png`: the rows of the links drawn, read without loading the others) when first
 asked for, so that no job pays matplotlib's time; the default plot is then stored too.
-The CSV and the arrays are schemas/result_tables.py's, which the command line and the client
+The CSV and the arrays are formats/result_tables.py's, which the command line and the client
 write too (the same bytes).
 Plots use matplotlib's object API, never pyplot, and are drawn one at a time (`_DRAWING`):
 matplotlib's mathtext parser (log-axis tick labels) is not thread-safe, and concurrent
@@ -20,11 +20,12 @@ import io
 import threading
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from owcsim.schemas.plots import MAX_PANELS, CirPanel, cir_figure, panels_of
-from owcsim.schemas.result_tables import CSV_ROWS_PER_CHUNK, cir_arrays, cir_csv_chunks, csv_cell
+from owcsim.formats.plots import MAX_PANELS, CirPanel, cir_figure, panels_of
+from owcsim.formats.result_tables import CSV_ROWS_PER_CHUNK, cir_arrays, cir_csv_chunks, csv_cell
 
 __all__ = [
     "CSV_ROWS_PER_CHUNK",
@@ -61,7 +62,8 @@ def cir_csv(result: SimulationResultPublic) -> str:
 
 def cir_npz(result: SimulationResultPublic) -> bytes:
     buf = io.BytesIO()
-    np.savez_compressed(buf, **cir_arrays(result))
+    arrays: dict[str, Any] = cir_arrays(result)  # Any: numpy's stubs type **arrays together with allow_pickle
+    np.savez_compressed(buf, **arrays)
     return buf.getvalue()
 
 
@@ -76,8 +78,9 @@ def render_all(result: SimulationResultPublic, result_json: str, folder: Path) -
     with gzip.open(out["result.csv.gz"], "wt", encoding="utf-8", newline="", compresslevel=6) as f:
         for chunk in cir_csv_chunks(result):
             f.write(chunk)
+    arrays: dict[str, Any] = cir_arrays(result)  # Any: numpy's stubs type **arrays together with allow_pickle
     with open(out["result.npz"], "wb") as f:
-        np.savez_compressed(f, **cir_arrays(result))
+        np.savez_compressed(f, **arrays)
     return out
 
 

@@ -23,6 +23,8 @@ from starlette.routing import Match
 
 from owcsim.schemas.errors import PROBLEM_MEDIA_TYPE, Problem, ProblemField, located
 
+from .job_rows import is_disk_full
+
 _HTTP_METHODS = {"GET", "PUT", "POST", "DELETE", "OPTIONS", "HEAD", "PATCH", "TRACE"}
 log = logging.getLogger("owcsim.server")
 
@@ -94,6 +96,18 @@ _KIND_BY_STATUS = {
 }
 
 
+def _documented_methods(request: Request) -> set[str]:
+    """Methods the OpenAPI document gives the request's path (routers included under a prefix
+    do not show their routes in app.routes)."""
+    out: set[str] = set()
+    for template, operations in request.app.openapi().get("paths", {}).items():
+        parts = re.split(r"(\{[^/}]+\})", template)
+        pattern = "".join("[^/]+" if part.startswith("{") else re.escape(part) for part in parts)
+        if re.fullmatch(pattern, request.url.path):
+            out |= {m.upper() for m in operations if m.upper() in _HTTP_METHODS}
+    return out | ({"HEAD"} if "GET" in out else set())
+
+
 def install(app: FastAPI) -> None:
     """Register the handlers on the app."""
 
@@ -108,17 +122,6 @@ def install(app: FastAPI) -> None:
         errors = field_errors(list(exc.errors()))
         detail = "; ".join(f"{e.loc}: {e.msg}" for e in errors[:5])
         return problem_response(request, 422, "invalid-parameter", detail, errors=errors)
-
-    def _documented_methods(request: Request) -> set[str]:
-        """Methods the OpenAPI document gives the request's path (routers included under a prefix
-        do not show their routes in app.routes)."""
-        out: set[str] = set()
-        for template, operations in request.app.openapi().get("paths", {}).items():
-            parts = re.split(r"(\{[^/}]+\})", template)
-            pattern = "".join("[^/]+" if part.startswith("{") else re.escape(part) for part in parts)
-            if re.fullmatch(pattern, request.url.path):
-                out |= {m.upper() for m in operations if m.upper() in _HTTP_METHODS}
-        return out | ({"HEAD"} if "GET" in out else set())
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException):
@@ -145,8 +148,6 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(sqlite3.OperationalError)
     async def _store(request: Request, exc: sqlite3.OperationalError):
         """Disk full: 507; the store busy (locked past the timeout): 503. Both retryable."""
-        from .store import is_disk_full
-
         if is_disk_full(exc):
             log.error("job store: disk full on %s %s", request.method, request.url.path)
             return problem_response(

@@ -18,9 +18,7 @@ from __future__ import annotations
 
 import builtins
 import contextlib
-import errno
 import fcntl
-import io
 import json
 import os
 import sqlite3
@@ -29,138 +27,25 @@ import time
 import uuid
 import zlib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 
-SCHEMA_VERSION = 2
-
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS jobs (
-    seq INTEGER PRIMARY KEY AUTOINCREMENT,
-    id TEXT NOT NULL UNIQUE,
-    owner TEXT NOT NULL,
-    idempotency_key TEXT,
-    request_hash TEXT NOT NULL,
-    name TEXT,
-    status TEXT NOT NULL,
-    created_at REAL NOT NULL,
-    started_at REAL,
-    finished_at REAL,
-    fraction REAL NOT NULL DEFAULT 0,
-    paths INTEGER NOT NULL DEFAULT 0,
-    batches INTEGER NOT NULL DEFAULT 0,
-    rel_stderr REAL,
-    elapsed_s REAL NOT NULL DEFAULT 0,
-    cancel_requested INTEGER NOT NULL DEFAULT 0,
-    attempts INTEGER NOT NULL DEFAULT 0,
-    crashes INTEGER NOT NULL DEFAULT 0,
-    run_token INTEGER NOT NULL DEFAULT 0,
-    worker_pid INTEGER,
-    error TEXT,
-    warnings TEXT NOT NULL DEFAULT '[]',
-    has_result INTEGER NOT NULL DEFAULT 0,
-    UNIQUE (owner, idempotency_key)
-);
-CREATE INDEX IF NOT EXISTS jobs_by_status ON jobs (status, seq);
-CREATE INDEX IF NOT EXISTS jobs_by_owner ON jobs (owner, seq);
-CREATE TABLE IF NOT EXISTS job_documents (
-    job_id TEXT PRIMARY KEY REFERENCES jobs (id),
-    scene BLOB NOT NULL,
-    result BLOB
-);
-"""
-
-#: Version 1 -> 2: per-job memory estimate, stored renders, owners' dispatch turns.
-_SCHEMA_2 = """
-ALTER TABLE jobs ADD COLUMN memory_bytes INTEGER NOT NULL DEFAULT 0;
-CREATE TABLE IF NOT EXISTS job_renders (
-    job_id TEXT NOT NULL REFERENCES jobs (id),
-    name TEXT NOT NULL,
-    data BLOB NOT NULL,
-    PRIMARY KEY (job_id, name)
-);
-CREATE TABLE IF NOT EXISTS owner_turns (
-    owner TEXT PRIMARY KEY,
-    last_turn INTEGER NOT NULL
-);
-"""
-
-#: Bytes read from a stored render at a time.
-CHUNK_BYTES = 256 * 1024
-
-_COLUMNS = (
-    "seq, id, owner, name, status, created_at, started_at, finished_at, fraction, paths, batches, "
-    "rel_stderr, elapsed_s, cancel_requested, attempts, crashes, run_token, worker_pid, error, warnings, "
-    "has_result, idempotency_key, request_hash, memory_bytes"
+from .job_rows import (
+    CHUNK_BYTES,
+    COLUMNS,
+    SCHEMA,
+    SCHEMA_2,
+    SCHEMA_VERSION,
+    IdempotencyConflict,
+    JobRow,
+    QueueFull,
+    StoreError,
+    is_disk_full,
+    pack,
 )
+from .sqlite_io import BlobFile, Transaction
 
-
-class QueueFull(Exception):
-    """The queue holds `max_queued_jobs` jobs already (`per_owner`: this owner's quota is used up)."""
-
-    def __init__(self, per_owner: bool = False):
-        super().__init__("queue full")
-        self.per_owner = per_owner
-
-
-class StoreError(Exception):
-    """The job store file cannot be used (damaged, not a database, locked by another server)."""
-
-
-def is_disk_full(exc: BaseException) -> bool:
-    """An SQLite error that means the disk (or the database's size cap) is full."""
-    if isinstance(exc, OSError):
-        return exc.errno in (errno.ENOSPC, errno.EDQUOT)
-    code = getattr(exc, "sqlite_errorcode", None)
-    return isinstance(exc, sqlite3.Error) and (code == sqlite3.SQLITE_FULL or "disk is full" in str(exc))
-
-
-class IdempotencyConflict(Exception):
-    """An Idempotency-Key was used before with a different request."""
-
-    def __init__(self, job_id: str):
-        super().__init__(job_id)
-        self.job_id = job_id
-
-
-@dataclass
-class JobRow:
-    seq: int
-    id: str
-    owner: str
-    name: str | None
-    status: str
-    created_at: float
-    started_at: float | None
-    finished_at: float | None
-    fraction: float
-    paths: int
-    batches: int
-    rel_stderr: float | None
-    elapsed_s: float
-    cancel_requested: bool
-    attempts: int
-    crashes: int
-    run_token: int
-    worker_pid: int | None
-    error: str | None
-    warnings: list[str] = field(default_factory=list)
-    has_result: bool = False
-    idempotency_key: str | None = None
-    request_hash: str = ""
-    memory_bytes: int = 0
-
-    @classmethod
-    def from_db(cls, r: tuple) -> "JobRow":
-        vals = list(r)
-        vals[13] = bool(vals[13])
-        vals[19] = json.loads(vals[19])
-        vals[20] = bool(vals[20])
-        return cls(*vals)
-
-
-def _pack(text: str | bytes) -> bytes:
-    return zlib.compress(text.encode() if isinstance(text, str) else text, 6)
+#: What the store raises and returns, for its callers (server routes, dispatcher, worker, command line).
+__all__ = ["CHUNK_BYTES", "IdempotencyConflict", "JobRow", "JobStore", "QueueFull", "StoreError", "is_disk_full"]
 
 
 class JobStore:
@@ -189,12 +74,12 @@ class JobStore:
             con.execute("PRAGMA journal_mode=WAL")
             version = con.execute("PRAGMA user_version").fetchone()[0]
             if version == 0:
-                con.executescript(_SCHEMA)
-                con.executescript(_SCHEMA_2)
+                con.executescript(SCHEMA)
+                con.executescript(SCHEMA_2)
                 con.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
             elif version == 1:
                 with self._tx() as tx:
-                    for stmt in filter(str.strip, _SCHEMA_2.split(";")):
+                    for stmt in filter(str.strip, SCHEMA_2.split(";")):
                         tx.execute(stmt)
                     tx.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
             elif version > SCHEMA_VERSION:
@@ -261,7 +146,7 @@ class JobStore:
         self._local = threading.local()
 
     def _tx(self):
-        return _Transaction(self._con())
+        return Transaction(self._con())
 
     # -- submission -------------------------------------------------------------------------
 
@@ -278,7 +163,7 @@ class JobStore:
         memory_bytes: int = 0,
     ) -> tuple[JobRow, bool]:
         """Queue a job; returns (job, created). With a known Idempotency-Key: the first job, not created."""
-        packed = _pack(scene_json)
+        packed = pack(scene_json)
         with self._tx() as con:
             if idempotency_key is not None:
                 first = self._idempotent(con, owner, idempotency_key, request_hash)
@@ -300,13 +185,13 @@ class JobStore:
                 (job_id, owner, idempotency_key, request_hash, name, time.time(), memory_bytes),
             )
             con.execute("INSERT INTO job_documents (job_id, scene) VALUES (?, ?)", (job_id, packed))
-            row = con.execute(f"SELECT {_COLUMNS} FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            row = con.execute(f"SELECT {COLUMNS} FROM jobs WHERE id = ?", (job_id,)).fetchone()
         return JobRow.from_db(row), True
 
     @staticmethod
     def _idempotent(con, owner: str, key: str, request_hash: str) -> JobRow | None:
         row = con.execute(
-            f"SELECT {_COLUMNS} FROM jobs WHERE owner = ? AND idempotency_key = ?", (owner, key)
+            f"SELECT {COLUMNS} FROM jobs WHERE owner = ? AND idempotency_key = ?", (owner, key)
         ).fetchone()
         if row is None:
             return None
@@ -324,14 +209,14 @@ class JobStore:
 
     def get(self, job_id: str, owner: str | None = None) -> JobRow | None:
         """The job, or None if it does not exist or (with `owner`) belongs to someone else."""
-        sql, args = f"SELECT {_COLUMNS} FROM jobs WHERE id = ?", [job_id]
+        sql, args = f"SELECT {COLUMNS} FROM jobs WHERE id = ?", [job_id]
         if owner is not None:
             sql, args = sql + " AND owner = ?", args + [owner]
         row = self._con().execute(sql, args).fetchone()
         return JobRow.from_db(row) if row else None
 
     def list(
-        self, owner: str | None, statuses: list[str] | None, limit: int, after: str | None
+        self, owner: str | None, statuses: Sequence[str] | None, limit: int, after: str | None
     ) -> tuple[list[JobRow], str | None]:
         """Newest first; returns (page, the id to pass as `after` for the next page or None).
 
@@ -355,7 +240,7 @@ class JobStore:
         if before_seq is not None:
             where.append("seq < ?")
             args.append(before_seq)
-        sql = f"SELECT {_COLUMNS} FROM jobs" + (" WHERE " + " AND ".join(where) if where else "")
+        sql = f"SELECT {COLUMNS} FROM jobs" + (" WHERE " + " AND ".join(where) if where else "")
         rows = self._con().execute(sql + " ORDER BY seq DESC LIMIT ?", args + [limit + 1]).fetchall()
         jobs = [JobRow.from_db(r) for r in rows[:limit]]
         return jobs, (jobs[-1].id if len(rows) > limit else None)
@@ -410,7 +295,7 @@ class JobStore:
             if row is None:
                 raise FileNotFoundError(f"job {job_id} has no render {name}")
             with con.blobopen("job_renders", "data", row[0], readonly=True) as blob:
-                yield _BlobFile(blob)
+                yield BlobFile(blob)
         finally:
             con.close()
 
@@ -600,7 +485,7 @@ class JobStore:
     ) -> bool:
         """Record a run's outcome and its renders ({name: file of gzip bytes}) in one transaction;
         False (nothing written) if the job is no longer this run's."""
-        packed = _pack(result_json) if result_json is not None else None
+        packed = pack(result_json) if result_json is not None else None
         with self._tx() as con:
             cur = con.execute(
                 "UPDATE jobs SET status = ?, finished_at = ?, error = COALESCE(?, error), warnings = ?, "
@@ -616,57 +501,3 @@ class JobStore:
             if renders:
                 self._write_renders(con, job_id, renders)
         return True
-
-
-class _BlobFile(io.RawIOBase):
-    """An SQLite blob as a binary file object (zipfile wants `seekable()` and friends)."""
-
-    def __init__(self, blob):
-        self.blob = blob
-
-    def readable(self) -> bool:
-        return True
-
-    def seekable(self) -> bool:
-        return True
-
-    def readinto(self, b) -> int:
-        data = self.blob.read(len(b))
-        b[: len(data)] = data
-        return len(data)
-
-    def seek(self, offset: int, whence: int = 0) -> int:
-        self.blob.seek(offset, whence)
-        return self.blob.tell()
-
-    def tell(self) -> int:
-        return self.blob.tell()
-
-
-class _Transaction:
-    """BEGIN IMMEDIATE ... COMMIT (ROLLBACK on error): one writer at a time, across processes."""
-
-    def __init__(self, con: sqlite3.Connection):
-        self.con = con
-
-    def __enter__(self) -> sqlite3.Connection:
-        self.con.execute("BEGIN IMMEDIATE")
-        return self.con
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            try:
-                self.con.execute("COMMIT")
-            except sqlite3.Error:
-                self._rollback()  # e.g. SQLITE_FULL at commit: leave no transaction open
-                raise
-        else:
-            self._rollback()
-
-    def _rollback(self) -> None:
-        """Roll back if a transaction is still open (SQLite ends some by itself, e.g. on SQLITE_FULL)."""
-        if self.con.in_transaction:
-            try:
-                self.con.execute("ROLLBACK")
-            except sqlite3.Error:
-                pass

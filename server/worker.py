@@ -164,6 +164,7 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
             except Exception:  # the job's outcome is decided; a cluster that went away must not change it
                 log.warning("job %s: closing the Dask client failed", job_id, exc_info=True)
         sys.stderr.flush()
+    assert result is not None  # set by simulate: the branches that clear it return
     if watch.reason == "abandoned":
         return
     if watch.reason == "time_limit":

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import json
 
-from owcsim.engine.integrator.medium_nee import simulate_two_sided as _two_sided
 from owcsim.engine.run.simulate import simulate as _simulate
+from owcsim.engine.run.simulate import simulate_two_sided as _two_sided
 
 
 def simulate_document(*args, **kwargs) -> dict:

@@ -1,4 +1,5 @@
-"""Import direction: schemas <- engine <- server; schemas <- clients; clients never import engine or server."""
+"""Import direction: schemas <- engine <- server; schemas <- formats <- clients, server; clients never import
+engine or server; formats (file writers and plots) import schemas only."""
 
 import ast
 from pathlib import Path
@@ -7,8 +8,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 FORBIDDEN = {
-    "schemas": {"engine", "server", "clients", "cli"},
-    "engine": {"server", "clients", "cli"},
+    "schemas": {"engine", "server", "clients", "cli", "formats"},
+    "formats": {"engine", "server", "clients", "cli"},
+    "engine": {"server", "clients", "cli", "formats"},
     "clients": {"engine", "server"},
     "server": {"clients", "cli"},
 }

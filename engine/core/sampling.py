@@ -247,3 +247,40 @@ def sample_uniform_sphere(u1, u2) -> np.ndarray:
 def uniform_sphere_pdf() -> float:
     """Solid-angle pdf of :func:`sample_uniform_sphere`: 1/(4 pi)."""
     return 1.0 / (4.0 * np.pi)
+
+
+#: Most forward steps of a guide-table lookup before the binary search takes over.
+GUIDE_STEPS = 3
+
+
+class GuideTable:
+    """``searchsorted(edges, keys, "right") - 1`` clipped to the segments, in O(1) per key.
+
+    Guide table (Chen & Asau 1974): keys in [lo, hi] fall in equal buckets; each bucket
+    stores the segment holding its start, and a key moves on by at most ``GUIDE_STEPS``
+    vectorized steps. Keys in buckets spanning more segments (steep parts of a table), and
+    any key the steps did not settle, take the binary search, so the answer is always exact.
+    """
+
+    def __init__(self, edges: np.ndarray, lo: float, hi: float, per_segment: int = 4):
+        self.edges = edges
+        self.m = len(edges) - 1  # segments
+        self.n = per_segment * self.m  # buckets
+        self.lo, self.scale = lo, self.n / (hi - lo)
+        starts = lo + np.arange(self.n + 1) / self.scale
+        self.start = np.clip(np.searchsorted(edges, starts, side="right") - 1, 0, self.m - 1)
+        self.short = np.diff(self.start) <= GUIDE_STEPS
+
+    def find(self, keys: np.ndarray) -> np.ndarray:
+        e, m = self.edges, self.m
+        k = np.clip(((keys - self.lo) * self.scale).astype(np.intp), 0, self.n - 1)
+        i = self.start[k]
+        for _ in range(GUIDE_STEPS):  # loop over steps, vectorized over keys
+            step = (i < m - 1) & (e[np.minimum(i + 1, m)] <= keys)
+            if not step.any():
+                break
+            i = i + step
+        bad = ~self.short[k] | ((i > 0) & (e[i] > keys)) | ((i < m - 1) & (e[np.minimum(i + 1, m)] <= keys))
+        if bad.any():
+            i[bad] = np.clip(np.searchsorted(e, keys[bad], side="right") - 1, 0, m - 1)
+        return i

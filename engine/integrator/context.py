@@ -26,7 +26,9 @@ from owcsim.engine.integrator.path import BatchState, Paths, WorkItem, dot, dot_
 from owcsim.engine.integrator.uniform_medium import EquiangularFrames, connect_on_segments
 from owcsim.engine.integrator.weights import connection_weight, side_weight
 from owcsim.engine.surfaces.bsdf import Materials
+from owcsim.engine.tally.spectral import ChannelBuilder
 from owcsim.engine.tally.tally import BatchBuilder, BatchTally
+from owcsim.schemas.algorithms import Direction
 
 #: Upper bound on paths x targets connected in one array operation (memory bound).
 NEE_CHUNK = 1 << 20
@@ -149,7 +151,7 @@ class BatchContext(BatchState):
 
     def __init__(self, *args: Any) -> None:
         super().__init__(*args)
-        self.channels: Any = None  # the per-(link, channel) sums of spectral scenes (spectra.ChannelBuilder)
+        self.channels: ChannelBuilder | None = None  # the per-(link, channel) sums of spectral scenes
         self.w0 = 1.0  # the source's weight W_source (trace_batch), the roulette's scale
         self.pending: dict[int, list[tuple[Any, ...]]] = {}  # depth k + s -> estimate groups waiting for their step
         self.builder: BatchBuilder | None = None  # the batch's tally (trace_batch)
@@ -175,11 +177,14 @@ class BatchContext(BatchState):
             or settings.in_then_out
         )
         block = qmc.block_size(item.n_paths, settings.qmc_block)  # paths per independent sample
+        links = item_links(self.scene, item)
+        if self.spectra is not None:  # per-(link, channel) sums (tally/spectral.py)
+            self.channels = ChannelBuilder(
+                self.spectra, item.direction, item.source, self.tgt, links, item.n_paths, block
+            )
         self.builder = BatchBuilder(
-            settings.tally, item_links(self.scene, item), item.n_paths, several, block, first_batch=item.batch == 0
+            settings.tally, links, item.n_paths, several, block, first_batch=item.batch == 0, channels=self.channels
         )
-        if self.spectra is not None:  # per-(link, channel) sums (spectra.py)
-            self.channels = self.spectra.builder(item, self.tgt, item_links(self.scene, item), block)
 
     def connect(self, v: Vertices, target: int | None = None) -> None:
         """Next-event estimation from the vertices `v` to the targets: the measurement equation.
@@ -369,10 +374,7 @@ class BatchContext(BatchState):
     def reduce(self, n_paths: int) -> BatchTally:
         self.flush()
         weights = None
-        if self.item.direction == "backward" and self.settings.tally.group_weights.size:
+        if self.item.direction is Direction.BACKWARD and self.settings.tally.group_weights.size:
             weights = self.settings.tally.group_weights[:, self.tgt]  # (G, T): targets are transmitters
         assert self.builder is not None
-        tally = self.builder.finish(weights)
-        if self.channels is not None:
-            tally.spectral = self.channels.finish()  # type: ignore[attr-defined]
-        return tally
+        return self.builder.finish(weights)  # (with the channel sums of spectral scenes)

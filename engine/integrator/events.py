@@ -28,6 +28,7 @@ from owcsim.engine.integrator.path import Paths, dot, dot3, rows
 from owcsim.engine.integrator.segments import scattering_point_throughput
 from owcsim.engine.integrator.uniform_medium import EquiangularFrames
 from owcsim.engine.integrator.weights import first_medium_factor, side_weight
+from owcsim.schemas.algorithms import Direction
 
 
 def surface_vertex(ctx: BatchContext, sp: Paths, prims: IntArray, ts: FloatArray, rng: np.random.Generator) -> Paths:
@@ -271,7 +272,8 @@ def medium_collision(
     mp.s = mp.s + 1
     if ctx.mirrors:  # ... -> x -> mirror -> target: only the collision reaches it (mirrors.py)
         connect_mirrors(ctx, Vertices.in_medium(points, mp.weights, mp, mp.directions))
-    if settings.both_sides and S >= 2 and ctx.item.direction == "forward":  # third strategy, Tx -> x1 -> x2 -> Rx
+    # the third strategy for Tx -> x1 -> x2 -> Rx (forward runs)
+    if settings.both_sides and S >= 2 and ctx.item.direction is Direction.FORWARD:
         connect_from_target(ctx, mp, points, rng)
     u = ctx.bounce_uniforms(mp, rng)
     arriving = mp.directions

@@ -80,6 +80,7 @@ from owcsim.engine.integrator.uniform_medium import EquiangularFrames
 from owcsim.engine.integrator.weights import first_vertex_factor
 from owcsim.engine.scene.scene import Scene
 from owcsim.engine.tally.tally import BatchTally
+from owcsim.schemas.algorithms import Direction
 
 
 @dataclass
@@ -104,7 +105,7 @@ def trace_batch(scene: Scene, item: WorkItem, settings: KernelSettings) -> Batch
     isect, medium = scene.intersector, scene.medium
     rays0 = (isect.n_intersect, isect.n_occluded)
     med0 = medium.evaluations if medium is not None else 0
-    forward = item.direction == "forward"
+    forward = item.direction is Direction.FORWARD
     ctx = BatchContext(scene, targets, np.asarray(item.targets, np.int64), settings, item)
     ctx.start_tally(item)
     paths, first_u = _emit(ctx, item, rng)
@@ -174,7 +175,7 @@ def _step(
     Russian roulette, events.roulette)."""
     scene, settings = ctx.scene, ctx.settings
     isect, medium = scene.intersector, scene.medium
-    forward = ctx.item.direction == "forward"
+    forward = ctx.item.direction is Direction.FORWARD
     K, S = settings.max_reflections, settings.max_scattering
     free_flight = settings.free_flight and medium is not None
     points_on_segments = settings.segment_scatter and medium is not None

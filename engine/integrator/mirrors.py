@@ -50,6 +50,7 @@ from owcsim.engine.integrator.path import dot3 as _dot
 from owcsim.engine.integrator.segments import equiangular_density, time_density
 from owcsim.engine.integrator.weights import side_weight, surface_target_factor
 from owcsim.engine.sources.devices import Devices
+from owcsim.schemas.algorithms import Direction
 
 #: share(ok, wdir, B(y), T(y -> t), image): a run's share of image connections (`_record_mirror`)
 Share = Callable[[IntArray, FloatArray, FloatArray, Any, "_Image"], Any]
@@ -193,7 +194,7 @@ def connect_segment_mirrors(
     balance heuristic of their point densities (`specular_first_share` there), the image
     counterpart of single_scatter._direction_mis for source -> p -> target.
     """
-    if not ctx.settings.other_family(ctx.item.direction == "forward"):
+    if not ctx.settings.other_family(ctx.item.direction is Direction.FORWARD):
         return
     src_set, _ = device_sets(ctx.scene, ctx.item.direction)
     i = ctx.item.source

@@ -10,17 +10,18 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
 from owcsim.engine.core import qmc
 from owcsim.engine.core.arrays import FloatArray, IntArray
-from owcsim.engine.media.media import Medium
+from owcsim.engine.media.medium import Medium
 from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.scene.scene import Scene
 from owcsim.engine.sources.devices import Devices
 from owcsim.engine.tally.tally import TallyPlan, TimeBins
+from owcsim.schemas.algorithms import Direction
 
 
 @dataclass(frozen=True)
@@ -92,7 +93,7 @@ class WorkItem:
     `seed_key` spawns the batch's independent random stream (fixed by the job).
     """
 
-    direction: str  # "forward" or "backward"
+    direction: Direction  # FORWARD or BACKWARD (its value is accepted too)
     source: int
     targets: tuple[int, ...]
     batch: int
@@ -100,14 +101,17 @@ class WorkItem:
     seed: int
     phase: int = 0  # 0 = main run, 1 = pilot
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "direction", Direction(self.direction))  # one spelling: the enum
+
     def rng(self) -> np.random.Generator:
-        key = (self.phase, 0 if self.direction == "forward" else 1, self.source, self.batch)
+        key = (self.phase, self.direction.code, self.source, self.batch)
         return np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=key))
 
 
-def device_sets(scene: Scene, direction: str) -> tuple[Devices, Devices]:
-    """(sources, targets) for a direction."""
-    if direction == "forward":
+def device_sets(scene: Scene, direction: Direction) -> tuple[Devices, Devices]:
+    """(sources, targets) of paths run in `direction` (forward: from the transmitters)."""
+    if direction is Direction.FORWARD:
         return scene.transmitters, scene.receivers
     return scene.receivers, scene.transmitters
 
@@ -115,7 +119,7 @@ def device_sets(scene: Scene, direction: str) -> tuple[Devices, Devices]:
 def item_links(scene: Scene, item: WorkItem) -> IntArray:
     """Global link index of each of the item's targets."""
     t = np.asarray(item.targets)
-    if item.direction == "forward":
+    if item.direction is Direction.FORWARD:
         return scene.link(item.source, t)
     return scene.link(t, item.source)
 
@@ -248,7 +252,9 @@ class BatchState:
     @property
     def phase(self) -> PhaseFunction:
         """The medium's phase function (`Scene.phase`, set with the medium)."""
-        return cast(PhaseFunction, self.scene.phase)
+        phase = self.scene.phase
+        assert phase is not None
+        return phase
 
     def record(
         self,

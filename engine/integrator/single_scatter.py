@@ -42,6 +42,7 @@ from owcsim.engine.integrator.segments import (
     time_strata,
 )
 from owcsim.engine.integrator.weights import first_vertex_factor, side_weight, source_factor, target_factor
+from owcsim.schemas.algorithms import Direction
 
 
 class PointWeight(Protocol):
@@ -76,7 +77,7 @@ def segment_scatter(
     family on the first segment (the same branch).
     """
     settings = ctx.settings
-    forward = ctx.item.direction == "forward"
+    forward = ctx.item.direction is Direction.FORWARD
     points_everywhere = settings.own_family(forward)  # this side's own family: points on all segments
     if first and settings.mis:
         assert prim is not None  # the first step passes its hits

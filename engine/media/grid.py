@@ -17,13 +17,15 @@ tracking (in `Medium`) uses the grid's largest sigma_t as majorant.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from owcsim.engine.media.media import Medium
-from owcsim.engine.scene.regions import clip_box
-from owcsim.schemas.medium import IsotropicPhaseSpec
+from owcsim.engine.core.arrays import BoolArray, FloatArray, IntArray
+from owcsim.engine.media.medium import Medium
+from owcsim.engine.media.regions import clip_box
+from owcsim.schemas.medium import IsotropicPhaseSpec, PhaseSpec
 
 
-def _field(values, shape) -> np.ndarray:
+def _field(values: ArrayLike, shape: tuple[int, ...]) -> FloatArray:
     """Coefficients as an (nx, ny, nz) float64 array; one number is broadcast (no memory per cell)."""
     a = np.asarray(values, dtype=np.float64)
     if a.size == 1:
@@ -36,7 +38,15 @@ def _field(values, shape) -> np.ndarray:
 class GridMedium(Medium):
     """Cells of constant `sigma_a`, `sigma_s` [1/m] filling the box lo..hi (see the module docstring)."""
 
-    def __init__(self, lo, hi, shape, sigma_a, sigma_s, phase_spec=None):
+    def __init__(
+        self,
+        lo: ArrayLike,
+        hi: ArrayLike,
+        shape: tuple[int, ...] | list[int],
+        sigma_a: ArrayLike,
+        sigma_s: ArrayLike,
+        phase_spec: PhaseSpec | None = None,
+    ):
         self.lo, self.hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
         self.shape = tuple(int(s) for s in shape)
         self.h = (self.hi - self.lo) / np.asarray(self.shape)
@@ -57,26 +67,41 @@ class GridMedium(Medium):
         """Largest cell sigma_t [1/m] (the delta-tracking majorant)."""
         return self._sigma_t_max
 
-    def cells(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    @property
+    def scatters(self) -> bool:
+        """True when some cell has sigma_s > 0."""
+        return bool(np.max(self.sigma_s_grid) > 0)
+
+    @property
+    def max_albedo(self) -> float:
+        """Largest cell albedo sigma_s / sigma_t [-] (0 in cells with sigma_t = 0)."""
+        st, ss = self.sigma_t_grid, self.sigma_s_grid
+        return float(np.max(np.where(st > 0, ss / np.where(st > 0, st, 1.0), 0.0)))
+
+    def cells(self, points: FloatArray) -> tuple[IntArray, BoolArray]:
         """(cell indices (n, 3), inside the box?) of points (n, 3); points on the box's faces are inside."""
         idx = np.floor((points - self.lo) / self.h).astype(np.int64)
         np.clip(idx, 0, np.asarray(self.shape) - 1, out=idx)
         return idx, np.all((points >= self.lo) & (points <= self.hi), axis=1)
 
-    def _coefficients_at(self, p):
+    def _coefficients_at(self, p: FloatArray) -> tuple[FloatArray, FloatArray]:
         idx, inside = self.cells(p)
         i, j, k = idx.T
         return (np.where(inside, self.sigma_t_grid[i, j, k], 0.0), np.where(inside, self.sigma_s_grid[i, j, k], 0.0))
 
-    def _optical_depth(self, o, d, L):
+    def _optical_depth(self, o: FloatArray, d: FloatArray, L: FloatArray) -> tuple[FloatArray, int]:
         tau, _, _, n = self._march(o, d, L, None)
         return tau, n
 
-    def _regular(self, o, d, L, need):
+    def _regular(
+        self, o: FloatArray, d: FloatArray, L: FloatArray, need: FloatArray
+    ) -> tuple[FloatArray, BoolArray, int]:
         _, t, scattered, n = self._march(o, d, L, need)
         return t, scattered, n
 
-    def _march(self, o, d, L, need):
+    def _march(
+        self, o: FloatArray, d: FloatArray, L: FloatArray, need: FloatArray | None
+    ) -> tuple[FloatArray, FloatArray, BoolArray, int]:
         """3-D DDA over the cells: (tau, t, scattered, number of segments crossing the grid).
 
         With `need` (target optical depths), rays stop at their collision (regular tracking);

@@ -1,27 +1,8 @@
-"""Participating media: extinction and free-flight sampling along ray segments (physics.md section 3).
+"""Homogeneous media (physics.md section 3): constant coefficients in a region, and the medium built from a document.
 
-Every medium answers the same questions on batches of segments origin + t direction,
-0 <= t <= length (origins, directions: (n, 3) float64 in any memory layout, e.g. the
-transpose of a (3, n) array; unit directions; lengths (n,) [m]):
-
-- `optical_depth(o, d, L)` -> tau (n,): the integral of sigma_t along each segment (exact);
-- `transmittance(o, d, L)` = exp(-tau) (Beer-Lambert, multiplicative along a ray);
-- `sample_distance(o, d, L, u)` -> (t, scattered): free flight, the t with optical depth
-  -ln(1 - u) from the origin; where that exceeds the segment's depth, t = L and
-  scattered = False. "scattered" means a collision (absorption or scattering; the
-  caller weights by `albedo_at`). Exact inversion ("regular tracking") by default;
-  `method="delta", rng=...` does delta (Woodcock) tracking against the majorant
-  `sigma_t_max`, which samples the same distribution;
-- `sigma_t_at(p)`, `sigma_s_at(p)`, `albedo_at(p)` at points (n, 3) [1/m], [1/m], [-]
-  (0 outside the medium; the albedo is 0 where sigma_t = 0, never NaN);
-- `phase_spec` (the phase function, built by the caller), `bounds` ((lo, hi) or None for
-  the whole scene), `sigma_t_max` [1/m].
-
-`evaluations` counts the segments the first three methods were asked about that actually
-cross the medium's region (for the whole-scene medium: every segment). Segments that
-never enter a bounded region are rejected by a bounding-box test and cost nothing else.
-Homogeneous media live here; the 3-D grid of homogeneous cells in `grid.py`, the
-regions (box, closed mesh) in `regions.py`.
+`HomogeneousMedium` implements the `Medium` interface (medium.py) for the whole scene, a box
+or a closed mesh; particle smoke is a homogeneous medium with its Mie coefficients (mie.py).
+`medium_from_spec` builds any medium kind from its document (grid media: grid.py).
 """
 
 from __future__ import annotations
@@ -29,133 +10,28 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from owcsim.engine.scene.regions import BoxRegion, MeshRegion, WholeRegion, as_rows, clip_box
+from owcsim.engine.core.arrays import BoolArray, FloatArray, IntArray
+from owcsim.engine.media.grid import GridMedium
+from owcsim.engine.media.medium import Medium
+from owcsim.engine.media.mie import medium_coefficients
+from owcsim.engine.media.regions import BoxRegion, MeshRegion, WholeRegion, as_rows
 from owcsim.schemas.medium import (
+    BoxRegionSpec,
     GridMediumSpec,
     HomogeneousMediumSpec,
     IsotropicPhaseSpec,
+    MeshRegionSpec,
     ParticleMediumSpec,
     PhaseSpec,
+    SceneRegionSpec,
 )
 
-
-class Medium:
-    """The interface every medium implements (see the module docstring); subclasses fill the `_` methods."""
-
-    evaluations: int
-    phase_spec: PhaseSpec
-    bounds: tuple[np.ndarray, np.ndarray] | None
-
-    @property
-    def sigma_t_max(self) -> float:
-        """Majorant of sigma_t over the medium [1/m]."""
-        raise NotImplementedError
-
-    # --- to implement ----------------------------------------------------------------
-    def _optical_depth(self, o, d, L) -> tuple[np.ndarray, int]:
-        """(tau, number of segments crossing the region)."""
-        raise NotImplementedError
-
-    def _regular(self, o, d, L, need) -> tuple[np.ndarray, np.ndarray, int]:
-        """Regular tracking to optical depth `need`: (t, scattered, number of crossing segments)."""
-        raise NotImplementedError
-
-    def _coefficients_at(self, p) -> tuple[np.ndarray, np.ndarray]:
-        """(sigma_t, sigma_s) at points p (n, 3), 0 outside."""
-        raise NotImplementedError
-
-    def _span(self, o, d, L) -> tuple[np.ndarray, np.ndarray]:
-        """(t_enter, t_exit) of each segment in a box holding the region (delta tracking works inside it)."""
-        if self.bounds is None:
-            return np.zeros(len(L)), L
-        return clip_box(o, d, L, *self.bounds)
-
-    # --- the interface -------------------------------------------------------------------
-    @staticmethod
-    def _inputs(origins, directions, lengths):
-        return as_rows(origins), as_rows(directions), np.asarray(lengths, dtype=np.float64).reshape(-1)
-
-    def optical_depth(self, origins, directions, lengths) -> np.ndarray:
-        """Integral of sigma_t along each segment [-]; counts crossing segments in `evaluations`."""
-        tau, n = self._optical_depth(*self._inputs(origins, directions, lengths))
-        self.evaluations += n
-        return tau
-
-    def transmittance(self, origins, directions, lengths) -> np.ndarray:
-        """T = exp(-optical depth) along each segment [-]; counts crossing segments in `evaluations`."""
-        return np.exp(-self.optical_depth(origins, directions, lengths))
-
-    def sample_distance(self, origins, directions, lengths, u=None, *, method: str = "regular", rng=None):
-        """Free-flight distance along each segment: (t [m], scattered (bool)); see the module docstring.
-
-        `u` (n,) uniforms in [0, 1) drive regular tracking (drawn from `rng` if omitted);
-        delta tracking draws its own numbers from `rng` (a numpy Generator) and ignores `u`.
-        Counts crossing segments in `evaluations`.
-        """
-        o, d, L = self._inputs(origins, directions, lengths)
-        if method == "regular":
-            if u is None:
-                if rng is None:
-                    raise ValueError("sample_distance needs `u` or `rng`")
-                u = rng.random(len(L))
-            t, scattered, n = self._regular(o, d, L, -np.log1p(-np.asarray(u, dtype=np.float64)))
-        elif method == "delta":
-            if rng is None:
-                raise ValueError("delta tracking needs `rng` (a numpy Generator)")
-            t, scattered, n = self._delta(o, d, L, rng)
-        else:
-            raise ValueError(f"unknown free-flight method {method!r} (use 'regular' or 'delta')")
-        self.evaluations += n
-        return t, scattered
-
-    def _delta(self, o, d, L, rng):
-        """Delta tracking: tentative collisions at rate sigma_t_max, real with probability sigma_t / sigma_t_max."""
-        t, scattered = L.copy(), np.zeros(len(L), bool)
-        t0, t1 = self._span(o, d, L)
-        ids = np.flatnonzero(t1 > t0)
-        n = len(ids)
-        majorant = float(self.sigma_t_max)
-        if majorant <= 0.0:
-            return t, scattered, n
-        tc, te = t0[ids], t1[ids]
-        while len(ids):  # ends with probability 1: every tentative step moves on by Exp(majorant)
-            u = rng.random((2, len(ids)))
-            tc = tc - np.log1p(-u[0]) / majorant
-            k = np.flatnonzero(tc < te)
-            ids, tc, te, u1 = ids[k], tc[k], te[k], u[1, k]
-            sigma_t, _ = self._coefficients_at(o[ids] + tc[:, None] * d[ids])
-            real = u1 * majorant < sigma_t
-            t[ids[real]], scattered[ids[real]] = tc[real], True
-            k = np.flatnonzero(~real)
-            ids, tc, te = ids[k], tc[k], te[k]
-        return t, scattered, n
-
-    @property
-    def uniform_coefficients(self) -> tuple[float, float] | None:
-        """(sigma_t, sigma_s) [1/m] when they are the same at every point of the scene, else None."""
-        return None
-
-    def coefficients_at(self, points) -> tuple[np.ndarray, np.ndarray]:
-        """(sigma_t, sigma_s) at each point [1/m] (0 outside the medium), in one evaluation."""
-        return self._coefficients_at(as_rows(points))
-
-    def sigma_t_at(self, points) -> np.ndarray:
-        """Extinction coefficient at each point [1/m] (0 outside the medium)."""
-        return self._coefficients_at(as_rows(points))[0]
-
-    def sigma_s_at(self, points) -> np.ndarray:
-        """Scattering coefficient at each point [1/m] (0 outside the medium)."""
-        return self._coefficients_at(as_rows(points))[1]
-
-    def albedo_at(self, points) -> np.ndarray:
-        """Single-scattering albedo sigma_s / sigma_t at each point [-]; 0 where sigma_t = 0."""
-        sigma_t, sigma_s = self._coefficients_at(as_rows(points))
-        pos = sigma_t > 0
-        return np.where(pos, sigma_s / np.where(pos, sigma_t, 1.0), 0.0)
+__all__ = ["HomogeneousMedium", "Medium", "medium_from_spec", "region_from_spec"]
 
 
-def _count(rays: list[np.ndarray]) -> int:
+def _count(rays: list[IntArray]) -> int:
     """Number of distinct segments in a list of index arrays."""
     if len(rays) <= 1:
         return len(rays[0]) if rays else 0
@@ -172,7 +48,7 @@ class HomogeneousMedium(Medium):
 
     sigma_a: float
     sigma_s: float
-    box: tuple[np.ndarray, np.ndarray] | None = None
+    box: tuple[FloatArray, FloatArray] | None = None
     #: number of segments that crossed the region in the kernel-facing methods (see the module docstring)
     evaluations: int = 0
     region: MeshRegion | None = None
@@ -206,7 +82,15 @@ class HomogeneousMedium(Medium):
         """sigma_s / sigma_t [-], 0 for an empty medium."""
         return self.sigma_s / self.sigma_t if self.sigma_t > 0 else 0.0
 
-    def length_inside(self, origins, directions, lengths) -> np.ndarray:
+    @property
+    def scatters(self) -> bool:
+        return self.sigma_s > 0
+
+    @property
+    def max_albedo(self) -> float:
+        return self.albedo
+
+    def length_inside(self, origins: ArrayLike, directions: ArrayLike, lengths: ArrayLike) -> FloatArray:
         """Length [m] of each segment inside the region (not counted in `evaluations`)."""
         o, d, L = self._inputs(origins, directions, lengths)
         if isinstance(self._region, WholeRegion):
@@ -216,7 +100,7 @@ class HomogeneousMedium(Medium):
             out[ray] += b - a
         return out
 
-    def _optical_depth(self, o, d, L):
+    def _optical_depth(self, o: FloatArray, d: FloatArray, L: FloatArray) -> tuple[FloatArray, int]:
         if isinstance(self._region, WholeRegion):  # (sigma_t = 0 with an infinite L: 0, not NaN)
             return (self.sigma_t * L if self.sigma_t > 0 else np.zeros(len(L))), len(L)
         tau = np.zeros(len(L))
@@ -226,7 +110,9 @@ class HomogeneousMedium(Medium):
             crossed.append(ray)
         return tau, _count(crossed)
 
-    def _regular(self, o, d, L, need):
+    def _regular(
+        self, o: FloatArray, d: FloatArray, L: FloatArray, need: FloatArray
+    ) -> tuple[FloatArray, BoolArray, int]:
         """Exact inversion interval by interval: the collision is where the accumulated depth reaches `need`."""
         if self.sigma_t == 0.0:
             return L.copy(), np.zeros(len(L), bool), 0
@@ -250,12 +136,12 @@ class HomogeneousMedium(Medium):
     def uniform_coefficients(self) -> tuple[float, float] | None:
         return (self.sigma_t, self.sigma_s) if isinstance(self._region, WholeRegion) else None
 
-    def albedo_at(self, points) -> np.ndarray:
+    def albedo_at(self, points: ArrayLike) -> FloatArray:
         if isinstance(self._region, WholeRegion):  # the same everywhere
             return np.full(len(as_rows(points)), self.albedo)
         return super().albedo_at(points)
 
-    def _coefficients_at(self, p):
+    def _coefficients_at(self, p: FloatArray) -> tuple[FloatArray, FloatArray]:
         if isinstance(self._region, WholeRegion):
             return np.full(len(p), self.sigma_t), np.full(len(p), self.sigma_s)
         inside = self._region.contains(p)
@@ -271,21 +157,25 @@ def medium_from_spec(spec: HomogeneousMediumSpec | GridMediumSpec | ParticleMedi
     if spec is None:
         return None
     if spec.type == "grid":
-        from owcsim.engine.media.grid import GridMedium  # grid.py builds on this module
-
         medium = GridMedium(spec.min, spec.max, spec.shape, spec.sigma_a, spec.sigma_s, spec.phase)
         return None if medium.sigma_t_max == 0.0 else medium
     if spec.type == "particles":  # smoke from its particles: Mie coefficients (engine/media/mie.py)
-        from owcsim.engine.media.mie import medium_coefficients
-
         sigma_a, sigma_s = medium_coefficients(spec)
     else:
         sigma_a, sigma_s = spec.coefficients
     if sigma_a + sigma_s == 0.0:
         return None
-    box = region = None
-    if spec.region.type == "box":
-        box = (np.asarray(spec.region.min, float), np.asarray(spec.region.max, float))
-    elif spec.region.type == "mesh":
-        region = MeshRegion(spec.region.vertices, spec.region.faces, label="medium.region")
+    box, region = region_from_spec(spec.region)
     return HomogeneousMedium(sigma_a, sigma_s, box, region=region, phase_spec=spec.phase)
+
+
+def region_from_spec(
+    region: SceneRegionSpec | BoxRegionSpec | MeshRegionSpec,
+) -> tuple[tuple[FloatArray, FloatArray] | None, MeshRegion | None]:
+    """(box (lo, hi) [m] or None, closed-mesh region or None) of a homogeneous medium's region document."""
+    box = mesh = None
+    if region.type == "box":
+        box = (np.asarray(region.min, float), np.asarray(region.max, float))
+    elif region.type == "mesh":
+        mesh = MeshRegion(region.vertices, region.faces, label="medium.region")
+    return box, mesh

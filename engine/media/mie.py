@@ -42,7 +42,7 @@ from functools import lru_cache
 import numpy as np
 
 from owcsim.engine.core.errors import SceneError
-from owcsim.schemas.medium import KOSCHMIEDER, MAX_COEFFICIENT, ParticleMediumSpec, ParticlesSpec
+from owcsim.schemas.medium import MAX_COEFFICIENT, ParticleMediumSpec, ParticlesSpec
 
 __all__ = [
     "ParticleOptics",
@@ -53,8 +53,6 @@ __all__ = [
     "particle_optics",
     "number_concentration",
     "medium_coefficients",
-    "describe",
-    "medium_report",
     "size_window",
     "DEFAULT_ANGLES",
 ]
@@ -302,6 +300,7 @@ def number_concentration(spec: ParticleMediumSpec, optics: ParticleOptics | None
     if spec.number_concentration is not None:
         return float(spec.number_concentration)
     optics = optics or particle_optics(spec.particles)
+    assert spec.mass_concentration is not None and spec.particle_density is not None  # (the schema's rule)
     return float(spec.mass_concentration / (spec.particle_density * np.pi / 6 * optics.mean_d3))
 
 
@@ -316,42 +315,3 @@ def medium_coefficients(spec: ParticleMediumSpec) -> tuple[float, float]:
             f"{MAX_COEFFICIENT:g} 1/m (opaque); lower the concentration"
         )
     return sigma_a, sigma_s
-
-
-def describe(spec: ParticleMediumSpec) -> dict:
-    """What a result reports about particle smoke: derived coefficients, albedo, g, visibility, the table."""
-    from owcsim.engine.media.phase import MiePhase
-
-    optics = particle_optics(spec.particles)
-    sigma_a, sigma_s = medium_coefficients(spec)
-    sigma_t = sigma_a + sigma_s
-    table = MiePhase(optics.cos_theta, optics.phase)
-    return {
-        "model": "Mie, log-normal size distribution (engine/media/mie.py, miepython)",
-        "number_concentration_per_m3": number_concentration(spec, optics),
-        "sigma_a": sigma_a,
-        "sigma_s": sigma_s,
-        "sigma_t": sigma_t,
-        "albedo": sigma_s / sigma_t if sigma_t > 0 else 0.0,
-        "g": optics.g,
-        "visibility_m": KOSCHMIEDER / sigma_t if sigma_t > 0 else None,
-        "size_parameter_median": optics.x_median,
-        "size_nodes": optics.nodes,
-        "phase": table.describe(),
-    }
-
-
-def medium_report(medium_spec, phase=None) -> dict | None:
-    """The `modeled["medium"]` entry of a result (for engine/results/result.py), or None without a medium.
-
-    Particle smoke: `describe(medium_spec)`. Other media: the phase function's type, mean
-    cosine and, for tables, points and normalisation (`phase.describe_phase`), when `phase`
-    (the scene's phase function) is given.
-    """
-    if medium_spec is None:
-        return None
-    if medium_spec.type == "particles":
-        return describe(medium_spec)
-    from owcsim.engine.media.phase import describe_phase
-
-    return {"model": medium_spec.type, "phase": describe_phase(phase) if phase is not None else None}

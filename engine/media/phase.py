@@ -11,13 +11,16 @@ Directions are component arrays of shape (3, n) (rows x, y, z); all float64, vec
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from abc import ABC, abstractmethod
 
 import numpy as np
+from numpy.typing import ArrayLike
 from pydantic import TypeAdapter
 
+from owcsim.engine.core.arrays import FloatArray
 from owcsim.engine.core.errors import SceneError
-from owcsim.engine.core.sampling import azimuth, column_norms
+from owcsim.engine.core.sampling import GuideTable, azimuth, column_norms
+from owcsim.engine.media.mie import particle_optics
 from owcsim.schemas.medium import PhaseSpec
 
 __all__ = [
@@ -59,18 +62,25 @@ def _from_sides(a, b):
     return np.where(a <= b, 1.0 - a, b - 1.0)
 
 
-class PhaseFunction:
-    """Base class: ``eval``, ``sample_cos``, ``sample`` (shared) and ``mean_cosine``."""
+class PhaseFunction(ABC):
+    """The interface of every phase function: ``eval`` and ``sample_cos`` (each subclass), ``pdf`` and ``sample``
+    (shared), ``mean_cosine``."""
 
-    eval: Callable[[np.ndarray], np.ndarray]  #: p(cos_theta) [1/sr]
-    sample_cos: Callable[[np.ndarray], np.ndarray]  #: cos_theta = F^{-1}(u), u uniform in [0, 1)
     mean_cosine: float  #: g = <cos_theta> = 2 pi int c p(c) dc (a property in every subclass)
 
-    def pdf(self, cos_theta) -> np.ndarray:
+    @abstractmethod
+    def eval(self, cos_theta: ArrayLike) -> FloatArray:
+        """p(cos_theta) [1/sr]."""
+
+    @abstractmethod
+    def sample_cos(self, u: ArrayLike) -> FloatArray:
+        """cos_theta = F^{-1}(u), u uniform in [0, 1) (the exact inverse of the cos_theta CDF)."""
+
+    def pdf(self, cos_theta: ArrayLike) -> FloatArray:
         """Solid-angle pdf of :meth:`sample` [1/sr]; equals :meth:`eval` (exact sampling)."""
         return self.eval(cos_theta)
 
-    def sample(self, directions, u1, u2) -> np.ndarray:
+    def sample(self, directions: ArrayLike, u1: ArrayLike, u2: ArrayLike) -> FloatArray:
         """New unit directions (3, n) around ``directions`` (3, n): cos = sample_cos(u1), phi = 2 pi u2.
 
         d' = sin(t) cos(phi) s + sin(t) sin(phi) t + cos(t) d, with (s, t, d) the frame of
@@ -369,43 +379,6 @@ class Mixture(PhaseFunction):
         return f"Mixture({[(float(w), p) for w, p in self._pairs()]!r})"
 
 
-class _Guide:
-    """``searchsorted(edges, keys, "right") - 1`` clipped to the segments, in O(1) per key.
-
-    Guide table (Chen & Asau 1974): keys in [lo, hi] fall in equal buckets; each bucket
-    stores the segment holding its start, and a key moves on by at most ``_GUIDE_STEPS``
-    vectorized steps. Keys in buckets spanning more segments (steep parts of a table), and
-    any key the steps did not settle, take the binary search, so the answer is always exact.
-    """
-
-    def __init__(self, edges: np.ndarray, lo: float, hi: float, per_segment: int = 4):
-        self.edges = edges
-        self.m = len(edges) - 1  # segments
-        self.n = per_segment * self.m  # buckets
-        self.lo, self.scale = lo, self.n / (hi - lo)
-        starts = lo + np.arange(self.n + 1) / self.scale
-        self.start = np.clip(np.searchsorted(edges, starts, side="right") - 1, 0, self.m - 1)
-        self.short = np.diff(self.start) <= _GUIDE_STEPS
-
-    def find(self, keys: np.ndarray) -> np.ndarray:
-        e, m = self.edges, self.m
-        k = np.clip(((keys - self.lo) * self.scale).astype(np.intp), 0, self.n - 1)
-        i = self.start[k]
-        for _ in range(_GUIDE_STEPS):  # loop over steps, vectorized over keys
-            step = (i < m - 1) & (e[np.minimum(i + 1, m)] <= keys)
-            if not step.any():
-                break
-            i = i + step
-        bad = ~self.short[k] | ((i > 0) & (e[i] > keys)) | ((i < m - 1) & (e[np.minimum(i + 1, m)] <= keys))
-        if bad.any():
-            i[bad] = np.clip(np.searchsorted(e, keys[bad], side="right") - 1, 0, m - 1)
-        return i
-
-
-#: Most forward steps of a guide-table lookup before the binary search takes over.
-_GUIDE_STEPS = 3
-
-
 class Tabulated(PhaseFunction):
     """A phase function given at points of cos(theta), linear in cos(theta) between them.
 
@@ -459,8 +432,8 @@ class Tabulated(PhaseFunction):
         cdf[-1] = 1.0
         self._cdf = cdf
         self._mass = np.diff(cdf) / (2.0 * np.pi)  # int p dc per segment
-        self._by_u = _Guide(cdf, 0.0, 1.0)
-        self._by_cos = _Guide(c, -1.0, 1.0)
+        self._by_u = GuideTable(cdf, 0.0, 1.0)
+        self._by_cos = GuideTable(c, -1.0, 1.0)
         a, b = c[:-1], c[1:]
         self._mean = float(
             2.0 * np.pi * np.sum(h * (self.values[:-1] * (2 * a + b) + self.values[1:] * (a + 2 * b))) / 6.0
@@ -516,8 +489,6 @@ class MiePhase(Tabulated):
 
     @classmethod
     def from_spec(cls, spec):
-        from owcsim.engine.media.mie import particle_optics  # mie.py builds on this module
-
         optics = particle_optics(spec.particles)
         return cls(optics.cos_theta, optics.phase)
 

@@ -12,18 +12,23 @@ estimators of the same quantity, so means and variances add.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from owcsim.engine.core.arrays import BoolArray, FloatArray
+from owcsim.engine.integrator.kernel import KernelSettings
 from owcsim.engine.integrator.lobe import LOBE_PEAK, phase_lobe_wanted
-from owcsim.engine.media import mie
+from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.results import metrics
+from owcsim.engine.results.job import FinishedJob
 from owcsim.engine.results.lighting import Lighting
 from owcsim.engine.results.result_parts import cir_block, column, document_rows, grid_maps, order_block
-from owcsim.engine.run.auto import _max_albedo, _scatters
+from owcsim.engine.results.spectral import result_block
 from owcsim.engine.scene.los import los_gain_grey, los_geometry
+from owcsim.engine.scene.scene import Scene
 from owcsim.engine.tally import reliability
 from owcsim.engine.tally.estimates import (
     channel_moments,
@@ -32,18 +37,12 @@ from owcsim.engine.tally.estimates import (
     los_moments,
     reported_rel_stderr,
 )
+from owcsim.engine.tally.tally import Accumulator
+from owcsim.schemas import SceneSpec
 from owcsim.schemas.algorithms import Direction, algorithm
 from owcsim.schemas.results import ModeledPublic, SimulationResultPublic, UnreachablePublic
 from owcsim.schemas.units import unit_warnings
 from owcsim.version import __version__  # the package's one version lookup
-
-if TYPE_CHECKING:
-    from owcsim.engine.integrator.kernel import KernelSettings
-    from owcsim.engine.run.simulate import RunInfo
-    from owcsim.engine.scene.los import LosGeometry
-    from owcsim.engine.scene.scene import Scene
-    from owcsim.engine.tally.tally import Accumulator
-    from owcsim.schemas import SceneSpec
 
 
 def _num(x) -> float | None:
@@ -55,16 +54,19 @@ def _num(x) -> float | None:
 PEAKED_PHASE_G = 0.95
 
 
-def _warnings(spec, scene) -> list[str]:
+def _warnings(spec: SceneSpec, scene: Scene) -> list[str]:
+    """The scene's and the algorithm's warnings: a peaked phase function, light the algorithm leaves out,
+    receivers too large for a point, and values plausible only in another unit."""
     out = []
     alg = algorithm(spec.simulation.algorithm)
-    if scene.phase is not None and alg.counts_scattering and abs(scene.phase.mean_cosine) > PEAKED_PHASE_G:
+    phase = scene.phase if isinstance(scene.phase, PhaseFunction) else None
+    if phase is not None and alg.counts_scattering and abs(phase.mean_cosine) > PEAKED_PHASE_G:
         out.append(
-            f"phase function mean cosine {scene.phase.mean_cosine:.4g}: connections from scattering "
+            f"phase function mean cosine {phase.mean_cosine:.4g}: connections from scattering "
             "points to point-like devices are heavy-tailed, so the scattered part converges slowly and its "
             "error bars may be too small; compare runs with different seeds"
         )
-    if alg.warning_in_scattering_medium and _scatters(spec.medium):
+    if alg.warning_in_scattering_medium and _scatters(scene):
         out.append(alg.warning_in_scattering_medium)
     out += _size_warnings(scene)
     return out + unit_warnings(spec, surface_extent(scene))
@@ -164,21 +166,27 @@ def _size_warnings(scene) -> list[str]:
     ]
 
 
+def _scatters(scene) -> bool:
+    """The scene's medium scatters (decided once when the scene was built: engine/media/model.py)."""
+    return scene.medium_model is not None and scene.medium_model.scatters
+
+
 def _albedo_max(scene) -> float:
-    return _max_albedo(scene.spec)
+    return scene.medium_model.max_albedo
 
 
-def _geometric_tail(gain: float, ratio: float) -> float:
-    return gain * ratio / (1.0 - ratio) if ratio < 1.0 else math.inf
-
-
-def _modeled(spec, scene, modeled: ModeledPublic | None, unreachable, settings) -> ModeledPublic:
-    """The result's `modeled` section: what the automatic settings said (`modeled`), and what ran."""
+def _modeled(job: FinishedJob) -> ModeledPublic:
+    """The result's `modeled` section: what the automatic settings said (`job.modeled`), and what ran."""
+    spec, scene, settings = job.spec, job.scene, job.settings
     sim = spec.simulation
     alg = algorithm(sim.algorithm)
-    chosen = modeled if modeled is not None else ModeledPublic(algorithm_reason=f"algorithm {sim.algorithm} requested")
+    chosen = (
+        job.modeled
+        if job.modeled is not None
+        else ModeledPublic(algorithm_reason=f"algorithm {sim.algorithm} requested")
+    )
     families, left_out = alg.families_at(sim.scattering_orders)
-    left = list(left_out) if spec.medium is not None and _scatters(spec.medium) else []
+    left = list(left_out) if _scatters(scene) else []
     left.append(f"reflection orders above K = {sim.max_reflections}")
     if alg.scattering_orders is None and scene.medium is not None:  # S chosen, not fixed by the algorithm
         left.append(f"scattering orders above S = {sim.max_scattering}")
@@ -192,16 +200,22 @@ def _modeled(spec, scene, modeled: ModeledPublic | None, unreachable, settings) 
             algorithm=sim.algorithm,
             families=families if scene.medium is not None else "vacuum paths, reflection orders 0..K",
             left_out=left,
-            medium=mie.medium_report(spec.medium, scene.phase),  # derived coefficients, g, visibility
+            medium=(
+                scene.medium_model.report(scene.phase if isinstance(scene.phase, PhaseFunction) else None)
+                if scene.medium_model is not None
+                else None
+            ),
             max_reflections=sim.max_reflections,
             max_scattering=sim.scattering_orders if scene.medium is not None else 0,
             time_window_s=(settings.bins.t_min, float(settings.bins.edges[-1])),
-            unreachable_receivers=[UnreachablePublic(receiver=scene.receivers.ids[j], reason=why) for j in unreachable],
+            unreachable_receivers=[
+                UnreachablePublic(receiver=scene.receivers.ids[j], reason=why) for j in job.unreachable
+            ],
         )
     )
 
 
-def _paths_traced(accs, n_tx: int, n_rx: int) -> int:
+def _paths_traced(accs: Mapping[Direction, Accumulator], n_tx: int, n_rx: int) -> int:
     """Paths traced, not path-link pairs: a forward path serves every link of its transmitter
     (the largest count among them), a backward path every link of its receiver."""
     fwd = accs[Direction.FORWARD].n_paths.reshape(n_tx, n_rx)
@@ -209,74 +223,89 @@ def _paths_traced(accs, n_tx: int, n_rx: int) -> int:
     return int(fwd.max(axis=1).sum() + bwd.max(axis=0).sum())
 
 
-def build_result(
-    spec: SceneSpec,
-    scene: Scene,
-    accs: dict[str, Accumulator],
-    settings: KernelSettings,
-    los_gain: np.ndarray,
-    los_delay: np.ndarray,
-    directions: np.ndarray,
-    info: RunInfo,
-    original: SceneSpec | None = None,
-    modeled: ModeledPublic | None = None,
-    unreachable: Sequence[int] = (),
-    geometry: LosGeometry | None = None,
-) -> SimulationResultPublic:
-    """The typed result; every per-link figure is computed for all links at once as arrays."""
-    plan = settings.tally
-    bins = plan.bins
-    tx, rx = scene.transmitters, scene.receivers
-    n_tx, n_rx = len(tx), len(rx)
-    masked_rx = scene.masked != ""
-    link_masked = np.tile(masked_rx, n_tx)
-    los_gain = np.where(link_masked, 0.0, los_gain)
-    los_abc = los_moments(los_gain, los_delay)
-    mean, cov = link_moments(accs, los_abc)
+#: Per-link figures that only some links have (a CIR, an order split, a finite delay of h^2): None elsewhere.
+OPTIONAL_LINK_COLUMNS = (
+    "mean_delay_h2_s",
+    "rms_delay_spread_h2_s",
+    "rms_delay_spread_h2_s_stderr",
+    "bandwidth_3db_hz",
+    "bandwidth_3db_hz_stderr",
+    "truncated_gain_estimate",
+    "dc_gain_by_reflection_order",
+    "dc_gain_by_reflection_order_stderr",
+    "dc_gain_by_scattering_order",
+    "dc_gain_by_scattering_order_stderr",
+    "early_gain",
+    "late_gain",
+    "cir",
+)
+
+
+@dataclass(frozen=True, slots=True)
+class _LinkFigures:
+    """Per link: the line of sight with masked links zeroed, its moments (a, b, c of metrics), and the delay
+    figures of the merged moments with masked links NaN (`masked`: per link, its receiver is masked)."""
+
+    masked: BoolArray
+    los_gain: FloatArray
+    los_abc: FloatArray  # (L, 3)
+    h0: FloatArray
+    delay: dict[str, FloatArray]  # dc_gain, mean_delay_s, rms_delay_spread_s and their stderr
+
+
+def _link_figures(job: FinishedJob) -> _LinkFigures:
+    """H0 and the delay figures of every link from the merged moments plus the closed-form line of sight."""
+    scene = job.scene
+    masked = np.tile(scene.masked != "", len(scene.transmitters))
+    los_gain = np.where(masked, 0.0, job.los.gain)
+    los_abc = los_moments(los_gain, job.los.delay)
+    mean, cov = link_moments(job.accs, los_abc)
     delay = metrics.delay_metrics_from_moments(mean, cov)
-    n_paths = np.sum([a.n_paths for a in accs.values()], axis=0)
-    link_tx, link_rx = np.divmod(np.arange(scene.n_links), n_rx)
-    h0 = np.where(link_masked, np.nan, delay["dc_gain"])
-    nan_masked = {k: np.where(link_masked, np.nan, v) for k, v in delay.items()}
-    cols = {
+    h0 = np.where(masked, np.nan, delay["dc_gain"])
+    nan_masked = {k: np.where(masked, np.nan, v) for k, v in delay.items()}
+    return _LinkFigures(masked, los_gain, los_abc, h0, nan_masked)
+
+
+def _link_columns(job: FinishedJob, f: _LinkFigures) -> dict[str, list]:
+    """The links' columns (one list per figure over links), the optional ones None until filled."""
+    scene = job.scene
+    tx, rx = scene.transmitters, scene.receivers
+    link_tx, link_rx = np.divmod(np.arange(scene.n_links), len(rx))
+    n_paths = np.sum([a.n_paths for a in job.accs.values()], axis=0)
+    h0, d = f.h0, f.delay
+    cols: dict[str, list] = {
         "transmitter": [tx.ids[i] for i in link_tx],
         "receiver": [rx.ids[j] for j in link_rx],
         "transmitter_index": link_tx.tolist(),
         "receiver_index": link_rx.tolist(),
         "receiver_position": [tuple(p) for p in rx.positions[link_rx].tolist()],
-        "direction": [Direction.of_code(d) for d in directions],
+        "direction": [Direction.of_code(c) for c in job.directions],
         "paths": n_paths.tolist(),
         "dc_gain": column(h0),
-        "dc_gain_stderr": column(nan_masked["dc_gain_stderr"]),
+        "dc_gain_stderr": column(d["dc_gain_stderr"]),
         "path_loss_db": column(metrics.path_loss_db(h0)),
         "received_power_w": column(h0 * tx.power[link_tx]),
-        "mean_delay_s": column(nan_masked["mean_delay_s"]),
-        "mean_delay_s_stderr": column(nan_masked["mean_delay_s_stderr"]),
-        "rms_delay_spread_s": column(nan_masked["rms_delay_spread_s"]),
-        "rms_delay_spread_s_stderr": column(nan_masked["rms_delay_spread_s_stderr"]),
-        "los_gain": column(np.where(link_masked, np.nan, los_gain)),
-        "los_delay_s": los_delay.tolist(),
+        "mean_delay_s": column(d["mean_delay_s"]),
+        "mean_delay_s_stderr": column(d["mean_delay_s_stderr"]),
+        "rms_delay_spread_s": column(d["rms_delay_spread_s"]),
+        "rms_delay_spread_s_stderr": column(d["rms_delay_spread_s_stderr"]),
+        "los_gain": column(np.where(f.masked, np.nan, f.los_gain)),
+        "los_delay_s": job.los.delay.tolist(),
     }
-    empty = [None] * scene.n_links
-    for key in (
-        "mean_delay_h2_s",
-        "rms_delay_spread_h2_s",
-        "rms_delay_spread_h2_s_stderr",
-        "bandwidth_3db_hz",
-        "bandwidth_3db_hz_stderr",
-        "truncated_gain_estimate",
-        "dc_gain_by_reflection_order",
-        "dc_gain_by_reflection_order_stderr",
-        "dc_gain_by_scattering_order",
-        "dc_gain_by_scattering_order_stderr",
-        "early_gain",
-        "late_gain",
-        "cir",
-    ):
-        cols[key] = list(empty)
-    cir_links = np.flatnonzero(plan.cir_slots(np.arange(scene.n_links)) >= 0)
-    cir_totals = cir_block(accs, plan, cir_links, los_gain, los_delay, cols)
-    order_links = np.flatnonzero(plan.order_slots(np.arange(scene.n_links)) >= 0)
+    for key in OPTIONAL_LINK_COLUMNS:
+        cols[key] = [None] * scene.n_links
+    return cols
+
+
+def _cir_and_orders(job: FinishedJob, f: _LinkFigures, cols: dict[str, list]) -> dict:
+    """Fill the CIR and the per-order columns of the links that ask for them (result_parts.py); the CIR
+    totals per link (the channels' CIR sums them)."""
+    scene, settings = job.scene, job.settings
+    plan = settings.tally
+    links = np.arange(scene.n_links)
+    cir_links = np.flatnonzero(plan.cir_slots(links) >= 0)
+    cir_totals = cir_block(job.accs, plan, cir_links, f.los_gain, job.los.delay, cols)
+    order_links = np.flatnonzero(plan.order_slots(links) >= 0)
     rho_max = float(scene.geometry.reflectance.max()) if len(scene.geometry.reflectance) else 0.0
     # the albedo tail concerns algorithm 5's truncated scattering orders (algorithm 4's S = 2 is a family, not a cut)
     albedo_max = (
@@ -284,56 +313,89 @@ def build_result(
         if settings.free_flight and settings.max_scattering > 1 and scene.medium is not None
         else None
     )
-    order_block(accs, plan, order_links, los_gain, cols, rho_max, albedo_max, enclosed=len(scene.geometry.faces) > 0)
-    for link in np.flatnonzero(link_masked & (plan.cir_slots(np.arange(scene.n_links)) >= 0)):
+    enclosed = len(scene.geometry.faces) > 0
+    order_block(job.accs, plan, order_links, f.los_gain, cols, rho_max, albedo_max, enclosed=enclosed)
+    for link in np.flatnonzero(f.masked & (plan.cir_slots(links) >= 0)):
         cols["cir"][link] = None
-    lighting = Lighting(spec, scene, geometry) if geometry is not None else None
-    if lighting is not None:
-        lighting.add_link_columns(cols, h0, nan_masked["rms_delay_spread_s"], link_masked)
-    links = document_rows(cols, scene.n_links)
-    channels, channel_cols = _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting)
-    rel = reported_rel_stderr(accs, los_gain, scene, plan, spec.simulation.target_scope)
-    all_accs = list(accs.values())
-    fwd = accs[Direction.FORWARD]
-    run = {
+    return cir_totals
+
+
+def _run_section(job: FinishedJob, los_gain: FloatArray) -> dict:
+    """The result's `run` section: how it stopped, its error, time, workers, batches, paths and rays."""
+    spec, scene, info = job.spec, job.scene, job.info
+    rel = reported_rel_stderr(job.accs, los_gain, scene, job.settings.tally, spec.simulation.target_scope)
+    all_accs = list(job.accs.values())
+    return {
         "stop_reason": info.stop_reason,
         "target_rel_error": spec.simulation.target_rel_error,
         "max_dc_gain_rel_stderr": _num(rel.max()) if len(rel) else None,
         "wall_time_s": info.wall_time_s,
         "workers": info.workers,
         "batches": info.batches,
-        "paths_total": _paths_traced(accs, n_tx, n_rx),
+        "paths_total": _paths_traced(job.accs, len(scene.transmitters), len(scene.receivers)),
         "rays_intersect": sum(a.rays_intersect for a in all_accs),
         "rays_occluded": sum(a.rays_occluded for a in all_accs),
-        "direction_choice": info.pilot,
+        "direction_choice": info.direction_choice,
     }
 
-    def per_tx(values):
+
+def _diagnostics(job: FinishedJob) -> dict:
+    """Power on surfaces and escaped per transmitter (per forward path), and the medium's evaluations."""
+    scene, fwd = job.scene, job.accs[Direction.FORWARD]
+
+    def per_tx(values: Mapping[int, float]) -> dict[str, float]:
         return {
-            tx.ids[i]: float(p) / max(fwd.n_paths[scene.link(i, 0) : scene.link(i + 1, 0)].max(), 1)
+            scene.transmitters.ids[i]: float(p) / max(fwd.n_paths[scene.link(i, 0) : scene.link(i + 1, 0)].max(), 1)
             for i, p in values.items()
         }
 
-    diagnostics = {
+    return {
         "power_on_surfaces": per_tx(fwd.surface_power),
         "escaped_power": per_tx(fwd.escaped_power),
-        "medium_evaluations": sum(a.medium_evaluations for a in all_accs),
+        "medium_evaluations": sum(a.medium_evaluations for a in job.accs.values()),
     }
+
+
+def _all_warnings(job: FinishedJob, f: _LinkFigures, cols: dict[str, list]) -> list[str]:
+    """Every warning of the result, in the order the result lists them."""
+    spec, scene = job.spec, job.scene
+    return (
+        _warnings(spec, scene)
+        + _window_warnings(cols)
+        + _truncation_warnings(cols, job.modeled, spec.simulation)
+        + _mask_warnings(scene)
+        + _peaked_phase_warnings(scene, job.settings)
+        + reliability.warnings(
+            link_reliability(job.accs, f.los_gain),
+            [f"{t}-{r}" for t, r in zip(cols["transmitter"], cols["receiver"])],
+            sampled=reliability.from_accumulators(job.accs.values()),
+        )
+    )
+
+
+def build_result(job: FinishedJob) -> SimulationResultPublic:
+    """The typed result of a finished job; every per-link figure is computed for all links at once as arrays."""
+    spec, scene = job.spec, job.scene
+    plan = job.settings.tally
+    bins = plan.bins
+    f = _link_figures(job)
+    cols = _link_columns(job, f)
+    cir_totals = _cir_and_orders(job, f, cols)
+    geometry = job.los.geometry
+    lighting = Lighting(spec, scene, geometry) if geometry is not None else None
+    if lighting is not None:
+        lighting.add_link_columns(cols, f.h0, f.delay["rms_delay_spread_s"], f.masked)
+    links = document_rows(cols, scene.n_links)
+    masked_rx = scene.masked != ""
+    channels, channel_cols = _channels(spec, scene, job.accs, plan, f.los_abc, cir_totals, masked_rx, lighting)
+    run = _run_section(job, f.los_gain)
+    diagnostics = _diagnostics(job)
     receivers = _receivers(spec, scene)
-    doc = {
+    doc: dict[str, Any] = {
         "owcsim_version": __version__,
         "algorithm": spec.simulation.algorithm,
-        "warnings": _warnings(spec, scene)
-        + _window_warnings(cols)
-        + _truncation_warnings(cols, modeled, spec.simulation)
-        + _mask_warnings(scene)
-        + _peaked_phase_warnings(scene, settings)
-        + reliability.warnings(
-            link_reliability(accs, los_gain),
-            [f"{t}-{r}" for t, r in zip(cols["transmitter"], cols["receiver"])],
-            sampled=reliability.from_accumulators(accs.values()),
-        ),
-        "modeled": _modeled(spec, scene, modeled, unreachable, settings),
+        "warnings": _all_warnings(job, f, cols),
+        "modeled": _modeled(job),
         "families": algorithm(spec.simulation.algorithm).families,
         "time_bins": {"t_min_s": bins.t_min, "time_bin_s": bins.dt, "n_bins": bins.n},
         "links": links,
@@ -341,16 +403,14 @@ def build_result(
         "channels": channels,
         "maps": grid_maps(spec, scene, channel_cols, [g.name for g in spec.transmitter_groups])
         if channels
-        else grid_maps(spec, scene, cols, list(tx.ids)),
+        else grid_maps(spec, scene, cols, list(scene.transmitters.ids)),
         "run": run,
         "diagnostics": diagnostics,
-        "scene": original or spec,  # the model itself: not validated again
+        "scene": job.original or spec,  # the model itself: not validated again
     }
-    if scene.spectra is not None:  # per band and combined (engine/spectral/spectra.py)
-        from owcsim.engine.spectral.spectra import result_block
-
+    if scene.spectra is not None:  # per band and combined (engine/results/spectral.py)
         g = geometry if geometry is not None else los_geometry(scene)
-        doc["spectral"] = result_block(spec, scene, accs, g, los_gain_grey(scene, g), los_delay)
+        doc["spectral"] = result_block(spec, scene, job.accs, g, los_gain_grey(scene, g), job.los.delay)
         doc["warnings"] += scene.spectra.warnings
     return SimulationResultPublic.model_validate(doc)
 

@@ -8,14 +8,16 @@ links that asked for a CIR (a handful of explicit receivers by default) get per-
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from functools import reduce
 from operator import add
 
 import numpy as np
 
 from owcsim.engine.results import metrics
+from owcsim.engine.results.truncation import geometric_tail, tail_ratio
 from owcsim.engine.tally.tally import Accumulator, TallyPlan
+from owcsim.schemas.algorithms import Direction
 
 
 def column(x) -> list:
@@ -74,7 +76,7 @@ def _group_estimates(accs, link: int, slot: int):
 
 
 def cir_block(
-    accs: dict[str, Accumulator], plan: TallyPlan, cir_links: np.ndarray, los_gain, los_delay, cols: dict
+    accs: Mapping[Direction, Accumulator], plan: TallyPlan, cir_links: np.ndarray, los_gain, los_delay, cols: dict
 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """Fill the CIR columns of the links that have one; returns {link: (total per bin, per-group per-path
     estimates (N_GROUPS, bins))} for the groups' channels."""
@@ -147,7 +149,7 @@ def cir_block(
 
 
 def order_block(
-    accs: dict[str, Accumulator],
+    accs: Mapping[Direction, Accumulator],
     plan: TallyPlan,
     order_links: np.ndarray,
     los_gain,
@@ -167,28 +169,21 @@ def order_block(
     by_s = mean.sum(axis=1)
     by_s[:, 0] += los_gain[order_links]
     by_k_se, by_s_se = np.sqrt(var.sum(axis=2)), np.sqrt(var.sum(axis=1))
-    from owcsim.engine.run.auto import tail_ratio
-
     tail = np.zeros(len(order_links))
     for r in range(len(order_links)):  # the decay past the last order: fitted to the measured orders, capped by
-        if by_k.shape[1] > 1:  # rho_max (albedo_max) when below 1 (auto.tail_ratio)
-            tail[r] += _geometric_tail(by_k[r, -1], tail_ratio(by_k[r], by_k_se[r], rho_max)[0])
-        if albedo_max is not None:  # albedo 1 and no surface: algebraic decay, no geometric bound (as auto.py)
+        if by_k.shape[1] > 1:  # rho_max (albedo_max) when below 1 (truncation.tail_ratio)
+            tail[r] += geometric_tail(by_k[r, -1], tail_ratio(by_k[r], by_k_se[r], rho_max)[0])
+        if (
+            albedo_max is not None
+        ):  # albedo 1 and no surface: algebraic decay, no geometric bound (as engine/run/auto.py)
             ratio = tail_ratio(by_s[r], by_s_se[r], albedo_max)[0] if albedo_max < 1.0 or enclosed else np.inf
-            tail[r] += _geometric_tail(by_s[r, -1], ratio)
+            tail[r] += geometric_tail(by_s[r, -1], ratio)
     for r, link in enumerate(order_links.tolist()):
         cols["dc_gain_by_reflection_order"][link] = by_k[r].tolist()
         cols["dc_gain_by_reflection_order_stderr"][link] = column(by_k_se[r])
         cols["dc_gain_by_scattering_order"][link] = by_s[r].tolist()
         cols["dc_gain_by_scattering_order_stderr"][link] = column(by_s_se[r])
         cols["truncated_gain_estimate"][link] = _num(tail[r])
-
-
-def _geometric_tail(gain: float, ratio: float) -> float:
-    """Power of the orders past the last one, if each keeps at most `ratio` of the one before (inf: no bound)."""
-    if gain == 0:
-        return 0.0
-    return gain * ratio / (1.0 - ratio) if ratio < 1.0 else float("inf")
 
 
 def _num(x) -> float | None:

@@ -29,7 +29,7 @@ The terms follow the arrays the engine allocates:
   plus the CIR links' bins x (K+S+4) and the maps (~12 quantities per grid point and channel).
 
 When K, S or the time window are "auto", the estimate takes the most the engine may choose
-(auto.PILOT_CAP orders; the pilot's longest window), i.e. an upper bound.
+(pilot.PILOT_CAP orders; the pilot's longest window), i.e. an upper bound.
 """
 
 from __future__ import annotations
@@ -39,10 +39,10 @@ from dataclasses import asdict, dataclass
 
 from owcsim.engine.core.constants import SPEED_OF_LIGHT
 from owcsim.engine.core.qmc import BLOCK
-from owcsim.engine.run.auto import PILOT_CAP
+from owcsim.engine.run.pilot import PILOT_CAP
 from owcsim.engine.tally.tally import CIR_GROUPS_MAX, N_GROUPS, SAMPLE_TABLE_MAX
 from owcsim.schemas import SceneSpec
-from owcsim.schemas.algorithms import ALGORITHMS
+from owcsim.schemas.algorithms import ALGORITHMS, Direction
 
 #: The batch caps of engine/run/simulate.py (copied: simulate imports the whole engine, this module stays light).
 PATH_TARGET_BUDGET = 1 << 20
@@ -119,7 +119,8 @@ def memory_estimate(
         t_long = (k + s + 3) * 1.8 * extent / SPEED_OF_LIGHT
         n_bins = max(1, math.ceil(t_long / sim.time_bin_s))
     cells = (k + 1) * (s + 1)
-    targets = {"forward": n_rx, "backward": n_tx}.get(sim.direction, max(n_rx, n_tx))
+    per_side = {Direction.FORWARD: n_rx, Direction.BACKWARD: n_tx}  # targets of a path from each side
+    targets = max(n_rx, n_tx) if sim.direction == "auto" else per_side[Direction(sim.direction)]
     tri = triangles if triangles is not None else _triangles(spec)
     cir, orders = spec.outputs.per_receiver(len(spec.receivers), n_rx - len(spec.receivers))
     n_cir, n_ord = n_tx * sum(cir), n_tx * sum(orders)

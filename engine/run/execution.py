@@ -24,11 +24,12 @@ import tempfile
 import time
 from collections import OrderedDict, deque
 from collections.abc import Generator, Iterable
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Protocol
 
 from owcsim.engine.integrator.kernel import KernelSettings, WorkItem, trace_batch
+from owcsim.engine.run.receivers import with_receivers
 from owcsim.engine.scene.scene import Scene, build_scene
 from owcsim.engine.tally.tally import BatchTally
 from owcsim.schemas import SceneSpec
@@ -106,7 +107,7 @@ class SerialExecutor:
 
     workers = 1
 
-    def map(self, job: JobRef, items, settings: KernelSettings):
+    def map(self, job: JobRef, items: Iterable[WorkItem], settings: KernelSettings) -> Generator[BatchTally]:
         for item in items:
             yield trace_batch(job.scene, item, settings)
 
@@ -117,7 +118,7 @@ class SerialExecutor:
 _SCENES: OrderedDict[str, Scene] = OrderedDict()
 #: The fields of a scene document that decide what build_scene builds besides the receivers (surfaces, the
 #: transmitters, the medium): documents that agree on them, as a job and its truncation pilot do, share one
-#: built geometry in a worker (the receivers are set on it: auto.with_receivers).
+#: built geometry in a worker (the receivers are set on it: receivers.with_receivers).
 BUILT_FIELDS = {"room", "furniture", "meshes", "transmitters", "medium"}
 
 
@@ -137,8 +138,6 @@ def _worker_scene(key: str, spec_path: str, base_dir: str | None) -> Scene:
         shared = built_key(spec, base_dir)
         same = next((_SCENES[k] for k, b in reversed(_BUILT.items()) if b == shared and k in _SCENES), None)
         if same is not None:
-            from owcsim.engine.run.auto import with_receivers
-
             scene = with_receivers(same, spec)
         else:
             scene = build_scene(spec, base_dir)
@@ -153,7 +152,14 @@ def _worker_scene(key: str, spec_path: str, base_dir: str | None) -> Scene:
 _BUILT: dict[str, str] = {}
 
 
-def _run_item(key: str, spec_path: str, base_dir: str | None, item: WorkItem, settings: KernelSettings):
+def _run_item(
+    key: str,
+    spec_path: str,
+    base_dir: str | None,
+    item: WorkItem,
+    settings: KernelSettings,
+) -> BatchTally:
+    """A batch in a worker: the JobRef's fields without its scene (the scene travels as its document's path)."""
     return trace_batch(_worker_scene(key, spec_path, base_dir), item, settings)
 
 
@@ -166,11 +172,12 @@ class ProcessExecutor:
         self.workers = workers
         self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
 
-    def map(self, job: JobRef, items, settings: KernelSettings):
-        window: deque = deque()
+    def map(self, job: JobRef, items: Iterable[WorkItem], settings: KernelSettings) -> Generator[BatchTally]:
+        window: deque[Future[BatchTally]] = deque()
         try:
             for item in items:
-                window.append(self._pool.submit(_run_item, job.key, job.spec_path, job.base_dir, item, settings))
+                task = (job.key, job.spec_path, job.base_dir, item, settings)
+                window.append(self._pool.submit(_run_item, *task))
                 if len(window) >= 2 * self.workers:
                     yield window.popleft().result()
             while window:

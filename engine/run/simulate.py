@@ -8,7 +8,13 @@ the same scene), then runs the job and returns the typed result (schemas.results
 sizes and their random streams), so the same seed gives bit-identical results with any
 number of workers. In accuracy mode batches are issued in rounds (one batch per source) and
 the run stops after the first round at which every link's relative standard error of H0 is
-at or below the target, or when the time budget is spent (the result says which).
+at or below the target, or when the time budget is spent (the result says which;
+engine/run/stopping.py).
+
+`simulate_two_sided(spec)` runs a resolved job with every link from both devices (studies and
+tests: engine/integrator/medium_nee.py's partition of unity) through the same steps. Each run
+is one `Job` value (engine/run/job.py) read by every step; the result is built from one
+`FinishedJob` (engine/results/job.py).
 """
 
 from __future__ import annotations
@@ -16,39 +22,41 @@ from __future__ import annotations
 import itertools
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from owcsim.engine.core import qmc
+from owcsim.engine.core.arrays import BoolArray, FloatArray, IntArray
 from owcsim.engine.core.constants import SPEED_OF_LIGHT
 from owcsim.engine.integrator.kernel import KernelSettings, WorkItem
 from owcsim.engine.integrator.lobe import phase_lobe_wanted
-from owcsim.engine.integrator.medium_nee import two_sided_settings
+from owcsim.engine.results.job import FinishedJob, LineOfSight, RunInfo
 from owcsim.engine.results.result import build_result
 from owcsim.engine.run import auto
 from owcsim.engine.run.execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
+from owcsim.engine.run.job import Job, Progress, ProgressFn, Watch
+from owcsim.engine.run.receivers import unreachable_receivers
+from owcsim.engine.run.stopping import MIN_PATHS_FOR_STOP, BatchWatch
 from owcsim.engine.scene.los import line_of_sight, los_geometry
-from owcsim.engine.scene.scene import Scene, build_scene
-from owcsim.engine.spectral import spectra
+from owcsim.engine.scene.scene import Scene, build_scene, check_spectral
 from owcsim.engine.tally import reliability
-from owcsim.engine.tally.estimates import may_stop, reported_rel_stderr
 from owcsim.engine.tally.tally import CIR_GROUPS_MAX, N_GROUPS, Accumulator, TallyPlan, TimeBins
 from owcsim.schemas import SceneSpec, SimulationSpec
 from owcsim.schemas.algorithms import Direction, TwoSided, algorithm
 from owcsim.schemas.results import DirectionChoicePublic, ModeledPublic, SimulationResultPublic, StopReason
 
+#: The names other packages import from here (the job's progress report, the run's record).
+__all__ = ["Progress", "ProgressFn", "RunInfo", "simulate", "simulate_two_sided", "kernel_settings", "batch_size"]
+
 #: Heuristic of the auto direction: with this many times more receivers than
 #: transmitters (or the reverse), one side amortizes its paths over so many links
 #: that no pilot is run.
 AMORTIZATION_RATIO = 8
-#: Least time between two evaluations of every link's error for progress reports [s].
-PROGRESS_INTERVAL_S = 0.25
-#: Accuracy mode checks the target only once each link has this many paths.
-MIN_PATHS_FOR_STOP = 2048
 #: Accuracy runs double their batches every this many rounds, up to the job's batch_size: small first
 #: batches check the target early, later ones pay the per-step fixed cost over more paths (a 4 096-path batch
 #: spends ~half its time in it: benchmarks/path_cost.py). A round is then at most ~1/8 of the paths so far.
@@ -63,37 +71,14 @@ PATH_TARGET_BUDGET = 1 << 20
 ESTIMATE_BUDGET = 1 << 22
 
 
-@dataclass(frozen=True, slots=True)
-class Progress:
-    """How far a run is, after its latest batch (the server stores it as schemas.jobs.JobProgress)."""
-
-    fraction: float  # estimated fraction done, 0..1
-    paths: int  # paths traced so far by the busiest link
-    batches: int  # batches merged so far
-    dc_gain_rel_stderr: float | None  # current worst relative standard error of H0 (None: not known yet)
-    elapsed_s: float  # since the job started [s]
-
-
-ProgressFn = Callable[[Progress], None]
-
-
-@dataclass
-class RunInfo:
-    stop_reason: StopReason = StopReason.PATHS
-    wall_time_s: float = 0.0
-    workers: int = 1
-    batches: int = 0
-    #: how the directions were chosen (the result's run.direction_choice; a dict is validated into it)
-    pilot: DirectionChoicePublic | dict = field(default_factory=lambda: DirectionChoicePublic(rule=""))
-
-
 def tally_plan(spec: SceneSpec, scene: Scene) -> TallyPlan:
     """What the job tallies (schemas/outputs.py): CIR and order split per receiver, group weights."""
     sim = spec.simulation
-    cir, orders = spec.outputs.per_receiver(len(spec.receivers), spec.grid_receiver_count())
-    cir, orders = np.asarray(cir, bool), np.asarray(orders, bool)
+    cir_flags, order_flags = spec.outputs.per_receiver(len(spec.receivers), spec.grid_receiver_count())
+    cir, orders = np.asarray(cir_flags, bool), np.asarray(order_flags, bool)
+    K, S = _resolved(sim.max_reflections), sim.scattering_orders
 
-    def rank(flags: np.ndarray) -> np.ndarray:
+    def rank(flags: BoolArray) -> IntArray:
         return np.where(flags, np.cumsum(flags) - 1, -1).astype(np.int64)
 
     n_cir = len(scene.transmitters) * int(cir.sum())
@@ -102,8 +87,8 @@ def tally_plan(spec: SceneSpec, scene: Scene) -> TallyPlan:
     one_batch = sim.n_paths is None or sim.n_paths <= sim.batch_size
     return TallyPlan(
         bins=TimeBins(sim.t_min_s, sim.time_bin_s, sim.n_bins),
-        n_orders=sim.max_reflections + 1,
-        n_scatter=sim.scattering_orders + 1,
+        n_orders=K + 1,
+        n_scatter=S + 1,
         n_rx=len(scene.receivers),
         cir_rank=rank(cir),
         order_rank=rank(orders),
@@ -113,7 +98,13 @@ def tally_plan(spec: SceneSpec, scene: Scene) -> TallyPlan:
     )
 
 
-def group_weights(spec: SceneSpec, scene: Scene) -> np.ndarray:
+def _resolved(value: int | None) -> int:
+    """A setting a resolved document gives (engine/run/auto.py resolves "auto" before the run)."""
+    assert value is not None, "the job's document is resolved"
+    return value
+
+
+def group_weights(spec: SceneSpec, scene: Scene) -> FloatArray:
     """(G, n_tx): weight P_i / sum_group P of each member transmitter in its group's channel."""
     ids = {t: i for i, t in enumerate(scene.transmitters.ids)}
     w = np.zeros((len(spec.transmitter_groups), len(scene.transmitters)))
@@ -137,12 +128,12 @@ def two_sided(spec: SceneSpec, scene: Scene) -> bool:
 def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = None) -> KernelSettings:
     """The kernel configuration of the job's algorithm (physics.md section 4; its flags from the registry,
     schemas/algorithms.py); `both_devices` (default: the planner's rule, `two_sided`) gives the settings of
-    links run from both devices (medium_nee.py)."""
+    links run from both devices (the registry's `both_devices` flags; medium_nee.py)."""
     sim = spec.simulation
     alg = algorithm(sim.algorithm)
     step = sim.segment_time_step_s if sim.segment_time_step_s is not None else sim.time_bin_s
     settings = KernelSettings(
-        max_reflections=sim.max_reflections,
+        max_reflections=_resolved(sim.max_reflections),
         russian_roulette=sim.russian_roulette,
         rr_start_depth=sim.rr_start_depth,
         tally=tally_plan(spec, scene),
@@ -152,16 +143,21 @@ def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = N
         equiangular_points=sim.equiangular_points,
         tally_channels=1 + (scene.spectra.n_channels if scene.spectra is not None else 0),
         qmc_block=qmc.job_block(sim.quasi_random, sim.n_paths),
-        **alg.kernel,
+        **_flags(alg.kernel),
     )
     both = two_sided(spec, scene) if both_devices is None else both_devices
-    if both:
-        settings = two_sided_settings(settings, alg.number, scene.medium is not None)
+    if both:  # a run whose partner run is missing would count about half: the planner runs both sides
+        settings = replace(settings, **_flags(alg.both_devices_kernel(scene.medium is not None)))
     # the phase lobe (medium_nee): algorithm 5 from either side or both, algorithms 2-4 from both
     lobe = settings.free_flight or (settings.mis and settings.segment_scatter)
     if lobe and scene.medium is not None and scene.spectra is None and phase_lobe_wanted(scene.phase):
         settings = replace(settings, phase_lobe=True)  # a peaked phase function
     return settings
+
+
+def _flags(flags: Mapping[str, object]) -> dict[str, Any]:
+    """The registry's KernelSettings flags (field name -> value, schemas/algorithms.py) as keyword arguments."""
+    return dict(flags)
 
 
 @contextmanager
@@ -196,11 +192,46 @@ def simulate(
     `Progress` after batches; `should_stop` is asked after every batch of the run (True stops it:
     stop reason "cancelled").
     """
-    t_start = time.perf_counter()
+    watch = Watch(progress, should_stop, time.perf_counter())
     scene = scene if scene is not None else build_scene(spec, base_dir)
     with _executor(executor, workers) as ex:
         resolved, scene, modeled = _resolve(spec, scene, ex, base_dir)
-        return _run_job(resolved, scene, ex, base_dir, progress, should_stop, t_start, original=spec, modeled=modeled)
+        return _run_job(resolved, scene, ex, base_dir, watch, original=spec, modeled=modeled)
+
+
+def simulate_two_sided(
+    spec: SceneSpec,
+    *,
+    base_dir: str | Path | None = None,
+    executor: Executor | None = None,
+    direction: Direction | str = Direction.BOTH,
+    **overrides: object,
+) -> SimulationResultPublic:
+    """`simulate` with every link run from both devices under the partition of unity (medium_nee.py), the
+    settings of the registry's `both_devices` flags (schemas/algorithms.py), for studies and tests.
+
+    The spec must be resolved (explicit algorithm, K, S and window). `direction` forward / backward runs one
+    side only with the one-sided settings (as `simulate` does, for comparisons); `overrides` replace
+    KernelSettings fields (e.g. rr_start_depth, rr_threshold)."""
+    t_start = time.perf_counter()
+    side = Direction(direction)
+    sim = spec.simulation
+    if not sim.is_resolved or side is Direction.NONE:
+        raise ValueError("simulate_two_sided needs a resolved document and a direction")
+    alg = algorithm(sim.algorithm)
+    if side is Direction.BOTH and alg.both_devices is None:
+        raise ValueError(f"algorithm {alg.number} runs one direction: give direction forward or backward")
+    scene = build_scene(spec, base_dir)
+    settings = replace(kernel_settings(spec, scene, both_devices=side is Direction.BOTH), **_flags(overrides))
+    rule = (
+        f"algorithm {alg.number} from both devices, partition of unity (engine/integrator/medium_nee.py)"
+        if side is Direction.BOTH
+        else f"requested: {side}"
+    )
+    with _executor(executor, 1) as ex:
+        job = _start(spec, scene, settings, ex, base_dir, Watch(t_start=t_start))
+        job.info.direction_choice = DirectionChoicePublic(rule=rule)
+        return _finish(job, np.full(scene.n_links, side.code))
 
 
 def _resolve(
@@ -211,9 +242,29 @@ def _resolve(
         return spec, scene, None
     step = auto.plan(spec, scene)
     if step.pilot is not None:  # the truncation pilot: a short run of K, S, window up to their caps
-        pilot = _run_job(step.pilot.spec, step.pilot.scene, executor, base_dir, None, None, time.perf_counter())
+        pilot = _run_job(step.pilot.spec, step.pilot.scene, executor, base_dir, Watch(t_start=time.perf_counter()))
         step = auto.finish(step, pilot)
     return step.spec, step.scene, step.modeled
+
+
+def _start(
+    spec: SceneSpec,
+    scene: Scene,
+    settings: KernelSettings,
+    executor: Executor,
+    base_dir: str | Path | None,
+    watch: Watch,
+) -> Job:
+    """The job value every step reads: its scene where the executor finds it, and the line of sight."""
+    geometry = los_geometry(scene)
+    gain, delay = line_of_sight(scene, geometry)
+    ref = (
+        JobRef(scene, "", "", None)
+        if isinstance(executor, SerialExecutor)
+        else job_ref(scene, str(base_dir) if base_dir is not None else None)
+    )
+    los = LineOfSight(gain, delay, geometry)
+    return Job(spec, scene, settings, executor, ref, los, RunInfo(workers=executor.workers), watch)
 
 
 def _run_job(
@@ -221,50 +272,46 @@ def _run_job(
     scene: Scene,
     executor: Executor,
     base_dir: str | Path | None,
-    progress: ProgressFn | None,
-    should_stop: Callable[[], bool] | None,
-    t_start: float,
+    watch: Watch,
     original: SceneSpec | None = None,
     modeled: ModeledPublic | None = None,
 ) -> SimulationResultPublic:
-    """Run a resolved job on its built scene."""
-    settings = kernel_settings(spec, scene)
-    geometry = los_geometry(scene)
-    los_gain, los_delay = line_of_sight(scene, geometry)
-    seen = los_gain.reshape(len(scene.transmitters), len(scene.receivers)).any(axis=0)
+    """Run a resolved job on its built scene: its settings, its directions, its batches, its result."""
+    job = _start(spec, scene, kernel_settings(spec, scene), executor, base_dir, watch)
+    return _finish(job, _choose_directions(job), original, modeled)
+
+
+def _finish(
+    job: Job, directions: IntArray, original: SceneSpec | None = None, modeled: ModeledPublic | None = None
+) -> SimulationResultPublic:
+    """Run the job in its chosen directions (links not simulated skipped) and build its result."""
+    scene = job.scene
+    seen = job.los.gain.reshape(len(scene.transmitters), len(scene.receivers)).any(axis=0)
     masked = np.flatnonzero(scene.masked != "")
-    blocked = auto.unreachable_receivers(scene, seen | (scene.masked != ""))  # a direct view proves reachability
-    info = RunInfo(workers=executor.workers)
-    job = (
-        JobRef(scene, "", "", None)
-        if isinstance(executor, SerialExecutor)
-        else job_ref(scene, str(base_dir) if base_dir is not None else None)
-    )
-    directions = _choose_directions(scene, spec, settings, executor, job, los_gain, info)
+    blocked = unreachable_receivers(scene, seen | (scene.masked != ""))  # a direct view proves reachability
     rx_of_link = np.arange(scene.n_links) % len(scene.receivers)
     directions[np.isin(rx_of_link, np.concatenate([blocked, masked]).astype(np.int64))] = SKIP
-    if exact_los_only(scene, settings):
+    if exact_los_only(scene, job.settings):
         directions[:] = SKIP
-        info.stop_reason = StopReason.EXACT
-        info.pilot = DirectionChoicePublic(
+        job.info.stop_reason = StopReason.EXACT
+        job.info.direction_choice = DirectionChoicePublic(
             rule="max_reflections = 0 without scattering: line of sight only, in closed form"
         )
-    accs = _run(scene, spec, settings, executor, job, directions, los_gain, info, progress, should_stop, t_start)
-    info.wall_time_s = time.perf_counter() - t_start
-    return build_result(
-        spec,
-        scene,
-        accs,
-        settings,
-        los_gain,
-        los_delay,
-        directions,
-        info,
+    accs = _run(job, directions)
+    job.info.wall_time_s = time.perf_counter() - job.watch.t_start
+    finished = FinishedJob(
+        spec=job.spec,
+        scene=scene,
+        settings=job.settings,
+        los=job.los,
+        directions=directions,
+        accs=accs,
+        info=job.info,
         original=original,
         modeled=modeled,
         unreachable=blocked,
-        geometry=geometry,
     )
+    return build_result(finished)
 
 
 def exact_los_only(scene: Scene, settings: KernelSettings) -> bool:
@@ -292,7 +339,7 @@ def batch_size(sim: SimulationSpec, settings: KernelSettings, n_targets: int) ->
 Run = tuple[Direction, int, tuple[int, ...]]
 
 
-def _sources(scene: Scene, directions: np.ndarray) -> list[Run]:
+def _sources(scene: Scene, directions: IntArray) -> list[Run]:
     """(direction, source, targets) runs that cover every link in its chosen direction(s)."""
     n_rx = len(scene.receivers)
     codes = directions.reshape(len(scene.transmitters), n_rx)
@@ -318,34 +365,34 @@ def _items(
         for d in (Direction.FORWARD, Direction.BACKWARD)
     }
     bs = min(sizes[d] for d in {r[0] for r in runs}) if runs else sim.batch_size
+    grown = bs
     if n_paths is None:  # accuracy mode: a round of many sources checks the target sooner: first batches of a
         # quarter (or 1 / sources) of batch_size, growing to the largest batch the memory caps allow
-        grown = bs
         bs = qmc.whole_blocks(min(bs, max(MIN_PATHS_FOR_STOP, sim.batch_size // max(len(runs), 4))), settings.qmc_block)
-    rounds = itertools.count() if n_paths is None else range(-(-n_paths // bs))
+    rounds: Iterable[int] = itertools.count() if n_paths is None else range(-(-n_paths // bs))
     for b in rounds:
-        size = bs if n_paths is None else min(bs, n_paths - b * bs)
         if n_paths is None:  # accuracy mode: batches double every GROWTH_ROUNDS rounds up to the memory cap
             size = min(grown, bs << min(b // GROWTH_ROUNDS, 16))
+        else:
+            size = min(bs, n_paths - b * bs)
         for direction, source, targets in runs:
             yield WorkItem(direction, source, targets, b, size, sim.seed, phase)
 
 
 def _new_accumulators(scene: Scene, settings: KernelSettings) -> dict[Direction, Accumulator]:
+    check_spectral(scene, settings.free_flight or settings.segment_scatter)  # the kernel the job chose
+    n_bands = scene.spectra.n_bands if scene.spectra is not None else 0  # spectral scenes: channel tallies too
     accs = {
-        d: Accumulator(scene.n_links, settings.tally, backward=d is Direction.BACKWARD)
+        d: Accumulator(scene.n_links, settings.tally, backward=d is Direction.BACKWARD, n_bands=n_bands)
         for d in (Direction.FORWARD, Direction.BACKWARD)
     }
-    spectra.new_accumulators(accs, scene, settings)  # spectral scenes: per-band channel tallies
     return accs
 
 
 def _merge(
+    job: Job,
     accs: dict[Direction, Accumulator],
-    executor: Executor,
-    job: JobRef,
     items: Iterable[WorkItem],
-    settings: KernelSettings,
     on_batch: Callable[[WorkItem], bool] | None = None,
 ) -> None:
     """Feed items to the executor and merge their tallies in order; `on_batch` may stop the run."""
@@ -356,76 +403,85 @@ def _merge(
             pulled.append(it)
             yield it
 
-    results = executor.map(job, recording(), settings)
+    results = job.executor.map(job.ref, recording(), job.settings)
     try:
         for tally in results:
             item = pulled.popleft()
             accs[item.direction].add(tally, item.batch, item.source)
-            spectra.add_batch(accs[item.direction], tally, item)
             if on_batch is not None and on_batch(item):
                 break
     finally:
         results.close()
 
 
-def _choose_directions(
-    scene: Scene,
-    spec: SceneSpec,
-    settings: KernelSettings,
-    executor: Executor,
-    job: JobRef,
-    los_gain: np.ndarray,
-    info: RunInfo,
-) -> np.ndarray:
-    """Per link: the Direction.code its paths run in (SKIP is set later for links not simulated)."""
+def _choose_directions(job: Job) -> IntArray:
+    """Per link: the Direction.code its paths run in (SKIP is set later for links not simulated): by a rule
+    (two-sided, the algorithm's, requested, line of sight only, amortized over many devices) or a pilot."""
+    ruled = _direction_rule(job)
+    if ruled is not None:
+        choice, direction = ruled
+        job.info.direction_choice = choice
+        return np.full(job.scene.n_links, direction.code)
+    choice, directions = _direction_pilot(job)
+    job.info.direction_choice = choice
+    return directions
+
+
+def _direction_rule(job: Job) -> tuple[DirectionChoicePublic, Direction] | None:
+    """The direction of every link when a rule decides it (and why); None: a pilot must choose."""
+    spec, scene = job.spec, job.scene
     sim = spec.simulation
     alg = algorithm(sim.algorithm)
     n_tx, n_rx = len(scene.transmitters), len(scene.receivers)
     if two_sided(spec, scene):
-        info.pilot = DirectionChoicePublic(
-            rule=f"algorithm {sim.algorithm} in a medium: every link from both devices, "
-            "each path weighted by its share (medium_nee.py: bounded weights near "
-            "point devices)"
+        rule = (
+            f"algorithm {sim.algorithm} in a medium: every link from both devices, each path weighted by its "
+            "share (medium_nee.py: bounded weights near point devices)"
         )
-        return np.full(scene.n_links, BOTH)
+        return DirectionChoicePublic(rule=rule), Direction.BOTH
     if alg.direction is not None:
-        info.pilot = DirectionChoicePublic(rule=alg.direction_reason)
-        return np.full(scene.n_links, alg.direction.code)
+        return DirectionChoicePublic(rule=alg.direction_reason), alg.direction
     if sim.direction != "auto":
-        info.pilot = DirectionChoicePublic(rule=f"requested: {sim.direction}")
-        return np.full(scene.n_links, Direction(sim.direction).code)
+        return DirectionChoicePublic(rule=f"requested: {sim.direction}"), Direction(sim.direction)
     if sim.max_reflections == 0:
-        info.pilot = DirectionChoicePublic(rule="max_reflections = 0: line of sight only, computed exactly")
-        return np.full(scene.n_links, FORWARD)
+        rule = "max_reflections = 0: line of sight only, computed exactly"
+        return DirectionChoicePublic(rule=rule), Direction.FORWARD
     if n_rx >= AMORTIZATION_RATIO * n_tx:
         # A map: forward paths serve every receiver at once, but their next-event estimates from wall points
         # a few cm from a receiver are heavy-tailed, so the map's worst points converge slowly; paths from each
         # receiver to the few luminaires do not (benchmarks/map_scale.py measures both).
-        info.pilot = DirectionChoicePublic(
-            rule=f"{n_tx} transmitters x {n_rx} receivers (a map): paths from each "
-            "receiver to the few transmitters; no pilot"
+        rule = (
+            f"{n_tx} transmitters x {n_rx} receivers (a map): paths from each receiver to the few transmitters; "
+            "no pilot"
         )
-        return np.full(scene.n_links, BACKWARD)
+        return DirectionChoicePublic(rule=rule), Direction.BACKWARD
     if n_tx >= AMORTIZATION_RATIO * n_rx:
-        info.pilot = DirectionChoicePublic(
-            rule=f"{n_tx} transmitters x {n_rx} receivers: the receiver side "
-            "amortizes its paths over the transmitters, no pilot"
+        rule = (
+            f"{n_tx} transmitters x {n_rx} receivers: the receiver side amortizes its paths over the "
+            "transmitters, no pilot"
         )
-        return np.full(scene.n_links, BACKWARD)
-    # Pilot: a short run each way; efficiency = 1 / (relative variance per path x rays per path),
-    # rays shared by the links a source serves. Ray counts (not times) keep the choice deterministic.
-    # Its paths are not merged into the result: the choice depends on their sample variance (and mean), so
-    # the chosen side's pilot paths are a selected sample, not an unbiased one (CHANGELOG, pilot reuse).
+        return DirectionChoicePublic(rule=rule), Direction.BACKWARD
+    return None
+
+
+def _direction_pilot(job: Job) -> tuple[DirectionChoicePublic, IntArray]:
+    """A short run each way; per link the side of higher efficiency = 1 / (relative variance per path x rays
+    per path), rays shared by the links a source serves. Ray counts (not times) keep the choice deterministic.
+
+    Its paths are not merged into the result: the choice depends on their sample variance (and mean), so
+    the chosen side's pilot paths are a selected sample, not an unbiased one (CHANGELOG, pilot reuse)."""
+    scene, sim = job.scene, job.spec.simulation
+    n_tx, n_rx = len(scene.transmitters), len(scene.receivers)
     cost_eff, sound = [], []
     for direction in (Direction.FORWARD, Direction.BACKWARD):
         runs = _sources(scene, np.full(scene.n_links, direction.code))
-        accs = _new_accumulators(scene, settings)
-        _merge(accs, executor, job, _items(runs, sim, settings, PILOT_PHASE, sim.pilot_paths), settings)
+        accs = _new_accumulators(scene, job.settings)
+        _merge(job, accs, _items(runs, sim, job.settings, PILOT_PHASE, sim.pilot_paths))
         acc = accs[direction]
         n = acc.n_paths.astype(float)
         mean = acc.s1[:, 0] / n
         var = np.maximum(acc.s2[:, 0, 0] / n - mean**2, 0.0)
-        h0 = mean + los_gain
+        h0 = mean + job.los.gain
         rays_per_path = (acc.rays_intersect + acc.rays_occluded) / max(n.sum(), 1)
         links_per_source = n_rx if direction is Direction.FORWARD else n_tx
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -438,115 +494,41 @@ def _choose_directions(
     by_variance = np.where(cost_eff[1][0] < cost_eff[0][0], BACKWARD, FORWARD)
     choice = np.where(sound[1] & ~sound[0], BACKWARD, np.where(sound[0] & ~sound[1], FORWARD, by_variance))
     overruled = int((choice != by_variance).sum())
-    info.pilot = DirectionChoicePublic(
-        rule="pilot: lower relative variance x rays per path, per link"
-        + (
-            f"; {overruled} link(s) from the only side whose pilot saw a sampled part not held by a few path groups"
-            if overruled
-            else ""
-        ),
+    why = (
+        f"; {overruled} link(s) from the only side whose pilot saw a sampled part not held by a few path groups"
+        if overruled
+        else ""
+    )
+    report = DirectionChoicePublic(
+        rule="pilot: lower relative variance x rays per path, per link" + why,
         paths_per_direction=sim.pilot_paths,
         rel_std_per_path_forward=_finite_list(cost_eff[0][1]),
         rel_std_per_path_backward=_finite_list(cost_eff[1][1]),
         rays_per_path_forward=float(cost_eff[0][2]),
         rays_per_path_backward=float(cost_eff[1][2]),
     )
-    return choice
+    return report, choice
 
 
-def _finite_list(x: np.ndarray) -> list[float | None]:
+def _finite_list(x: FloatArray) -> list[float | None]:
     return [float(v) if np.isfinite(v) else None for v in x]
 
 
-def _run(
-    scene: Scene,
-    spec: SceneSpec,
-    settings: KernelSettings,
-    executor: Executor,
-    job: JobRef,
-    directions: np.ndarray,
-    los_gain: np.ndarray,
-    info: RunInfo,
-    progress: ProgressFn | None,
-    should_stop: Callable[[], bool] | None,
-    t_start: float,
-) -> dict[Direction, Accumulator]:
-    """Run the batches of every link in its direction(s), merging as they come; stop by the job's rule."""
-    sim = spec.simulation
-    runs = _sources(scene, directions)
-    accs = _new_accumulators(scene, settings)
+def _run(job: Job, directions: IntArray) -> dict[Direction, Accumulator]:
+    """Run the batches of every link in its direction(s), merging as they come; stop by the job's rule
+    (engine/run/stopping.py)."""
+    sim = job.spec.simulation
+    runs = _sources(job.scene, directions)
+    accs = _new_accumulators(job.scene, job.settings)
     n_paths = sim.n_paths
     total_batches = None
     if n_paths is not None and runs:
-        first = next(_items(runs, sim, settings, MAIN_PHASE, n_paths))
+        first = next(_items(runs, sim, job.settings, MAIN_PHASE, n_paths))
         total_batches = len(runs) * -(-n_paths // first.n_paths)
-    state: dict[str, float] = {"done": 0, "worst": float("inf"), "rel_at": -PROGRESS_INTERVAL_S}
-
-    def on_batch(item: WorkItem) -> bool:
-        state["done"] += 1
-        info.batches = int(state["done"])
-        end_of_round = state["done"] % max(len(runs), 1) == 0
-        elapsed = time.perf_counter() - t_start
-        last = total_batches is not None and state["done"] == total_batches
-        # The error of every link costs O(links): computed where the stopping rule needs it (end of a round in
-        # accuracy mode) and for progress at most every PROGRESS_INTERVAL_S, not after each of a map's batches.
-        if (total_batches is None and end_of_round) or (
-            progress is not None and (last or elapsed - state["rel_at"] >= PROGRESS_INTERVAL_S)
-        ):
-            rel = reported_rel_stderr(accs, los_gain, scene, settings.tally, sim.target_scope)
-            state["worst"] = float(np.max(rel)) if len(rel) else 0.0
-            state["rel_at"] = elapsed
-        worst = state["worst"]
-        if total_batches is not None:
-            frac = state["done"] / total_batches
-        else:
-            target = sim.target_rel_error
-            frac = min(
-                1.0,
-                max(
-                    elapsed / sim.time_budget_s,
-                    0.0 if not np.isfinite(worst) else (target / worst) ** 2 if worst > 0 else 1.0,
-                ),
-            )
-        if progress is not None:
-            progress(
-                Progress(
-                    fraction=frac,
-                    paths=int(max(a.n_paths.max() for a in accs.values())),
-                    batches=int(state["done"]),
-                    dc_gain_rel_stderr=worst if np.isfinite(worst) else None,
-                    elapsed_s=elapsed,
-                )
-            )
-        if should_stop is not None and should_stop():
-            info.stop_reason = StopReason.CANCELLED
-            return True
-        if total_batches is None and end_of_round:
-            served = np.sum([a.n_paths for a in accs.values()], axis=0)[directions != SKIP]
-            if (
-                (served.min() if len(served) else MIN_PATHS_FOR_STOP) >= MIN_PATHS_FOR_STOP
-                and worst <= sim.target_rel_error
-                and may_stop(
-                    accs,
-                    los_gain,
-                    scene,
-                    settings.tally,
-                    sim.target_rel_error,
-                    directions != SKIP,
-                    sim.target_scope,
-                    heavy_tails=scene.medium is not None,  # reliability.py: optional stopping in smoke
-                )
-            ):
-                info.stop_reason = StopReason.TARGET_REACHED
-                return True
-            if elapsed >= sim.time_budget_s:
-                info.stop_reason = StopReason.TIME_BUDGET
-                return True
-        return False
-
     if not runs:  # every link exact or skipped (unreachable receivers): nothing to run, not an endless loop
-        if info.stop_reason is not StopReason.EXACT:
-            info.stop_reason = StopReason.NOTHING_TO_SIMULATE
+        if job.info.stop_reason is not StopReason.EXACT:
+            job.info.stop_reason = StopReason.NOTHING_TO_SIMULATE
         return accs
-    _merge(accs, executor, job, _items(runs, sim, settings, MAIN_PHASE, n_paths), settings, on_batch)
+    watch = BatchWatch(job, accs, directions, len(runs), total_batches)
+    _merge(job, accs, _items(runs, sim, job.settings, MAIN_PHASE, n_paths), watch)
     return accs

@@ -22,6 +22,7 @@ from owcsim.engine.core.constants import DEGENERATE_AREA_FACTOR, MAX_SCENE_EXTEN
 from owcsim.engine.core.errors import SceneError
 from owcsim.engine.core.inputs import read_input
 from owcsim.engine.core.lazy import trimesh  # imported on first use: it pulls in scipy (issue 10)
+from owcsim.engine.spectral.spectra import grey_surfaces
 from owcsim.engine.surfaces.bsdf import Materials
 from owcsim.schemas import ROOM_FACES, SceneSpec
 from owcsim.schemas.geometry import BoxSpec, MeshSpec, RoomSpec
@@ -115,12 +116,13 @@ def _load_mesh(i: int, spec: MeshSpec, base_dir: Path | None, count_only: bool =
     """
     label = spec.name or f"meshes[{i}]"
     if spec.vertices is not None:
+        assert spec.faces is not None  # (the schema gives faces with vertices)
         if count_only:
             return len(spec.faces)
         verts = np.asarray(spec.vertices, float)
         faces = np.asarray(spec.faces, np.int64)
         return verts, faces, np.full(len(faces), spec.reflectance), [label] * len(faces)
-    fmt = spec.format
+    fmt: str | None = spec.format
     try:
         data, path = read_input(spec.file, spec.data_base64, base_dir, f"{label}: mesh file")
         if path is not None:
@@ -149,7 +151,8 @@ def _load_mesh(i: int, spec: MeshSpec, base_dir: Path | None, count_only: bool =
         vs.append(trimesh.transform_points(np.asarray(part.vertices, float), transform))
         fs.append(np.asarray(part.faces, np.int64) + offset)
         offset += len(part.vertices)
-        rhos.append(np.full(len(part.faces), spec.group_reflectance.get(key, spec.reflectance)))
+        rho = spec.group_reflectance.get(key, spec.reflectance) if key is not None else spec.reflectance
+        rhos.append(np.full(len(part.faces), rho))
         names += [f"{label}.{key or geom_name}"] * len(part.faces)
     if unknown:
         raise SceneError(f"{label}: group_reflectance names groups the file does not have: {sorted(unknown)}")
@@ -205,11 +208,7 @@ def build_geometry(spec: SceneSpec, base_dir: Path | None = None) -> Geometry:
     if not ok.any():
         raise SceneError("every triangle of the scene is degenerate")
     surfaces = surfaces_all[ok]
-    from owcsim.engine.spectral.spectra import (
-        grey_surfaces,  # spectral surfaces: the carrier's reflectance (max over the bands)
-    )
-
-    rho, material = _materials(grey_surfaces(surfaces, spec))
+    rho, material = _materials(grey_surfaces(surfaces, spec))  # spectral surfaces: the carrier's (max over bands)
     return Geometry(
         vertices, faces[ok], rho, group[ok], list(group_names), material, surfaces if surfaces.dtype == object else None
     )

@@ -72,7 +72,7 @@ def line_of_sight(scene: Scene, geometry: LosGeometry | None = None) -> tuple[np
     g = geometry if geometry is not None else los_geometry(scene)
     gain = los_gain_grey(scene, g)
     if scene.spectra is not None:
-        gain = scene.spectra.los_channels(scene, g, gain)[scene.spectra.n_bands]
+        gain = los_channels(scene, g, gain)[scene.spectra.n_bands]
     return gain, g.delay
 
 
@@ -85,3 +85,21 @@ def los_gain_grey(scene: Scene, g: LosGeometry | None) -> np.ndarray:
     ok = g.clear > 0
     d = np.where(ok, g.distance, 1.0)
     return np.where(ok, tx.response(ti, g.cos_tx, g.directions) * rx.response(ri, g.cos_rx) / (d * d) * g.clear, 0.0)
+
+
+def los_channels(scene: Scene, g: LosGeometry, grey: np.ndarray) -> np.ndarray:
+    """(V, L) line-of-sight gain of every channel of a spectral scene from the carrier's LOS gain `grey` (L,) and
+    geometry `g`: band b is grey times T_b / T_c = exp(-tau_c (sigma_t,b / sigma_t,c - 1)) of the path."""
+    sp = scene.spectra
+    assert sp is not None
+    B = sp.n_bands
+    bands = np.repeat(grey[None, :], B, axis=0)
+    if sp.tau_scale is not None and scene.medium is not None:
+        idx = np.flatnonzero(grey > 0)
+        if len(idx):
+            tx = scene.transmitters.positions[np.arange(sp.n_links) // len(scene.receivers)]
+            tau = scene.medium.optical_depth(tx[idx], g.directions[idx], g.distance[idx])
+            bands[:, idx] *= np.exp(-sp.tau_scale[:, None] * tau[None, :])
+    ti, ri = np.divmod(np.arange(sp.n_links), len(scene.receivers))
+    _, ch = sp.channel_power(np.ones(sp.n_links), bands / np.where(grey > 0, grey, 1.0), ti, ri)
+    return ch * grey[None, :]

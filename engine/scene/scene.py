@@ -2,22 +2,22 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from owcsim.engine.core.errors import SceneError
-from owcsim.engine.media.media import Medium, medium_from_spec
-from owcsim.engine.media.phase import phase_from_spec
+from owcsim.engine.media.media import HomogeneousMedium, medium_from_spec, region_from_spec
+from owcsim.engine.media.medium import Medium
+from owcsim.engine.media.model import MediumKind, MediumModel, medium_model
+from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.scene.geometry import Geometry, Intersector, build_geometry, check_extent
 from owcsim.engine.sources.devices import Devices, concentrator_gain, transmitters_from_specs
-from owcsim.engine.surfaces.bsdf import mirror_planes
+from owcsim.engine.spectral.spectra import SceneSpectra, carrier_bands, medium_bands, scene_tables, unsupported
+from owcsim.engine.surfaces.bsdf import MirrorPlane, mirror_planes
 from owcsim.schemas import SceneSpec
-
-if TYPE_CHECKING:
-    from owcsim.engine.spectral.spectra import SceneSpectra
+from owcsim.schemas.algorithms import ALGORITHMS
 
 
 @dataclass
@@ -33,17 +33,19 @@ class Scene:
     #: convex), so shadow rays are skipped; benchmarks may turn it off to cast them anyway.
     all_visible: bool = False
     #: phase function of the medium (None without a medium)
-    phase: object = None
+    phase: PhaseFunction | None = None
     #: length given to segments that leave the scene: the medium beyond it absorbs everything [m]
     medium_far_distance: float = float("inf")
     #: per receiver: why it is not simulated ("" = simulated): grid points in furniture or outside the room
-    masked: np.ndarray = None  # type: ignore[assignment]
+    masked: np.ndarray = field(default_factory=lambda: np.zeros(0, object))
     #: receiver index range of each grid: (first, shape (nu, nv)) in `spec.receiver_grids` order
-    grid_slices: list = None  # type: ignore[assignment]
+    grid_slices: list[tuple[int, tuple[int, int]]] = field(default_factory=list)
     #: planar groups of perfect-mirror faces (bsdf.MirrorPlane): devices are reached through their images
-    mirror_planes: list = field(default_factory=list)
+    mirror_planes: list[MirrorPlane] = field(default_factory=list)
     #: per-band tables of a spectral scene (engine/spectral/spectra.py), None when grey
     spectra: SceneSpectra | None = None
+    #: the document's medium as decided once when built: scatters, max_albedo, report (engine/media/model.py)
+    medium_model: MediumModel | None = None
 
     @property
     def n_links(self) -> int:
@@ -79,17 +81,60 @@ def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
         receivers=receivers,
         medium=medium,
         all_visible=spec.room is not None and not spec.furniture and not spec.meshes,
-        phase=phase_from_spec(spec.medium.phase) if medium is not None else None,
+        phase=medium.phase if medium is not None else None,
         medium_far_distance=_far_distance(spec, geometry, medium, receivers.positions),
         masked=mask_reasons(spec, receivers, len(spec.receivers)),
         grid_slices=grid_slices,
         mirror_planes=planes,
+        medium_model=medium_model(spec.medium, medium),
     )
     if spec.spectral is not None:  # per-band tables; the scene becomes the carrier band's (engine/spectral/spectra.py)
-        from owcsim.engine.spectral.spectra import attach
-
-        attach(scene)
+        scene = spectral_scene(scene)
     return scene
+
+
+def spectral_scene(scene: Scene) -> Scene:
+    """The scene with its per-band tables (`spectra`), made the carrier: the largest reflectance (the geometry's,
+    geometry.build_geometry via spectra.grey_surfaces) and the least attenuated band's medium (docs/spectra.md)."""
+    spec = scene.spec
+    assert spec.spectral is not None
+    geo = scene.geometry
+    tables = scene_tables(spec, geo.reflectance, getattr(geo, "surfaces", None), len(scene.receivers))
+    carrier: dict = {}
+    bands = medium_bands(spec, spec.spectral)
+    if bands is not None:
+        sigma_a, sigma_s, phases = bands
+        c = carrier_bands(tables, sigma_a, sigma_s, phases)
+        if c is None:  # no band attenuates
+            carrier = {"medium": None, "phase": None, "medium_far_distance": float("inf")}
+        else:
+            assert spec.medium is not None and spec.medium.type != "grid"  # (per-band grids: refused by the schema)
+            box, region = region_from_spec(spec.medium.region)
+            medium = HomogeneousMedium(float(sigma_a[c]), float(sigma_s[c]), box, region=region, phase_spec=phases[c])
+            far = _far_distance(spec, geo, medium, scene.receivers.positions)
+            carrier = {"medium": medium, "phase": medium.phase, "medium_far_distance": far}
+    if scene.medium_model is not None and scene.medium_model.kind is MediumKind.PARTICLES:
+        assert spec.medium is not None and spec.medium.type == "particles"
+        tables.warnings.append(
+            f"medium.particles.wavelength ({spec.medium.particles.wavelength:.4g} m) is not used: a "
+            "spectral scene computes the Mie optics at each band centre (spectral.medium_bands)"
+        )
+    out = replace(scene, spectra=tables, **carrier)
+    algorithm = spec.simulation.algorithm
+    check_spectral(out, algorithm != "auto" and ALGORITHMS[algorithm].counts_scattering)
+    return out
+
+
+def check_spectral(scene: Scene, samples_scattering: bool) -> None:
+    """SceneError where a spectral scene's per-band ratios would be needed by a part of the kernel that does not
+    carry them (spectra.unsupported). Checked when the scene is built (for the document's algorithm: does it
+    sample scattering points, `counts_scattering` in schemas/algorithms.py) and again when a job starts its
+    tallies (for the kernel settings the automatic settings chose, on a scene built before)."""
+    if scene.spectra is None:
+        return
+    why = unsupported(scene.spectra, bool(scene.mirror_planes), scene.medium is not None, samples_scattering)
+    if why is not None:
+        raise SceneError(why)
 
 
 def _unit_rows(v: np.ndarray) -> np.ndarray:

@@ -25,7 +25,8 @@ import numpy as np
 from owcsim.engine.core.errors import SceneError
 from owcsim.engine.core.inputs import read_input
 from owcsim.engine.core.sampling import _cone_polar, _lambertian_polar, polar_about_soa
-from owcsim.engine.sources.photometry import Photometry, PhotometryError, luminaire_frame, parse_photometry
+from owcsim.engine.sources.photometry import Photometry, PhotometryError, luminaire_frame
+from owcsim.engine.sources.photometry_files import parse_photometry
 from owcsim.schemas import ReceiverSpec, TransmitterSpec
 
 

@@ -18,7 +18,7 @@ so they differ only through these factors (a two-band run equals two one-band ru
 seed up to rounding, when the carrier's sampling decisions are the bands' own: no roulette, and
 smoke that does not vary per band).
 
-Channels tallied per link (`ChannelBuilder`, one contraction per path group and kernel step), V = B + 3:
+Channels tallied per link (engine/tally/spectral.py, one contraction per path group and kernel step), V = B + 3:
   - band b: H_b, gain per watt emitted in band b [-];
   - optical: H = sum_b f_b H_b, f_b the transmitter's power fraction in band b [-] (also the
     main tally, so the result's dc_gain, CIR and delay figures are those of the whole spectrum);
@@ -35,6 +35,11 @@ ratio tracking: the carrier samples free flights with sigma_t,c and keeps albedo
 an uncollided flight to a surface multiplies band b by T_b / T_c (`transmit_rows`), a collision and
 each scattering point's estimate by sigma_s,b T_b / (sigma_s,c T_c) (`scatter`), the sampled
 direction by p_b / p_c (`turn`).
+
+Where the parts live: this module holds the band model (band averages, `SceneSpectra` and the kernel's
+hooks on it, `scene_tables`, `carrier_bands`); the scene becomes the carrier in engine/scene/scene.py
+(`spectral_scene`), the channels are tallied in engine/tally/spectral.py and reported by
+engine/results/spectral.py.
 """
 
 from __future__ import annotations
@@ -44,8 +49,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from owcsim.engine.core.errors import SceneError
+from owcsim.engine.media.mie import medium_coefficients, particle_optics
+from owcsim.engine.media.phase import phase_from_spec
 from owcsim.engine.spectral.spectra_tables import CURVES, K_M, VISIBLE, v_lambda
-from owcsim.engine.tally.tally import N_GROUPS, group_shift
+from owcsim.schemas.medium import MiePhaseSpec
 
 #: Most channels x links a spectral job may tally (each link holds ~(B + 10) x 16 sums per direction).
 MAX_CHANNEL_LINKS = 400_000
@@ -275,27 +282,6 @@ class SceneSpectra:
         luminous = (fb * self.tx_luminous.take(tx, axis=0).T).sum(axis=0)
         return optical, np.concatenate([bands, optical[None], electrical[None], luminous[None]])
 
-    # --- line of sight -------------------------------------------------------------------
-    def los_channels(self, scene, g, grey) -> np.ndarray:
-        """(V, L) line-of-sight gain of every channel from the carrier's LOS gain `grey` (L,) and geometry `g`."""
-        B = self.n_bands
-        bands = np.repeat(grey[None, :], B, axis=0)
-        if self.tau_scale is not None and scene.medium is not None:
-            idx = np.flatnonzero(grey > 0)
-            if len(idx):
-                tx = scene.transmitters.positions[np.arange(self.n_links) // len(scene.receivers)]
-                tau = scene.medium.optical_depth(tx[idx], g.directions[idx], g.distance[idx])
-                bands[:, idx] *= np.exp(-self.tau_scale[:, None] * tau[None, :])
-        ti, ri = np.divmod(np.arange(self.n_links), len(scene.receivers))
-        _, ch = self.channel_power(np.ones(self.n_links), bands / np.where(grey > 0, grey, 1.0), ti, ri)
-        return ch * grey[None, :]
-
-    # --- tallies -------------------------------------------------------------------------
-    def builder(self, item, tgt: np.ndarray, links: np.ndarray, block: int = 1) -> "ChannelBuilder":
-        """The channel tally of a batch (kernel.WorkItem) whose targets `tgt` are the global `links`;
-        `block` paths per independent sample (engine/core/qmc.py)."""
-        return ChannelBuilder(self, item.direction, item.source, tgt, links, item.n_paths, block)
-
 
 def surface_bands(surface, spectral) -> np.ndarray:
     """(B,) reflectance per band of one surface: a number, a material (its total rho, grey) or a spectral spec."""
@@ -333,7 +319,7 @@ def grey_surfaces(surfaces: np.ndarray, spec) -> np.ndarray:
     return out
 
 
-def _medium_bands(spec, spectral):
+def medium_bands(spec, spectral):
     """Per band (sigma_a, sigma_s) arrays and phase specs, or None for a grey medium."""
     med = spec.medium
     if med is None:
@@ -341,9 +327,6 @@ def _medium_bands(spec, spectral):
     bm = spectral.medium
     centres = spectral.centres()
     if med.type == "particles":
-        from owcsim.engine.media.mie import medium_coefficients
-        from owcsim.schemas.medium import MiePhaseSpec
-
         idx = bm.refractive_index if bm is not None else [med.particles.refractive_index] * len(centres)
         sa, ss, phases = [], [], []
         for lam, m in zip(centres, idx):  # a loop over bands: one Mie average each
@@ -384,26 +367,24 @@ def with_receivers(sp: SceneSpectra, spec, n_tx: int, n_rx: int) -> SceneSpectra
     return replace(sp, rx_electrical=electrical, rx_responsive=responsive, n_links=n_tx * n_rx)
 
 
-def attach(scene) -> None:
-    """Build `scene.spectra` and make the scene the carrier (largest reflectance, least attenuated band's medium).
+def scene_tables(spec, reflectance: np.ndarray, surfaces: np.ndarray | None, n_rx: int) -> SceneSpectra:
+    """The per-band tables of surfaces and devices (the medium's come from `carrier_bands`).
 
-    The geometry's reflectances are already the carrier's (geometry.build_geometry via grey_surfaces).
+    `reflectance` (F,) is the carrier's (geometry.build_geometry via grey_surfaces), `surfaces` the
+    faces' surface objects (None when every face is grey), `n_rx` the receivers (grid points included).
     """
-    spec = scene.spec
     spectral = spec.spectral
     B = spectral.n_bands
-    geo = scene.geometry
-    surfaces = getattr(geo, "surfaces", None)
-    face_rho = np.repeat(np.asarray(geo.reflectance, float)[None, :], B, axis=0)
+    face_rho = np.repeat(np.asarray(reflectance, float)[None, :], B, axis=0)
     spectral_surfaces = False
     if surfaces is not None:
         faces, bands = spectral_faces(surfaces, spectral)
         face_rho[:, faces] = bands
         spectral_surfaces = len(faces) > 0
-    carrier = np.asarray(geo.reflectance, float)
+    carrier = np.asarray(reflectance, float)
     with np.errstate(invalid="ignore", divide="ignore"):
         face_ratio = np.where(carrier[None, :] > 0, face_rho / np.where(carrier > 0, carrier, 1.0)[None, :], 1.0)
-    n_tx, n_rx = len(scene.transmitters), len(scene.receivers)
+    n_tx = len(spec.transmitters)
     frac, lum = np.zeros((n_tx, B)), np.zeros((n_tx, B))
     for i, t in enumerate(spec.transmitters):  # a loop over transmitters
         frac[i], lum[i] = band_spd(t.spectrum, spectral)
@@ -417,31 +398,20 @@ def attach(scene) -> None:
         tx_luminous=lum,
         rx_electrical=electrical,
         rx_responsive=responsive,
-        n_links=scene.n_links,
+        n_links=n_tx * n_rx,
     )
-    if out.n_channels * scene.n_links > MAX_CHANNEL_LINKS:
+    if out.n_channels * out.n_links > MAX_CHANNEL_LINKS:
         raise SceneError(
-            f"spectral: {B} bands over {scene.n_links} links need {out.n_channels * scene.n_links} "
+            f"spectral: {B} bands over {out.n_links} links need {out.n_channels * out.n_links} "
             f"tally channels, more than {MAX_CHANNEL_LINKS}: use fewer bands or fewer receivers"
         )
-    med = _medium_bands(spec, spectral)
-    if med is not None:
-        _carrier_medium(scene, out, *med)
-    if spec.medium is not None and spec.medium.type == "particles":
-        out.warnings.append(
-            f"medium.particles.wavelength ({spec.medium.particles.wavelength:.4g} m) is not used: a "
-            "spectral scene computes the Mie optics at each band centre (spectral.medium_bands)"
-        )
-    out.carry = B >= 2 and (spectral_surfaces or out.tau_scale is not None)
-    scene.spectra = out
-    _check_supported(scene, out)
+    out.carry = B >= 2 and spectral_surfaces  # (and smoke varying per band: `carrier_bands`)
+    return out
 
 
-def _carrier_medium(scene, out: SceneSpectra, sigma_a, sigma_s, phases) -> None:
-    from owcsim.engine.media.media import HomogeneousMedium
-    from owcsim.engine.media.phase import phase_from_spec
-    from owcsim.engine.scene.scene import _far_distance
-
+def carrier_bands(out: SceneSpectra, sigma_a: np.ndarray, sigma_s: np.ndarray, phases: list) -> int | None:
+    """Fill the per-band medium tables of `out` (sigma_a, sigma_s (B,) [1/m], phase specs per band) and return
+    the carrier band c = argmin_b sigma_t,b (the least attenuated), or None when no band attenuates."""
     sigma_t = sigma_a + sigma_s
     c = int(np.argmin(sigma_t))
     out.sigma_a, out.sigma_s, out.carrier_band = sigma_a, sigma_s, c
@@ -458,27 +428,14 @@ def _carrier_medium(scene, out: SceneSpectra, sigma_a, sigma_s, phases) -> None:
         for b in range(len(sigma_t))
     ]
     if sigma_t.max() == 0:
-        scene.medium, scene.phase, scene.medium_far_distance = None, None, float("inf")
-        return
+        return None
     if sigma_t[c] == 0:
         raise SceneError(
             f"spectral.medium: band {c} has sigma_t = 0 while others attenuate: give every band a "
             "positive extinction (e.g. 1e-9 1/m) or no medium"
         )
-    spec_m = scene.spec.medium
-    box = region = None
-    if spec_m.region.type == "box":
-        box = (np.asarray(spec_m.region.min, float), np.asarray(spec_m.region.max, float))
-    elif spec_m.region.type == "mesh":
-        from owcsim.engine.scene.regions import MeshRegion
-
-        region = MeshRegion(spec_m.region.vertices, spec_m.region.faces, label="medium.region")
-    scene.medium = HomogeneousMedium(float(sigma_a[c]), float(sigma_s[c]), box, region=region, phase_spec=phases[c])
-    scene.phase = phase_from_spec(phases[c])
     for b, p in enumerate(phases):
         if p.type == "mie":
-            from owcsim.engine.media.mie import particle_optics
-
             out.medium_bands[b]["g"] = float(particle_optics(p.particles).g)
     varies = not (np.all(sigma_a == sigma_a[c]) and np.all(sigma_s == sigma_s[c]))
     out.tau_scale = sigma_t / sigma_t[c] - 1.0 if varies else None
@@ -487,289 +444,26 @@ def _carrier_medium(scene, out: SceneSpectra, sigma_a, sigma_s, phases) -> None:
             out.scatter_scale = np.where(sigma_s > 0, sigma_s / sigma_s[c], 0.0) if sigma_s[c] > 0 else None
         if len({p.model_dump_json() for p in phases}) > 1:
             out.phase_bands = [phase_from_spec(p) for p in phases]
-    scene.medium_far_distance = _far_distance(scene.spec, scene.geometry, scene.medium, scene.receivers.positions)
+    out.carry = out.n_bands >= 2 and (out.carry or out.tau_scale is not None)
+    return c
 
 
-def _check_supported(scene, out: SceneSpectra, algorithm=None) -> None:
-    """SceneError where the per-band ratios would be needed by a part of the kernel that does not carry them.
-
-    Checked when the scene is built (for the document's algorithm) and again when a job starts its tallies
-    (`new_accumulators`: the algorithm the automatic settings chose, on a scene built before)."""
+def unsupported(out: SceneSpectra, has_mirrors: bool, has_medium: bool, samples_scattering: bool) -> str | None:
+    """Why the kernel cannot run these tables, or None: per-band ratios needed by a part that does not carry
+    them (perfect mirrors; a carrier band that does not scatter while the run samples scattering points)."""
     if not out.carry:
-        return
-    if scene.mirror_planes:
-        raise SceneError(
+        return None
+    if has_mirrors:
+        return (
             "spectral: perfect-mirror surfaces are not supported with spectral surfaces or smoke yet "
             "(use a Phong material with a large exponent, or run one job per band)"
         )
-    a = scene.spec.simulation.algorithm if algorithm is None else algorithm
-    if scene.medium is None or out.tau_scale is None or a in (1, "auto"):
-        return
+    if not has_medium or out.tau_scale is None or not samples_scattering:
+        return None
     if out.scatter_scale is None and out.sigma_s is not None and np.any(out.sigma_s > 0):
-        raise SceneError(
+        return (
             f"spectral.medium: band {out.carrier_band} (the least attenuated) does not scatter while "
             "others do: algorithms 2-5 sample scattering points in that band; give it a positive "
             "sigma_s (e.g. 1e-9 1/m), or use algorithm 1"
         )
-
-
-# --- channel tallies --------------------------------------------------------------------------------------------------
-# Path groups of the channel tallies: tally.N_GROUPS, sample index mod N_GROUPS as tally.py's reliability
-# groups (a sample is a path, or a block of quasi-random paths: engine/core/qmc.py).
-
-
-@dataclass
-class ChannelBatch:
-    """One batch's channel sums (see ChannelBuilder)."""
-
-    links: np.ndarray  # (T,) global links of the batch's targets
-    n_paths: int
-    sums: np.ndarray  # (B + 9, T, N_GROUPS): per band w, then per combination w, w t, w t^2
-    band_bc: np.ndarray  # (2, B, T): per band sums of w t and w t^2
-    group_paths: np.ndarray  # (N_GROUPS,)
-
-
-class ChannelBuilder:
-    """One batch's estimates summed per channel, target and path group (per kernel step, `add`).
-
-    Rows per target and path group: the B bands' power, then the optical, electrical and luminous
-    combinations' (w, w t, w t^2). Per band, w t and w t^2 are summed without groups (mean delay and
-    delay spread per band, without error bars). Standard errors come from the spread of the N_GROUPS
-    path-group means (batch means, 15 degrees of freedom: an error bar good to about 20 %), not from
-    per-sample second moments: per-sample sums would cost a scatter per band and estimate, these stay
-    small. The whole-spectrum optical gain also has the main tally's per-path error bars (dc_gain)."""
-
-    def __init__(
-        self,
-        sp: "SceneSpectra",
-        item_direction: str,
-        source: int,
-        tgt: np.ndarray,
-        links: np.ndarray,
-        n_paths: int,
-        block: int = 1,
-    ):
-        self.B, self.T, self.n_paths, self.links = sp.n_bands, len(tgt), n_paths, np.asarray(links, np.int64)
-        self.block = block  # paths per independent sample: groups hold whole blocks
-        own = np.full(self.T, source, np.int64)
-        tx, rx = (own, tgt) if item_direction == "forward" else (tgt, own)
-        f = sp.tx_fraction[tx]  # (T, B)
-        #: (T, 3, B) weights of the combinations: optical f, electrical f T R, luminous f K_m Vbar
-        self.weights = np.stack([f, f * sp.rx_electrical[rx], f * sp.tx_luminous[tx]], axis=1)
-        self.sums = np.zeros((self.B + 9) * self.T * N_GROUPS)
-        self.band_bc = np.zeros((2, self.B, self.T))
-
-    def add(self, target, delay, power, ratio, path) -> np.ndarray:
-        """Estimates (m,) of local targets `target`, delays [s], carrier powers, band ratios (B, m) or (0, m)
-        (all 1), batch path indices; returns their optical (whole-spectrum) power (m,).
-
-        Per target, the estimates are sorted by path group (a radix sort of m small keys) and each group's
-        moments sum_m r_bm p_m t_m^k (k = 0, 1, 2) are one contraction (einsum: no BLAS threads) of its
-        ratios with (p, p t, p t^2); the combinations' sums are the weights (3, B) times those band sums
-        (they are linear in the bands), and the per-band delay sums are the k = 1, 2 sums over the groups.
-        """
-        optical = np.zeros(len(power))
-        B = self.B
-        sums = self.sums.reshape(B + 9, self.T, N_GROUPS)
-        for j in range(self.T):  # a loop over target devices
-            sel = None if self.T == 1 else np.flatnonzero(target == j)
-            p, t, pth = (power, delay, path) if sel is None else (power[sel], delay[sel], path[sel])
-            if len(p) == 0:
-                continue
-            group = ((pth // self.block if self.block > 1 else pth) % N_GROUPS).astype(np.uint8)
-            counts = np.bincount(group, minlength=N_GROUPS)
-            w = self.weights[j]  # (3, B)
-            s = np.zeros((3, B, N_GROUPS))  # sum over a group's estimates of band power x t^k
-            if ratio.shape[0]:
-                order = np.argsort(group, kind="stable")
-                p_o, t_o = p.take(order), t.take(order)
-                pt = p_o * t_o
-                moments = np.stack([p_o, pt, pt * t_o])  # (3, m)
-                r_o = ratio.take(order if sel is None else sel.take(order), axis=1)  # (B, m) by group
-                bounds = np.concatenate([[0], np.cumsum(counts)])
-                for g in np.flatnonzero(counts):  # a loop over the path groups
-                    lo, hi = bounds[g], bounds[g + 1]
-                    s[:, :, g] = np.einsum("bm,km->kb", r_o[:, lo:hi], moments[:, lo:hi])
-                opt = np.empty(len(p))
-                opt[order] = p_o * np.einsum("b,bm->m", w[0], r_o)
-            else:  # every ratio 1: each band's sums are the carrier's
-                pt = p * t
-                for k, x in enumerate((p, pt, pt * t)):
-                    s[k] = np.bincount(group, x, N_GROUPS)[None, :]
-                opt = p * w[0].sum()
-            sums[:B, j] += s[0]
-            sums[B:, j] += np.einsum("cb,kbg->kcg", w, s).reshape(9, N_GROUPS)
-            self.band_bc[:, :, j] += s[1:].sum(axis=2)
-            if sel is None:
-                optical = opt
-            else:
-                optical[sel] = opt
-        return optical
-
-    def finish(self) -> ChannelBatch:
-        paths = np.bincount(np.arange(self.n_paths) // self.block % N_GROUPS, minlength=N_GROUPS)
-        return ChannelBatch(
-            self.links, self.n_paths, self.sums.reshape(self.B + 9, self.T, N_GROUPS), self.band_bc, paths
-        )
-
-
-def _group_moments(sums: np.ndarray, paths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean per path (Q, L) of Q quantities and the covariance of those means (L, Q, Q) from group sums
-    (Q, L, G) and paths per group (L, G): sum_g (m_g - m)(m_g - m)^T / (G (G - 1)) over the groups with paths."""
-    n = paths.sum(axis=1)
-    live = paths > 0
-    g = live.sum(axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = np.where(n > 0, sums.sum(axis=2) / np.maximum(n, 1), 0.0)
-        dev = np.where(live[None], sums / np.where(live, paths, 1.0)[None] - mean[:, :, None], 0.0)
-        cov = np.einsum("qlg,rlg->lqr", dev, dev) / np.maximum(g * (g - 1), 1)[:, None, None]
-    return mean, np.where((g >= 2)[:, None, None], cov, np.where((n > 0)[:, None, None], np.nan, 0.0))
-
-
-class ChannelAccumulator:
-    """A direction's channel sums over the job; `moments` as tally.Accumulator's (estimates.link_moments)."""
-
-    def __init__(self, n_bands: int, n_links: int):
-        self.B, self.L = n_bands, n_links
-        self.sums = np.zeros((n_bands + 9, n_links, N_GROUPS))
-        self.band_bc = np.zeros((2, n_bands, n_links))
-        self.paths = np.zeros((n_links, N_GROUPS))
-
-    def add(self, batch: ChannelBatch, shift: int = 0) -> None:
-        """Add a batch whose path group 0 is the job's group `shift` (tally.group_shift)."""
-        self.sums[:, batch.links] += np.roll(batch.sums, shift, axis=2)
-        self.band_bc[:, :, batch.links] += batch.band_bc
-        self.paths[batch.links] += np.roll(batch.group_paths, shift)[None, :]
-
-    def moments(self) -> tuple[np.ndarray, np.ndarray]:
-        """Per virtual link (channel-major, V L): mean per path of (a, b, c) (V L, 3) and its covariance
-        (V L, 3, 3); for the bands only the variance of a is known (the rest NaN)."""
-        B, L = self.B, self.L
-        mean, cov = np.zeros((B + 3, L, 3)), np.full((B + 3, L, 3, 3), np.nan)
-        band_a, band_var = _group_moments(self.sums[:B], self.paths)
-        n = self.paths.sum(axis=1)
-        mean[:B, :, 0] = band_a
-        with np.errstate(invalid="ignore", divide="ignore"):
-            mean[:B, :, 1:] = np.where(n > 0, self.band_bc / np.maximum(n, 1), 0.0).transpose(1, 2, 0)
-        cov[:B, :, 0, 0] = np.diagonal(band_var, axis1=1, axis2=2).T
-        for c in range(3):  # optical, electrical, luminous
-            m, cv = _group_moments(self.sums[[B + c, B + 3 + c, B + 6 + c]], self.paths)
-            mean[B + c], cov[B + c] = m.T, cv
-        return mean.reshape(-1, 3), cov.reshape(-1, 3, 3)
-
-
-def new_accumulators(accs: dict, scene, settings) -> None:
-    """Attach a channel tally (`.spectral`, V n_links virtual links) to each direction's Accumulator."""
-    sp = getattr(scene, "spectra", None)
-    if sp is None:
-        return
-    _check_supported(scene, sp, 5 if settings.free_flight else 4 if settings.segment_scatter else 1)
-    for acc in accs.values():
-        acc.spectral = ChannelAccumulator(sp.n_bands, scene.n_links)
-
-
-def add_batch(acc, tally, item) -> None:
-    """Merge a batch's channel tally into the direction's Accumulator (simulate._merge)."""
-    extra = getattr(tally, "spectral", None)
-    if extra is not None:
-        acc.spectral.add(extra, group_shift(item.batch, tally.n_paths // tally.block))
-
-
-def result_block(spec, scene, accs, los_geometry, los_grey, los_delay) -> dict | None:
-    """The `spectral` section of the result: bands, per-band smoke, and per link every channel's figures."""
-    sp = getattr(scene, "spectra", None)
-    if sp is None:
-        return None
-    from owcsim.engine.results import metrics
-    from owcsim.engine.results.result_parts import column
-    from owcsim.engine.tally.estimates import link_moments, los_moments
-
-    V, B, L = sp.n_channels, sp.n_bands, scene.n_links
-    los = sp.los_channels(scene, los_geometry, los_grey) if los_geometry is not None else np.zeros((V, L))
-    los_abc = los_moments(los.ravel(), np.tile(los_delay, V))
-    chan = {d: a.spectral for d, a in accs.items() if hasattr(a, "spectral")}
-    mean, cov = link_moments(chan, los_abc)
-    d = metrics.delay_metrics_from_moments(mean, cov)
-    n_rx = len(scene.receivers)
-    ti, ri = np.divmod(np.arange(L), n_rx)
-    masked = np.tile(scene.masked != "", len(scene.transmitters))
-
-    def ch(key):
-        return np.where(masked[None, :], np.nan, np.asarray(d[key], float).reshape(V, L))
-
-    h, h_se = ch("dc_gain"), ch("dc_gain_stderr")
-    h_se[:B] = np.where(masked[None, :], np.nan, np.sqrt(np.maximum(cov[:, 0, 0], 0.0)).reshape(V, L)[:B])
-    mean_d, rms, rms_se = ch("mean_delay_s"), ch("rms_delay_spread_s"), ch("rms_delay_spread_s_stderr")
-    ob, el, lu = B, B + 1, B + 2
-    gain = scene.receivers.gain.take(ri)  # A T_s g [m^2]
-    power = scene.transmitters.power.take(ti)
-    has_e = sp.rx_responsive.take(ri)
-    lux_ok = sp.has_luminous
-    links = []
-    for k in range(L):  # rows of the document
-        row = {
-            "transmitter": scene.transmitters.ids[ti[k]],
-            "receiver": scene.receivers.ids[ri[k]],
-            "dc_gain_by_band": column(h[:B, k]),
-            "dc_gain_by_band_stderr": column(h_se[:B, k]),
-            "mean_delay_s_by_band": column(mean_d[:B, k]),
-            "rms_delay_spread_s_by_band": column(rms[:B, k]),
-            "optical_gain": column(h[ob, k : k + 1])[0],
-            "optical_gain_stderr": column(h_se[ob, k : k + 1])[0],
-            "electrical_gain_a_per_w": column(h[el, k : k + 1])[0] if has_e[k] else None,
-            "electrical_gain_a_per_w_stderr": column(h_se[el, k : k + 1])[0] if has_e[k] else None,
-            "electrical_rms_delay_spread_s": column(rms[el, k : k + 1])[0] if has_e[k] else None,
-            "electrical_rms_delay_spread_s_stderr": column(rms_se[el, k : k + 1])[0] if has_e[k] else None,
-            "photocurrent_a": column(h[el, k : k + 1] * power[k])[0] if has_e[k] else None,
-            "electrical_gain_by_band_a_per_w": column(sp.tx_fraction[ti[k]] * sp.rx_electrical[ri[k]] * h[:B, k])
-            if has_e[k]
-            else None,
-            "illuminance_by_band_lx": column(
-                power[k] / gain[k] * sp.tx_fraction[ti[k]] * sp.tx_luminous[ti[k]] * h[:B, k]
-            )
-            if lux_ok
-            else None,
-            "illuminance_lx": column(h[lu, k : k + 1] * power[k] / gain[k])[0] if lux_ok else None,
-            "illuminance_lx_stderr": column(h_se[lu, k : k + 1] * power[k] / gain[k])[0] if lux_ok else None,
-            "illuminance_direct_lx": float(los[lu, k] * power[k] / gain[k]) if lux_ok and not masked[k] else None,
-        }
-        links.append(row)
-    bands = [
-        {
-            "index": b,
-            "lower_m": float(sp.edges[b]),
-            "upper_m": float(sp.edges[b + 1]),
-            "centre_m": float(sp.centres[b]),
-            "reflectance_range": [float(sp.face_rho[b].min()), float(sp.face_rho[b].max())]
-            if sp.face_rho.shape[1]
-            else None,
-        }
-        for b in range(B)
-    ]
-    transmitters = [
-        {
-            "id": scene.transmitters.ids[i],
-            "band_power_fraction": sp.tx_fraction[i].tolist(),
-            "luminous_efficacy_by_band_lm_per_w": sp.tx_luminous[i].tolist(),
-            "luminous_efficacy_lm_per_w": float(sp.tx_luminous[i] @ sp.tx_fraction[i]),
-            "luminous_flux_lm": float(scene.transmitters.power[i] * sp.tx_luminous[i] @ sp.tx_fraction[i]),
-        }
-        for i in range(len(scene.transmitters))
-    ]
-    rx_rows = [(r.id or f"rx{j}", j) for j, r in enumerate(spec.receivers)]
-    for g, (start, _shape) in zip(spec.receiver_grids, scene.grid_slices or []):
-        rx_rows.append((g.id_prefix, start))
-    receivers = [
-        {"id": name, "electrical_weight_a_per_w": sp.rx_electrical[j].tolist() if sp.rx_responsive[j] else None}
-        for name, j in rx_rows
-    ]
-    return {
-        "bands": bands,
-        "carried_ratios": sp.carry,
-        "transmitters": transmitters,
-        "receivers": receivers,
-        "medium_bands": sp.medium_bands or None,
-        "links": links,
-        "model": "bands traced together: carrier = largest reflectance / least-attenuated band, per-band ratios "
-        "(engine/spectral/spectra.py); curves averaged over each band",
-    }
+    return None

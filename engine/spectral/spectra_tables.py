@@ -25,6 +25,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from owcsim.engine.core.errors import SceneError
+
 #: Luminous efficacy of the CIE photopic observer at its peak, K_m [lm/W] (SI definition of the candela).
 K_M = 683.0
 #: Elementary charge q [C], Planck constant h [J s], speed of light c [m/s] (CODATA exact values).
@@ -73,8 +75,6 @@ def photopic() -> tuple[np.ndarray, np.ndarray]:
     try:
         from colour.colorimetry import SDS_LEFS_PHOTOPIC
     except ImportError as err:  # pragma: no cover - the engine extra installs it
-        from owcsim.engine.core.errors import SceneError
-
         raise SceneError(
             "illuminance of a spectral scene needs the `colour-science` package (pip install 'owcsim[engine]')"
         ) from err

@@ -34,7 +34,8 @@ of the lobes (Pharr, Jakob & Humphreys, PBRT 4th ed. sec. 2.4.3).
 Next-event estimation evaluates the non-delta part of f for the pair (incoming, toward
 the target); the mirror part reaches point devices only through mirror images.
 
-Arrays are (3, n) component rows (as in the kernel); `d_in` is the arriving ray
+The three models, each behind one interface (evaluate, density, sample), are in lobes.py; `Materials`
+mixes them per face. Arrays are (3, n) component rows (as in the kernel); `d_in` is the arriving ray
 direction (pointing into the surface), `normals` face the arriving ray.
 """
 
@@ -45,22 +46,28 @@ from dataclasses import dataclass
 import numpy as np
 
 from owcsim.engine.core.sampling import cosine_about_soa
+from owcsim.engine.surfaces.lobes import (
+    Lambert,
+    Mirror,
+    Phong,
+    SurfaceModel,
+    _dot,
+    lambert_brdf,
+    lambert_pdf,
+    mirror_direction,
+    phong_brdf,
+    phong_directions,
+    phong_pdf,
+    phong_weight,
+)
 
-__all__ = ["Materials", "mirror_direction"]
-
-
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def mirror_direction(d_in: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """r = d_in - 2 (d_in . n) n: the specular reflection of the arriving direction, (3, n)."""
-    return d_in - 2.0 * _dot(d_in, normals) * normals
+__all__ = ["Materials", "MirrorPlane", "mirror_direction", "mirror_planes"]
 
 
 @dataclass
-class Materials:
-    """Per-face (or per-vertex after `take`) material parameters, each (F,)."""
+class Materials(SurfaceModel):
+    """Per-face (or per-vertex after `take`) material parameters, each (F,): the albedo-weighted mixture of the
+    three models of lobes.py, Lambert(rho_d) + Phong(rho_s, exponent) + Mirror(rho_m) (`parts`)."""
 
     rho_d: np.ndarray  # diffuse reflectance
     rho_s: np.ndarray  # glossy (Phong) reflectance
@@ -82,6 +89,11 @@ class Materials:
     def is_lambertian(self) -> bool:
         return not (self.rho_s.any() or self.rho_m.any())
 
+    @property
+    def parts(self) -> tuple[Lambert, Phong, Mirror]:
+        """The three models this material mixes, each with its own reflectance."""
+        return Lambert(self.rho_d), Phong(self.rho_s, self.exponent), Mirror(self.rho_m)
+
     def take(self, idx) -> "Materials":
         return Materials(self.rho_d.take(idx), self.rho_s.take(idx), self.exponent.take(idx), self.rho_m.take(idx))
 
@@ -94,10 +106,10 @@ class Materials:
         """
         cos_i = -_dot(d_in, normals)
         cos_o = _dot(w_o, normals)
-        out = self.rho_d * (1.0 / np.pi)
+        out = lambert_brdf(self.rho_d)
         if self.rho_s.any():  # rho_s = 0 rows add 0 (their lobe is finite)
             cos_a = _dot(d_in, w_o) + 2.0 * cos_i * cos_o
-            out = out + self.rho_s * _phong_lobe(self.exponent, cos_a) / np.maximum(np.maximum(cos_i, cos_o), 1e-300)
+            out = out + phong_brdf(self.rho_s, self.exponent, cos_a, cos_i, cos_o)
         return np.where((cos_o > 0) & (cos_i > 0), out, 0.0)
 
     def pdf(self, d_in: np.ndarray, normals: np.ndarray, w_o: np.ndarray) -> np.ndarray:
@@ -105,9 +117,9 @@ class Materials:
         rho = self.total
         safe = np.where(rho > 0, rho, 1.0)
         cos_o = _dot(w_o, normals)
-        p = self.rho_d / safe * np.maximum(cos_o, 0.0) / np.pi
+        p = lambert_pdf(self.rho_d / safe, cos_o)
         cos_a = _dot(d_in, w_o) - 2.0 * _dot(d_in, normals) * cos_o
-        p = p + self.rho_s / safe * _phong_lobe(self.exponent, cos_a)
+        p = p + phong_pdf(self.rho_s / safe, self.exponent, cos_a)
         return np.where(rho > 0, p, 0.0)
 
     # ------------------------------------------------------------------ sampling
@@ -136,51 +148,16 @@ class Materials:
         if len(idx):
             v = np.clip((u1.take(idx) - p_d.take(idx)) / p_s.take(idx), 0.0, 1.0)
             n_i, d_i = normals.take(idx, axis=1), d_in.take(idx, axis=1)
-            w = _lobe_about_soa(mirror_direction(d_i, n_i), self.exponent.take(idx), v, u2.take(idx))
+            w = phong_directions(d_i, n_i, self.exponent.take(idx), v, u2.take(idx))
             for k in range(3):
                 w_o[k].put(idx, w[k])
-            cos_o = _dot(w, n_i)
-            cos_i = -_dot(d_i, n_i)
-            weight.put(
-                idx, np.where(cos_o > 0, rho.take(idx) * cos_o / np.maximum(np.maximum(cos_i, cos_o), 1e-300), 0.0)
-            )
+            weight.put(idx, phong_weight(rho.take(idx), d_i, n_i, w))
         idx = np.flatnonzero(~diffuse & ~glossy)
         if len(idx):
             r = mirror_direction(d_in.take(idx, axis=1), normals.take(idx, axis=1))
             for k in range(3):
                 w_o[k].put(idx, r[k])
         return w_o, weight
-
-
-def _lobe_about_soa(axis: np.ndarray, n: np.ndarray, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
-    """Directions (3, m) with pdf (n+1)/(2 pi) cos^n(angle to `axis` (3, m)), exact inversion.
-
-    cos t = u1^(1/(n+1)), sin^2 t = -expm1(2 log(u1)/(n+1)), phi = 2 pi u2 (as
-    sampling.sample_generalized_lambertian), in the frame of Duff et al. 2017 about the
-    axis, on component arrays; the azimuth's cosine and sine in float32 (as
-    sampling.cosine_about_soa: ~1e-7 rad, below Embree's float32 precision).
-    """
-    with np.errstate(divide="ignore"):
-        e = np.log(u1) / (n + 1.0)
-    cos_t = np.exp(e)
-    sin_t = np.sqrt(np.maximum(0.0, -np.expm1(2.0 * e)))
-    phi = (2.0 * np.pi * u2).astype(np.float32)
-    a_c, a_s = sin_t * np.cos(phi), sin_t * np.sin(phi)
-    x, y, z = axis
-    sgn = np.copysign(1.0, z)
-    a = -1.0 / (sgn + z)
-    b = x * y * a
-    out = np.empty_like(axis)
-    out[0] = a_c * (1.0 + sgn * x * x * a) + a_s * b + cos_t * x
-    out[1] = a_c * (sgn * b) + a_s * (sgn + y * y * a) + cos_t * y
-    out[2] = a_c * (-sgn * x) + a_s * (-y) + cos_t * z
-    return out
-
-
-def _phong_lobe(n: np.ndarray, cos_a: np.ndarray) -> np.ndarray:
-    """(n + 1) / (2 pi) cos^n(alpha) for cos alpha > 0, else 0 (normalised over the sphere of w_o)."""
-    safe = np.where(cos_a > 0, cos_a, 1.0)
-    return np.where(cos_a > 0, (n + 1.0) / (2 * np.pi) * np.exp(n * np.log(safe)), 0.0)
 
 
 @dataclass

@@ -14,10 +14,14 @@ them into H0, mean delay and RMS delay spread with standard errors.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any, Protocol
+
 import numpy as np
 
 from owcsim.engine.tally import reliability
 from owcsim.engine.tally.tally import Accumulator, TallyPlan
+from owcsim.schemas.algorithms import Direction
 
 
 def los_moments(los_gain: np.ndarray, los_delay: np.ndarray) -> np.ndarray:
@@ -25,7 +29,14 @@ def los_moments(los_gain: np.ndarray, los_delay: np.ndarray) -> np.ndarray:
     return np.stack([los_gain, los_gain * los_delay, los_gain * los_delay**2], axis=-1)
 
 
-def link_moments(accs: dict[str, Accumulator], los_abc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+class Moments(Protocol):
+    """A tally of per-link means: Accumulator, or a spectral scene's ChannelAccumulator (one virtual link per
+    channel and link)."""
+
+    def moments(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+def link_moments(accs: Mapping[Any, Moments], los_abc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per link: mean (L, 3) and covariance (L, 3, 3) of the estimate, both directions and the LOS."""
     mean, cov = los_abc.copy(), np.zeros(los_abc.shape + (3,))
     for acc in accs.values():
@@ -36,18 +47,18 @@ def link_moments(accs: dict[str, Accumulator], los_abc: np.ndarray) -> tuple[np.
 
 
 def channel_moments(
-    accs: dict[str, Accumulator], los_abc: np.ndarray, plan: TallyPlan
+    accs: Mapping[Direction, Accumulator], los_abc: np.ndarray, plan: TallyPlan
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per (group, receiver): mean (G, R, 3) and covariance (G, R, 3, 3) of the group's channel."""
     w = plan.group_weights
     n_groups, n_tx = w.shape
     n_rx = plan.n_rx
-    fwd_mu, fwd_cov = accs["forward"].moments()
+    fwd_mu, fwd_cov = accs[Direction.FORWARD].moments()
     fwd_mu = (fwd_mu + los_abc).reshape(n_tx, n_rx, 3)
     fwd_cov = fwd_cov.reshape(n_tx, n_rx, 3, 3)
     mean = np.einsum("gi,irq->grq", w, fwd_mu)
     cov = np.einsum("gi,irqs->grqs", w * w, fwd_cov)
-    bwd_mu, bwd_cov = accs["backward"].channel_moments()
+    bwd_mu, bwd_cov = accs[Direction.BACKWARD].channel_moments()
     if n_groups:
         mean += bwd_mu
         cov += bwd_cov
@@ -61,7 +72,7 @@ def _rel(mean: np.ndarray, var: np.ndarray) -> np.ndarray:
 
 
 def reported_rel_stderr(
-    accs: dict[str, Accumulator], los_gain: np.ndarray, scene, plan: TallyPlan, scope: str = "channels"
+    accs: Mapping[Direction, Accumulator], los_gain: np.ndarray, scene, plan: TallyPlan, scope: str = "channels"
 ) -> np.ndarray:
     """Relative standard errors of H0 of what `scope` (simulation.target_scope) names: "channels" every
     group's channel and every link of a transmitter in no group (what the result reports as channels),
@@ -87,13 +98,13 @@ def _solo_links(w: np.ndarray, n_rx: int) -> np.ndarray:
     return np.repeat(~(w > 0).any(axis=0), n_rx)
 
 
-def link_reliability(accs: dict[str, Accumulator], los_gain: np.ndarray) -> reliability.Reliability:
+def link_reliability(accs: Mapping[Direction, Accumulator], los_gain: np.ndarray) -> reliability.Reliability:
     """Reliability of every link's H0 error bar (engine/tally/reliability.py), from the batch groups."""
     return reliability.from_accumulators(accs.values(), los_gain)
 
 
 def may_stop(
-    accs: dict[str, Accumulator],
+    accs: Mapping[Direction, Accumulator],
     los_gain: np.ndarray,
     scene,
     plan: TallyPlan,

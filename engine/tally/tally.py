@@ -39,13 +39,30 @@ groups), and the per-bin errors of a one-batch run come from those (result_parts
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from functools import cached_property
+from dataclasses import dataclass
 
 import numpy as np
 
-#: Number of batch groups kept for per-bin standard errors and the jackknife.
-N_GROUPS = 16
+from owcsim.engine.tally.plan import N_GROUPS, TallyPlan, TimeBins, group_shift
+from owcsim.engine.tally.spectral import ChannelAccumulator, ChannelBatch, ChannelBuilder
+from owcsim.engine.tally.stats import mean_cov, per_path_s2, sample_cov
+
+__all__ = [
+    "CIR_GROUPS_MAX",
+    "DIRECT_KEYS",
+    "KEYS_PER_ESTIMATE",
+    "N_GROUPS",
+    "SAMPLE_TABLE_MAX",
+    "Accumulator",
+    "BatchBuilder",
+    "BatchTally",
+    "TallyPlan",
+    "TimeBins",
+    "group_shift",
+    "per_path_s2",
+    "sample_cov",
+]
+
 _GROUP_RANGE = np.arange(N_GROUPS)
 #: The order split's per-(sample, cell) sums take one bincount when their keys span at most this many
 #: (or KEYS_PER_ESTIMATE per estimate), else rounds over the estimates (BatchBuilder._add_squared_path_sums).
@@ -58,64 +75,6 @@ SAMPLE_TABLE_MAX = 1 << 20
 #: Most entries of the first batch's CIR per path group (N_GROUPS x CIR links x bins, float64: 8 MiB);
 #: a larger CIR keeps batch groups only (no per-bin errors from a one-batch run).
 CIR_GROUPS_MAX = 1 << 20
-
-
-@dataclass(frozen=True)
-class TimeBins:
-    """Bins of width `dt` [s] from `t_min` [s]; `n` bins."""
-
-    t_min: float
-    dt: float
-    n: int
-
-    @property
-    def edges(self) -> np.ndarray:
-        return self.t_min + self.dt * np.arange(self.n + 1)
-
-
-@dataclass(frozen=True)
-class TallyPlan:
-    """What the job tallies. Slots are per receiver: link (tx, rx) has CIR slot
-    tx * n_cir_rx + cir_rank[rx] when cir_rank[rx] >= 0 (likewise for the order split)."""
-
-    bins: TimeBins
-    n_orders: int  # K + 1
-    n_scatter: int  # S + 1
-    n_rx: int
-    cir_rank: np.ndarray  # (n_rx,) rank among CIR receivers, -1 without CIR
-    order_rank: np.ndarray  # (n_rx,) rank among order-split receivers, -1 without
-    #: (G, n_tx) weight of each transmitter in each group's channel (P_i / sum of the group's P)
-    group_weights: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-    #: split the CIR by order where a receiver has both (outputs.cir_by_order)
-    split_cir: bool = True
-    #: the first batch of each source also bins its CIR per path group (`BatchBuilder`), for the per-bin
-    #: errors of runs of one batch; set by the planner when the run may have one batch (simulate.tally_plan)
-    first_batch_groups: bool = False
-
-    @property
-    def n_cir_rx(self) -> int:
-        return int((self.cir_rank >= 0).sum())
-
-    @property
-    def n_order_rx(self) -> int:
-        return int((self.order_rank >= 0).sum())
-
-    def slots(self, links: np.ndarray, rank: np.ndarray, n_ranked: int) -> np.ndarray:
-        """Slot of each global link in a per-(tx, ranked rx) array, -1 where its receiver is not ranked."""
-        tx, rx = np.divmod(np.asarray(links, np.int64), self.n_rx)
-        r = rank.take(rx)
-        return np.where(r >= 0, tx * n_ranked + r, -1)
-
-    def cir_slots(self, links) -> np.ndarray:
-        return self.slots(links, self.cir_rank, self.n_cir_rx)
-
-    def order_slots(self, links) -> np.ndarray:
-        return self.slots(links, self.order_rank, self.n_order_rx)
-
-    @cached_property
-    def by_order_cir(self) -> bool:
-        """True when some receiver has both the CIR and the order split (then the CIR is split too)."""
-        return self.split_cir and bool(np.any((self.cir_rank >= 0) & (self.order_rank >= 0)))
 
 
 @dataclass
@@ -153,6 +112,8 @@ class BatchTally:
     surface_power: float = 0.0  # incident power on surfaces (forward paths) [W/W]
     escaped_power: float = 0.0  # power of rays that left the scene [W/W]
     medium_evaluations: int = 0
+    #: a spectral scene's channel sums (tally/spectral.py), None when grey
+    spectral: ChannelBatch | None = None
 
 
 def _accumulate(out: np.ndarray, idx: np.ndarray, weights: np.ndarray) -> None:
@@ -182,8 +143,12 @@ class BatchBuilder:
         several_per_cell: bool,
         block: int = 1,
         first_batch: bool = False,
+        channels: ChannelBuilder | None = None,
     ):
         self.plan, self.links, self.n_paths = plan, np.asarray(links, np.int64), n_paths
+        #: a spectral scene's per-(target, channel) sums (tally/spectral.py; the kernel adds its estimates,
+        #: `finish` puts them in BatchTally.spectral), None when grey
+        self.channels = channels
         #: paths per independent sample (engine/core/qmc.py); n_paths is a multiple of it
         self.block = block
         #: a sample may add several estimates to one order cell in one step: sum them before squaring
@@ -442,61 +407,8 @@ class BatchBuilder:
             cir_groups=None if self.cir_groups is None else self.cir_groups.reshape(N_GROUPS, self.n_cir, bins.n),
             h0_sample_max=h0_sample_max,
             block=m,
+            spectral=self.channels.finish() if self.channels is not None else None,
         )
-
-
-def group_shift(batch_index: int, n_samples: int) -> int:
-    """Path group of a batch's first sample: batches of fewer than N_GROUPS samples (blocks of quasi-random
-    paths, engine/core/qmc.py) fill the groups in turn instead of always the first ones."""
-    return batch_index * n_samples % N_GROUPS
-
-
-def sample_cov(
-    n: np.ndarray, n_samples: np.ndarray, s1: np.ndarray, s2: np.ndarray, q1: np.ndarray, q0: np.ndarray
-) -> np.ndarray:
-    """Covariance (..., Q, Q) of the mean per path H = s1 / n from B = n_samples independent samples, sample b
-    holding n_b paths with sums S_b (..., Q): s2 = sum S_b S_b^T, q1 = sum n_b S_b, q0 = sum n_b^2;
-        Cov(H) = B / (B - 1) sum_b (S_b - n_b H)(S_b - n_b H)^T / n^2
-               = B / (B - 1) (s2 - H q1^T - q1 H^T + q0 H H^T) / n^2
-    (the ratio estimator's variance over clusters of unequal size, Cochran 1977, ch. 9A). One-path samples
-    (n_b = 1) give (s2 - n H H^T) / (n (n - 1)). Zero with no path; NaN with one sample."""
-    nn, bb = n.astype(float)[..., None], n_samples.astype(float)[..., None, None]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        h = np.where(nn > 0, s1 / np.maximum(nn, 1.0), 0.0)
-        hq = h[..., :, None] * q1[..., None, :]
-        r = s2 - hq - np.swapaxes(hq, -1, -2) + q0[..., None, None] * h[..., :, None] * h[..., None, :]
-        cov = bb / np.maximum(bb - 1, 1) * r / np.maximum(nn, 1.0)[..., None] ** 2
-    return np.where(bb >= 2, cov, np.where(bb > 0, np.nan, 0.0))
-
-
-def per_path_s2(
-    n: np.ndarray, n_samples: np.ndarray, s1: np.ndarray, s2: np.ndarray, q1: np.ndarray, q0: np.ndarray
-) -> np.ndarray:
-    """The sum of per-path outer products (..., Q, Q) that independent paths would need to give the same
-    covariance of the mean as the samples (`sample_cov`): n H H^T + n (n - 1) Cov(H); the samples' own s2
-    where every sample is one path, so per-path formulas (metrics.delay_metrics) stay valid for blocks."""
-    nn = n.astype(float)[..., None]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        h = np.where(nn > 0, s1 / np.maximum(nn, 1.0), 0.0)
-        eff = nn[..., None] * h[..., :, None] * h[..., None, :] + (nn * (nn - 1))[..., None] * sample_cov(
-            n, n_samples, s1, s2, q1, q0
-        )
-    return np.where((n_samples == n)[..., None, None], s2, eff)
-
-
-def _mean_cov(n: np.ndarray, s1: np.ndarray, s2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean of per-path vectors (..., Q) and the covariance of that mean (..., Q, Q), from n, sums, sums of
-    outer products. Zero with no path (adds nothing when estimators combine); NaN covariance with one path."""
-    nn = n.astype(float)[..., None]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mu = np.where(nn > 0, s1 / np.maximum(nn, 1.0), 0.0)
-        cov = (
-            (s2 - nn[..., None] * mu[..., :, None] * mu[..., None, :])
-            / np.maximum(nn - 1, 1)[..., None]
-            / np.maximum(nn, 1)[..., None]
-        )
-    n3 = nn[..., None]
-    return mu, np.where(n3 >= 2, cov, np.where(n3 > 0, np.nan, 0.0))
 
 
 @dataclass
@@ -509,9 +421,13 @@ class Accumulator:
     rays_intersect: int = 0
     rays_occluded: int = 0
     medium_evaluations: int = 0
+    #: bands of a spectral scene (0: grey); with bands, `spectral` sums their channels (tally/spectral.py)
+    n_bands: int = 0
 
     def __post_init__(self):
         plan, bins = self.plan, self.plan.bins
+        #: a spectral scene's channel sums over the job, None when grey
+        self.spectral = ChannelAccumulator(self.n_bands, self.n_links) if self.n_bands else None
         n_tx = self.n_links // max(plan.n_rx, 1)
         self.n_paths = np.zeros(self.n_links, np.int64)
         #: independent samples (paths, or blocks of quasi-random paths) and their sums (`sample_cov`):
@@ -600,6 +516,9 @@ class Accumulator:
             self.channel_s2[:, source] += batch.channel_s2
             self.channel_q1[:, source] += m * batch.channel_s1
             self.channel_q0[:, source] += n_samples * m * m
+        if batch.spectral is not None:
+            assert self.spectral is not None, "a spectral batch merged into a grey accumulator"
+            self.spectral.add(batch.spectral, group_shift(batch_index, n_samples))
         self.rays_intersect += batch.rays_intersect
         self.rays_occluded += batch.rays_occluded
         self.medium_evaluations += batch.medium_evaluations
@@ -614,14 +533,14 @@ class Accumulator:
 
     def moments(self) -> tuple[np.ndarray, np.ndarray]:
         """Per link: mean of the per-path (a, b, c) (L, 3) and the covariance of that mean (L, 3, 3)."""
-        return _mean_cov(self.n_paths, self.s1, self.s2)
+        return mean_cov(self.n_paths, self.s1, self.s2)
 
     def channel_moments(self) -> tuple[np.ndarray, np.ndarray]:
         """Per (group, receiver) of backward runs: mean (G, R, 3) and covariance (G, R, 3, 3) of the channel."""
         s2 = per_path_s2(
             self.channel_n, self.channel_samples, self.channel_s1, self.channel_s2, self.channel_q1, self.channel_q0
         )
-        return _mean_cov(self.channel_n, self.channel_s1, s2)
+        return mean_cov(self.channel_n, self.channel_s1, s2)
 
     def order_moments(self, order_links: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per order-split slot (links given in slot order): mean gain per (k, s) and the variance of that mean."""

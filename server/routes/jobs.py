@@ -141,9 +141,9 @@ def list_jobs(
     try:
         rows, after = store.list(owner, status, limit, cursor)
     except KeyError:
-        cursor = ProblemField(loc="query.cursor", msg="unknown cursor", type="value_error")
+        unknown = ProblemField(loc="query.cursor", msg="unknown cursor", type="value_error")
         raise ProblemError(
-            422, "invalid-parameter", "query.cursor: not a cursor of this API key's listing", errors=[cursor]
+            422, "invalid-parameter", "query.cursor: not a cursor of this API key's listing", errors=[unknown]
         ) from None
     nxt = None
     if after is not None:

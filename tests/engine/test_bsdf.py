@@ -169,7 +169,7 @@ def test_large_exponent_tends_to_the_mirror():
 
 def test_glossy_lobe_frame_unit_vectors_and_mean_direction():
     """Samples are unit vectors and E[w] = E[cos alpha] r = (n+1)/(n+2) r (uniform azimuth, orthonormal frame)."""
-    from owcsim.engine.surfaces.bsdf import _lobe_about_soa
+    from owcsim.engine.surfaces.lobes import _lobe_about_soa
 
     rng = np.random.default_rng(11)
     size, n = 400_000, 7.0

@@ -90,6 +90,37 @@ def test_the_registry_is_what_the_planner_runs(number):
     assert settings.max_scattering == {1: 0, 2: 1, 3: 1, 4: 2, 5: 3}[number]
 
 
+#: What a run from both devices sets, per algorithm, in a medium and in vacuum (medium_nee.py's partition of unity;
+#: the values of the former medium_nee.two_sided_settings).
+BOTH_DEVICES = {
+    2: ({"mis": True, "scatter_then_reflect": True, "reflect_then_scatter": False},) * 2,
+    3: ({"mis": True, "scatter_then_reflect": False, "reflect_then_scatter": True},) * 2,
+    4: ({"mis": True, "scatter_then_reflect": True, "reflect_then_scatter": True},) * 2,
+    5: ({"both_sides": True}, {"mis": True}),
+}
+
+
+@pytest.mark.parametrize("number", sorted(ALGORITHMS))
+def test_the_registry_says_what_a_run_from_both_devices_sets(number):
+    """The planner's two-sided settings are the record's `both_devices` flags on top of its own; algorithm 1 has
+    none (simulate_two_sided refuses it from both sides)."""
+    from owcsim.engine.scene.scene import build_scene
+
+    alg = ALGORITHMS[number]
+    if number not in BOTH_DEVICES:
+        assert alg.both_devices is None
+        with pytest.raises(ValueError, match="one direction"):
+            simulate_module.simulate_two_sided(_smoky(algorithm=number, max_reflections=1, t_max_s=1e-7))
+        return
+    for has_medium, flags in zip((True, False), BOTH_DEVICES[number]):
+        spec = _smoky(algorithm=number, max_reflections=1, t_max_s=1e-7)
+        if not has_medium:
+            spec = spec.model_copy(update={"medium": None})
+        settings = simulate_module.kernel_settings(spec, build_scene(spec), both_devices=True)
+        assert dict(alg.both_devices_kernel(has_medium)) == flags
+        assert {k: getattr(settings, k) for k in flags} == flags
+
+
 def test_an_automatic_window_over_the_bin_budget_is_a_located_error():
     """The line-of-sight window is chosen without a pilot; the budget is still checked (not by re-validation)."""
     from owcsim.engine.core.errors import SceneError

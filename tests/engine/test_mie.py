@@ -28,7 +28,7 @@ from pydantic import ValidationError
 from scipy import integrate
 
 from owcsim.engine.core.errors import SceneError
-from owcsim.engine.media import mie
+from owcsim.engine.media import mie, report
 from owcsim.engine.media.media import HomogeneousMedium, medium_from_spec
 from owcsim.engine.media.phase import MiePhase, Tabulated, phase_from_spec
 from owcsim.engine.scene.scene import build_scene
@@ -212,7 +212,7 @@ def test_particle_medium_builds_coefficients_and_mie_table():
     assert scene.medium.sigma_a == pytest.approx(n * (o.c_ext - o.c_sca), rel=1e-12, abs=0)
     assert 0.05 < scene.medium.sigma_t < 1.0  # 50 mg/m^3 of soot: visibility of some metres
     assert isinstance(scene.phase, MiePhase) and scene.phase.mean_cosine == pytest.approx(o.g, abs=1e-4)
-    info = mie.describe(med_spec)
+    info = report.describe(med_spec)
     st = info["sigma_t"]
     assert st == pytest.approx(scene.medium.sigma_t, rel=1e-12)
     assert info["visibility_m"] == pytest.approx(KOSCHMIEDER / st)
@@ -291,26 +291,10 @@ def test_soot_examples_build(name):
 
     doc = json.loads((EXAMPLES / f"soot_room_{name}.json").read_text())
     scene = build_scene(spec(doc))
-    info = mie.describe(scene.spec.medium)
+    info = report.describe(scene.spec.medium)
     assert isinstance(scene.phase, MiePhase) and scene.medium.sigma_t == pytest.approx(info["sigma_t"], rel=1e-12)
     # 50 and 250 mg/m^3 of soot: visibility of tens of metres and of a few metres
     assert (10 < info["visibility_m"] < 40) if name == "light" else (2 < info["visibility_m"] < 8)
-
-
-def test_medium_report_for_the_result():
-    from owcsim.engine.media.phase import HenyeyGreenstein, Tabulated
-
-    particles = ParticleMediumSpec.model_validate(_medium())
-    assert mie.medium_report(particles) == mie.describe(particles)
-    assert mie.medium_report(None) is None
-    hom = spec(room_doc(medium={"type": "homogeneous", "sigma_a": 0.1, "sigma_s": 0.1})).medium
-    assert mie.medium_report(hom, HenyeyGreenstein(0.3)) == {
-        "model": "homogeneous",
-        "phase": {"type": "hg", "mean_cosine": 0.3},
-    }
-    table = Tabulated([-1, 1], [2, 2])
-    rep = mie.medium_report(hom, table)["phase"]
-    assert rep["type"] == "tabulated" and rep["normalisation"] == pytest.approx(8 * math.pi) and rep["points"] == 2
 
 
 def test_monodisperse_particles_run_without_warnings_and_equal_one_sphere():

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from owcsim.engine.sources.photometry import PhotometryError, luminaire_frame, parse_ies, parse_ldt
+from owcsim.engine.sources.photometry import PhotometryError, luminaire_frame
+from owcsim.engine.sources.photometry_files import parse_ies, parse_ldt
 
 
 # ----------------------------------------------------------------------------- writers (test fixtures)

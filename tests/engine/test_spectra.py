@@ -517,7 +517,8 @@ def test_channel_builder_sums_against_a_plain_loop(carried):
     delay sums; and the optical power it returns. Two targets, estimates in random order."""
     from types import SimpleNamespace
 
-    from owcsim.engine.spectral.spectra import N_GROUPS, ChannelBuilder
+    from owcsim.engine.tally.plan import N_GROUPS
+    from owcsim.engine.tally.spectral import ChannelBuilder
 
     rng = np.random.default_rng(5)
     B, T, m = 3, 2, 500

@@ -1,9 +1,9 @@
 """A spectral scene with more receivers than the truncation pilot traces (issue 22, item 2).
 
-The pilot runs on up to auto.PILOT_RECEIVERS receivers of the job's built scene; the scene's spectral
+The pilot runs on up to pilot.PILOT_RECEIVERS receivers of the job's built scene; the scene's spectral
 tables (the receivers' responsivity rows, the link count) stayed the job's, so its line of sight indexed
 a transmitter row that does not exist (IndexError in spectra.channel_power) with 9 or more receivers.
-auto.with_receivers now gives the pilot (and a worker reusing a built geometry) the tables of its own
+receivers.with_receivers now gives the pilot (and a worker reusing a built geometry) the tables of its own
 receivers (spectra.with_receivers). Checks: the tables against those of a scene built from the pilot's
 document, and the automatic run of 12 receivers against the same scene with its K and window given.
 """
@@ -14,6 +14,7 @@ import numpy as np
 
 from owcsim.api import simulate
 from owcsim.engine.run import auto
+from owcsim.engine.run import pilot as pilot_module
 from owcsim.engine.scene.scene import build_scene
 from owcsim.schemas import SceneSpec
 from tests.scenes import within
@@ -69,14 +70,14 @@ def test_the_pilot_scene_has_the_spectral_tables_of_its_receivers():
     scene = build_scene(spec)
     step = auto.plan(spec, scene)
     pilot = step.pilot
-    assert pilot is not None and len(pilot.receivers) == auto.PILOT_RECEIVERS < 12
+    assert pilot is not None and len(pilot.receivers) == pilot_module.PILOT_RECEIVERS < 12
     own = build_scene(pilot.spec).spectra  # the tables a scene of the pilot's document has
     tables = pilot.scene.spectra
-    assert tables.n_links == own.n_links == auto.PILOT_RECEIVERS
+    assert tables.n_links == own.n_links == pilot_module.PILOT_RECEIVERS
     np.testing.assert_array_equal(tables.rx_electrical, own.rx_electrical)
     np.testing.assert_array_equal(tables.rx_responsive, own.rx_responsive)
     np.testing.assert_array_equal(tables.rx_electrical, scene.spectra.rx_electrical[pilot.receivers])
-    assert not np.array_equal(tables.rx_electrical, scene.spectra.rx_electrical[: auto.PILOT_RECEIVERS])
+    assert not np.array_equal(tables.rx_electrical, scene.spectra.rx_electrical[: pilot_module.PILOT_RECEIVERS])
     np.testing.assert_array_equal(tables.face_rho, scene.spectra.face_rho)  # the rest is shared
     assert scene.spectra.n_links == 12  # the job's own tables are untouched
 
@@ -84,7 +85,7 @@ def test_the_pilot_scene_has_the_spectral_tables_of_its_receivers():
 def test_automatic_settings_with_twelve_spectral_receivers_agree_with_explicit_ones():
     result = simulate(_doc(12, paths=20_000, seed=1, pilot_paths=1024))  # IndexError before
     modeled = result.modeled
-    assert len(modeled.pilot.receivers) == auto.PILOT_RECEIVERS and modeled.max_reflections >= 5
+    assert len(modeled.pilot.receivers) == pilot_module.PILOT_RECEIVERS and modeled.max_reflections >= 5
     explicit = copy.deepcopy(_doc(12, paths=20_000, seed=2))
     explicit["simulation"].update(
         algorithm=modeled.algorithm, max_reflections=modeled.max_reflections, t_max_s=modeled.time_window_s[1]

@@ -4,7 +4,8 @@ import math
 
 import numpy as np
 
-from owcsim.engine.run.auto import _delay_shift, _tail_moments, tail_ratio
+from owcsim.engine.results.truncation import tail_ratio
+from owcsim.engine.run.tail import delay_shift, tail_moments
 from tests.results import simulate_document as simulate
 from tests.scenes import room_doc, spec
 
@@ -27,11 +28,11 @@ def test_tail_moments_and_delay_shift_by_hand():
     """One geometric tail: P = g_L r / (1 - r) past the last order; the delay shift of dropping power p at time t."""
     g = np.array([1.0, 0.5, 0.25])
     t1 = np.array([1.0, 2.0, 3.0])
-    p, p1, p2 = _tail_moments(2, g, np.zeros(3), t1, t1**2, 0.5)
+    p, p1, p2 = tail_moments(2, g, np.zeros(3), t1, t1**2, 0.5)
     assert p == 0.25 * 1.0  # sum r^i = 1 for r = 1/2
     assert p1 == 0.25 * (3.0 * 1.0 + 1.0 * 2.0)  # base 3, step 1: sum i r^i = 2
     # drop power 1 at t = 3 from a link of gain 2, mean delay 2, spread 1 (moments: 2, 4, 10)
-    d0, d_rms = _delay_shift(2.0, 2.0, 1.0, 1.0, 3.0, 9.0)
+    d0, d_rms = delay_shift(2.0, 2.0, 1.0, 1.0, 3.0, 9.0)
     assert d0 == 1.0 and d_rms == 1.0  # what remains: gain 1 at t = 1 (mean 1, spread 0)
 
 

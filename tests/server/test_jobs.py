@@ -9,8 +9,8 @@ import time
 import numpy as np
 import pytest
 
-from owcsim.clients.output import write_cir_csv
 from owcsim.clients.result import Result
+from owcsim.formats.result_files import write_cir_csv
 from owcsim.schemas import SceneSpec
 from tests.results import simulate_document as simulate
 

@@ -133,12 +133,12 @@ def test_restarts_count_toward_the_attempt_limit(tmp_path):
 def test_an_old_store_is_upgraded_in_place(tmp_path):
     path = tmp_path / "j.sqlite"
     con = sqlite3.connect(path)
-    from owcsim.server import store as store_module
+    from owcsim.server import job_rows
 
-    con.executescript(store_module._SCHEMA)
+    con.executescript(job_rows.SCHEMA)
     con.execute("PRAGMA user_version=1")
     con.execute("INSERT INTO jobs (id, owner, request_hash, status, created_at) VALUES ('a', '', 'h', 'queued', 0)")
-    con.execute("INSERT INTO job_documents (job_id, scene) VALUES ('a', ?)", (store_module._pack("{}"),))
+    con.execute("INSERT INTO job_documents (job_id, scene) VALUES ('a', ?)", (job_rows.pack("{}"),))
     con.commit()
     con.close()
     store = JobStore(path, server=True)

@@ -1,6 +1,6 @@
 """A result's CIR as tables: the long CSV (cir.csv, the service's result.csv) and numpy arrays (result.npz).
 
-One copy for the command line and the client (clients/output.py, clients/result.py) and the
+One copy for the command line and the client (result_files.py, clients/result.py) and the
 service (server/formats.py): the files they write are the same bytes. Ids that a spreadsheet
 would take for a formula are escaped (OWASP CSV injection).
 """
@@ -13,7 +13,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from .results import SimulationResultPublic
+from owcsim.schemas.results import SimulationResultPublic
 
 #: Rows of the CSV per chunk of `cir_csv_chunks`.
 CSV_ROWS_PER_CHUNK = 4096

@@ -10,7 +10,10 @@ import csv
 import json
 from pathlib import Path
 
-from owcsim.schemas.result_tables import cir_csv_chunks, csv_cell
+from owcsim.formats.map_files import write_map_files
+from owcsim.formats.maps import maps_of_result
+from owcsim.formats.plots import plot_cir
+from owcsim.formats.result_tables import cir_csv_chunks, csv_cell
 from owcsim.schemas.results import SimulationResultPublic
 
 #: Scalar columns of links.csv (and of the command line's summaries).
@@ -38,7 +41,7 @@ COMPACT_JSON_LINKS = 200
 
 
 def write_cir_csv(result: SimulationResultPublic, path: Path) -> bool:
-    """cir.csv (schemas.result_tables.cir_csv_chunks: one row per link with a CIR and bin). Returns False
+    """cir.csv (result_tables.cir_csv_chunks: one row per link with a CIR and bin). Returns False
     (and writes nothing) when no link has a CIR."""
     if not any(lk.cir is not None for lk in result.links):
         return False
@@ -76,8 +79,6 @@ def write_outputs(result: SimulationResultPublic, out: Path, raw: dict | None = 
     if write_cir_csv(result, out / "cir.csv"):
         paths.append(out / "cir.csv")
         if plot:
-            from .plot import plot_cir  # matplotlib: only when a PNG is written
-
             plot_cir(result, out / "cir.png")
             paths.append(out / "cir.png")
     if result.maps:
@@ -92,9 +93,7 @@ HEATMAPS = ("dc_gain", "received_power_dbm", "mean_delay_s", "rms_delay_spread_s
 
 
 def write_map_outputs(result: SimulationResultPublic, out: Path) -> list[Path]:
-    """netCDF (one file per grid), maps.mat and heatmap PNGs (HEATMAPS) of the maps (owcsim.schemas.maps)."""
-    from owcsim.schemas.maps import maps_of_result, write_map_files
-
+    """netCDF (one file per grid), maps.mat and heatmap PNGs (HEATMAPS) of the maps (maps.py)."""
     maps, decor = maps_of_result(result)
     drawn = [q for q in HEATMAPS if any(q in m.values for m in maps)]
     return write_map_files(maps, out, decor=decor, heatmaps=drawn)

@@ -1,4 +1,4 @@
-"""Coverage-map output (schemas/maps.py): summary, netCDF / .mat round trips, heatmaps.
+"""Coverage-map output (formats/maps.py, map_files.py, heatmap.py): summary, netCDF / .mat round trips, heatmaps.
 
 References are computed here independently: positions and the 1/d^2 field point by point in plain
 Python from the grid's definition (origin + i s u + j s v), and closed forms for the extremes.
@@ -11,21 +11,9 @@ import sys
 import numpy as np
 import pytest
 
-from owcsim.schemas.maps import (
-    GridMap,
-    MapDecor,
-    _hull,
-    _project,
-    format_summary,
-    from_xarray,
-    heatmap_png,
-    masked_points,
-    summary,
-    to_dataframe,
-    to_netcdf,
-    to_xarray,
-    write_map_files,
-)
+from owcsim.formats.heatmap import _hull, _project, heatmap_png
+from owcsim.formats.map_files import from_xarray, to_dataframe, to_netcdf, to_xarray, write_map_files
+from owcsim.formats.maps import GridMap, MapDecor, format_summary, masked_points, summary
 from tests.scenes import room_doc, spec
 
 S = 0.5  # grid spacing [m]
@@ -385,7 +373,8 @@ def test_dataframe_is_long():
 
 def test_import_stays_light():
     code = (
-        "import sys, owcsim.schemas, owcsim.schemas.maps; "
+        "import sys, owcsim.schemas, owcsim.formats.maps, owcsim.formats.map_files, owcsim.formats.heatmap, "
+        "owcsim.formats.plots, owcsim.formats.result_files; "
         "print(sorted(m for m in ('matplotlib', 'xarray', 'scipy', 'pandas') if m in sys.modules))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout

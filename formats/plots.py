@@ -1,7 +1,7 @@
 """The CIR figure of a result: h(t) per reflection order and total, one panel per link.
 
-One drawing for the command line's cir.png, the client's `Result.plot()` and the service's
-plot.png (server/formats.py draws it from the rows of a stored .npz). matplotlib's object API
+One drawing for the command line's cir.png and the client's `Result.plot()` (`plot_cir`) and the
+service's plot.png (server/formats.py draws it from the rows of a stored .npz). matplotlib's object API
 (Figure + the Agg canvas), never pyplot: no global state (the service draws from several
 threads, under a lock), and pyplot's import is not paid. matplotlib is imported inside
 `cir_figure`, so importing this module stays light.
@@ -17,7 +17,7 @@ import numpy as np
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
 
-    from .results import SimulationResultPublic
+    from owcsim.schemas.results import SimulationResultPublic
 
 #: Links drawn at most in one figure.
 MAX_PANELS = 6
@@ -92,4 +92,20 @@ def cir_figure(t_min_s: float, time_bin_s: float, n_bins: int, panels: list[CirP
         )
         ax.legend(fontsize=8, ncol=3)
     fig.tight_layout()
+    return fig
+
+
+def plot_cir(result: SimulationResultPublic, path=None, link: int | None = None) -> Figure:
+    """h(t) [1/s] of each link, per reflection order k and total (report figures 6.1-6.5).
+
+    Draws every link with a binned CIR (up to 6) unless `link` picks one; saves to `path` (PNG)
+    if given and returns the matplotlib Figure.
+    """
+    panels = panels_of(result, link)
+    if not panels:
+        raise ValueError("no link of this result has a binned CIR (ask for it with outputs.cir = true)")
+    tb = result.time_bins
+    fig = cir_figure(tb.t_min_s, tb.time_bin_s, tb.n_bins, panels)
+    if path is not None:
+        fig.savefig(path, dpi=120)
     return fig

@@ -1,0 +1,268 @@
+"""Coverage-map files: an xarray Dataset and netCDF per grid, one MATLAB .mat file, a pandas table;
+`write_map_files` writes a folder of them with the heatmaps (heatmap.py).
+
+netCDF through xarray's scipy backend (netCDF3 64-bit offset). It needs no HDF5 library and
+scipy is already an engine dependency; a map of 1e5 points x a few quantities is a few MB, far from
+any netCDF3 limit, and netCDF3 files open in every netCDF reader (xarray, MATLAB `ncread`, ncview,
+Panoply). Pass `engine="h5netcdf"` to `to_netcdf` for netCDF4 if that package is installed.
+xarray, scipy and pandas are imported when a function needs them (optional.need).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+
+from owcsim.formats.heatmap import heatmap_png
+from owcsim.formats.maps import GridMap, MapDecor
+from owcsim.formats.optional import need
+
+if TYPE_CHECKING:  # pragma: no cover
+    import xarray
+
+__all__ = ["from_xarray", "to_dataframe", "to_netcdf", "to_xarray", "write_map_files"]
+
+
+def _one_grid(maps: Sequence[GridMap]) -> GridMap:
+    if not maps:
+        raise ValueError("no maps given")
+    first = maps[0]
+    for m in maps[1:]:
+        same = (
+            m.grid == first.grid
+            and m.shape == first.shape
+            and np.allclose(m.origin, first.origin)
+            and np.allclose(m.u, first.u)
+            and np.allclose(m.v, first.v)
+            and np.allclose(m.x, first.x)
+            and np.allclose(m.y, first.y)
+        )
+        if not same:
+            raise ValueError(
+                f"maps of different grids ({first.grid!r} and {m.grid!r}, or the same name with "
+                "other points): give one grid's maps, or use write_map_files"
+            )
+    channels = [m.channel for m in maps]
+    dup = sorted({c for c in channels if channels.count(c) > 1})
+    if dup:
+        raise ValueError(f"grid {first.grid!r}: channels {dup} given more than once")
+    return first
+
+
+def _stacked(maps: Sequence[GridMap]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, str]]:
+    """Values and stderr per quantity as (channel, nu, nv), NaN for a channel that lacks it; units checked."""
+    units: dict[str, str] = {}
+    for m in maps:
+        for q, un in m.units.items():
+            if units.setdefault(q, un) != un:
+                raise ValueError(f"grid {m.grid!r}: quantity {q!r} in {units[q]!r} and {un!r}")
+    nan = np.full(maps[0].shape, np.nan)
+    values = {q: np.stack([m.values.get(q, nan) for m in maps]) for q in units}
+    with_se = [q for q in units if any(q in m.stderr for m in maps)]
+    stderr = {q: np.stack([m.stderr.get(q, nan) for m in maps]) for q in with_se}
+    return values, stderr, units
+
+
+def to_xarray(maps: Sequence[GridMap]) -> xarray.Dataset:
+    """The maps of ONE grid (several channels) as a Dataset over (channel, i, j).
+
+    Coordinates channel, x(i), y(j) [m] (offsets along u, v) and position_x/y/z(i, j) [m]; a variable
+    per quantity and `<q>_stderr`, each with a `units` attribute; `mask_reason` string over (i, j) when
+    every channel has the same mask (masks come from the geometry), else over (channel, i, j) (xarray
+    broadcasts either); attributes grid, origin, u, v, normal. netCDF3 does not compress: one string
+    per point and channel would be the largest variable of a big grid.
+    """
+    xr = need("xarray", "a map Dataset")
+    first = _one_grid(maps)
+    values, stderr, units = _stacked(maps)
+    pos = first.positions
+    dims = ("channel", "i", "j")
+    data: dict[str, Any] = {}
+    for q, a in values.items():
+        data[q] = (dims, a, {"units": units[q]})
+        if q in stderr:
+            data[f"{q}_stderr"] = (dims, stderr[q], {"units": units[q], "long_name": f"standard error of {q}"})
+    reasons = np.stack([m.reasons for m in maps]).astype(str)
+    same = bool(np.all(reasons == reasons[:1]))
+    data["mask_reason"] = (
+        dims[1:] if same else dims,
+        reasons[0] if same else reasons,
+        {"long_name": "why the point is masked; empty for a simulated point"},
+    )
+    coords = {
+        "channel": ("channel", [m.channel for m in maps]),
+        "x": ("i", first.x, {"units": "m", "long_name": "offset along u"}),
+        "y": ("j", first.y, {"units": "m", "long_name": "offset along v"}),
+        **{f"position_{c}": (("i", "j"), pos[..., k], {"units": "m"}) for k, c in enumerate("xyz")},
+    }
+    attrs = {
+        "grid": first.grid,
+        "origin": first.origin,
+        "u": first.u,
+        "v": first.v,
+        "normal": first.normal,
+        "title": f"owcsim coverage map of grid {first.grid}",
+        "comment": "point (i, j) = origin + x[i] u + y[j] v; NaN where masked or not available",
+    }
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def from_xarray(ds: xarray.Dataset) -> list[GridMap]:
+    """The maps of a Dataset written by `to_xarray` (a channel that lacked a quantity reads back as NaN)."""
+    quantities = [q for q in ds.data_vars if q != "mask_reason" and not str(q).endswith("_stderr")]
+    out = []
+    r = ds["mask_reason"].values
+    for c in range(ds.sizes["channel"]):
+        out.append(
+            GridMap(
+                grid=str(ds.attrs["grid"]),
+                channel=str(ds["channel"].values[c]),
+                origin=ds.attrs["origin"],
+                u=ds.attrs["u"],
+                v=ds.attrs["v"],
+                x=ds["x"].values,
+                y=ds["y"].values,
+                values={str(q): ds[q].values[c] for q in quantities},
+                stderr={str(q): ds[f"{q}_stderr"].values[c] for q in quantities if f"{q}_stderr" in ds},
+                units={str(q): str(ds[q].attrs.get("units", "")) for q in quantities},
+                mask_reason=(r if r.ndim == 2 else r[c]).astype(str),
+            )
+        )
+    return out
+
+
+def to_netcdf(
+    maps: Sequence[GridMap], path: str | Path, *, engine: Literal["netcdf4", "scipy", "h5netcdf"] = "scipy"
+) -> Path:
+    """Write the maps of one grid as a netCDF file (netCDF3 through scipy by default); returns the path."""
+    path = Path(path)
+    to_xarray(maps).to_netcdf(path, engine=engine)
+    return path
+
+
+def _safe_name(name: str) -> str:
+    """A file-name-safe form of a grid, channel or quantity name."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "map"
+
+
+def _unique_names(names: Iterable[str], make) -> list[str]:
+    out: list[str] = []
+    for n in names:
+        base = make(n)
+        cand, k = base, 1
+        while cand in out:
+            k += 1
+            cand = f"{base}_{k}"
+        out.append(cand)
+    return out
+
+
+def _by_grid(maps: Sequence[GridMap]) -> dict[str, list[GridMap]]:
+    groups: dict[str, list[GridMap]] = {}
+    for m in maps:
+        groups.setdefault(m.grid, []).append(m)
+    return groups
+
+
+def _mat_struct(maps: list[GridMap]) -> dict[str, Any]:
+    first = _one_grid(maps)
+    values, stderr, units = _stacked(maps)
+    cell = np.empty(len(maps), dtype=object)
+    cell[:] = [m.channel for m in maps]
+    # reasons as codes into a list (1-based, as MATLAB indexes it; 0 = simulated): a cell per point is slow and big
+    names, code = np.unique(np.stack([m.reasons for m in maps]), return_inverse=True)
+    code = code.reshape(len(maps), *first.shape)
+    if names[0] == "":
+        names = names[1:]
+    else:
+        code = code + 1
+    reasons = np.empty(len(names), dtype=object)
+    reasons[:] = [str(n) for n in names]
+    return {
+        "grid": first.grid,
+        "channels": cell,
+        "origin": first.origin,
+        "u": first.u,
+        "v": first.v,
+        "normal": first.normal,
+        "x": first.x,
+        "y": first.y,
+        "position": first.positions,
+        "values": values,
+        "stderr": stderr,
+        "units": units,
+        "mask_code": code.astype(np.int32),
+        "mask_reasons": reasons,
+    }
+
+
+def write_map_files(
+    maps: Sequence[GridMap],
+    folder: str | Path,
+    *,
+    decor: MapDecor | None = None,
+    heatmaps: bool | Iterable[str] = True,
+    log: bool | None = None,
+) -> list[Path]:
+    """Write `map_<grid>.nc` per grid, one `maps.mat` and the heatmaps `map_<grid>_<channel>_<quantity>.png`.
+
+    In maps.mat each grid is a struct `map_<grid>` with grid, channels (cell), origin, u, v, normal,
+    x, y, position (nu, nv, 3), values.<q> and stderr.<q> (channel, nu, nv), units.<q>, mask_code
+    (channel, nu, nv): 0 for a simulated point, k for the reason mask_reasons{k} (cell). `heatmaps`: True
+    for every quantity, False for none, or the quantity names to draw. Returns the paths written.
+    """
+    savemat = need("scipy.io", "the .mat file").savemat
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    groups = _by_grid(maps)
+    names = _unique_names(groups, _safe_name)
+    written: list[Path] = []
+    mat: dict[str, Any] = {}
+    mat_names = _unique_names(names, lambda n: ("map_" + re.sub(r"\W", "_", n))[:63])
+    for ms, name, mat_name in zip(groups.values(), names, mat_names):
+        written.append(to_netcdf(ms, folder / f"map_{name}.nc"))
+        mat[mat_name] = _mat_struct(ms)
+    savemat(folder / "maps.mat", mat, do_compression=True, oned_as="column")
+    written.append(folder / "maps.mat")
+    if heatmaps is False:
+        return written
+    wanted = None if heatmaps is True else set(heatmaps)
+    for ms, name in zip(groups.values(), names):
+        for m, ch in zip(ms, _unique_names((m.channel for m in ms), _safe_name)):
+            for q in m.values:
+                if wanted is None or q in wanted:
+                    written.append(heatmap_png(m, q, decor, folder / f"map_{name}_{ch}_{_safe_name(q)}.png", log=log))
+    return written
+
+
+def to_dataframe(maps: GridMap | Sequence[GridMap]):
+    """A long table (pandas): one row per (map, point) with grid, channel, i, j, x, y, position, mask_reason,
+    each quantity and its `_stderr`."""
+    pd = need("pandas", "a map table")
+
+    frames = []
+    for m in [maps] if isinstance(maps, GridMap) else maps:
+        ii, jj = np.meshgrid(np.arange(m.shape[0]), np.arange(m.shape[1]), indexing="ij")
+        pos = m.positions.reshape(-1, 3)
+        cols: dict[str, Any] = {
+            "grid": m.grid,
+            "channel": m.channel,
+            "i": ii.ravel(),
+            "j": jj.ravel(),
+            "x": m.x[ii.ravel()],
+            "y": m.y[jj.ravel()],
+            "position_x": pos[:, 0],
+            "position_y": pos[:, 1],
+            "position_z": pos[:, 2],
+            "mask_reason": m.reasons.ravel(),
+        }
+        for q, a in m.values.items():
+            cols[q] = a.ravel()
+            if q in m.stderr:
+                cols[f"{q}_stderr"] = m.stderr[q].ravel()
+        frames.append(pd.DataFrame(cols))
+    return pd.concat(frames, ignore_index=True)
