@@ -1,5 +1,6 @@
-"""The events of one step of a path (the sections of kernel.trace_batch), named as pbrt-v4's VolPathIntegrator
-and Mitsuba 3's volpath name them.
+"""The events of one step of a path: surface vertex, medium next events, medium collision, roulette.
+
+The sections of kernel.trace_batch, named as pbrt-v4's VolPathIntegrator and Mitsuba 3's volpath name them:
 
 - `surface_vertex`: next-event estimation to the targets (the BRDF, or rho / pi), mirror images, then
   reflection (cosine sampling or a material lobe chosen by albedo) and roulette;
