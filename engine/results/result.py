@@ -20,7 +20,7 @@ import numpy as np
 
 from owcsim.engine.core.arrays import BoolArray, FloatArray
 from owcsim.engine.integrator.kernel import KernelSettings
-from owcsim.engine.integrator.medium_nee import LOBE_PEAK, phase_lobe_wanted
+from owcsim.engine.integrator.lobe import LOBE_PEAK, phase_lobe_wanted
 from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.results import metrics
 from owcsim.engine.results.job import FinishedJob

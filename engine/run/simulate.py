@@ -34,7 +34,7 @@ from owcsim.engine.core import qmc
 from owcsim.engine.core.arrays import BoolArray, FloatArray, IntArray
 from owcsim.engine.core.constants import SPEED_OF_LIGHT
 from owcsim.engine.integrator.kernel import KernelSettings, WorkItem
-from owcsim.engine.integrator.medium_nee import phase_lobe_wanted
+from owcsim.engine.integrator.lobe import phase_lobe_wanted
 from owcsim.engine.results.job import FinishedJob, LineOfSight, RunInfo
 from owcsim.engine.results.result import build_result
 from owcsim.engine.run import auto

@@ -93,9 +93,9 @@ def test_the_registry_is_what_the_planner_runs(number):
 #: What a run from both devices sets, per algorithm, in a medium and in vacuum (medium_nee.py's partition of unity;
 #: the values of the former medium_nee.two_sided_settings).
 BOTH_DEVICES = {
-    2: ({"mis": True, "segment_family": 2},) * 2,
-    3: ({"mis": True, "segment_family": 3},) * 2,
-    4: ({"mis": True, "segment_family": 4},) * 2,
+    2: ({"mis": True, "scatter_then_reflect": True, "reflect_then_scatter": False},) * 2,
+    3: ({"mis": True, "scatter_then_reflect": False, "reflect_then_scatter": True},) * 2,
+    4: ({"mis": True, "scatter_then_reflect": True, "reflect_then_scatter": True},) * 2,
     5: ({"both_sides": True}, {"mis": True}),
 }
 
