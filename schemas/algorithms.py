@@ -42,7 +42,7 @@ _CODES = {d: i for i, d in enumerate(_MEMBERS)}
 
 
 class TwoSided(StrEnum):
-    """When an algorithm runs every link from both devices in a medium (engine/integrator/medium_nee.py)."""
+    """When an algorithm runs every link from both devices in a medium (engine/integrator/weights.py)."""
 
     NEVER = "never"
     ALWAYS = "always"
@@ -52,7 +52,7 @@ class TwoSided(StrEnum):
 @dataclass(frozen=True)
 class BothDevicesKernel:
     """The KernelSettings flags (field name -> value) a run of every link from both devices sets on top of
-    `Algorithm.kernel` (engine/integrator/medium_nee.py: the partition of unity between the two sides; the
+    `Algorithm.kernel` (engine/integrator/weights.py: the partition of unity between the two sides; the
     planner must then run every such link both ways, or it counts about half)."""
 
     in_medium: Mapping[str, object]
