@@ -3,7 +3,7 @@
 Open medium (no walls): Tx at the origin facing +x (Lambertian, m = 1), Rx (1 cm^2, FOV 90 deg) at
 (D, 0, 0) facing it, D = 3 m, sigma_s 0.2 /m, sigma_a 0.05 /m, HG phase with g = 0.9, 0.99, 0.999,
 -0.999; K = 0, S = 1 (the single-scattering family Tx -> p -> Rx only), `--paths` paths a side,
-`--seeds` seeds, algorithm 5 at its defaults (from both devices; engine/integrator/medium_nee.py), or those
+`--seeds` seeds, algorithm 5 at its defaults (from both devices; engine/integrator/weights.py), or those
 given by `--algorithms`. Reference: tests/reference_peaked.py, an independent volume quadrature in
 coordinates adapted to the peak (its refined grid printed next to it). Per g the table prints:
 - bias: mean of the runs / reference - 1 (the 20-seed mean's own relative standard error after it);

@@ -224,7 +224,7 @@ def roulette_study(args) -> None:
 def speed_study(args) -> None:
     """Paths and wall time to 0.03 % on the clear room (S1) and 0.3 % on the smoky room (g 0.5), accuracy mode,
     before (roulette from depth 3 with survival min(1, w / w0), one side) and after, in the same run."""
-    from owcsim.engine.integrator.kernel import KernelSettings
+    from owcsim.engine.integrator.path import KernelSettings
 
     after = {"rr_start_depth": args.rr_depth, "rr_threshold": args.rr_theta}
     before = {"rr_start_depth": 3, "rr_threshold": 1.0}

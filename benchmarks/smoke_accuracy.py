@@ -29,7 +29,7 @@ from owcsim.engine.run.simulate import simulate  # noqa: E402
 from owcsim.schemas import SceneSpec  # noqa: E402
 
 MEDIUM = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.2, "phase": {"type": "hg", "g": 0.7}}
-# Algorithms 2-4 in a medium run from both devices (engine/integrator/medium_nee.py); 5 one-sided here for comparison
+# Algorithms 2-4 in a medium run from both devices (engine/integrator/weights.py); 5 one-sided here for comparison
 # (its default, direction "auto" in a medium, runs from both devices too).
 CASES = [(1, "auto"), (2, "both"), (3, "both"), (4, "both"), (5, "forward"), (5, "backward"), (5, "both")]
 

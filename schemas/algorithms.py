@@ -42,7 +42,7 @@ _CODES = {d: i for i, d in enumerate(_MEMBERS)}
 
 
 class TwoSided(StrEnum):
-    """When an algorithm runs every link from both devices in a medium (engine/integrator/medium_nee.py)."""
+    """When an algorithm runs every link from both devices in a medium (engine/integrator/weights.py)."""
 
     NEVER = "never"
     ALWAYS = "always"
@@ -52,7 +52,7 @@ class TwoSided(StrEnum):
 @dataclass(frozen=True)
 class BothDevicesKernel:
     """The KernelSettings flags (field name -> value) a run of every link from both devices sets on top of
-    `Algorithm.kernel` (engine/integrator/medium_nee.py: the partition of unity between the two sides; the
+    `Algorithm.kernel` (engine/integrator/weights.py: the partition of unity between the two sides; the
     planner must then run every such link both ways, or it counts about half)."""
 
     in_medium: Mapping[str, object]
@@ -125,10 +125,14 @@ class Algorithm:
         )
 
 
-def _mis_on_family(family: int) -> BothDevicesKernel:
+def _mis_on_families(scatter_then_reflect: bool, reflect_then_scatter: bool) -> BothDevicesKernel:
     """Algorithms 2-4 from both devices, with a medium or without: the balance heuristic on the family both
-    sides sample, the partition of unity on the others, and which single-scattering family is estimated."""
-    flags = MappingProxyType({"mis": True, "segment_family": family})
+    sides sample, the partition of unity on the others, and which single-scattering families are estimated:
+    Tx -> p -> (k) -> Rx (`scatter_then_reflect`, algorithm 2's), Tx -> (k) -> p -> Rx (`reflect_then_scatter`,
+    algorithm 3's)."""
+    flags = MappingProxyType(
+        {"mis": True, "scatter_then_reflect": scatter_then_reflect, "reflect_then_scatter": reflect_then_scatter}
+    )
     return BothDevicesKernel(in_medium=flags, in_vacuum=flags)
 
 
@@ -172,7 +176,7 @@ ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
                 direction=Direction.BACKWARD,
                 direction_reason="algorithm 2 samples in-scattering from the receiver side",
                 two_sided=TwoSided.ALWAYS,
-                both_devices=_mis_on_family(2),
+                both_devices=_mis_on_families(scatter_then_reflect=True, reflect_then_scatter=False),
                 counts_scattering=True,
                 outputs=_SCATTERED,
                 scattering_range=(1, 1),
@@ -193,7 +197,7 @@ ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
                 direction=Direction.FORWARD,
                 direction_reason="algorithm 3 samples out-scattering from the transmitter side",
                 two_sided=TwoSided.ALWAYS,
-                both_devices=_mis_on_family(3),
+                both_devices=_mis_on_families(scatter_then_reflect=False, reflect_then_scatter=True),
                 counts_scattering=True,
                 outputs=_SCATTERED,
                 scattering_range=(1, 1),
@@ -218,7 +222,7 @@ ALGORITHMS: Mapping[int, Algorithm] = MappingProxyType(
                 direction=Direction.BOTH,
                 direction_reason="algorithm 4 runs both sides and weights their shared family by MIS",
                 two_sided=TwoSided.ALWAYS,
-                both_devices=_mis_on_family(4),
+                both_devices=_mis_on_families(scatter_then_reflect=True, reflect_then_scatter=True),
                 counts_scattering=True,
                 outputs=_SCATTERED,
                 scattering_range=(1, 2),

@@ -27,7 +27,8 @@ import multiprocessing as mp
 import threading
 from dataclasses import dataclass
 
-from owcsim.schemas import SceneSpec
+from owcsim.schemas import SceneSpec, SimulationSpec
+from owcsim.schemas.algorithms import algorithm
 from owcsim.schemas.errors import ProblemField
 
 from .problems import ProblemError
@@ -94,8 +95,8 @@ def _run(spec: SceneSpec, max_triangles: int, workers: int) -> tuple:
                 "batch_size": 64,
                 "direction": "forward",
                 "pilot_paths": 256,
-                # algorithm 4 left out: its default S = 2 (the double-scattering family runs too)
-                "max_scattering": sim.max_scattering if sim.max_scattering is not None or sim.algorithm == 4 else 1,
+                # an algorithm whose default S is above 1 (4: the double-scattering family) keeps it: that runs too
+                "max_scattering": sim.max_scattering if sim.max_scattering is not None or _s_above_1(sim) else 1,
             }
         )  # every setting explicit but the algorithm: no pilot
         scene = build_scene(spec, None)
@@ -208,3 +209,8 @@ def preflight(spec: SceneSpec) -> int:
     if out[0] != "ok":
         raise _error(out)
     return out[1]
+
+
+def _s_above_1(sim: SimulationSpec) -> bool:
+    """The requested algorithm fixes a scattering order above 1 by default (the registry's `scattering_orders`)."""
+    return sim.algorithm != "auto" and (algorithm(sim.algorithm).scattering_orders or 0) > 1

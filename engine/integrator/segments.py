@@ -24,37 +24,40 @@ the balance heuristic on sample densities: a point from either set is weighted b
 1 / (n_T(s) + n_E(s)), with n_T = 1 / |time stratum containing s| and
 n_E = N_E pdf_E(s); the sum over both sets is an unbiased estimate of the integral.
 
-The estimators of algorithms 2-4 built on them (`segment_scatter`, `segment_points`: the
-segment-points event of kernel.trace_batch) live at the end of this module; they connect
-through the kernel's `_Context.connect` (the measurement equation).
+The estimators of algorithms 2-4 built on them (the segment-points event of kernel.trace_batch) are
+in single_scatter.py. Also here: the densities with which a device's run puts points on its first
+segments (`first_segment_density`) and algorithm 5's balance heuristic of the free-flight collision
+and the equiangular points (`scattering_point_throughput`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 
+from owcsim.engine.core.arrays import FloatArray, IntArray
 from owcsim.engine.core.sampling import column_norms
-from owcsim.engine.integrator.medium_nee import first_segment_branch, first_vertex_factor, side_weight, target_factor
+from owcsim.engine.integrator.path import BatchState, dot3
+from owcsim.engine.sources.devices import Devices
 
 
-def _dot3(a, b):
-    """Row-wise dot product of (3, n) component arrays."""
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _cut(D, vv, vw):
+def _cut(D: FloatArray, vv: FloatArray, vw: FloatArray) -> FloatArray:
     """s where s + |v - s w| = D (see module docstring); D - v.w > 0 for cuts inside a segment."""
     den = 2.0 * (D - vw)
     return (D * D - vv) / np.where(den > 0, den, 1.0)
 
 
-def path_length(l0, origins, directions, targets, s):
+def path_length(l0: Any, origins: FloatArray, directions: FloatArray, targets: FloatArray, s: Any) -> FloatArray:
     """l(s) = l0 + s + |target - (origin + s direction)| for (3, n) arrays [m]."""
     r = targets - (origins + s * directions)
     return l0 + s + np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
 
 
-def _strata_plan(la, lb, h, max_strata):
+def _strata_plan(
+    la: FloatArray, lb: FloatArray, h: float, max_strata: int
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Per segment: (first cut index, cut spacing, cut origin, number of cuts) in path length."""
     first = np.floor(la / h) + 1.0
     n_cuts = np.maximum(np.ceil(lb / h) - first, 0.0)
@@ -66,7 +69,17 @@ def _strata_plan(la, lb, h, max_strata):
     return first, step, origin_l, n_cuts
 
 
-def time_density(l0, origins, directions, targets, a, b, s, h, max_strata: int = 64):
+def time_density(
+    l0: FloatArray,
+    origins: FloatArray,
+    directions: FloatArray,
+    targets: FloatArray,
+    a: Any,
+    b: FloatArray,
+    s: FloatArray,
+    h: float,
+    max_strata: int = 64,
+) -> FloatArray:
     """n_T(s) = 1 / length of the time stratum of `time_strata` containing s (one point per segment)."""
     la = path_length(l0, origins, directions, targets, a)
     lb = path_length(l0, origins, directions, targets, b)
@@ -99,7 +112,7 @@ class EquiangularFrame:
 
     __slots__ = ("a", "D", "c", "h", "h2", "r2", "span", "scale")
 
-    def __init__(self, origins, directions, targets, a, b):
+    def __init__(self, origins: FloatArray, directions: FloatArray, targets: FloatArray, a: Any, b: FloatArray):
         v = targets - origins
         D = v[0] * directions[0] + v[1] * directions[1] + v[2] * directions[2]
         r = v - D * directions
@@ -120,10 +133,10 @@ class EquiangularFrame:
         )
 
     @staticmethod
-    def _at(x, seg):
+    def _at(x: Any, seg: IntArray | None) -> Any:
         return x if seg is None or np.ndim(x) == 0 else x.take(seg)
 
-    def sample(self, seg, xi):
+    def sample(self, seg: IntArray | None, xi: FloatArray) -> FloatArray:
         """s of the points with stratified uniforms `xi` on the segments `seg` (not clipped to [a, b]).
 
         `seg` None: every segment, `xi` of shape (n,) or (k, n) (k points per segment, broadcast)."""
@@ -138,7 +151,7 @@ class EquiangularFrame:
             num += a
         return num
 
-    def density(self, s, n_per: int, seg=None):
+    def density(self, s: FloatArray, n_per: int, seg: IntArray | None = None) -> FloatArray:
         """n_E(s) = n_per h / ((theta_b - theta_a) (h^2 + (s - D)^2)) on the segments `seg` (all if None;
         `s` may then be (k, n): k points per segment)."""
         at = self._at
@@ -148,7 +161,16 @@ class EquiangularFrame:
         return np.divide(n_per * at(self.scale, seg), x, out=x)
 
 
-def equiangular(origins, directions, targets, a, b, n_per: int, u, frame: EquiangularFrame | None = None):
+def equiangular(
+    origins: FloatArray,
+    directions: FloatArray,
+    targets: FloatArray,
+    a: FloatArray,
+    b: FloatArray,
+    n_per: int,
+    u: Callable[[int], FloatArray],
+    frame: EquiangularFrame | None = None,
+) -> tuple[IntArray, FloatArray]:
     """`n_per` stratified equiangular points per segment [a, b] with respect to its target.
 
     Returns (segment index (m,), s (m,)); `u(m)` gives the uniforms. `frame` reuses a computed
@@ -164,14 +186,26 @@ def equiangular(origins, directions, targets, a, b, n_per: int, u, frame: Equian
     return seg, np.clip(s, a.take(seg), b.take(seg))
 
 
-def equiangular_density(origins, directions, targets, a, b, s, n_per: int):
+def equiangular_density(
+    origins: FloatArray, directions: FloatArray, targets: FloatArray, a: Any, b: FloatArray, s: FloatArray, n_per: int
+) -> FloatArray:
     """n_E(s) = n_per * pdf_E(s) (one point per segment, arrays as `equiangular`)."""
     if n_per == 0:
         return np.zeros(len(s))
     return EquiangularFrame(origins, directions, targets, a, b).density(s, n_per)
 
 
-def time_strata(l0, origins, directions, targets, a, b, h, u, max_strata: int = 64):
+def time_strata(
+    l0: FloatArray,
+    origins: FloatArray,
+    directions: FloatArray,
+    targets: FloatArray,
+    a: FloatArray,
+    b: FloatArray,
+    h: float,
+    u: Callable[[int], FloatArray],
+    max_strata: int = 64,
+) -> tuple[IntArray, FloatArray, FloatArray]:
     """Stratify segments [a, b] in total path length (time bins of length h = c dt [m]).
 
     Arrays: l0, a, b (n,) [m]; origins, directions, targets (3, n). `u` is a
@@ -204,152 +238,7 @@ def time_strata(l0, origins, directions, targets, a, b, h, u, max_strata: int = 
     return seg, s_lo + u(m) * length, length
 
 
-# --- the estimators of algorithms 2-4 (the segment-points event of kernel.trace_batch) -----------------
-def segment_scatter(ctx, paths, t_seg, rng, first: bool, prim=None) -> None:
-    """Single scattering at points of each segment, connected to the targets (algorithms 2-4).
-
-    Per target (the strata are ellipsoids with the target as a focus): one point per
-    time stratum plus `equiangular_points` equiangular points (above), combined
-    by the balance heuristic: a point at s has weight
-        w * T(o -> p) * sigma_s(p) / (n_T(s) + n_E(s)),
-    and the connection adds phase, response, 1/d^2, visibility and T(p -> target).
-    Points on every segment estimate the family source -> (k) -> p -> target (forward:
-    algorithm 3's, backward: algorithm 2's). Run from both devices (`settings.mis`), the
-    family both sample on the first segment (k = 0: Tx -> p -> Rx) gets the direction
-    balance heuristic (`_direction_mis`); for k >= 1 the other device samples the same
-    family by scattering on its own first segment (medium_nee.first_segment_branch), and
-    the two share each path by the partition of unity of medium_nee.side_weight
-    (bounded weights near the devices). Algorithm 4 also starts the double-scattering
-    family on the first segment (the same branch).
-    """
-    settings = ctx.settings
-    forward = ctx.item.direction == "forward"
-    fam = settings.segment_family
-    points_everywhere = fam == 4 or (fam == 3) == forward  # this side's own family: points on all segments
-    if first and settings.mis:
-        paths.first = first_vertex_factor(ctx, paths, prim, t_seg, np.zeros(len(t_seg)), np.zeros(len(t_seg), bool))
-        chain = fam == 4 or not points_everywhere  # the other side's family, sampled from this side
-        if chain or settings.in_then_out:
-            first_segment_branch(ctx, paths, t_seg, rng, chain=chain, double=settings.in_then_out)
-    if not (points_everywhere or (first and settings.mis)):
-        return
-    alive = np.flatnonzero((paths.s == 0) & (paths.k <= settings.max_reflections) & np.isfinite(t_seg))
-    if len(alive) == 0:
-        return
-    partition = None
-    if settings.mis and not first:
-        from owcsim.engine.integrator.mirrors import specular_first_share
-
-        def partition(j, pp, points, s, density):  # after a specular first vertex: mirrors.py
-            return specular_first_share(
-                ctx, j, pp, points, s, density, side_weight(pp.first, target_factor(ctx, j, points))
-            )
-
-    segment_points(
-        ctx,
-        paths.keep(alive),
-        t_seg.take(alive),
-        rng,
-        order=1,
-        direction_mis=settings.mis and first,
-        weight_fn=partition,
-    )
-
-
-def segment_points(ctx, seg_paths, t_seg, rng, order: int, direction_mis: bool = False, weight_fn=None) -> None:
-    """Points on the segments [0, t_seg) of `seg_paths` (time strata + equiangular, balance heuristic),
-    each connected to every target as a scattering event of order `order`.
-
-    `weight_fn(j, pp, points, s, density)`, if given, multiplies each point's weight (e.g. a partition of unity).
-    """
-    settings, medium = ctx.settings, ctx.scene.medium
-    zeros = np.zeros(len(seg_paths))
-    h, n_eq = settings.strata_length, settings.equiangular_points
-    for j in range(len(ctx.tgt)):  # strata depend on the target: a loop over devices, not rays
-        y = np.repeat(ctx.t_pos[:, j : j + 1], len(seg_paths), axis=1)
-        o, d, l0 = seg_paths.origins, seg_paths.directions, seg_paths.lengths
-        seg_t, s_t, _ = time_strata(l0, o, d, y, zeros, t_seg, h, lambda m: rng.random(m), settings.max_strata)
-        frame = EquiangularFrame(o, d, y, zeros, t_seg)  # once per segment and target
-        seg_e, s_e = equiangular(o, d, y, zeros, t_seg, n_eq, lambda m: rng.random(m), frame=frame)
-        found = _scattering_points(seg_paths, np.concatenate([seg_t, seg_e]), np.concatenate([s_t, s_e]), medium)
-        if found is None:
-            continue
-        seg, pp, points, s, sigma_s = found
-        y_p, end = y.take(seg, axis=1), t_seg.take(seg)
-        density = time_density(
-            pp.lengths, pp.origins, pp.directions, y_p, np.zeros(len(s)), end, s, h, settings.max_strata
-        ) + (frame.density(s, n_eq, seg) if n_eq else 0.0)
-        # throughput of a point: w T(o -> p) sigma_s(p) / (n_T + n_E), the balance heuristic of the time
-        # strata and the equiangular points in Veach's multi-sample form (segments.py)
-        tau = medium.optical_depth(pp.origins.T, pp.directions.T, s)
-        throughput = pp.weights * np.exp(-tau) * sigma_s / density  # exp(-tau) = medium.transmittance
-        if ctx.spectra is not None:  # spectral smoke: sigma_s,b T_b over the carrier's (spectra.py)
-            pp.ratio = ctx.spectra.scatter(pp.ratio, tau)
-        if direction_mis and ctx.mirrors:  # source -> p -> mirror -> target, through the image (mirrors.py)
-            from owcsim.engine.integrator.mirrors import connect_segment_mirrors
-
-            connect_segment_mirrors(ctx, j, points, throughput, pp, s, order, density)
-        mis = _direction_mis(ctx, int(ctx.tgt[j]), pp, points, s, density) if direction_mis else None
-        if weight_fn is not None:
-            share = weight_fn(j, pp, points, s, density)
-            mis = share if mis is None else mis * share
-        ctx.connect(
-            points,
-            points,
-            throughput,
-            pp,
-            in_dirs=pp.directions,
-            mis=mis,
-            target=j,
-            scatter_order=np.full(len(pp), order, np.int64),
-            extra_length=s,
-        )
-
-
-def _scattering_points(paths, seg, s, medium):
-    """Points at distance s along the segments `seg` of `paths`, keeping those where sigma_s > 0.
-
-    Returns (seg, their paths, points (3, m), s, sigma_s), or None when no point scatters.
-    """
-    if len(seg) == 0:
-        return None
-    pp = paths.keep(seg)
-    points = pp.origins + s * pp.directions
-    sigma_s = medium.sigma_s_at(points.T)
-    inside = np.flatnonzero(sigma_s > 0)
-    if len(inside) == 0:
-        return None
-    return (seg.take(inside), pp.keep(inside), points.take(inside, axis=1), s.take(inside), sigma_s.take(inside))
-
-
-def _direction_mis(ctx, j: int, pp, points, s, density):
-    """Balance heuristic for Tx -> p -> Rx, sampled from both devices (algorithm 4).
-
-    Per-path density of p in volume measure for the side that starts at device X:
-        q_X(p) = R_X(cos_X) / W_X / r_X^2 * (n_T + n_E)_X(p),
-    direction pdf times the point density along X's first segment. This run is one
-    side (its density is given); the other side's first segment is cast from the
-    other device through p. Both sides run the same number of paths (the plan
-    guarantees it), so the weight is q_self / (q_self + q_other). `j`: the target's index in
-    its device set. With KernelSettings.phase_lobe the two phase-lobe strategies join the
-    denominator (medium_nee.lobe_volume_density).
-    """
-    from owcsim.engine.integrator.kernel import device_sets
-    from owcsim.engine.integrator.medium_nee import lobe_volume_density
-
-    scene = ctx.scene
-    src_set, dst_set = device_sets(scene, ctx.item.direction)
-    i, n = ctx.item.source, len(s)
-    cos_src = _dot3(pp.directions, src_set.normals[i][:, None])
-    q_self = src_set.response(np.full(n, i), cos_src, pp.directions.T) / src_set.total_response(i) / (s * s) * density
-    q_other = first_segment_density(ctx, dst_set, j, src_set.positions[i], points)
-    total = q_self + q_other
-    if ctx.settings.phase_lobe:  # the two phase-lobe strategies of medium_nee.lobe_connections
-        total = total + lobe_volume_density(ctx, dst_set.positions[j], points)
-    return np.where(total > 0, q_self / np.where(total > 0, total, 1.0), 1.0)
-
-
-def first_segment_density(ctx, devices, d: int, other, points):
+def first_segment_density(ctx: BatchState, devices: Devices, d: int, other: Any, points: FloatArray) -> FloatArray:
     """q_X(p) = R_X(cos) / W_X / r^2 (n_T + n_E)(p) [1/m^3]: the density of points at `points` (3, n) placed
     on device d's first segments (cast from it through them; time strata and equiangular points toward
     the device at `other` (3,)), per path of that device (`_direction_mis`)."""
@@ -358,9 +247,9 @@ def first_segment_density(ctx, devices, d: int, other, points):
     n = points.shape[1]
     o = devices.positions[d] + isect.offset * devices.normals[d]
     to_p = points - o[:, None]
-    r = np.sqrt(_dot3(to_p, to_p))
+    r = np.sqrt(dot3(to_p, to_p))
     w_dir = to_p / r
-    q = devices.response(np.full(n, d), _dot3(w_dir, devices.normals[d][:, None]), w_dir.T) / devices.total_response(d)
+    q = devices.response(np.full(n, d), dot3(w_dir, devices.normals[d][:, None]), w_dir.T) / devices.total_response(d)
     live = np.flatnonzero(q > 0)
     if len(live):
         origins = np.repeat(o[:, None], len(live), axis=1)
@@ -374,3 +263,29 @@ def first_segment_density(ctx, devices, d: int, other, points):
         ) + equiangular_density(origins, dirs, tgt, zeros, t_hit, rl, settings.equiangular_points)
         q[live] = q.take(live) / (rl * rl) * dens
     return q
+
+
+def scattering_point_throughput(
+    weights: FloatArray, transmittance: FloatArray, sigma_t: Any, sigma_s: Any, n_e: Any
+) -> FloatArray:
+    """Algorithm 5's balance heuristic (Veach 1997, ch. 9) in one place: the throughput of a scattering point.
+
+    Two techniques place scattering points at distance s on a segment o + s w: the free-flight
+    collision, density p_ff(s) = sigma_t(s) T(o -> s), and `equiangular_points` equiangular points per
+    target, density n_E(s) (segments.EquiangularFrame.density). Every point of either set makes a
+    next-event estimate with MIS weight p / (p_ff + n_E) over its own density p, i.e. throughput
+        w T(o -> s) sigma_s(s) / (p_ff(s) + n_E(s)),
+    the same formula for both (for the collision it is w x albedo x p_ff / (p_ff + n_E)); without
+    equiangular points (n_E = 0) it is the collision's w x albedo.
+    """
+    total = sigma_t * transmittance  # p_ff
+    total += n_e
+    num = weights * transmittance
+    num *= sigma_s
+    # total = 0 only where T = 0 or sigma_t = 0 (then sigma_s = 0): num is 0 there and stays
+    # (a division masked by `where` is ~2.5x slower than a plain one: only when needed)
+    return (
+        np.divide(num, total, out=num)
+        if total.min(initial=1.0) > 0
+        else np.divide(num, total, out=num, where=total > 0)
+    )

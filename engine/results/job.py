@@ -11,7 +11,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from owcsim.engine.core.arrays import FloatArray, IntArray
-from owcsim.engine.integrator.kernel import KernelSettings
+from owcsim.engine.integrator.path import KernelSettings
 from owcsim.engine.scene.los import LosGeometry
 from owcsim.engine.scene.scene import Scene
 from owcsim.engine.tally.tally import Accumulator

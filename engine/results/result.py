@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 
 from owcsim.engine.core.arrays import BoolArray, FloatArray
-from owcsim.engine.integrator.kernel import KernelSettings
-from owcsim.engine.integrator.medium_nee import LOBE_PEAK, phase_lobe_wanted
+from owcsim.engine.integrator.lobe import LOBE_PEAK, phase_lobe_wanted
+from owcsim.engine.integrator.path import KernelSettings
 from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.results import metrics
 from owcsim.engine.results.job import FinishedJob
@@ -416,7 +416,7 @@ def build_result(job: FinishedJob) -> SimulationResultPublic:
 
 
 def _peaked_phase_warnings(scene, settings: KernelSettings) -> list[str]:
-    """A phase peak above medium_nee.LOBE_PEAK x isotropic (HG |g| >= 0.81) where the phase lobe does not cover
+    """A phase peak above lobe.LOBE_PEAK x isotropic (HG |g| >= 0.81) where the phase lobe does not cover
     the run: the single-scattering needle along Tx -> p -> Rx (or through a mirror image of a device) is missed
     by most runs, with a small error bar (issue 22 item 5; tests/matrix.py at g = +-0.999: z up to 46 in spectral
     scenes, with mirrors, and with a backward peak and reflections; forward peaks with diffuse walls held)."""

@@ -28,7 +28,8 @@ from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Protocol
 
-from owcsim.engine.integrator.kernel import KernelSettings, WorkItem, trace_batch
+from owcsim.engine.integrator.kernel import trace_batch
+from owcsim.engine.integrator.path import KernelSettings, WorkItem
 from owcsim.engine.run.receivers import with_receivers
 from owcsim.engine.scene.scene import Scene, build_scene
 from owcsim.engine.tally.tally import BatchTally

@@ -58,7 +58,8 @@ from pathlib import Path
 import numpy as np
 
 from owcsim.engine.core.errors import EngineError, SceneError
-from owcsim.engine.integrator.kernel import KernelSettings, WorkItem, trace_batch
+from owcsim.engine.integrator.kernel import trace_batch
+from owcsim.engine.integrator.path import KernelSettings, WorkItem
 from owcsim.engine.run.execution import SCENE_CACHE_SIZE, JobRef
 from owcsim.engine.scene.scene import Scene, build_scene
 from owcsim.engine.tally.tally import BatchTally

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from owcsim.engine.integrator.kernel import KernelSettings
+from owcsim.engine.integrator.path import KernelSettings
 from owcsim.engine.results.job import LineOfSight, RunInfo
 from owcsim.engine.run.execution import Executor, JobRef
 from owcsim.engine.scene.scene import Scene

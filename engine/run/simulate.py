@@ -12,7 +12,7 @@ at or below the target, or when the time budget is spent (the result says which;
 engine/run/stopping.py).
 
 `simulate_two_sided(spec)` runs a resolved job with every link from both devices (studies and
-tests: engine/integrator/medium_nee.py's partition of unity) through the same steps. Each run
+tests: engine/integrator/weights.py's partition of unity) through the same steps. Each run
 is one `Job` value (engine/run/job.py) read by every step; the result is built from one
 `FinishedJob` (engine/results/job.py).
 """
@@ -33,8 +33,8 @@ import numpy as np
 from owcsim.engine.core import qmc
 from owcsim.engine.core.arrays import BoolArray, FloatArray, IntArray
 from owcsim.engine.core.constants import SPEED_OF_LIGHT
-from owcsim.engine.integrator.kernel import KernelSettings, WorkItem
-from owcsim.engine.integrator.medium_nee import phase_lobe_wanted
+from owcsim.engine.integrator.lobe import phase_lobe_wanted
+from owcsim.engine.integrator.path import KernelSettings, WorkItem
 from owcsim.engine.results.job import FinishedJob, LineOfSight, RunInfo
 from owcsim.engine.results.result import build_result
 from owcsim.engine.run import auto
@@ -116,7 +116,7 @@ def group_weights(spec: SceneSpec, scene: Scene) -> FloatArray:
 
 
 def two_sided(spec: SceneSpec, scene: Scene) -> bool:
-    """True when every link runs from both devices under the partition of unity of medium_nee.py: in a
+    """True when every link runs from both devices under the partition of unity of integrator/weights.py: in a
     medium, algorithms 2-4 always, algorithm 5 unless a direction is requested (bounded weights near point
     devices); the registry's `two_sided` says which (schemas/algorithms.py)."""
     rule = algorithm(spec.simulation.algorithm).two_sided
@@ -128,7 +128,7 @@ def two_sided(spec: SceneSpec, scene: Scene) -> bool:
 def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = None) -> KernelSettings:
     """The kernel configuration of the job's algorithm (physics.md section 4; its flags from the registry,
     schemas/algorithms.py); `both_devices` (default: the planner's rule, `two_sided`) gives the settings of
-    links run from both devices (the registry's `both_devices` flags; medium_nee.py)."""
+    links run from both devices (the registry's `both_devices` flags; integrator/weights.py)."""
     sim = spec.simulation
     alg = algorithm(sim.algorithm)
     step = sim.segment_time_step_s if sim.segment_time_step_s is not None else sim.time_bin_s
@@ -148,7 +148,7 @@ def kernel_settings(spec: SceneSpec, scene: Scene, both_devices: bool | None = N
     both = two_sided(spec, scene) if both_devices is None else both_devices
     if both:  # a run whose partner run is missing would count about half: the planner runs both sides
         settings = replace(settings, **_flags(alg.both_devices_kernel(scene.medium is not None)))
-    # the phase lobe (medium_nee): algorithm 5 from either side or both, algorithms 2-4 from both
+    # the phase lobe (integrator/lobe.py): algorithm 5 from either side or both, algorithms 2-4 from both
     lobe = settings.free_flight or (settings.mis and settings.segment_scatter)
     if lobe and scene.medium is not None and scene.spectra is None and phase_lobe_wanted(scene.phase):
         settings = replace(settings, phase_lobe=True)  # a peaked phase function
@@ -207,7 +207,7 @@ def simulate_two_sided(
     direction: Direction | str = Direction.BOTH,
     **overrides: object,
 ) -> SimulationResultPublic:
-    """`simulate` with every link run from both devices under the partition of unity (medium_nee.py), the
+    """`simulate` with every link run from both devices under the partition of unity (integrator/weights.py), the
     settings of the registry's `both_devices` flags (schemas/algorithms.py), for studies and tests.
 
     The spec must be resolved (explicit algorithm, K, S and window). `direction` forward / backward runs one
@@ -224,7 +224,7 @@ def simulate_two_sided(
     scene = build_scene(spec, base_dir)
     settings = replace(kernel_settings(spec, scene, both_devices=side is Direction.BOTH), **_flags(overrides))
     rule = (
-        f"algorithm {alg.number} from both devices, partition of unity (engine/integrator/medium_nee.py)"
+        f"algorithm {alg.number} from both devices, partition of unity (engine/integrator/weights.py)"
         if side is Direction.BOTH
         else f"requested: {side}"
     )
@@ -436,7 +436,7 @@ def _direction_rule(job: Job) -> tuple[DirectionChoicePublic, Direction] | None:
     if two_sided(spec, scene):
         rule = (
             f"algorithm {sim.algorithm} in a medium: every link from both devices, each path weighted by its "
-            "share (medium_nee.py: bounded weights near point devices)"
+            "share (integrator/weights.py: bounded weights near point devices)"
         )
         return DirectionChoicePublic(rule=rule), Direction.BOTH
     if alg.direction is not None:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from owcsim.engine.core.arrays import IntArray
-from owcsim.engine.integrator.kernel import WorkItem
+from owcsim.engine.integrator.path import WorkItem
 from owcsim.engine.run.job import Job, Progress
 from owcsim.engine.tally.estimates import may_stop, reported_rel_stderr
 from owcsim.engine.tally.tally import Accumulator

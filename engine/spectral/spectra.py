@@ -28,7 +28,7 @@ Channels tallied per link (engine/tally/spectral.py, one contraction per path gr
     with the receiver's field of view reads, all reflection orders included).
 Per-band smoke: homogeneous coefficients per band, or Mie per band centre for particles
 (engine/media/mie.py). Algorithms 1-4 in any spectral scene: a scattering point p placed by the carrier
-(points on segments, or a collision starting a branch of medium_nee.first_segment_branch) multiplies
+(points on segments, or a collision starting a branch of single_scatter.first_segment_branch) multiplies
 the band's ratio by sigma_s,b / sigma_s,c and its depth factor, and the direction taken from p (the
 connection, or the branch's sampled direction) by p_b(cos) / p_c(cos). Algorithm 5 by spectral
 ratio tracking: the carrier samples free flights with sigma_t,c and keeps albedo_c at a collision;

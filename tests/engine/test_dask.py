@@ -26,7 +26,7 @@ distributed = pytest.importorskip("distributed")
 from dask import config as dask_config  # noqa: E402
 
 from owcsim.engine.core.errors import EngineError, SceneError  # noqa: E402
-from owcsim.engine.integrator.kernel import WorkItem  # noqa: E402
+from owcsim.engine.integrator.path import WorkItem  # noqa: E402
 from owcsim.engine.run.execution import JobRef  # noqa: E402
 from owcsim.engine.run.execution_dask import (  # noqa: E402
     ClusterError,

@@ -1,7 +1,7 @@
 """Algorithm 5 from both devices in a furnished room (issue 22, item 1).
 
 When every shadow ray of a connection step was blocked (a desk between the last vertices and the
-receiver), `_Context.connect` handed zero connections to medium_nee.connection_weight, whose
+receiver), `BatchContext.connect` handed zero connections to weights.connection_weight, whose
 `depth.min()` raised "zero-size array to reduction operation minimum": 4 of 8 seeds of a smoky
 office crashed, mostly in the automatic settings' pilot (K and S up to 40, few deep paths). The seeds
 below crashed before the fix. Each result is checked against an independent estimate of the same

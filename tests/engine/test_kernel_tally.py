@@ -7,7 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from owcsim.engine.integrator.kernel import WorkItem, trace_batch
+from owcsim.engine.integrator.kernel import trace_batch
+from owcsim.engine.integrator.path import WorkItem
 from owcsim.engine.run.simulate import kernel_settings
 from owcsim.engine.scene.scene import build_scene
 from owcsim.engine.tally import tally as tally_module

@@ -1,9 +1,9 @@
-"""Algorithm 5's next-event estimates from scattering points: `_Context.connect_on_segments` (computed on the
-segments' equiangular frames, no gathers) against the general `_Context.connect` on the same points.
+"""Algorithm 5's next-event estimates from scattering points: `BatchContext.connect_on_segments` (computed on the
+segments' equiangular frames, no gathers) against the general `BatchContext.connect` on the same points.
 
 Both draw the same random numbers, so a batch traced either way must give the same tallies to rounding; the
-connection itself (measurement equation, balance heuristic of `_scattering_point_throughput`, the share of
-medium_nee.connection_weight) is thus checked estimate by estimate against the general code, whose statistics
+connection itself (measurement equation, balance heuristic of `segments.scattering_point_throughput`, the share of
+weights.connection_weight) is thus checked estimate by estimate against the general code, whose statistics
 the other tests check against references."""
 
 import dataclasses
@@ -11,14 +11,15 @@ import dataclasses
 import numpy as np
 import pytest
 
-from owcsim.engine.integrator import kernel
-from owcsim.engine.integrator.kernel import WorkItem, trace_batch
+from owcsim.engine.integrator import context, uniform_medium
+from owcsim.engine.integrator.kernel import trace_batch
+from owcsim.engine.integrator.path import WorkItem
 from owcsim.engine.run.simulate import kernel_settings
 from owcsim.engine.scene.scene import build_scene
 from owcsim.schemas import SceneSpec
 from tests.scenes import room_doc
 
-REAL = kernel._Context.connect_on_segments
+REAL = context.BatchContext.connect_on_segments
 SMOKE_HG = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.3, "phase": {"type": "hg", "g": 0.6}}
 
 
@@ -33,7 +34,7 @@ def _trace(doc, direction, both, fused: bool, monkeypatch, targets=(0,)):
         used.append(done)
         return done
 
-    monkeypatch.setattr(kernel._Context, "connect_on_segments", spy)
+    monkeypatch.setattr(context.BatchContext, "connect_on_segments", spy)
     tally = trace_batch(scene, WorkItem(direction, 0, targets, 0, 1024, 5), settings)
     evaluations = scene.medium.evaluations
     return tally, evaluations, used
@@ -43,7 +44,7 @@ def _trace(doc, direction, both, fused: bool, monkeypatch, targets=(0,)):
 @pytest.mark.parametrize("both", [True, False], ids=["both devices", "one side"])
 @pytest.mark.parametrize("direction", ["forward", "backward"])
 def test_segment_frame_connections_equal_the_general_ones(direction, both, small_step, monkeypatch):
-    monkeypatch.setattr(kernel, "SMALL_STEP", small_step)  # the points of a step as one group or two
+    monkeypatch.setattr(uniform_medium, "SMALL_STEP", small_step)  # the points of a step as one group or two
     doc = room_doc(medium=SMOKE_HG, algorithm=5, max_reflections=5, max_scattering=4, paths=1024)
     fused, ev_fused, used = _trace(doc, direction, both, True, monkeypatch)
     plain, ev_plain, _ = _trace(doc, direction, both, False, monkeypatch)
@@ -62,7 +63,7 @@ def test_narrow_fov_lambertian_order_and_two_receivers(direction, monkeypatch):
     """Receivers with FOV 50 deg (estimates of zero power dropped), a Lambertian order 3 transmitter, three
     equiangular points per segment, and in forward runs two receivers (the loop over targets): the same
     tallies as the general connection."""
-    monkeypatch.setattr(kernel, "SMALL_STEP", -1)
+    monkeypatch.setattr(uniform_medium, "SMALL_STEP", -1)
     doc = room_doc(medium=SMOKE_HG, algorithm=5, max_reflections=4, max_scattering=3, paths=1024, m=3.0, fov_deg=50)
     doc["receivers"].append(
         {"id": "rx2", "position": [4.0, 2.0, 1.0], "normal": [-1, 0, 0], "area": 1e-4, "fov_deg": 50}
@@ -90,7 +91,7 @@ def test_the_comparison_has_power(monkeypatch):
         finally:
             del phase.eval
 
-    monkeypatch.setattr(kernel._Context, "connect_on_segments", biased)
+    monkeypatch.setattr(context.BatchContext, "connect_on_segments", biased)
     spec = SceneSpec.model_validate(doc)
     scene = build_scene(spec)
     settings = dataclasses.replace(kernel_settings(spec, scene, both_devices=True), qmc_block=1)

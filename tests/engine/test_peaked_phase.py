@@ -1,4 +1,4 @@
-"""Honest error bars for single scattering in forward-peaked smoke (issue 22, item 5; engine/integrator/medium_nee.py,
+"""Honest error bars for single scattering in forward-peaked smoke (issue 22, item 5; engine/integrator/lobe.py,
 the phase lobe).
 
 Open medium, Tx and Rx 3 m apart facing each other, HG g up to +-0.999, K = 0, S = 1: the single-scattering
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from benchmarks.peaked_phase import AREA, SIGMA_A, SIGMA_S, D, M, doc, run_seeds
-from owcsim.engine.integrator import kernel, medium_nee
+from owcsim.engine.integrator import context, kernel, single_scatter, uniform_medium
 from owcsim.engine.run import simulate as simulate_module
 from owcsim.engine.run.simulate import kernel_settings
 from owcsim.engine.scene.scene import build_scene
@@ -103,10 +103,10 @@ def _planted(monkeypatch, what: str) -> None:
 
         monkeypatch.setattr(kernel, "lobe_connections", lobe)
     elif what == "weight":  # the emissions' share F / (F + L) without the lobes' densities (paths counted twice)
-        real_weight = kernel.connection_weight
-        monkeypatch.setattr(kernel, "connection_weight", lambda *a, lobe=None, **k: real_weight(*a, **k))
-    else:  # "points' weight" (algorithms 2-4): segments._direction_mis without the lobes' densities
-        monkeypatch.setattr(medium_nee, "lobe_volume_density", lambda ctx, y, points: np.zeros(points.shape[1]))
+        real_weight = context.connection_weight
+        monkeypatch.setattr(context, "connection_weight", lambda *a, lobe=None, **k: real_weight(*a, **k))
+    else:  # "points' weight" (algorithms 2-4): single_scatter._direction_mis without the lobes' densities
+        monkeypatch.setattr(single_scatter, "lobe_volume_density", lambda ctx, y, points: np.zeros(points.shape[1]))
 
 
 @pytest.mark.parametrize(
@@ -122,7 +122,7 @@ def test_the_check_catches_a_planted_error(what, algorithm, paths, monkeypatch):
 
 @pytest.mark.parametrize("algorithm", [5, 3])
 def test_weights_obey_the_bound_whatever_g(algorithm, monkeypatch):
-    """engine/integrator/medium_nee.py (the phase lobe): every single-scattering estimate is at most
+    """engine/integrator/lobe.py (the phase lobe): every single-scattering estimate is at most
     4 albedo R_tx,max R_rx,max / D^2 at g = 0.999 (the bound without the lobe has p_max ~ 1.6e5 / sr in
     place of R_tx,max = 1 / pi); without the lobe the same run exceeds it."""
     bound = 4 * (SIGMA_S / SIGMA_T) * ((M + 1) / (2 * np.pi)) * AREA / D**2
@@ -154,8 +154,8 @@ def test_black_room_frame_connections_cover_the_prism_reference(monkeypatch):
     medium = {"type": "homogeneous", "sigma_a": SIGMA_A, "sigma_s": SIGMA_S, "phase": {"type": "hg", "g": 0.999}}
     base = dict(rx=(2.5, 2.5, 0.0), medium=medium, algorithm=5, max_reflections=0, max_scattering=1, t_max_s=4e-7)
     ref = single_scattering(3.0, 1.0, 1e-4, SIGMA_S, SIGMA_T, 0.999, n_z=100, half_width=2.5)
-    used, real = [], kernel._Context.connect_on_segments
-    monkeypatch.setattr(kernel._Context, "connect_on_segments", lambda *a: used.append(real(*a)) or used[-1])
+    used, real = [], context.BatchContext.connect_on_segments
+    monkeypatch.setattr(context.BatchContext, "connect_on_segments", lambda *a: used.append(real(*a)) or used[-1])
     link = simulate(SceneSpec.model_validate(room_doc(0.0, 0.0, 0.0, paths=50_000, seed=3, **base)))["links"][0]
     h1 = link["dc_gain"] - link["los_gain"]
     assert used and all(used)  # the frame connections served (the room is empty: every point sees the Rx)
@@ -166,7 +166,7 @@ def test_black_room_frame_connections_cover_the_prism_reference(monkeypatch):
 @pytest.mark.parametrize("direction", ["forward", "backward"])
 def test_frame_connections_equal_the_general_ones_with_the_lobe(direction, monkeypatch):
     """As tests/engine/test_medium_next_events.py, with g = 0.95 (the lobe on): the same tallies to rounding."""
-    monkeypatch.setattr(kernel, "SMALL_STEP", -1)
+    monkeypatch.setattr(uniform_medium, "SMALL_STEP", -1)
     medium = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.3, "phase": {"type": "hg", "g": 0.95}}
     d = room_doc(medium=medium, algorithm=5, max_reflections=3, max_scattering=3, paths=1024)
     spec = SceneSpec.model_validate(d)

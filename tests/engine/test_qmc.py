@@ -12,7 +12,8 @@ import pytest
 from scipy.stats import qmc as scipy_qmc
 
 from owcsim.engine.core import qmc
-from owcsim.engine.integrator.kernel import WorkItem, trace_batch
+from owcsim.engine.integrator.kernel import trace_batch
+from owcsim.engine.integrator.path import WorkItem
 from owcsim.engine.run.simulate import kernel_settings
 from owcsim.engine.scene.scene import build_scene
 from owcsim.engine.tally.tally import Accumulator, BatchBuilder, per_path_s2, sample_cov

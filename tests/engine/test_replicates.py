@@ -196,7 +196,7 @@ def _max_contribution(monkeypatch, run):
 
 
 def test_single_scattering_weights_obey_the_proven_bound(monkeypatch):
-    """engine/integrator/medium_nee.py: from both devices, a single-scattering connection is at most
+    """engine/integrator/weights.py: from both devices, a single-scattering connection is at most
     4 albedo p_max max(R_tx,max W_rx, R_rx,max W_tx) / D^2; from one side it is not bounded."""
     D, g, area = 0.5, 0.7, 1e-4
     albedo = 0.2 / 0.25

@@ -140,7 +140,7 @@ def test_black_room_single_scattering_families_agree():
 def test_algorithm_5_without_equiangular_points_in_a_box_medium():
     """Algorithm 5 from both devices in smoke filling half the room (points outside it do not scatter): the
     free-flight collisions alone (equiangular_points = 0) and with the equiangular points (the balance heuristic
-    of medium_nee / kernel._scattering_point_throughput) estimate the same H0 and s = 1 gain."""
+    of weights.py / segments.scattering_point_throughput) estimate the same H0 and s = 1 gain."""
     from tests.results import simulate_two_sided_document as simulate_two_sided
 
     smoke = dict(SMOKE, region={"type": "box", "min": [0.0, 0.0, 0.0], "max": [5.0, 2.5, 3.0]})

@@ -463,7 +463,7 @@ def test_algorithm_5_flat_and_albedo_only_smoke_per_band_equal_grey_runs():
     """Algorithm 5: smoke given per band but flat gives the grey result (roulette on); smoke whose bands share
     sigma_t but not sigma_s samples the same collisions in both bands, so each band equals its grey run with the
     same seed to rounding (band 1 through the ratio sigma_s,1 / sigma_s,0 at every scattering point, the
-    equiangular points and the third strategy of medium_nee included)."""
+    equiangular points and the third strategy, events.connect_from_target, included)."""
     smoke = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.3, "phase": {"type": "hg", "g": 0.6}}
     sim = {"algorithm": 5, "max_scattering": 2, "max_reflections": 1}
     grey = simulate(spec(_smoke_room(smoke, None, russian_roulette=True, **sim)))["links"][0]
