@@ -1,4 +1,4 @@
-"""Homogeneous media (physics.md section 3): constant coefficients in a region, and the medium built from a document.
+"""Homogeneous media (physics.md section 3): constant coefficients in a region, and the `homogeneous` kind's builder.
 
 `HomogeneousMedium` implements the `Medium` interface (medium.py) for the whole scene, a box
 or a closed mesh; `homogeneous_from_spec` builds the `homogeneous` kind from its document, particle
