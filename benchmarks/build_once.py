@@ -6,7 +6,7 @@ issue 10 measurement), written as a PLY file next to the scene. Two settings:
 - explicit: algorithm 5, K = 6, S = 20, t_max_s given (no pilot);
 - automatic: algorithm, K, S and the window chosen by engine/run/auto.py (a truncation pilot runs).
 For each it prints the geometry builds (engine.scene.geometry.build_geometry, one per scene build)
-and medium builds (engine.media.media.medium_from_spec) counted in one job (in-process `simulate`),
+and medium builds (engine.media.registry.medium_from_spec) counted in one job (in-process `simulate`),
 the same counts for the service pre-flight of the automatic scene, and the wall time of the
 whole command `owcsim run SCENE --out DIR` (best of `--repeats`, in a fresh process: imports,
 scene build, pilot, run, files).
@@ -73,7 +73,7 @@ def counted(key, real):
         return real(*a, **k)
     return wrapper
 for mod_name, attr, key in (("owcsim.engine.scene.geometry", "build_geometry", "geometry"),
-                            ("owcsim.engine.media.media", "medium_from_spec", "medium")):
+                            ("owcsim.engine.media.registry", "medium_from_spec", "medium")):
     real = getattr(sys.modules[mod_name], attr)
     wrap = counted(key, real)
     for name, mod in list(sys.modules.items()):  # every module that imported the builder by name

@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike
 from owcsim.engine.core.arrays import BoolArray, FloatArray, IntArray
 from owcsim.engine.media.medium import Medium
 from owcsim.engine.media.regions import clip_box
-from owcsim.schemas.medium import IsotropicPhaseSpec, PhaseSpec
+from owcsim.schemas.medium import GridMediumSpec, IsotropicPhaseSpec, PhaseSpec
 
 
 def _field(values: ArrayLike, shape: tuple[int, ...]) -> FloatArray:
@@ -157,3 +157,9 @@ class GridMedium(Medium):
                     want = want[keep]
         tau[ids] = acc  # (none left: the loop bound is the longest walk)
         return tau, t_out, scattered, n_cross
+
+
+def grid_from_spec(spec: GridMediumSpec) -> GridMedium | None:
+    """The `grid` kind (registry.py): the grid of the document; None when sigma_t = 0 in every cell."""
+    medium = GridMedium(spec.min, spec.max, spec.shape, spec.sigma_a, spec.sigma_s, spec.phase)
+    return None if medium.sigma_t_max == 0.0 else medium

@@ -1,7 +1,8 @@
-"""Homogeneous media (physics.md section 3): constant coefficients in a region, and the medium built from a document.
+"""Homogeneous media (physics.md section 3): constant coefficients in a region, and the `homogeneous` kind's builder.
 
 `HomogeneousMedium` implements the `Medium` interface (medium.py) for the whole scene, a box
-or a closed mesh; particle smoke is a homogeneous medium with its Mie coefficients (mie.py).
+or a closed mesh; `homogeneous_from_spec` builds the `homogeneous` kind from its document, particle
+smoke is a homogeneous medium with its Mie coefficients (particles.py). registry.py's
 `medium_from_spec` builds any medium kind from its document (grid media: grid.py).
 """
 
@@ -13,13 +14,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from owcsim.engine.core.arrays import BoolArray, FloatArray, IntArray
-from owcsim.engine.media.grid import GridMedium
 from owcsim.engine.media.medium import Medium
-from owcsim.engine.media.mie import medium_coefficients
 from owcsim.engine.media.regions import BoxRegion, MeshRegion, WholeRegion, as_rows
 from owcsim.schemas.medium import (
     BoxRegionSpec,
-    GridMediumSpec,
     HomogeneousMediumSpec,
     IsotropicPhaseSpec,
     MeshRegionSpec,
@@ -28,7 +26,7 @@ from owcsim.schemas.medium import (
     SceneRegionSpec,
 )
 
-__all__ = ["HomogeneousMedium", "Medium", "medium_from_spec", "region_from_spec"]
+__all__ = ["HomogeneousMedium", "Medium", "homogeneous_from_spec", "homogeneous_medium", "region_from_spec"]
 
 
 def _count(rays: list[IntArray]) -> int:
@@ -148,25 +146,21 @@ class HomogeneousMedium(Medium):
         return np.where(inside, self.sigma_t, 0.0), np.where(inside, self.sigma_s, 0.0)
 
 
-def medium_from_spec(spec: HomogeneousMediumSpec | GridMediumSpec | ParticleMediumSpec | None) -> Medium | None:
-    """The engine medium, or None when there is nothing to attenuate (no medium, or sigma_t = 0 everywhere).
-
-    A particle medium becomes a homogeneous one with its Mie sigma_a, sigma_s; its `phase_spec`
-    is the Mie phase spec (built into a table by phase.phase_from_spec).
-    """
-    if spec is None:
-        return None
-    if spec.type == "grid":
-        medium = GridMedium(spec.min, spec.max, spec.shape, spec.sigma_a, spec.sigma_s, spec.phase)
-        return None if medium.sigma_t_max == 0.0 else medium
-    if spec.type == "particles":  # smoke from its particles: Mie coefficients (engine/media/mie.py)
-        sigma_a, sigma_s = medium_coefficients(spec)
-    else:
-        sigma_a, sigma_s = spec.coefficients
+def homogeneous_medium(
+    sigma_a: float, sigma_s: float, spec: HomogeneousMediumSpec | ParticleMediumSpec
+) -> HomogeneousMedium | None:
+    """The homogeneous medium of `sigma_a`, `sigma_s` [1/m] in the region and with the phase of `spec`; None when
+    sigma_t = 0 (nothing to attenuate)."""
     if sigma_a + sigma_s == 0.0:
         return None
     box, region = region_from_spec(spec.region)
     return HomogeneousMedium(sigma_a, sigma_s, box, region=region, phase_spec=spec.phase)
+
+
+def homogeneous_from_spec(spec: HomogeneousMediumSpec) -> HomogeneousMedium | None:
+    """The `homogeneous` kind (registry.py): constant coefficients from the document."""
+    sigma_a, sigma_s = spec.coefficients
+    return homogeneous_medium(sigma_a, sigma_s, spec)
 
 
 def region_from_spec(

@@ -135,7 +135,7 @@ def memory_estimate(
         2 * 8 * (n_links * 50 + int(n_cir * per_cir_link) + n_ord * 3 * cells + n_groups * n_rx * 18 + first_groups)
     )
     n_bands = spec.spectral.n_bands if spec.spectral is not None else 0
-    if n_bands:  # spectral channel sums per link and direction (engine/spectra.ChannelAccumulator)
+    if n_bands:  # spectral channel sums per link and direction (engine/tally/spectral.py ChannelAccumulator)
         accumulators += 2 * 8 * n_links * ((n_bands + 10) * N_GROUPS + 2 * n_bands)
     # Paths per batch as simulate.batch_size caps them (targets x paths and estimates per step bounded).
     segment_points = alg is None or bool(alg.kernel["segment_scatter"])  # auto: as if (the largest)

@@ -26,7 +26,6 @@ from owcsim.engine.spectral.spectra import grey_surfaces
 from owcsim.engine.surfaces.bsdf import Materials
 from owcsim.schemas import ROOM_FACES, SceneSpec
 from owcsim.schemas.geometry import BoxSpec, MeshSpec, RoomSpec
-from owcsim.schemas.surfaces import split
 
 # Unit-cube corners and the two triangles of each face, wound so normals point outward.
 _CUBE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
@@ -94,8 +93,7 @@ def _materials(rho: np.ndarray) -> tuple[np.ndarray, Materials | None]:
     """(total reflectance per face, Materials or None if every face is Lambertian) from _surfaces' arrays."""
     if rho.dtype != object:
         return rho, None
-    parts = np.array([split(v) for v in rho], float).reshape(len(rho), 4)
-    mat = Materials(parts[:, 0].copy(), parts[:, 1].copy(), parts[:, 2].copy(), parts[:, 3].copy())
+    mat = Materials.of_surfaces(list(rho))
     if mat.is_lambertian:
         return mat.rho_d, None
     return mat.total, mat

@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 
 from owcsim.engine.core.errors import SceneError
-from owcsim.engine.media.media import HomogeneousMedium, medium_from_spec, region_from_spec
+from owcsim.engine.media.media import HomogeneousMedium, region_from_spec
 from owcsim.engine.media.medium import Medium
 from owcsim.engine.media.model import MediumKind, MediumModel, medium_model
 from owcsim.engine.media.phase import PhaseFunction
+from owcsim.engine.media.registry import medium_from_spec
 from owcsim.engine.scene.geometry import Geometry, Intersector, build_geometry, check_extent
 from owcsim.engine.sources.devices import Devices, concentrator_gain, transmitters_from_specs
 from owcsim.engine.spectral.spectra import SceneSpectra, carrier_bands, medium_bands, scene_tables, unsupported

@@ -1,6 +1,6 @@
-"""Surface reflection models: Lambertian, modified Phong (diffuse + glossy lobe), perfect mirror.
+"""Materials: the per-face mixture of the registered surface models (Lambert, Phong, mirror); mirror planes.
 
-One material is a mixture of three parts, with the reflectance split stated:
+With the built-in models, one material is a mixture of three parts, with the reflectance split stated:
     rho = rho_d + rho_s + rho_m <= 1
 (rho_d diffuse, rho_s glossy Phong lobe of exponent n, rho_m perfect mirror). The BRDF is
 
@@ -34,129 +34,199 @@ of the lobes (Pharr, Jakob & Humphreys, PBRT 4th ed. sec. 2.4.3).
 Next-event estimation evaluates the non-delta part of f for the pair (incoming, toward
 the target); the mirror part reaches point devices only through mirror images.
 
-The three models, each behind one interface (evaluate, density, sample), are in lobes.py; `Materials`
-mixes them per face. Arrays are (3, n) component rows (as in the kernel); `d_in` is the arriving ray
-direction (pointing into the surface), `normals` face the arriving ray.
+The models, each behind one interface (evaluate, density, sample), are in lobes.py and registered by their wire
+`type` in registry.py (`SURFACE_MODELS`: lambertian, phong, mirror); `Materials` mixes the registered models per
+face in registry order (sums of their terms; lobe chosen by cumulative albedo shares). Arrays are (3, n) component
+rows (as in the kernel); `d_in` is the arriving ray direction (pointing into the surface), `normals` face the
+arriving ray.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from owcsim.engine.core.sampling import cosine_about_soa
-from owcsim.engine.surfaces.lobes import (
-    Lambert,
-    Mirror,
-    Phong,
-    SurfaceModel,
-    _dot,
-    lambert_brdf,
-    lambert_pdf,
-    mirror_direction,
-    phong_brdf,
-    phong_directions,
-    phong_pdf,
-    phong_weight,
-)
+from owcsim.engine.core.arrays import FloatArray, IntArray
+from owcsim.engine.surfaces.lobes import Lobe, Pair, Phong, SurfaceModel, _dot, mirror_direction
+from owcsim.engine.surfaces.registry import DIFFUSE, SURFACE_MODELS
 
 __all__ = ["Materials", "MirrorPlane", "mirror_direction", "mirror_planes"]
 
 
+def _weights(surface: Any) -> dict[str, float]:
+    """The weights [-] of the models one surface mixes: a number rho is Lambertian; a spec of `type` t is its
+    diffuse part r_d rho plus the lobe t of weight rho - r_d rho (a `lambertian` spec: rho, diffuse)."""
+    if isinstance(surface, (int, float)):
+        return {DIFFUSE: float(surface)}
+    if surface.type not in SURFACE_MODELS:
+        raise TypeError(f"no surface model {surface.type!r} (engine/surfaces/registry.py: {', '.join(SURFACE_MODELS)})")
+    rho = surface.reflectance
+    if surface.type == DIFFUSE:
+        return {DIFFUSE: rho}
+    rd = surface.diffuse_fraction * rho
+    return {DIFFUSE: rd, surface.type: rho - rd}
+
+
 @dataclass
 class Materials(SurfaceModel):
-    """Per-face (or per-vertex after `take`) material parameters, each (F,): the albedo-weighted mixture of the
-    three models of lobes.py, Lambert(rho_d) + Phong(rho_s, exponent) + Mirror(rho_m) (`parts`)."""
+    """Per-face (or per-vertex after `take`) materials: one lobe of each registered model (`kinds`, the surface
+    types of registry.SURFACE_MODELS, in its order), each holding its weight per face (0 where a face does not use
+    it); the mixture's BRDF is the sum of theirs, e.g. Lambert(rho_d) + Phong(rho_s, exponent) + Mirror(rho_m)."""
 
-    rho_d: np.ndarray  # diffuse reflectance
-    rho_s: np.ndarray  # glossy (Phong) reflectance
-    exponent: np.ndarray  # Phong exponent n >= 0
-    rho_m: np.ndarray  # perfect-mirror reflectance
+    lobes: tuple[Lobe, ...]
+    kinds: tuple[str, ...]
 
     @classmethod
-    def lambertian(cls, rho) -> "Materials":
-        rho = np.asarray(rho, float)
-        z = np.zeros_like(rho)
-        return cls(rho.copy(), z, z.copy(), z.copy())
+    def mix(cls, **given: Lobe | ArrayLike) -> Materials:
+        """The registered models with the `given` lobes by surface type (an array: the weight of a model without
+        parameters); every other model has weight 0 (and parameters 0), e.g. `mix(lambertian=rho_d,
+        phong=Phong(rho_s, n))`."""
+        unknown = set(given) - set(SURFACE_MODELS)
+        if unknown:
+            raise KeyError(f"no surface model {sorted(unknown)} (registered: {', '.join(SURFACE_MODELS)})")
+        lobes = {k: v if isinstance(v, Lobe) else SURFACE_MODELS[k](np.asarray(v, float)) for k, v in given.items()}
+        count = len(next(iter(lobes.values())).rho)
+        zero = np.zeros(count)
+        for kind, model in SURFACE_MODELS.items():
+            if kind not in lobes:
+                lobes[kind] = model(zero.copy(), *(zero.copy() for _ in model.parameters))
+        return cls(tuple(lobes[k] for k in SURFACE_MODELS), tuple(SURFACE_MODELS))
+
+    @classmethod
+    def lambertian(cls, rho: ArrayLike) -> Materials:
+        return cls.mix(**{DIFFUSE: np.asarray(rho, float).copy()})
+
+    @classmethod
+    def of_surfaces(cls, surfaces: Sequence[Any]) -> Materials:
+        """The materials of per-face surfaces: numbers (Lambertian rho) or surface specs (schemas/surfaces.py)."""
+        count = len(surfaces)
+        weights = {kind: np.zeros(count) for kind in SURFACE_MODELS}
+        params = {kind: np.zeros((len(m.parameters), count)) for kind, m in SURFACE_MODELS.items()}
+        for face, surface in enumerate(surfaces):
+            for kind, w in _weights(surface).items():
+                weights[kind][face] = w
+            if not isinstance(surface, (int, float)):
+                for j, name in enumerate(SURFACE_MODELS[surface.type].parameters):
+                    params[surface.type][j, face] = getattr(surface, name)
+        return cls.mix(**{k: m(weights[k], *params[k]) for k, m in SURFACE_MODELS.items()})
+
+    def lobe(self, kind: str) -> Lobe:
+        """The lobe of the model registered as surface type `kind`."""
+        return self.lobes[self.kinds.index(kind)]
+
+    def weight_of(self, kind: str) -> FloatArray:
+        """The weight [-] per face of the model `kind` (e.g. "mirror": rho_m, for mirror planes and images)."""
+        return self.lobe(kind).rho
 
     @property
-    def total(self) -> np.ndarray:
-        """rho = rho_d + rho_s + rho_m (the directional albedo's upper bound)."""
-        return self.rho_d + self.rho_s + self.rho_m
+    def rho_d(self) -> FloatArray:
+        """Diffuse reflectance [-] (the `lambertian` model's weight)."""
+        return self.weight_of(DIFFUSE)
+
+    @property
+    def rho_s(self) -> FloatArray:
+        """Glossy (Phong) reflectance [-]."""
+        return self.weight_of("phong")
+
+    @property
+    def exponent(self) -> FloatArray:
+        """Phong exponent n >= 0 [-]."""
+        phong = self.lobe("phong")
+        assert isinstance(phong, Phong)
+        return phong.n
+
+    @property
+    def rho_m(self) -> FloatArray:
+        """Perfect-mirror reflectance [-]."""
+        return self.weight_of("mirror")
+
+    @property
+    def total(self) -> FloatArray:
+        """rho = the sum of the lobes' weights, in registry order (rho_d + rho_s + rho_m): the albedo's bound."""
+        out = self.lobes[0].rho
+        for lobe in self.lobes[1:]:
+            out = out + lobe.rho
+        return out
 
     @property
     def is_lambertian(self) -> bool:
-        return not (self.rho_s.any() or self.rho_m.any())
+        """No weight on any model but the diffuse one."""
+        return not any(lobe.rho.any() for lobe in self.lobes[1:])
 
-    @property
-    def parts(self) -> tuple[Lambert, Phong, Mirror]:
-        """The three models this material mixes, each with its own reflectance."""
-        return Lambert(self.rho_d), Phong(self.rho_s, self.exponent), Mirror(self.rho_m)
+    def take(self, idx: IntArray) -> Materials:
+        return Materials(tuple(lobe.take(idx) for lobe in self.lobes), self.kinds)
 
-    def take(self, idx) -> "Materials":
-        return Materials(self.rho_d.take(idx), self.rho_s.take(idx), self.exponent.take(idx), self.rho_m.take(idx))
+    def _terms(self) -> list[Lobe]:
+        """The non-delta lobes after the first with some weight (a lobe of weight 0 everywhere adds 0)."""
+        return [lobe for lobe in self.lobes[1:] if not lobe.delta and lobe.rho.any()]
 
     # ------------------------------------------------------------------ evaluation
-    def eval(self, d_in: np.ndarray, normals: np.ndarray, w_o: np.ndarray) -> np.ndarray:
-        """Non-delta BRDF f(w_i = -d_in, w_o) [1/sr] (0 when w_o is below the surface).
+    def eval(self, d_in: FloatArray, normals: FloatArray, w_o: FloatArray) -> FloatArray:
+        """Non-delta BRDF f(w_i = -d_in, w_o) [1/sr]: the lobes' terms summed in registry order (0 when w_o or w_i
+        is below the surface)."""
+        pair = Pair.of(d_in, normals, w_o)
+        out = self.lobes[0].brdf(pair)
+        for lobe in self._terms():
+            out = out + lobe.brdf(pair)
+        return np.where(pair.above, out, 0.0)
 
-        cos alpha = r . w_o = d_in . w_o + 2 cos th_i cos th_o (r = d_in - 2 (d_in . n) n), so the
-        mirror direction itself is never formed.
-        """
-        cos_i = -_dot(d_in, normals)
-        cos_o = _dot(w_o, normals)
-        out = lambert_brdf(self.rho_d)
-        if self.rho_s.any():  # rho_s = 0 rows add 0 (their lobe is finite)
-            cos_a = _dot(d_in, w_o) + 2.0 * cos_i * cos_o
-            out = out + phong_brdf(self.rho_s, self.exponent, cos_a, cos_i, cos_o)
-        return np.where((cos_o > 0) & (cos_i > 0), out, 0.0)
-
-    def pdf(self, d_in: np.ndarray, normals: np.ndarray, w_o: np.ndarray) -> np.ndarray:
-        """Solid-angle density of `sample`'s non-delta directions (without the mirror's point mass)."""
+    def pdf(self, d_in: FloatArray, normals: FloatArray, w_o: FloatArray) -> FloatArray:
+        """Solid-angle density [1/sr] of `sample`'s non-delta directions: sum of (rho_k / rho) pdf_k (no point
+        masses)."""
         rho = self.total
         safe = np.where(rho > 0, rho, 1.0)
-        cos_o = _dot(w_o, normals)
-        p = lambert_pdf(self.rho_d / safe, cos_o)
-        cos_a = _dot(d_in, w_o) - 2.0 * _dot(d_in, normals) * cos_o
-        p = p + phong_pdf(self.rho_s / safe, self.exponent, cos_a)
+        pair = Pair.of(d_in, normals, w_o)
+        first = self.lobes[0]
+        p = first.density(first.rho / safe, pair)
+        for lobe in self._terms():
+            p = p + lobe.density(lobe.rho / safe, pair)
         return np.where(rho > 0, p, 0.0)
 
     # ------------------------------------------------------------------ sampling
-    def sample(self, d_in: np.ndarray, normals: np.ndarray, u1: np.ndarray, u2: np.ndarray):
-        """(w_o (3, n), weight factor (n,)): lobe chosen by albedo, lobe sampled exactly.
+    def sample(
+        self, d_in: FloatArray, normals: FloatArray, u1: FloatArray, u2: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """(w_o (3, n), weight factor (n,)): lobe k chosen with probability rho_k / rho, then sampled exactly.
 
-        The weight factor is f cos th_o / (p_lobe pdf_lobe) for the chosen lobe's f:
-        rho for the diffuse and mirror lobes, rho cos th_o / max(cos th_i, cos th_o) for
-        the glossy lobe (0 below the surface); always <= rho. The cosine sampler runs on every
-        vertex (cheaper than gathering the diffuse ones and scattering back); the glossy and
-        mirror vertices then overwrite their directions.
+        Lobe k takes the vertices with c_(k-1) <= u1 < c_k, c_k = p_1 + ... + p_k (the last lobe the rest), and u1
+        remapped to (u1 - c_(k-1)) / p_k. The weight factor is the chosen lobe's sampled weight for the total rho
+        (f cos th_o / (p_k pdf_k)): rho for the diffuse and mirror lobes, rho cos th_o / max(cos th_i, cos th_o)
+        for the glossy one; always <= rho. The first (diffuse) lobe samples every vertex (cheaper than gathering
+        the diffuse ones and scattering back); the others then overwrite their vertices.
         """
         rho = self.total
         safe = np.where(rho > 0, rho, 1.0)
-        p_d = self.rho_d / safe
+        first, rest = self.lobes[0], self.lobes[1:]
+        below = first.rho / safe  # c_1
         u1 = np.asarray(u1, float)
-        diffuse = u1 < p_d  # (so p_d > 0 there)
-        w_o = cosine_about_soa(normals, u1 / np.where(diffuse, p_d, 1.0), u2)  # every vertex; glossy and mirror
-        # ones are replaced below
-        weight = rho.copy()
-        if diffuse.all():  # every vertex diffuse (a Lambertian scene)
+        taken = u1 < below  # (so p_1 > 0 there)
+        w_o, weight = first.with_rho(rho).sample(d_in, normals, u1 / np.where(taken, below, 1.0), u2)
+        if taken.all():  # every vertex diffuse (a Lambertian scene)
             return w_o, weight
-        p_s = self.rho_s / safe
-        glossy = ~diffuse & (u1 < p_d + p_s)
-        idx = np.flatnonzero(glossy)
-        if len(idx):
-            v = np.clip((u1.take(idx) - p_d.take(idx)) / p_s.take(idx), 0.0, 1.0)
-            n_i, d_i = normals.take(idx, axis=1), d_in.take(idx, axis=1)
-            w = phong_directions(d_i, n_i, self.exponent.take(idx), v, u2.take(idx))
-            for k in range(3):
-                w_o[k].put(idx, w[k])
-            weight.put(idx, phong_weight(rho.take(idx), d_i, n_i, w))
-        idx = np.flatnonzero(~diffuse & ~glossy)
-        if len(idx):
-            r = mirror_direction(d_in.take(idx, axis=1), normals.take(idx, axis=1))
-            for k in range(3):
-                w_o[k].put(idx, r[k])
+        for k, lobe in enumerate(rest):
+            last = k == len(rest) - 1
+            if last:  # the rest: u1 >= c_(K-1) (and the vertices of rho = 0, weight 0)
+                idx = np.flatnonzero(~taken)
+            elif lobe.rho.any():
+                share = lobe.rho / safe
+                chosen = ~taken & (u1 < below + share)
+                idx = np.flatnonzero(chosen)
+            else:  # weight 0 everywhere: no vertex has c_(k-1) <= u1 < c_(k-1) + 0
+                continue
+            if len(idx):
+                p_k = lobe.rho.take(idx) / safe.take(idx)
+                v = np.clip((u1.take(idx) - below.take(idx)) / np.where(p_k > 0, p_k, 1.0), 0.0, 1.0)
+                part = lobe.at(idx, rho.take(idx))
+                w, wt = part.sample(d_in.take(idx, axis=1), normals.take(idx, axis=1), v, u2.take(idx))
+                for c in range(3):
+                    w_o[c].put(idx, w[c])
+                weight.put(idx, wt)
+            if not last:
+                taken, below = taken | chosen, below + share
         return w_o, weight
 
 

@@ -1,4 +1,4 @@
-"""The three surface reflection models, each behind one interface (`SurfaceModel`): evaluate, density, sample.
+"""The surface reflection models, each behind one interface (`SurfaceModel`; `Lobe` for the mixable ones).
 
 - `Lambert(rho)`: f = rho / pi; cosine-weighted sampling, density cos th_o / pi, weight rho.
 - `Phong(rho, n)`: f = rho (n + 1) / (2 pi) cos^n(alpha) / max(cos th_i, cos th_o) (cos alpha > 0, alpha the
@@ -7,22 +7,24 @@
 - `Mirror(rho)`: a delta lobe: f and the density of non-delta directions are 0; sampling returns the mirror
   direction with weight rho (point devices are reached through mirror images, bsdf.MirrorPlane).
 
-A surface's material mixes the three (bsdf.Materials, the kernel's model: one lobe chosen by albedo per
-vertex); the formulas and references are in bsdf.py's docstring. Arrays are (3, n) component rows;
+A surface's material mixes the registered models (registry.py `SURFACE_MODELS`; bsdf.Materials, the kernel's
+model: one lobe chosen by albedo per vertex); the formulas and references are in bsdf.py's docstring. A `Lobe`
+gives the mixture its unmasked BRDF term `brdf(pair)` and its weighted density `density(share, pair)` on the
+vertex pairs `Pair` (the cosines computed once for every model). Arrays are (3, n) component rows;
 `d_in` is the arriving direction (into the surface), `normals` face the arriving ray, `w_o` leaves it.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Protocol
+from dataclasses import dataclass, fields, replace
+from typing import ClassVar, Protocol, Self
 
 import numpy as np
 
-from owcsim.engine.core.arrays import FloatArray
+from owcsim.engine.core.arrays import BoolArray, FloatArray, IntArray
 from owcsim.engine.core.sampling import cosine_about_soa
 
-__all__ = ["Lambert", "Mirror", "Phong", "SurfaceModel", "mirror_direction"]
+__all__ = ["Lambert", "Lobe", "Mirror", "Pair", "Phong", "SurfaceModel", "mirror_direction"]
 
 
 class SurfaceModel(Protocol):
@@ -117,62 +119,120 @@ def _phong_lobe(n: np.ndarray, cos_a: np.ndarray) -> np.ndarray:
 
 
 # --- the models -------------------------------------------------------------------------------------------------------
-def _both_above(d_in: np.ndarray, normals: np.ndarray, w_o: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(cos th_i, cos th_o, both above the surface)."""
-    cos_i = -_dot(d_in, normals)
-    cos_o = _dot(w_o, normals)
-    return cos_i, cos_o, (cos_o > 0) & (cos_i > 0)
+@dataclass(frozen=True)
+class Pair:
+    """A batch of vertex pairs (incoming, outgoing): `d_in` (3, n) arriving (into the surface), `normals` (3, n)
+    facing the arriving ray, `w_o` (3, n) leaving; cos th_i = -d_in . n and cos th_o = w_o . n, computed once."""
+
+    d_in: FloatArray
+    normals: FloatArray
+    w_o: FloatArray
+    cos_i: FloatArray
+    cos_o: FloatArray
+
+    @classmethod
+    def of(cls, d_in: FloatArray, normals: FloatArray, w_o: FloatArray) -> Pair:
+        return cls(d_in, normals, w_o, -_dot(d_in, normals), _dot(w_o, normals))
+
+    @property
+    def above(self) -> BoolArray:
+        """Both directions above the surface (cos th_i > 0 and cos th_o > 0)."""
+        return (self.cos_o > 0) & (self.cos_i > 0)
 
 
 @dataclass(frozen=True)
-class Lambert(SurfaceModel):
+class Lobe(SurfaceModel):
+    """A reflection model a material mixes (registry.py): its weight `rho` (n,) [-] per vertex, then its own
+    per-vertex parameters (the dataclass fields after `rho`, read from the surface spec's fields `parameters`).
+
+    A subclass gives `brdf` and `density` (or sets `delta`: a point mass, no non-delta BRDF nor density) and
+    `sample`; `eval`, `pdf`, `take` and `with_rho` follow.
+    """
+
+    rho: FloatArray
+    #: a delta lobe (perfect mirror): f and the density of non-delta directions are 0, the mixture skips it
+    delta: ClassVar[bool] = False
+    #: the surface spec's fields holding the per-vertex parameters, in the order of the fields after `rho`
+    parameters: ClassVar[tuple[str, ...]] = ()
+
+    def brdf(self, pair: Pair) -> FloatArray:
+        """The BRDF term f(w_i, w_o) [1/sr] (n,) of weight `rho`, before the mixture's below-surface mask."""
+        raise NotImplementedError(f"{type(self).__name__} is a delta lobe")
+
+    def density(self, share: FloatArray, pair: Pair) -> FloatArray:
+        """`share` (n,) times the solid-angle pdf [1/sr] of `sample`'s directions."""
+        raise NotImplementedError(f"{type(self).__name__} is a delta lobe")
+
+    def eval(self, d_in: FloatArray, normals: FloatArray, w_o: FloatArray) -> FloatArray:
+        if self.delta:
+            return np.zeros(len(self.rho))
+        pair = Pair.of(d_in, normals, w_o)
+        return np.where(pair.above, self.brdf(pair), 0.0)
+
+    def pdf(self, d_in: FloatArray, normals: FloatArray, w_o: FloatArray) -> FloatArray:
+        if self.delta:
+            return np.zeros(len(self.rho))
+        return self.density(np.ones(len(self.rho)), Pair.of(d_in, normals, w_o))
+
+    def take(self, idx: IntArray) -> Self:
+        """The lobe on the vertices `idx` (every per-vertex field taken)."""
+        return type(self)(*(np.take(getattr(self, f.name), idx) for f in fields(self)))
+
+    def at(self, idx: IntArray, rho: FloatArray) -> Self:
+        """The lobe on the vertices `idx` with weight `rho` (len(idx),): its parameters taken, `rho` given."""
+        return type(self)(rho, *(np.take(getattr(self, f.name), idx) for f in fields(self)[1:]))
+
+    def with_rho(self, rho: FloatArray) -> Self:
+        """The same lobe with weight `rho` (the mixture samples a chosen lobe with the material's total rho)."""
+        return replace(self, rho=rho)
+
+
+@dataclass(frozen=True)
+class Lambert(Lobe):
     """Ideal diffuse reflection of reflectance `rho` (n,)."""
 
-    rho: np.ndarray
+    def brdf(self, pair: Pair) -> FloatArray:
+        return lambert_brdf(self.rho)
 
-    def eval(self, d_in, normals, w_o):
-        _, _, above = _both_above(d_in, normals, w_o)
-        return np.where(above, lambert_brdf(self.rho), 0.0)
+    def density(self, share: FloatArray, pair: Pair) -> FloatArray:
+        return lambert_pdf(share, pair.cos_o)
 
-    def pdf(self, d_in, normals, w_o):
-        return lambert_pdf(np.ones(len(self.rho)), _dot(w_o, normals))
-
-    def sample(self, d_in, normals, u1, u2):
+    def sample(
+        self, d_in: FloatArray, normals: FloatArray, u1: FloatArray, u2: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
         return cosine_about_soa(normals, u1, u2), self.rho.copy()
 
 
 @dataclass(frozen=True)
-class Phong(SurfaceModel):
+class Phong(Lobe):
     """The reciprocal modified-Phong glossy lobe of reflectance `rho` (n,) and exponent `n` (n,) >= 0."""
 
-    rho: np.ndarray
-    n: np.ndarray
+    n: FloatArray
+    parameters: ClassVar[tuple[str, ...]] = ("exponent",)
 
-    def eval(self, d_in, normals, w_o):
-        cos_i, cos_o, above = _both_above(d_in, normals, w_o)
-        cos_a = _dot(d_in, w_o) + 2.0 * cos_i * cos_o
-        return np.where(above, phong_brdf(self.rho, self.n, cos_a, cos_i, cos_o), 0.0)
+    def brdf(self, pair: Pair) -> FloatArray:
+        """cos alpha = r . w_o = d_in . w_o + 2 cos th_i cos th_o (the mirror direction r is never formed)."""
+        cos_a = _dot(pair.d_in, pair.w_o) + 2.0 * pair.cos_i * pair.cos_o
+        return phong_brdf(self.rho, self.n, cos_a, pair.cos_i, pair.cos_o)
 
-    def pdf(self, d_in, normals, w_o):
-        cos_a = _dot(d_in, w_o) - 2.0 * _dot(d_in, normals) * _dot(w_o, normals)
-        return phong_pdf(np.ones(len(self.rho)), self.n, cos_a)
+    def density(self, share: FloatArray, pair: Pair) -> FloatArray:
+        cos_a = _dot(pair.d_in, pair.w_o) - 2.0 * _dot(pair.d_in, pair.normals) * pair.cos_o
+        return phong_pdf(share, self.n, cos_a)
 
-    def sample(self, d_in, normals, u1, u2):
+    def sample(
+        self, d_in: FloatArray, normals: FloatArray, u1: FloatArray, u2: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
         w_o = phong_directions(d_in, normals, self.n, u1, u2)
         return w_o, phong_weight(self.rho, d_in, normals, w_o)
 
 
 @dataclass(frozen=True)
-class Mirror(SurfaceModel):
+class Mirror(Lobe):
     """Perfect specular reflection of reflectance `rho` (n,): a delta lobe."""
 
-    rho: np.ndarray
+    delta: ClassVar[bool] = True
 
-    def eval(self, d_in, normals, w_o):
-        return np.zeros(len(self.rho))
-
-    def pdf(self, d_in, normals, w_o):
-        return np.zeros(len(self.rho))
-
-    def sample(self, d_in, normals, u1, u2):
+    def sample(
+        self, d_in: FloatArray, normals: FloatArray, u1: FloatArray, u2: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
         return mirror_direction(d_in, normals), self.rho.copy()

@@ -14,13 +14,14 @@ import pytest
 from scipy import stats
 
 from owcsim.engine.surfaces.bsdf import Materials, mirror_direction
+from owcsim.engine.surfaces.lobes import Phong
 
 N = np.array([0.0, 0.0, 1.0])
 
 
 def _mat(rho_d=0.0, rho_s=0.0, n=0.0, rho_m=0.0, size=1):
     f = lambda x: np.full(size, float(x))  # noqa: E731
-    return Materials(f(rho_d), f(rho_s), f(n), f(rho_m))
+    return Materials.mix(lambertian=f(rho_d), phong=Phong(f(rho_s), f(n)), mirror=f(rho_m))
 
 
 def _incoming(theta_deg, size):

@@ -17,8 +17,9 @@ from scipy import stats
 from conftest import SEED, seeded_rng  # noqa: F401
 from owcsim.engine.core.errors import SceneError
 from owcsim.engine.media.grid import GridMedium
-from owcsim.engine.media.media import HomogeneousMedium, medium_from_spec
+from owcsim.engine.media.media import HomogeneousMedium
 from owcsim.engine.media.regions import MeshRegion
+from owcsim.engine.media.registry import medium_from_spec
 from owcsim.schemas import SceneSpec
 from tests.scenes import room_doc
 

@@ -29,8 +29,9 @@ from scipy import integrate
 
 from owcsim.engine.core.errors import SceneError
 from owcsim.engine.media import mie, report
-from owcsim.engine.media.media import HomogeneousMedium, medium_from_spec
+from owcsim.engine.media.media import HomogeneousMedium
 from owcsim.engine.media.phase import MiePhase, Tabulated, phase_from_spec
+from owcsim.engine.media.registry import medium_from_spec
 from owcsim.engine.scene.scene import build_scene
 from owcsim.schemas.medium import KOSCHMIEDER, ParticleMediumSpec, ParticlesSpec
 from tests.results import simulate_document as simulate

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from owcsim.engine.surfaces.bsdf import Materials
+from owcsim.engine.surfaces.lobes import Phong
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "luminaires-surfaces.md"
 #: The docs' example floor: {"type": "phong", "reflectance": 0.3, "diffuse_fraction": 0.6, "exponent": 30}
@@ -44,7 +45,7 @@ def albedo_quadrature(rho_d, rho_s, n, theta_i, steps=600):
 
 def albedo_engine(rho_d, rho_s, n, theta_i, count=400_000, seed=3):
     """Mean and standard error of Materials.sample's weight factor (the engine's estimate of the albedo)."""
-    mat = Materials(*(np.full(count, v) for v in (rho_d, rho_s, n, 0.0)))
+    mat = Materials.mix(lambertian=np.full(count, rho_d), phong=Phong(np.full(count, rho_s), np.full(count, n)))
     d_in = np.tile(np.array([[-math.sin(theta_i)], [0.0], [-math.cos(theta_i)]]), count)  # arriving, into the surface
     normals = np.tile(np.array([[0.0], [0.0], [1.0]]), count)
     u = np.random.default_rng(seed).random((2, count))
