@@ -4,12 +4,27 @@ from __future__ import annotations
 
 import importlib
 import json
+import os
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
+
+
+def use_baseline_tree() -> None:
+    """In a baseline tree (OWCSIM_TREE set: its symlink farm on PYTHONPATH), drop this editable install's
+    import finder so that `owcsim` is the baseline's. Call before the first owcsim import."""
+    if "OWCSIM_TREE" in os.environ:
+        sys.meta_path[:] = [
+            f
+            for f in sys.meta_path
+            if "editable" not in getattr(f, "__module__", "")
+            and "editable" not in type(f).__module__
+            and "editable" not in repr(f)
+        ]
 
 
 def engine_module(name: str):

@@ -48,16 +48,10 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-if "OWCSIM_TREE" in os.environ:  # a baseline tree: its symlink farm (PYTHONPATH), not this editable install
-    sys.meta_path[:] = [
-        f
-        for f in sys.meta_path
-        if "editable" not in getattr(f, "__module__", "")
-        and "editable" not in type(f).__module__
-        and "editable" not in repr(f)
-    ]
 sys.path.append(str(ROOT))  # after a baseline's farm: `benchmarks` is this tree's, `owcsim` the farm's
-from benchmarks._common import engine_module  # noqa: E402
+from benchmarks._common import engine_module, use_baseline_tree  # noqa: E402
+
+use_baseline_tree()
 
 #: The commit this work started from (issue 13's "today").
 DEFAULT_BASELINE = "d42d4e1"

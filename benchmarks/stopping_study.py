@@ -32,14 +32,10 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-if "OWCSIM_TREE" in os.environ:  # a baseline tree: its symlink farm (PYTHONPATH), not this editable install
-    sys.meta_path[:] = [
-        f
-        for f in sys.meta_path
-        if "editable" not in getattr(f, "__module__", "")
-        and "editable" not in type(f).__module__
-        and "editable" not in repr(f)
-    ]
+sys.path.append(str(ROOT))  # after a baseline's farm: `benchmarks` is this tree's, `owcsim` the farm's
+from benchmarks._common import engine_module, use_baseline_tree  # noqa: E402
+
+use_baseline_tree()
 
 CASES = {"far": 0.85, "near": 2.5}
 G = 0.9
@@ -55,7 +51,7 @@ def scene(case: str, seed: int, **simulation) -> dict:
 
 
 def run(doc: dict) -> dict:
-    from owcsim.engine.run.simulate import simulate
+    simulate = engine_module("run.simulate").simulate
     from owcsim.schemas import SceneSpec
 
     t = time.perf_counter()
@@ -108,7 +104,8 @@ def reference(tree: Tree, case: str, seeds: int, paths: int) -> tuple[float, flo
 def map_run(doc: dict) -> dict:
     """examples/komine_map.json at `doc['target']`: paths, wall time, worst error (no medium: the earlier rule)."""
     from owcsim.docs import load_scene
-    from owcsim.engine.run.simulate import simulate
+
+    simulate = engine_module("run.simulate").simulate
 
     spec, _ = load_scene(ROOT / "examples" / "komine_map.json", [("simulation.target_rel_error", doc["target"])])
     t = time.perf_counter()

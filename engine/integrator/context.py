@@ -23,7 +23,6 @@ from owcsim.engine.core import qmc
 from owcsim.engine.core.arrays import FloatArray, IntArray
 from owcsim.engine.core.constants import SPEED_OF_LIGHT
 from owcsim.engine.integrator.path import BatchState, Paths, WorkItem, dot, dot_vector, item_links, rows
-from owcsim.engine.integrator.uniform_medium import EquiangularFrames, connect_on_segments
 from owcsim.engine.integrator.weights import connection_weight, side_weight
 from owcsim.engine.surfaces.bsdf import Materials
 from owcsim.engine.tally.spectral import ChannelBuilder
@@ -335,19 +334,6 @@ class BatchContext(BatchState):
                 ratio = ratio * spectra.phase_ratio(dot(rows(v.in_dirs, vertex), out_dir))
         length *= 1.0 / SPEED_OF_LIGHT
         self.record(c.column, rows(paths.k, vertex), s_order, length, f, rows(paths.path, vertex), ratio)
-
-    def connect_on_segments(
-        self,
-        j: int,
-        paths: Paths,
-        eq: EquiangularFrames,
-        s_eq: FloatArray,
-        collision_rows: IntArray,
-        t_col: FloatArray,
-    ) -> bool:
-        """The medium branch of `connect` for algorithm 5's scattering points, on their segments'
-        equiangular frames (uniform_medium.connect_on_segments); False (nothing done) where it does not apply."""
-        return connect_on_segments(self, j, paths, eq, s_eq, collision_rows, t_col)
 
     def flush(self, depth: int | None = None) -> None:
         """Tally the estimates of cells of depth k + s <= `depth` (all with None).

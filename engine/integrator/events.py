@@ -27,7 +27,7 @@ from owcsim.engine.integrator.lobe import lobe_axis, lobe_source_density
 from owcsim.engine.integrator.mirrors import connect_mirrors
 from owcsim.engine.integrator.path import Paths, dot, dot3, rows
 from owcsim.engine.integrator.segments import scattering_point_throughput
-from owcsim.engine.integrator.uniform_medium import EquiangularFrames
+from owcsim.engine.integrator.uniform_medium import EquiangularFrames, connect_on_segments
 from owcsim.engine.integrator.weights import first_medium_factor, side_weight
 from owcsim.schemas.algorithms import Direction
 
@@ -117,7 +117,7 @@ def medium_next_events(
     segments.scattering_point_throughput. The path itself continues from the collision only
     (`medium_collision`). The equiangular points of all segments are drawn as one (n_eq, segments)
     grid, stratum i of every segment in row i (broadcasting, no index arrays). Where
-    `BatchContext.connect_on_segments` applies (a medium the same everywhere, see there) the points connect
+    `uniform_medium.connect_on_segments` applies (a medium the same everywhere, see there) the points connect
     through their segment's frame without gathering the paths; else through `connect`.
     """
     settings, medium = ctx.settings, ctx.medium
@@ -158,7 +158,7 @@ def _equiangular_points(
     xi *= 1.0 / n_eq
     s_eq = np.clip(frame.sample(None, xi), 0.0, eq.end)
     empty = frame.span <= 0  # (a segment of length 0 has no equiangular points)
-    if not empty.any() and ctx.connect_on_segments(j, paths, eq, s_eq, collision_rows, t_col):
+    if not empty.any() and connect_on_segments(ctx, j, paths, eq, s_eq, collision_rows, t_col):
         return None
     seg_rows = np.arange(n_seg) if eq.rows is None else eq.rows
     s_eq, n_e_eq, eq_rows = s_eq.ravel(), frame.density(s_eq, n_eq).ravel(), np.tile(seg_rows, n_eq)

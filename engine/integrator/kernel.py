@@ -52,7 +52,7 @@ VolPathIntegrator and Mitsuba 3's volpath):
   measurement equation: it evaluates the BRDF or the phase function itself, callers pass a `Vertices`
   description with the path throughput and their weights; algorithm 5's scattering points in a medium
   the same everywhere take its medium branch on their segments' equiangular frames,
-  `BatchContext.connect_on_segments`, tests/engine/test_medium_next_events.py holds the two equal);
+  `uniform_medium.connect_on_segments`, tests/engine/test_medium_next_events.py holds the two equal);
 - mirrors.py: connections through perfect-mirror images;
 - single_scatter.py: the segment-points event of algorithms 2-4 and their branch from the first segment;
 - events.py: surface vertex, medium next events, medium collision, roulette;

@@ -20,7 +20,7 @@ from owcsim.engine.media.medium import Medium
 from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.scene.scene import Scene
 from owcsim.engine.sources.devices import Devices
-from owcsim.engine.tally.tally import TallyPlan, TimeBins
+from owcsim.engine.tally.plan import TallyPlan, TimeBins
 from owcsim.schemas.algorithms import Direction
 
 

@@ -66,7 +66,7 @@ def _warnings(spec: SceneSpec, scene: Scene) -> list[str]:
             "points to point-like devices are heavy-tailed, so the scattered part converges slowly and its "
             "error bars may be too small; compare runs with different seeds"
         )
-    if alg.warning_in_scattering_medium and _scatters(scene):
+    if alg.warning_in_scattering_medium and scene.scatters:
         out.append(alg.warning_in_scattering_medium)
     out += _size_warnings(scene)
     return out + unit_warnings(spec, surface_extent(scene))
@@ -166,15 +166,6 @@ def _size_warnings(scene) -> list[str]:
     ]
 
 
-def _scatters(scene) -> bool:
-    """The scene's medium scatters (decided once when the scene was built: engine/media/model.py)."""
-    return scene.medium_model is not None and scene.medium_model.scatters
-
-
-def _albedo_max(scene) -> float:
-    return scene.medium_model.max_albedo
-
-
 def _modeled(job: FinishedJob) -> ModeledPublic:
     """The result's `modeled` section: what the automatic settings said (`job.modeled`), and what ran."""
     spec, scene, settings = job.spec, job.scene, job.settings
@@ -186,7 +177,7 @@ def _modeled(job: FinishedJob) -> ModeledPublic:
         else ModeledPublic(algorithm_reason=f"algorithm {sim.algorithm} requested")
     )
     families, left_out = alg.families_at(sim.scattering_orders)
-    left = list(left_out) if _scatters(scene) else []
+    left = list(left_out) if scene.scatters else []
     left.append(f"reflection orders above K = {sim.max_reflections}")
     if alg.scattering_orders is None and scene.medium is not None:  # S chosen, not fixed by the algorithm
         left.append(f"scattering orders above S = {sim.max_scattering}")
@@ -306,12 +297,10 @@ def _cir_and_orders(job: FinishedJob, f: _LinkFigures, cols: dict[str, list]) ->
     cir_links = np.flatnonzero(plan.cir_slots(links) >= 0)
     cir_totals = cir_block(job.accs, plan, cir_links, f.los_gain, job.los.delay, cols)
     order_links = np.flatnonzero(plan.order_slots(links) >= 0)
-    rho_max = float(scene.geometry.reflectance.max()) if len(scene.geometry.reflectance) else 0.0
+    rho_max = scene.max_reflectance
     # the albedo tail concerns algorithm 5's truncated scattering orders (algorithm 4's S = 2 is a family, not a cut)
     albedo_max = (
-        _albedo_max(scene)
-        if settings.free_flight and settings.max_scattering > 1 and scene.medium is not None
-        else None
+        scene.max_albedo if settings.free_flight and settings.max_scattering > 1 and scene.medium is not None else None
     )
     enclosed = len(scene.geometry.faces) > 0
     order_block(job.accs, plan, order_links, f.los_gain, cols, rho_max, albedo_max, enclosed=enclosed)

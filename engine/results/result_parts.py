@@ -16,7 +16,8 @@ import numpy as np
 
 from owcsim.engine.results import metrics
 from owcsim.engine.results.truncation import geometric_tail, tail_ratio
-from owcsim.engine.tally.tally import Accumulator, TallyPlan
+from owcsim.engine.tally.plan import TallyPlan
+from owcsim.engine.tally.tally import Accumulator
 from owcsim.schemas.algorithms import Direction
 
 

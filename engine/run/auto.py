@@ -63,7 +63,7 @@ def choose_algorithm(spec: SceneSpec, scene: Scene) -> tuple[int, str, bool]:
         lo, hi = (np.asarray(b, float) for b in medium.bounds)
         if np.any(hi <= room_lo) or np.any(lo >= room_hi):
             return 1, "the medium's region lies outside the room: no path can enter it; vacuum paths only", True
-    if not _scatters(scene):
+    if not scene.scatters:
         return 1, "sigma_s = 0: no scattering; algorithm 1 (extinction only) is exact", False
     return (
         5,
@@ -73,23 +73,6 @@ def choose_algorithm(spec: SceneSpec, scene: Scene) -> tuple[int, str, bool]:
         ),
         False,
     )
-
-
-def _scatters(scene: Scene) -> bool:
-    """True when the scene's medium scatters anywhere (sigma_s > 0), as decided when it was built."""
-    return scene.medium_model is not None and scene.medium_model.scatters
-
-
-def _max_reflectance(spec: SceneSpec, scene: Scene) -> float:
-    """rho_max: the largest reflectance of the scene's surfaces [-] (0 without surfaces)."""
-    rho = scene.geometry.reflectance
-    return float(rho.max()) if len(rho) else 0.0
-
-
-def _max_albedo(scene: Scene) -> float:
-    """albedo_max: the largest single-scattering albedo of the scene's medium [-], as decided when it was built."""
-    assert scene.medium_model is not None  # S is chosen only in a medium
-    return scene.medium_model.max_albedo
 
 
 @dataclass(frozen=True)
@@ -236,7 +219,7 @@ def _choose_orders(
     enclosed = len(scene.geometry.faces) > 0
     k = s = None
     if sim.max_reflections is None:
-        rho_max = _max_reflectance(spec, scene)
+        rho_max = scene.max_reflectance
         k = choose_order(
             OrderKind.REFLECTION,
             pilot.links,
@@ -252,7 +235,7 @@ def _choose_orders(
         s = choose_order(
             OrderKind.SCATTERING,
             pilot.links,
-            _max_albedo(scene),
+            scene.max_albedo,
             run.cap_s,
             allowed=allowance,
             rel=rel,
@@ -300,7 +283,7 @@ def finish(step: Resolution, pilot: SimulationResultPublic) -> Resolution:
         max_scattering=run.cap_s,
         t_max_s=run.t_long,
         allowed_truncation_per_watt=float(allowed),
-        rho_max=_max_reflectance(spec, scene),
+        rho_max=scene.max_reflectance,
     )
     total_tail = float((k.tail if k is not None else 0.0) + (s.tail if s is not None else 0.0))
     modeled.truncation_estimate_per_watt = total_tail if math.isfinite(total_tail) else None

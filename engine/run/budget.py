@@ -40,7 +40,8 @@ from dataclasses import asdict, dataclass
 from owcsim.engine.core.constants import SPEED_OF_LIGHT
 from owcsim.engine.core.qmc import BLOCK
 from owcsim.engine.run.pilot import PILOT_CAP
-from owcsim.engine.tally.tally import CIR_GROUPS_MAX, N_GROUPS, SAMPLE_TABLE_MAX
+from owcsim.engine.tally.plan import N_GROUPS
+from owcsim.engine.tally.tally import CIR_GROUPS_MAX, SAMPLE_TABLE_MAX
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.algorithms import ALGORITHMS, Direction
 

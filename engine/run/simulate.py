@@ -45,7 +45,8 @@ from owcsim.engine.run.stopping import MIN_PATHS_FOR_STOP, BatchWatch
 from owcsim.engine.scene.los import line_of_sight, los_geometry
 from owcsim.engine.scene.scene import Scene, build_scene, check_spectral
 from owcsim.engine.tally import reliability
-from owcsim.engine.tally.tally import CIR_GROUPS_MAX, N_GROUPS, Accumulator, TallyPlan, TimeBins
+from owcsim.engine.tally.plan import N_GROUPS, TallyPlan, TimeBins
+from owcsim.engine.tally.tally import CIR_GROUPS_MAX, Accumulator
 from owcsim.schemas import SceneSpec, SimulationSpec
 from owcsim.schemas.algorithms import Direction, TwoSided, algorithm
 from owcsim.schemas.results import DirectionChoicePublic, ModeledPublic, SimulationResultPublic, StopReason

@@ -56,6 +56,23 @@ class Scene:
         """Flat link index of (transmitter, receiver): tx * n_rx + rx."""
         return tx * len(self.receivers) + rx
 
+    @property
+    def scatters(self) -> bool:
+        """The medium scatters somewhere (sigma_s > 0), as decided when it was built (engine/media/model.py)."""
+        return self.medium_model is not None and self.medium_model.scatters
+
+    @property
+    def max_albedo(self) -> float:
+        """albedo_max: the medium's largest single-scattering albedo sigma_s / sigma_t [-] (a medium is needed)."""
+        assert self.medium_model is not None
+        return self.medium_model.max_albedo
+
+    @property
+    def max_reflectance(self) -> float:
+        """rho_max: the largest reflectance of the scene's surfaces [-] (0 without surfaces)."""
+        rho = self.geometry.reflectance
+        return float(rho.max()) if len(rho) else 0.0
+
 
 def build_scene(spec: SceneSpec, base_dir: str | Path | None = None) -> Scene:
     """Everything the kernel needs, from a validated scene document.

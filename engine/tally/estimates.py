@@ -20,7 +20,8 @@ from typing import Any, Protocol
 import numpy as np
 
 from owcsim.engine.tally import reliability
-from owcsim.engine.tally.tally import Accumulator, TallyPlan
+from owcsim.engine.tally.plan import TallyPlan
+from owcsim.engine.tally.tally import Accumulator
 from owcsim.schemas.algorithms import Direction
 
 

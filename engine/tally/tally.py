@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from owcsim.engine.tally.plan import N_GROUPS, TallyPlan, TimeBins, group_shift
+from owcsim.engine.tally.plan import N_GROUPS, TallyPlan, group_shift
 from owcsim.engine.tally.spectral import ChannelAccumulator, ChannelBatch, ChannelBuilder
 from owcsim.engine.tally.stats import mean_cov, per_path_s2, sample_cov
 
@@ -51,16 +51,10 @@ __all__ = [
     "CIR_GROUPS_MAX",
     "DIRECT_KEYS",
     "KEYS_PER_ESTIMATE",
-    "N_GROUPS",
     "SAMPLE_TABLE_MAX",
     "Accumulator",
     "BatchBuilder",
     "BatchTally",
-    "TallyPlan",
-    "TimeBins",
-    "group_shift",
-    "per_path_s2",
-    "sample_cov",
 ]
 
 _GROUP_RANGE = np.arange(N_GROUPS)

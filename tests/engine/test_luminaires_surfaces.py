@@ -444,7 +444,6 @@ def test_surface_spec_validation(floor, message):
 
 
 def test_materials_per_face_and_rho_max_is_the_total_reflectance():
-    from owcsim.engine.run.auto import _max_reflectance
     from owcsim.engine.scene.scene import build_scene
 
     doc = room_doc(0.5, 0.3, 0.6)
@@ -461,7 +460,7 @@ def test_materials_per_face_and_rho_max_is_the_total_reflectance():
     np.testing.assert_allclose(g.material.rho_m[box], 0.63)
     np.testing.assert_allclose(g.material.rho_d[box], 0.07)
     np.testing.assert_allclose(g.reflectance, g.material.total)
-    assert _max_reflectance(s, scene) == pytest.approx(0.9)
+    assert scene.max_reflectance == pytest.approx(0.9)
     assert len(scene.mirror_planes) == 6  # the box's six faces
 
 

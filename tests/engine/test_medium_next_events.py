@@ -1,4 +1,4 @@
-"""Algorithm 5's next-event estimates from scattering points: `BatchContext.connect_on_segments` (computed on the
+"""Algorithm 5's next-event estimates from scattering points: `uniform_medium.connect_on_segments` (computed on the
 segments' equiangular frames, no gathers) against the general `BatchContext.connect` on the same points.
 
 Both draw the same random numbers, so a batch traced either way must give the same tallies to rounding; the
@@ -11,7 +11,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from owcsim.engine.integrator import context, uniform_medium
+from owcsim.engine.integrator import events, uniform_medium
 from owcsim.engine.integrator.kernel import trace_batch
 from owcsim.engine.integrator.path import WorkItem
 from owcsim.engine.run.simulate import kernel_settings
@@ -19,7 +19,7 @@ from owcsim.engine.scene.scene import build_scene
 from owcsim.schemas import SceneSpec
 from tests.scenes import room_doc
 
-REAL = context.BatchContext.connect_on_segments
+REAL = events.connect_on_segments
 SMOKE_HG = {"type": "homogeneous", "sigma_a": 0.05, "sigma_s": 0.3, "phase": {"type": "hg", "g": 0.6}}
 
 
@@ -34,7 +34,7 @@ def _trace(doc, direction, both, fused: bool, monkeypatch, targets=(0,)):
         used.append(done)
         return done
 
-    monkeypatch.setattr(context.BatchContext, "connect_on_segments", spy)
+    monkeypatch.setattr(events, "connect_on_segments", spy)
     tally = trace_batch(scene, WorkItem(direction, 0, targets, 0, 1024, 5), settings)
     evaluations = scene.medium.evaluations
     return tally, evaluations, used
@@ -91,7 +91,7 @@ def test_the_comparison_has_power(monkeypatch):
         finally:
             del phase.eval
 
-    monkeypatch.setattr(context.BatchContext, "connect_on_segments", biased)
+    monkeypatch.setattr(events, "connect_on_segments", biased)
     spec = SceneSpec.model_validate(doc)
     scene = build_scene(spec)
     settings = dataclasses.replace(kernel_settings(spec, scene, both_devices=True), qmc_block=1)

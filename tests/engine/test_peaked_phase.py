@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from benchmarks.peaked_phase import AREA, SIGMA_A, SIGMA_S, D, M, doc, run_seeds
-from owcsim.engine.integrator import context, kernel, single_scatter, uniform_medium
+from owcsim.engine.integrator import context, events, kernel, single_scatter, uniform_medium
 from owcsim.engine.run import simulate as simulate_module
 from owcsim.engine.run.simulate import kernel_settings
 from owcsim.engine.scene.scene import build_scene
@@ -154,8 +154,8 @@ def test_black_room_frame_connections_cover_the_prism_reference(monkeypatch):
     medium = {"type": "homogeneous", "sigma_a": SIGMA_A, "sigma_s": SIGMA_S, "phase": {"type": "hg", "g": 0.999}}
     base = dict(rx=(2.5, 2.5, 0.0), medium=medium, algorithm=5, max_reflections=0, max_scattering=1, t_max_s=4e-7)
     ref = single_scattering(3.0, 1.0, 1e-4, SIGMA_S, SIGMA_T, 0.999, n_z=100, half_width=2.5)
-    used, real = [], context.BatchContext.connect_on_segments
-    monkeypatch.setattr(context.BatchContext, "connect_on_segments", lambda *a: used.append(real(*a)) or used[-1])
+    used, real = [], events.connect_on_segments
+    monkeypatch.setattr(events, "connect_on_segments", lambda *a: used.append(real(*a)) or used[-1])
     link = simulate(SceneSpec.model_validate(room_doc(0.0, 0.0, 0.0, paths=50_000, seed=3, **base)))["links"][0]
     h1 = link["dc_gain"] - link["los_gain"]
     assert used and all(used)  # the frame connections served (the room is empty: every point sees the Rx)

@@ -16,7 +16,8 @@ from owcsim.engine.integrator.kernel import trace_batch
 from owcsim.engine.integrator.path import WorkItem
 from owcsim.engine.run.simulate import kernel_settings
 from owcsim.engine.scene.scene import build_scene
-from owcsim.engine.tally.tally import Accumulator, BatchBuilder, per_path_s2, sample_cov
+from owcsim.engine.tally.stats import per_path_s2, sample_cov
+from owcsim.engine.tally.tally import Accumulator, BatchBuilder
 from owcsim.schemas import SceneSpec
 from tests.scenes import barry_first_bounce, room_doc, within
 

@@ -156,7 +156,7 @@ def test_4_a_job_over_the_per_job_memory_limit_is_refused_at_submission(tmp_path
 
 def test_4_estimate_terms_follow_the_tally_shapes():
     from owcsim.engine.run.budget import memory_estimate
-    from owcsim.engine.tally.tally import N_GROUPS
+    from owcsim.engine.tally.plan import N_GROUPS
     from owcsim.schemas import SceneSpec
 
     small = memory_estimate(SceneSpec.model_validate(_grid_doc(10, t_max_s=1e-7)))
