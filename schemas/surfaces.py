@@ -96,18 +96,3 @@ Surface = Annotated[
     Discriminator(_surface_kind, custom_error_type="invalid_surface", custom_error_message=_SURFACE_HELP),
     WrapValidator(_number_first),
 ]
-
-
-def split(surface) -> tuple[float, float, float, float]:
-    """(rho_d, rho_s, exponent, rho_m) of a number (Lambertian rho) or a surface spec."""
-    if isinstance(surface, (int, float)):
-        return float(surface), 0.0, 0.0, 0.0
-    if surface.type == "spectral":
-        raise TypeError("a spectral surface has no single reflectance: engine/spectral/spectra.py resolves it per band")
-    rho = surface.reflectance
-    if surface.type == "lambertian":
-        return rho, 0.0, 0.0, 0.0
-    rd = surface.diffuse_fraction * rho
-    if surface.type == "phong":
-        return rd, rho - rd, surface.exponent, 0.0
-    return rd, 0.0, 0.0, rho - rd
