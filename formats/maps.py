@@ -322,6 +322,7 @@ def maps_of_result(result: SimulationResultPublic) -> tuple[list[GridMap], MapDe
     maps = []
     for m in result.maps:
         nu, nv = m.shape
+        su, sv = m.steps
         maps.append(
             GridMap(
                 grid=m.grid,
@@ -329,8 +330,8 @@ def maps_of_result(result: SimulationResultPublic) -> tuple[list[GridMap], MapDe
                 origin=np.asarray(m.origin, float),
                 u=np.asarray(m.u, float),
                 v=np.asarray(m.v, float),
-                x=m.spacing * np.arange(nu),
-                y=m.spacing * np.arange(nv),
+                x=su * np.arange(nu),
+                y=sv * np.arange(nv),
                 values={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m.values.items()},
                 stderr={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m.stderr.items()},
                 units=dict(m.units),
