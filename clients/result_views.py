@@ -52,16 +52,18 @@ def _facts(r: SimulationResultPublic) -> dict[str, Any]:
         counts.append(_plural(len(r.maps), "map"))
     run = r.run
     worst = run.max_dc_gain_rel_stderr
-    err = f"worst rel. error {_pct(worst)}" + (
+    err = f", worst rel. error {_pct(worst)}" + (
         f" (target {_pct(run.target_rel_error)})" if run.target_rel_error is not None else ""
     )
+    if run.stop_reason.value == "exact":  # line of sight in closed form: no error bar to quote
+        err = ""
     name = r.scene.name or "(unnamed scene)"
     return {
         "title": f"{name[:_NAME]}{'...' if len(name) > _NAME else ''}",
         "head": f"algorithm {r.algorithm}, owcsim {r.owcsim_version}",
         "devices": devices,
         "counts": ", ".join(counts),
-        "run": f"{run.paths_total:,d} paths in {run.wall_time_s:.3g} s, stop: {run.stop_reason.value}, {err}",
+        "run": f"{run.paths_total:,d} paths in {run.wall_time_s:.3g} s, stop: {run.stop_reason.value}{err}",
         "rows": _channel_rows(r),
         "warnings": len(r.warnings),
     }
@@ -100,7 +102,7 @@ def result_text(r: SimulationResultPublic) -> str:
     f = _facts(r)
     rows, more = f["rows"]
     lines = [
-        f"Result: {f['title']} ({f['head']})",
+        f"Result: {f['title']} (algorithm {r.algorithm})",
         f"  {f['devices']}",
         f"  {f['counts']}",
         f"  run: {f['run']}",
