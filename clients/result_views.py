@@ -79,8 +79,11 @@ def _channel_rows(r: SimulationResultPublic) -> tuple[list[tuple[str, ...]], int
         names = [lk.transmitter for lk in r.links]
         h0 = np.array([np.nan if lk.dc_gain is None else lk.dc_gain for lk in r.links], float)
         se = np.array([np.nan if lk.dc_gain_stderr is None else lk.dc_gain_stderr for lk in r.links], float)
-    order = list(dict.fromkeys(names))
-    key = np.array([order.index(n) for n in names]) if names else np.zeros(0, int)
+    # channels in order of appearance: np.unique sorts, its first indices give the document's order back
+    uniq, first, inverse = np.unique(np.array(names, dtype=str), return_index=True, return_inverse=True)
+    rank = np.argsort(np.argsort(first))
+    order = [str(n) for n in uniq[np.argsort(first)]]
+    key = rank[inverse.reshape(-1)] if names else np.zeros(0, int)
     rows = []
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(h0 > 0, se / h0, np.nan)
