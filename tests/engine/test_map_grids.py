@@ -198,3 +198,16 @@ def test_exclude_and_include_areas_mask_exactly_the_points_inside():
     values = np.array(res["maps"][0]["values"]["dc_gain"], float).ravel()
     np.testing.assert_array_equal(np.isnan(values), np.array(want) != "")  # masked: null, not simulated
     assert [r["masked"] or "" for r in res["receivers"]] == want
+
+
+def test_a_non_convex_include_polygon_keeps_exactly_the_points_inside():
+    """An L-shaped room plan: the union of two rectangles, edges included, is the reference."""
+    ell = [[0.0, 0.0], [4.0, 0.0], [4.0, 1.5], [1.5, 1.5], [1.5, 4.0], [0.0, 4.0]]
+    grid = {"origin": [0.5, 0.5, 0.85], "size": [4.0, 4.0], "shape": [17, 17], "area": 1e-4}
+    scene = build_scene(SceneSpec.model_validate(_los_doc({**grid, "include": [{"polygon": ell}]})))
+    kept = []
+    for i in range(17):
+        for j in range(17):
+            a, b = 0.25 * i, 0.25 * j
+            kept.append((0 <= a <= 4 and 0 <= b <= 1.5) or (0 <= a <= 1.5 and 0 <= b <= 4))
+    assert (scene.masked == "").tolist() == kept and 0 < sum(kept) < 17 * 17

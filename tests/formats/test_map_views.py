@@ -159,3 +159,15 @@ def test_plot_map_errors_are_clear():
     bare = GridMap("g", "c", m.origin, m.u, m.v, m.x, m.y, {"q": m.values["illuminance_lx"]}, {}, {"q": "1"})
     with pytest.raises(ValueError, match="has no standard error"):
         plot_map(bare, "q", stderr=True)
+
+
+def test_imports_stay_light():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, owcsim.formats.map_plot, owcsim.clients.result; "
+        "print(sorted(m for m in ('matplotlib', 'xarray', 'pandas') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
