@@ -264,3 +264,35 @@ def test_spectral_scenes_and_too_many_receivers_are_refused():
     doc["spectral"] = {"wavelengths": [450e-9, 550e-9]}
     with pytest.raises(ValueError, match="not supported in spectral scenes"):
         spec(doc)
+
+
+def test_all_orders_mean_matches_los_plus_first_bounce_at_the_samples_normals():
+    """K = 1 by the Monte Carlo: the point's mean power against the mean over its samples' normals of the closed-form
+    LOS plus the converged first-bounce patch integral (tests/reference.py), within 4 of the Monte Carlo bound
+    (1/K) sum sigma_k the engine adds (the quadrature error does not apply: the same nodes)."""
+    from tests.reference import first_bounce_box_dc_gain
+    from tests.scenes import BARRY_RHO
+
+    doc = doc_with({"model": "sitting", "samples": 8})
+    doc["simulation"].update(max_reflections=1, paths=40_000, seed=5)
+    res = simulate(spec(doc))
+    (row,) = res["orientation"]
+    first, k = row["first_sample_index"], row["samples"]
+    normals = [r["normal"] for r in res["receivers"][first : first + k]]
+    v = (LAMP - RX) / np.linalg.norm(LAMP - RX)
+    k0 = geometry()[0]
+    los = [k0 * (n @ v) if n @ v >= math.cos(math.radians(FOV_DEG)) else 0.0 for n in np.asarray(normals)]
+    h1 = [
+        first_bounce_box_dc_gain(
+            (5.0, 5.0, 3.0), BARRY_RHO, tuple(LAMP), (0, 0, -1), M, tuple(RX), tuple(n), AREA,
+            math.radians(FOV_DEG), rel_tol=1e-3,
+        )
+        for n in normals
+    ]  # fmt: skip
+    ref = float(np.mean(np.add(los, h1)))
+    links = {link["receiver"]: link for link in res["links"]}
+    sigma_mc = np.mean([links[f"rx@o{i}"]["dc_gain_stderr"] for i in range(k)])
+    assert 0 < sigma_mc < 0.005 * ref
+    assert row["received_power_mean_w_stderr"] >= sigma_mc
+    assert abs(row["received_power_mean_w"] - ref) <= 4 * sigma_mc + 1e-3 * ref  # + the patch integral's tolerance
+    assert abs(row["received_power_mean_w"] - 1.1 * ref) > 4 * sigma_mc + 1e-3 * ref
