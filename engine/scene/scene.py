@@ -14,11 +14,13 @@ from owcsim.engine.media.model import MediumKind, MediumModel, medium_model
 from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.media.registry import medium_from_spec
 from owcsim.engine.scene.geometry import Geometry, Intersector, build_geometry, check_extent
+from owcsim.engine.scene.orientation import with_hidden_receivers
 from owcsim.engine.sources.devices import Devices, concentrator_gain, transmitters_from_specs
 from owcsim.engine.spectral.spectra import SceneSpectra, carrier_bands, medium_bands, scene_tables, unsupported
 from owcsim.engine.surfaces.bsdf import MirrorPlane, mirror_planes
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.algorithms import ALGORITHMS
+from owcsim.schemas.orientation import hidden_blocks
 
 
 @dataclass
@@ -208,7 +210,8 @@ def grid_area_reasons(grid) -> np.ndarray:
 
 
 def receivers_from_scene(spec: SceneSpec) -> tuple[Devices, list]:
-    """Explicit receivers then every grid, as arrays (grids are expanded without building per-point models).
+    """Explicit receivers then every grid, as arrays (grids are expanded without building per-point models), then
+    the hidden receivers of orientation requests and angle-diversity receivers (engine/scene/orientation.py).
 
     Returns the Devices and, per grid, (first receiver index, (nu, nv)).
     """
@@ -246,7 +249,7 @@ def receivers_from_scene(spec: SceneSpec) -> tuple[Devices, list]:
         area=per_point([r[2] for r in rows]),
         patterns=[None] * n,
     )
-    return devices, slices
+    return with_hidden_receivers(spec, devices), slices  # orientation samples, photodiodes (scene/orientation.py)
 
 
 def mask_reasons(spec: SceneSpec, receivers: Devices, n_explicit: int) -> np.ndarray:
@@ -270,11 +273,18 @@ def mask_reasons(spec: SceneSpec, receivers: Devices, n_explicit: int) -> np.nda
         reason[inside] = f"inside furniture[{j}]" + (f" ({box.name})" if box.name else "")
     reason[:n_explicit] = ""  # explicit receivers were checked (and refused) by the schema
     first = n_explicit
-    for grid in spec.receiver_grids:  # the grid's own masks: exclude / include areas of its plane
+    area = np.full(len(p), "", dtype=object)  # the grids' own masks: exclude / include areas of their planes
+    for grid in spec.receiver_grids:
         own = grid_area_reasons(grid)
-        part = reason[first : first + len(own)]
-        part[(own != "") & (part == "")] = own[(own != "") & (part == "")]
+        area[first : first + len(own)] = own
         first += len(own)
+    for block in hidden_blocks(spec):  # a point's orientation samples share its area mask (point-major)
+        if block.kind == "orientation":
+            area[block.first : block.first + block.count] = np.repeat(
+                area[block.points.start : block.points.stop], block.per_point
+            )
+    take = (area != "") & (reason == "")
+    reason[take] = area[take]
     return reason
 
 

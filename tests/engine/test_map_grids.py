@@ -211,3 +211,25 @@ def test_a_non_convex_include_polygon_keeps_exactly_the_points_inside():
             a, b = 0.25 * i, 0.25 * j
             kept.append((0 <= a <= 4 and 0 <= b <= 1.5) or (0 <= a <= 1.5 and 0 <= b <= 4))
     assert (scene.masked == "").tolist() == kept and 0 < sum(kept) < 17 * 17
+
+
+def test_orientation_samples_of_an_excluded_point_are_masked_with_it():
+    """A grid with random orientation (issue 24 item 5): an excluded point's hidden samples are not simulated
+    either, and its orientation figures are null, while the other points keep theirs."""
+    grid = {
+        "origin": [0.5, 0.5, 0.85],
+        "size": [1.0, 1.0],
+        "spacing": 0.5,
+        "area": 1e-4,
+        "exclude": [{"min": [0.0, 0.0], "max": [0.6, 0.6]}],  # points (0, 0), (0, 1), (1, 0), (1, 1)
+        "orientation": {"model": "walking", "samples": 4},
+    }
+    spec = SceneSpec.model_validate(_los_doc(grid))
+    scene = build_scene(spec)
+    own = scene.masked[:9].tolist()
+    assert [r != "" for r in own] == [True, True, False, True, True, False, False, False, False]
+    hidden = scene.masked[9:].reshape(9, 4)
+    assert (hidden == np.array(own, dtype=object)[:, None]).all()  # each point's 4 samples share its reason
+    res = simulate(spec)
+    mean = np.array(res["maps"][0]["values"]["received_power_mean_w"], float).ravel()
+    assert np.isnan(mean[[0, 1, 3, 4]]).all() and np.isfinite(mean[[2, 5, 6, 7, 8]]).all()
