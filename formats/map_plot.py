@@ -37,6 +37,9 @@ QUANTITY_NAMES = {
     "snr_db": "SNR",
     "ber": "bit-error rate",
     "max_bit_rate_bps": "bit rate",
+    "received_power_mean_w": "mean received power",
+    "snr_mean_db": "mean SNR",
+    "outage_probability": "outage probability",
 }
 #: Label of the outline patches (tests and users find them by it: `patch.get_label()`).
 FURNITURE_LABEL, ROOM_LABEL, LUMINAIRE_LABEL = "furniture", "room", "luminaires"
