@@ -78,7 +78,7 @@ def resolve_fluxes(spec, scene: Scene) -> LuminousFluxes:
             if other is not used and abs(value - flux[i]) > FLUX_TOLERANCE * flux[i]:
                 warns.append(
                     f"{tx.ids[i]}: {used.value} {flux[i]:.0f} lm differs from the {other.value}'s {value:.0f} lm by "
-                    f"{abs(value - flux[i]) / value:.0%}; {flux[i]:.0f} lm is used"
+                    f"{abs(value - flux[i]) / flux[i]:.0%}; {flux[i]:.0f} lm is used"
                 )
     return LuminousFluxes(flux, sources, cands, warns)
 
