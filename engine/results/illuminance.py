@@ -64,8 +64,9 @@ def resolve_fluxes(spec, scene: Scene) -> LuminousFluxes:
             c[FluxSource.LUMINOUS_OUTPUT] = float(out.luminous_flux)
         elif out is not None and r_aim[i] > 0:
             c[FluxSource.LUMINOUS_OUTPUT] = float(out.center_luminous_intensity / r_aim[i])
-        if patterns[i] is not None:
-            c[FluxSource.PHOTOMETRY] = float(patterns[i].luminous_flux)
+        pattern = patterns[i]
+        if pattern is not None:
+            c[FluxSource.PHOTOMETRY] = float(pattern.luminous_flux)
         if spectrum[i] > 0:
             c[FluxSource.SPECTRUM] = float(spectrum[i])
         used = next((s for s in FluxSource if s in c), None)  # the enum's order is the precedence

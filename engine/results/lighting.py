@@ -104,7 +104,7 @@ class Lighting:
     ) -> None:
         """weights (G, n_tx); h0, rms (G, n_rx) of the groups' channels; group_power (G,) [W]."""
         member = (weights > 0).astype(float)
-        has = ((weights > 0) & np.isfinite(self.fluxes.flux_lm)[None, :]).any(axis=1)
+        has = np.any((weights > 0) & np.isfinite(self.fluxes.flux_lm)[None, :], axis=1)
         nan = ~(has[:, None] & np.isfinite(h0))
 
         def total(x: np.ndarray) -> np.ndarray:
@@ -135,7 +135,7 @@ class Lighting:
         ]
         member = (weights > 0).astype(float) if weights is not None and weights.size else np.eye(self.n_tx)
         totals = np.where(masked_rx[None, :], np.nan, member @ np.nan_to_num(self.illuminance))
-        lit = (member * np.isfinite(self.fluxes.flux_lm)[None, :]).any(axis=1)
+        lit = np.any(member * np.isfinite(self.fluxes.flux_lm)[None, :] > 0, axis=1)
         channels = [(n, member[g], totals[g]) for g, n in enumerate(names) if lit[g]]
         reps = replicate_reflected(self.scene, self.accs, self.fluxes.flux_lm) if self.accs is not None else None
         areas, warns = area_figures(self.spec, self.scene, channels, reps)

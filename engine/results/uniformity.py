@@ -24,12 +24,13 @@ import numpy as np
 from owcsim.engine.core.arrays import FloatArray
 from owcsim.engine.scene.scene import Scene
 from owcsim.engine.tally import reliability
+from owcsim.engine.tally.plan import N_GROUPS
 
 #: A point lies on a task area's box when within this distance of it [m].
 AREA_TOLERANCE = 1e-6
 
 ERRORS_NOTE = (
-    "delete-one-group jackknife over the 16 path groups, each replicate map keeping the exact direct light "
+    "delete-one-group jackknife over the path groups, each replicate map keeping the exact direct light "
     "(engine/results/uniformity.py); null in spectral scenes (the groups hold the carrier band only)"
 )
 
@@ -40,11 +41,13 @@ def replicate_reflected(scene: Scene, accs: Mapping, flux: FloatArray) -> FloatA
     if scene.spectra is not None:
         return None
     means, counts = reliability.group_means(accs.values())
+    n_tx, n_rx = len(scene.transmitters), len(scene.receivers)
+    if not counts.any():  # nothing traced (line of sight only): every replicate is the exact map
+        return np.zeros((N_GROUPS, n_tx, n_rx))
     total, weight = (means * counts).sum(axis=0), counts.sum(axis=0)
     rest = weight[None, :] - counts
     with np.errstate(invalid="ignore", divide="ignore"):
         rep = np.where(weight[None, :] > 0, (total[None, :] - counts * means) / rest, 0.0)
-    n_tx, n_rx = len(scene.transmitters), len(scene.receivers)
     scale = np.nan_to_num(flux)[:, None] / scene.receivers.gain[None, :]  # Phi_v / (A T_s g) [lx] per unit H
     return rep.reshape(-1, n_tx, n_rx) * scale[None]
 
@@ -66,7 +69,7 @@ def _figures(values: FloatArray, reps: FloatArray | None, grid_ij: np.ndarray) -
             theta = np.stack([r_avg, r_min, np.where(r_avg > 0, r_min / r_avg, np.nan)])  # (3, G)
         g = theta.shape[1]
         se = np.sqrt((g - 1) / g * ((theta - theta.mean(axis=1, keepdims=True)) ** 2).sum(axis=1))
-    out = dict(points=points)
+    out: dict = {"points": points}
     for key, x in zip(_KEYS, (stats[0], se[0], stats[1], se[1], stats[2], se[2])):
         out[key] = float(x) if np.isfinite(x) else None
     return out
@@ -98,16 +101,16 @@ def area_figures(
     grids = {g.id_prefix: (g, sl) for g, sl in zip(spec.receiver_grids, scene.grid_slices)}
     areas = lighting.task_areas if lighting is not None else []
     width = lighting.surround_width if lighting is not None else 0.0
-    todo = [(a.name, a.grid, np.array(a.min), np.array(a.max)) for a in areas] or [
-        (name, name, None, None) for name in grids
-    ]
+    todo: list[tuple[str, str, FloatArray | None, FloatArray | None]] = [
+        (a.name, a.grid, np.array(a.min), np.array(a.max)) for a in areas
+    ] or [(name, name, None, None) for name in grids]
     out, warns = [], []
     for name, grid_id, lo, hi in todo:  # a loop over the few areas
         grid, (first, (nu, nv)) = grids[grid_id]
         idx = first + np.arange(nu * nv)
         ij = np.stack(np.divmod(np.arange(nu * nv), nv), axis=1)
         pos = scene.receivers.positions[idx]
-        if lo is None:
+        if lo is None or hi is None:
             task, band = np.ones(len(idx), bool), None
         else:
             task = _in_box(pos, lo, hi, AREA_TOLERANCE)
@@ -121,7 +124,7 @@ def area_figures(
             rep = None
             if reps is not None:
                 rep = np.einsum("i,gir->gr", members, reps[:, :, idx]) + (total[idx] - _mc(members, reps, idx))[None]
-            row = {"name": name, "grid": grid_id, "channel": channel}
+            row: dict = {"name": name, "grid": grid_id, "channel": channel}
             row["task"] = _figures(total[idx][task], None if rep is None else rep[:, task], ij[task])
             if band is not None:
                 row["surround"] = _figures(total[idx][band], None if rep is None else rep[:, band], ij[band])
