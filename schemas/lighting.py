@@ -41,7 +41,7 @@ class TaskAreaSpec(SpecModel):
 
 class LightingSpec(SpecModel):
     """EN 12464-1 figures asked of the result: per task area (or per grid without one) E_avg, E_min and U0, for
-    the area and its immediate surround; optionally the cylindrical illuminance on every map."""
+    the area, its immediate surround and its background; optionally the cylindrical illuminance on every map."""
 
     task_areas: list[TaskAreaSpec] = Field(
         default_factory=list,
@@ -53,6 +53,13 @@ class LightingSpec(SpecModel):
         le=10.0,
         description="width of the immediate surround band around each task area [m] (EN 12464-1: at least 0.5 m; "
         "0: no surround)",
+    )
+    background_width: float = Field(
+        0.0,
+        ge=0.0,
+        le=100.0,
+        description="width of the background band beyond the immediate surround [m] (EN 12464-1: at least 3 m, "
+        "within the room; 0: none)",
     )
     cylindrical: bool = Field(
         False,
@@ -126,6 +133,9 @@ class TaskAreaPublic(PublicModel):
     task: AreaFiguresPublic = Field(description="the points of the task area")
     surround: AreaFiguresPublic | None = Field(
         None, description="the points of the immediate surround band (null without task area or with width 0)"
+    )
+    background: AreaFiguresPublic | None = Field(
+        None, description="the points of the background band beyond the surround (null without background_width)"
     )
 
 

@@ -88,14 +88,13 @@ class Lighting:
         r = self.reflected
         if r is None:
             return np.zeros((len(member), self.n_rx))
-        fwd = np.einsum("gi,ir->gr", member, r.var_forward)
-        bwd = np.einsum("gi,ir->gr", member, np.sqrt(r.var_backward)) ** 2
-        bound = np.sqrt(fwd + bwd)
+        fwd = np.einsum("gi,ir->gr", member, np.nan_to_num(r.var_forward))  # a member without light adds 0
+        bwd = np.einsum("gi,ir->gr", member, np.sqrt(np.nan_to_num(r.var_backward))) ** 2
+        out = np.sqrt(fwd + bwd)
         k = self.fluxes.flux_lm / self.scene.transmitters.power
-        out = bound
         for g in range(len(member)):  # a loop over groups
-            ks = k[member[g] > 0]
-            if self.scene.spectra is None and np.all(np.isfinite(ks)) and np.ptp(ks) <= 1e-12 * ks.max():
+            ks = k[(member[g] > 0) & np.isfinite(k)]
+            if self.scene.spectra is None and len(ks) == (member[g] > 0).sum() and np.ptp(ks) <= 1e-12 * ks.max():
                 out[g] = ks[0] * group_power[g] * gain_stderr[g] / self.scene.receivers.gain
         return out
 

@@ -4,7 +4,8 @@ EN 12464-1:2021 sec. 4.3: the maintained illuminance E_m is the average over the
 total illuminance of its grid points, as built: multiply by a maintenance factor for E_m), U0 = E_min / E_avg
 the uniformity; the immediate surround is a band of at least 0.5 m around the task area. A point belongs to
 the task area when it lies in the area's box (within 1e-6 m), to its surround when it lies in the box grown
-by `surround_width` on every axis and not in the task area.
+by `surround_width` on every axis and not in the task area, to its background (EN 12464-1: a band of at least
+3 m within the room) when in the box grown by `surround_width` + `background_width` and in neither.
 
 Standard errors: delete-one-group jackknife over the path groups (engine/tally/plan.py N_GROUPS). Group g's
 replicate of every link is its Monte Carlo estimate without group g, (T - c_g m_g) / (C - c_g) (T, C the sums
@@ -101,6 +102,7 @@ def area_figures(
     grids = {g.id_prefix: (g, sl) for g, sl in zip(spec.receiver_grids, scene.grid_slices)}
     areas = lighting.task_areas if lighting is not None else []
     width = lighting.surround_width if lighting is not None else 0.0
+    back = lighting.background_width if lighting is not None else 0.0
     todo: list[tuple[str, str, FloatArray | None, FloatArray | None]] = [
         (a.name, a.grid, np.array(a.min), np.array(a.max)) for a in areas
     ] or [(name, name, None, None) for name in grids]
@@ -110,12 +112,17 @@ def area_figures(
         idx = first + np.arange(nu * nv)
         ij = np.stack(np.divmod(np.arange(nu * nv), nv), axis=1)
         pos = scene.receivers.positions[idx]
+        parts: dict[str, np.ndarray] = {}
         if lo is None or hi is None:
-            task, band = np.ones(len(idx), bool), None
+            parts["task"] = np.ones(len(idx), bool)
         else:
-            task = _in_box(pos, lo, hi, AREA_TOLERANCE)
-            band = _in_box(pos, lo, hi, width + AREA_TOLERANCE) & ~task if width > 0 else None
-            if not task.any():
+            parts["task"] = _in_box(pos, lo, hi, AREA_TOLERANCE)
+            near = _in_box(pos, lo, hi, width + AREA_TOLERANCE)
+            if width > 0:
+                parts["surround"] = near & ~parts["task"]
+            if back > 0:
+                parts["background"] = _in_box(pos, lo, hi, width + back + AREA_TOLERANCE) & ~near
+            if not parts["task"].any():
                 warns.append(
                     f"lighting: task area {name!r} holds no point of grid {grid_id!r}: its figures are null; "
                     "make its box meet the grid's plane"
@@ -125,9 +132,8 @@ def area_figures(
             if reps is not None:
                 rep = np.einsum("i,gir->gr", members, reps[:, :, idx]) + (total[idx] - _mc(members, reps, idx))[None]
             row: dict = {"name": name, "grid": grid_id, "channel": channel}
-            row["task"] = _figures(total[idx][task], None if rep is None else rep[:, task], ij[task])
-            if band is not None:
-                row["surround"] = _figures(total[idx][band], None if rep is None else rep[:, band], ij[band])
+            for part, sel in parts.items():  # task, surround, background
+                row[part] = _figures(total[idx][sel], None if rep is None else rep[:, sel], ij[sel])
             out.append(row)
     return out, warns
 

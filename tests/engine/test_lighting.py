@@ -214,12 +214,22 @@ def test_group_channel_and_map_illuminance_sum_the_members():
         assert m["stderr"]["illuminance_lx"][i][jj] == pytest.approx(c["illuminance_lx_stderr"], rel=1e-12)
 
 
-def test_members_of_different_efficacy_bound_the_channel_error():
-    """Forward paths: the members' errors are independent, so the channel's is the root sum of squares."""
-    doc = _office()
+@pytest.mark.parametrize("direction", ["forward", "backward"])
+def test_members_of_different_efficacy_bound_the_channel_error(direction):
+    """Forward paths: the members' errors are independent, so the channel's is the root sum of squares; backward
+    paths are shared by the members of a point: their errors add (an upper bound). A member without light adds
+    nothing to the channel's illuminance nor to its error."""
+    doc = _office(direction=direction)
     doc["transmitters"][3]["luminous_output"] = {"center_luminous_intensity": 1314.0}
+    del doc["transmitters"][2]["luminous_output"]
     res = simulate(spec(doc))
     n_rx = len(res["receivers"])
+    assert res["lighting"]["transmitters"][2]["luminous_flux_lm"] is None
     for c in res["channels"]:
-        se = [res["links"][i * n_rx + c["receiver_index"]]["illuminance_lx_stderr"] for i in range(4)]
-        assert c["illuminance_lx_stderr"] == pytest.approx(math.sqrt(sum(s * s for s in se)), rel=1e-9)
+        rows = [res["links"][i * n_rx + c["receiver_index"]] for i in range(4)]
+        assert rows[2]["illuminance_lx"] is None and rows[0]["illuminance_lx_stderr"] > 0
+        lit = [r for k, r in enumerate(rows) if k != 2]
+        assert c["illuminance_lx"] == pytest.approx(sum(r["illuminance_lx"] for r in lit), rel=1e-12)
+        se = [r["illuminance_lx_stderr"] for r in lit]
+        expected = math.sqrt(sum(s * s for s in se)) if direction == "forward" else sum(se)
+        assert c["illuminance_lx_stderr"] == pytest.approx(expected, rel=1e-9)

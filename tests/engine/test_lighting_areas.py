@@ -64,13 +64,15 @@ def _points(lo, hi, spacing=0.5, n=9):
     return out
 
 
-def test_task_area_and_surround_figures_are_exact_in_line_of_sight():
-    res = simulate(spec(office({"task_areas": [DESK], "surround_width": 0.5})))
+def test_task_area_surround_and_background_figures_are_exact_in_line_of_sight():
+    res = simulate(spec(office({"task_areas": [DESK], "surround_width": 0.5, "background_width": 1.0})))
     (area,) = res["lighting"]["areas"]
     assert (area["name"], area["grid"], area["channel"]) == ("desk", "plane", "ceiling")
     task = _points(1.5, 3.5)
     ring = [p for p in _points(1.0, 4.0) if p not in task]
-    for got, pts in ((area["task"], task), (area["surround"], ring)):
+    back = [p for p in _points(0.0, 5.0) if p not in task and p not in ring]
+    assert len(back) == 32
+    for got, pts in ((area["task"], task), (area["surround"], ring), (area["background"], back)):
         assert sorted(map(tuple, got["points"])) == sorted(ij for ij, _ in pts)
         e = np.array([komine_direct(p) for _, p in pts])
         assert got["illuminance_avg_lx"] == pytest.approx(e.mean(), rel=1e-9)
@@ -83,7 +85,8 @@ def test_task_area_and_surround_figures_are_exact_in_line_of_sight():
 def test_without_task_area_the_whole_grid_is_reported():
     res = simulate(spec(office(spacing=1.0)))
     (area,) = res["lighting"]["areas"]
-    assert area["name"] == "plane" and area["surround"] is None and len(area["task"]["points"]) == 25
+    assert area["name"] == "plane" and area["surround"] is None and area["background"] is None
+    assert len(area["task"]["points"]) == 25
     e = [komine_direct(p) for _, p in _points(0.0, 5.0, spacing=1.0, n=5)]
     assert area["task"]["uniformity_u0"] == pytest.approx(min(e) / np.mean(e), rel=1e-9)
 
