@@ -9,6 +9,7 @@ from pydantic import Field, model_validator
 
 from .base import Direction, Point, SpecModel
 from .link_budget import LuminousOutputSpec
+from .orientation import OrientationSpec
 from .photometry import PhotometrySpec
 from .spectra import Curve
 
@@ -110,6 +111,9 @@ class ReceiverSpec(SpecModel):
         description="optical filter transmission per band, in [0, 1] "
         "(a spectral curve; applies to the electrical gain)",
     )
+    orientation: OrientationSpec | None = Field(
+        None, description="random orientation of a handheld device: statistics over tilted copies (docs/orientation.md)"
+    )
 
 
 def _unit(d: tuple[float, float, float]) -> tuple[float, float, float]:
@@ -140,6 +144,9 @@ class ReceiverGridSpec(SpecModel):
     concentrator_index: float | None = Field(None, ge=1.0, le=4.0)
     responsivity: Curve | None = Field(None, description="photodiode responsivity per band [A/W] (spectral scenes)")
     filter_transmission: Curve | None = Field(None, description="optical filter transmission per band (spectral)")
+    orientation: OrientationSpec | None = Field(
+        None, description="random orientation of a handheld device at every point (docs/orientation.md)"
+    )
 
     @model_validator(mode="after")
     def _sane(self) -> "ReceiverGridSpec":

@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from .algorithms import Direction
 from .lighting import LightingResultPublic
+from .orientation import CombinedSnrPublic, OrientationPointPublic
 from .scene import SceneSpec
 from .spectra import SpectralResultPublic
 
@@ -280,6 +281,14 @@ class SimulationResultPublic(PublicModel):
     receivers: list[ReceiverPublic] = Field(default_factory=list)
     channels: list[ChannelPublic] = Field(default_factory=list, description="transmitter groups' channels")
     maps: list[MapPublic] = Field(default_factory=list, description="receiver grids as 2-D arrays")
+    orientation: list[OrientationPointPublic] = Field(
+        default_factory=list,
+        description="per point and channel: statistics over random orientation (docs/orientation.md)",
+    )
+    angle_diversity: list[CombinedSnrPublic] = Field(
+        default_factory=list,
+        description="per angle-diversity receiver and channel: combined SNRs (docs/orientation.md)",
+    )
     run: RunPublic
     diagnostics: DiagnosticsPublic
     warnings: list[str] = Field(default_factory=list, description="what a careful reader of these numbers should know")

@@ -14,6 +14,7 @@ from owcsim.engine.media.model import MediumKind, MediumModel, medium_model
 from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.media.registry import medium_from_spec
 from owcsim.engine.scene.geometry import Geometry, Intersector, build_geometry, check_extent
+from owcsim.engine.scene.orientation import with_hidden_receivers
 from owcsim.engine.sources.devices import Devices, concentrator_gain, transmitters_from_specs
 from owcsim.engine.spectral.spectra import SceneSpectra, carrier_bands, medium_bands, scene_tables, unsupported
 from owcsim.engine.surfaces.bsdf import MirrorPlane, mirror_planes
@@ -169,7 +170,8 @@ def grid_points(grid) -> tuple[np.ndarray, tuple[int, int]]:
 
 
 def receivers_from_scene(spec: SceneSpec) -> tuple[Devices, list]:
-    """Explicit receivers then every grid, as arrays (grids are expanded without building per-point models).
+    """Explicit receivers then every grid, as arrays (grids are expanded without building per-point models), then
+    the hidden receivers of orientation requests and angle-diversity receivers (engine/scene/orientation.py).
 
     Returns the Devices and, per grid, (first receiver index, (nu, nv)).
     """
@@ -207,7 +209,7 @@ def receivers_from_scene(spec: SceneSpec) -> tuple[Devices, list]:
         area=per_point([r[2] for r in rows]),
         patterns=[None] * n,
     )
-    return devices, slices
+    return with_hidden_receivers(spec, devices), slices  # orientation samples, photodiodes (scene/orientation.py)
 
 
 def mask_reasons(spec: SceneSpec, receivers: Devices, n_explicit: int) -> np.ndarray:
