@@ -14,6 +14,7 @@ from enum import StrEnum
 from pydantic import BaseModel, ConfigDict, Field
 
 from .algorithms import Direction
+from .lighting import LightingResultPublic
 from .orientation import CombinedSnrPublic, OrientationPointPublic
 from .scene import SceneSpec
 from .spectra import SpectralResultPublic
@@ -57,8 +58,13 @@ class LightingPublic(PublicModel):
 
     illuminance_lx: float | None = Field(
         None,
-        description="direct illuminance on the receiver plane [lx] (when the transmitters give a luminous output "
-        "or a photometric file)",
+        description="total illuminance on the receiver plane [lx]: direct light plus every reflection and scattering "
+        "order (when a transmitter gives light: luminous_output, a photometric file or a spectrum; docs/lighting.md)",
+    )
+    illuminance_lx_stderr: float | None = Field(None, description="standard error of illuminance_lx [lx]")
+    illuminance_direct_lx: float | None = Field(None, description="the direct part of illuminance_lx [lx]")
+    cylindrical_illuminance_direct_lx: float | None = Field(
+        None, description="direct cylindrical illuminance [lx] (with lighting.cylindrical)"
     )
     snr_db: float | None = Field(None, description="electrical SNR [dB] (with `link_budget`)")
     ber: float | None = Field(None, description="bit-error rate of OOK-NRZ (with `link_budget`)")
@@ -307,5 +313,8 @@ class SimulationResultPublic(PublicModel):
     )
     spectral: SpectralResultPublic | None = Field(
         None, description="per wavelength band and combined (scenes with `spectral`; docs/spectra.md)"
+    )
+    lighting: LightingResultPublic | None = Field(
+        None, description="luminous fluxes and EN 12464-1 figures (when a transmitter gives light; docs/lighting.md)"
     )
     scene: SceneSpec

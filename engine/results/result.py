@@ -372,7 +372,7 @@ def build_result(job: FinishedJob) -> SimulationResultPublic:
     cols = _link_columns(job, f)
     cir_totals = _cir_and_orders(job, f, cols)
     geometry = job.los.geometry
-    lighting = Lighting(spec, scene, geometry) if geometry is not None else None
+    lighting = Lighting(spec, scene, geometry, job.accs) if geometry is not None else None
     if lighting is not None:
         lighting.add_link_columns(cols, f.h0, f.delay["rms_delay_spread_s"], f.masked)
     links = document_rows(cols, scene.n_links)
@@ -400,6 +400,11 @@ def build_result(job: FinishedJob) -> SimulationResultPublic:
     }
     held, held_warnings = receivers_as_held(spec, scene, cols, channel_cols, doc["maps"])  # docs/orientation.md
     doc.update(held, warnings=doc["warnings"] + held_warnings)
+    if lighting is not None:  # luminous fluxes and EN 12464-1 figures (engine/results/lighting.py)
+        doc["lighting"] = lighting.section(
+            plan.group_weights, [g.name for g in spec.transmitter_groups] or list(scene.transmitters.ids), masked_rx
+        )
+        doc["warnings"] += lighting.warnings
     if scene.spectra is not None:  # per band and combined (engine/results/spectral.py)
         g = geometry if geometry is not None else los_geometry(scene)
         doc["spectral"] = result_block(spec, scene, job.accs, g, los_gain_grey(scene, g), job.los.delay)

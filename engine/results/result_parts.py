@@ -202,7 +202,16 @@ MAP_QUANTITIES = {
     "rms_delay_spread_s": ("s", "rms_delay_spread_s_stderr"),
 }
 #: Quantities a map has when the scene asks for them (luminous output, link budget): included where finite.
-OPTIONAL_MAP_QUANTITIES = {"illuminance_lx": "lx", "snr_db": "dB", "ber": "1", "max_bit_rate_bps": "bit/s"}
+OPTIONAL_MAP_QUANTITIES = {
+    "illuminance_lx": "lx",
+    "illuminance_direct_lx": "lx",
+    "cylindrical_illuminance_direct_lx": "lx",
+    "snr_db": "dB",
+    "ber": "1",
+    "max_bit_rate_bps": "bit/s",
+}
+#: The standard error of an optional quantity: its key in the columns.
+OPTIONAL_MAP_STDERR = {"illuminance_lx": "illuminance_lx_stderr"}
 
 
 def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[dict]:
@@ -236,6 +245,8 @@ def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[d
             for q, unit in OPTIONAL_MAP_QUANTITIES.items():
                 if q in columns and np.isfinite(arr := part(q)).any():
                     values[q], units[q] = column(arr), unit
+                    if q in OPTIONAL_MAP_STDERR:
+                        stderr[q] = column(part(OPTIONAL_MAP_STDERR[q]))
             out.append(
                 {
                     "grid": grid.id_prefix,
