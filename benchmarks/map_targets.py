@@ -459,25 +459,26 @@ def references(runs, trees, docs, quick, references_only=False) -> None:
     )
     print("(e) deterministic references of the same room (this script, numpy): time, and (ref - owcsim) at the points")
     print(
-        f"    {'reference':50s} {'points':>7s} {'time [s]':>9s}   {'owcsim':24s} {'median z':>9s} {'worst z':>9s} "
+        f"    {'reference':50s} {'points':>7s} {'time [s]':>9s} {'CPU [s]':>8s}   {'owcsim':24s} {'median z':>9s} "
+        f"{'worst z':>9s} "
         f"{'median %':>9s} {'worst %':>9s}"
     )
     for ref in refs:
         for key in ("a", "c"):
             rx = grid_points(docs[key])
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             h = reference_dc_gain(ref, room, rx)
-            el = time.perf_counter() - t
+            el, el_cpu = time.perf_counter() - t, time.process_time() - c
             label = f"{ref.name} (patch {ref.patch:g} m, {ref.n_sub}x{ref.n_sub})"
             found = [(tree, runs[key, tree]) for tree, _ in trees if (key, tree) in runs]
             if not found and not references_only:
                 continue
             if not found:
-                print(f"    {label:50s} {len(rx):7,d} {el:9.2f}")
+                print(f"    {label:50s} {len(rx):7,d} {el:9.2f} {el_cpu:8.2f}")
             for tree, r in found:
                 z_med, z_max, p_med, p_max = deviation(h, r)
                 print(
-                    f"    {label:50s} {len(rx):7,d} {el:9.2f}   {tree:24s} {z_med:9.2f} {z_max:9.2f} "
+                    f"    {label:50s} {len(rx):7,d} {el:9.2f} {el_cpu:8.2f}   {tree:24s} {z_med:9.2f} {z_max:9.2f} "
                     f"{p_med:9.2f} {p_max:9.2f}"
                 )
 
