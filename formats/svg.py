@@ -441,4 +441,4 @@ def _colour_bar(doc: _Doc, x: float, ph: float, lo: float, hi: float, log: bool,
         y = _M_TOP + (1 - f) * ph
         doc.add(f'<line x1="{x + w:.1f}" y1="{y:.1f}" x2="{x + w + 4:.1f}" y2="{y:.1f}" stroke="black"/>')
         doc.markup(x + w + 7, y + 4, text, 10, "start")
-    doc.text(0, 0, label, 11, extra=f' transform="translate({x + w + 62:.1f},{_M_TOP + ph / 2:.1f}) rotate(90)"')
+    doc.text(0, 0, label, 11, extra=f' transform="translate({x + w + 52:.1f},{_M_TOP + ph / 2:.1f}) rotate(90)"')
