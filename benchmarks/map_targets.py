@@ -289,6 +289,7 @@ class Command:
     last_line: str
     dc_gain: np.ndarray  # (N,) NaN where missing
     stderr: np.ndarray
+    positions: np.ndarray  # (N, 3) the receivers [m], as the result lists them
 
 
 def run_owcsim(python: str, doc: dict) -> Command:
@@ -316,7 +317,8 @@ def run_owcsim(python: str, doc: dict) -> Command:
         h[ch["receiver_index"]] = np.nan if ch["dc_gain"] is None else ch["dc_gain"]
         err[ch["receiver_index"]] = np.nan if ch["dc_gain_stderr"] is None else ch["dc_gain_stderr"]
     last = stdout.strip().splitlines()[-1].split(";")[0]
-    return Command(wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024, last, h, err)
+    pos = np.array([r["position"] for r in res["receivers"]], float)
+    return Command(wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024, last, h, err, pos)
 
 
 def baseline_python(rev: str) -> str:
@@ -465,17 +467,23 @@ def references(runs, trees, docs, quick, references_only=False) -> None:
     )
     for ref in refs:
         for key in ("a", "c"):
-            rx = grid_points(docs[key])
+            found = [(tree, runs[key, tree]) for tree, _ in trees if (key, tree) in runs]
+            if not found and not references_only:
+                continue
+            rx = grid_points(docs[key])  # the points the runs report, when there are runs
+            for _, r in found:
+                if r.positions.shape != rx.shape:
+                    raise RuntimeError(f"case {key}: the result has {len(r.positions)} receivers, not {len(rx)}")
+                rx = r.positions
             t, c = time.perf_counter(), time.process_time()
             h = reference_dc_gain(ref, room, rx)
             el, el_cpu = time.perf_counter() - t, time.process_time() - c
             label = f"{ref.name} (patch {ref.patch:g} m, {ref.n_sub}x{ref.n_sub})"
-            found = [(tree, runs[key, tree]) for tree, _ in trees if (key, tree) in runs]
-            if not found and not references_only:
-                continue
             if not found:
                 print(f"    {label:50s} {len(rx):7,d} {el:9.2f} {el_cpu:8.2f}")
             for tree, r in found:
+                if not np.allclose(r.positions, rx):
+                    raise RuntimeError(f"case {key}: {tree}'s receivers are not the others'")
                 z_med, z_max, p_med, p_max = deviation(h, r)
                 print(
                     f"    {label:50s} {len(rx):7,d} {el:9.2f} {el_cpu:8.2f}   {tree:24s} {z_med:9.2f} {z_max:9.2f} "
