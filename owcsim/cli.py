@@ -169,7 +169,7 @@ def _cmd_run(args) -> int:
         close()
         if executor is not None:
             executor.close()
-    paths = write_outputs(result, out, plot=not args.no_plot)
+    paths = write_outputs(result, out, plot=not args.no_plot, plot_format=args.plot_format)
     _print_links(result)
     run = result.run
     wrote = (
@@ -294,14 +294,17 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="owcsim", description="Optical wireless channel simulator.")
     p.add_argument("--version", action="version", version=f"owcsim {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="simulate a scene; write result.json, cir.csv and cir.png")
+    run = sub.add_parser("run", help="simulate a scene; write result.json, links.csv, cir.csv and cir.svg")
     run.add_argument("scene", help="scene document (JSON)")
     run.add_argument("--out", required=True, help="output folder (created if needed)")
     run.add_argument(
-        "--no-plot",
-        action="store_true",
-        help="do not draw cir.png (saves matplotlib's start-up, ~0.3-0.5 s: for sweeps)",
+        "--plot-format",
+        choices=("svg", "png"),
+        default="svg",
+        help="figures (cir, map heatmaps) as SVG written directly (default, a few ms) or as PNG drawn by "
+        "matplotlib (its start-up and drawing: ~0.5-0.8 s)",
     )
+    run.add_argument("--no-plot", action="store_true", help="draw no figure (cir, map heatmaps): for sweeps")
     _add_simulation_options(run)
     where = run.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=1, help="worker processes on this machine (default 1)")
