@@ -14,6 +14,7 @@ from enum import StrEnum
 from pydantic import BaseModel, ConfigDict, Field
 
 from .algorithms import Direction
+from .cells import CellsPublic
 from .scene import SceneSpec
 from .spectra import SpectralResultPublic
 
@@ -274,6 +275,9 @@ class SimulationResultPublic(PublicModel):
     receivers: list[ReceiverPublic] = Field(default_factory=list)
     channels: list[ChannelPublic] = Field(default_factory=list, description="transmitter groups' channels")
     maps: list[MapPublic] = Field(default_factory=list, description="receiver grids as 2-D arrays")
+    cells: CellsPublic | None = Field(
+        None, description="multi-cell LiFi: serving cell, SINR, rates, handover boundaries (schemas/cells.py)"
+    )
     run: RunPublic
     diagnostics: DiagnosticsPublic
     warnings: list[str] = Field(default_factory=list, description="what a careful reader of these numbers should know")

@@ -23,6 +23,7 @@ from owcsim.engine.integrator.lobe import LOBE_PEAK, phase_lobe_wanted
 from owcsim.engine.integrator.path import KernelSettings
 from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.results import metrics
+from owcsim.engine.results.cells import cells_block
 from owcsim.engine.results.job import FinishedJob
 from owcsim.engine.results.lighting import Lighting
 from owcsim.engine.results.result_parts import cir_block, column, document_rows, grid_maps, order_block
@@ -393,6 +394,7 @@ def build_result(job: FinishedJob) -> SimulationResultPublic:
         "maps": grid_maps(spec, scene, channel_cols, [g.name for g in spec.transmitter_groups])
         if channels
         else grid_maps(spec, scene, cols, list(scene.transmitters.ids)),
+        "cells": cells_block(spec, scene, plan, cols, channel_cols, job.directions),
         "run": run,
         "diagnostics": diagnostics,
         "scene": job.original or spec,  # the model itself: not validated again
