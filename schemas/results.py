@@ -130,6 +130,12 @@ class ChannelPublic(LightingPublic):
     mean_delay_s_stderr: float | None = Field(description="standard error of mean_delay_s [s]")
     rms_delay_spread_s: float | None = Field(description="RMS delay spread of the summed channel [s]")
     rms_delay_spread_s_stderr: float | None = Field(description="standard error of rms_delay_spread_s [s]")
+    bandwidth_3db_hz: float | None = Field(
+        None,
+        description="3 dB bandwidth of the summed channel [Hz], the line of sight as exact delays "
+        "(engine/results/channel_spectrum.py); null without a binned CIR at this receiver (ask `outputs.cir`; "
+        "a line-of-sight-only exact run needs none) or when |H| stays above 1/sqrt(2) up to 1/(2 time_bin_s)",
+    )
     cir: CirPublic | None = None
 
 

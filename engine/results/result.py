@@ -24,6 +24,7 @@ from owcsim.engine.integrator.path import KernelSettings
 from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.results import metrics
 from owcsim.engine.results.cells import cells_block
+from owcsim.engine.results.channel_spectrum import group_bandwidths
 from owcsim.engine.results.job import FinishedJob
 from owcsim.engine.results.lighting import Lighting
 from owcsim.engine.results.result_parts import cir_block, column, document_rows, grid_maps, order_block
@@ -41,7 +42,7 @@ from owcsim.engine.tally.estimates import (
 from owcsim.engine.tally.tally import Accumulator
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.algorithms import Direction, algorithm
-from owcsim.schemas.results import ModeledPublic, SimulationResultPublic, UnreachablePublic
+from owcsim.schemas.results import ModeledPublic, SimulationResultPublic, StopReason, UnreachablePublic
 from owcsim.schemas.units import unit_warnings
 from owcsim.version import __version__  # the package's one version lookup
 
@@ -377,7 +378,13 @@ def build_result(job: FinishedJob) -> SimulationResultPublic:
         lighting.add_link_columns(cols, f.h0, f.delay["rms_delay_spread_s"], f.masked)
     links = document_rows(cols, scene.n_links)
     masked_rx = scene.masked != ""
-    channels, channel_cols = _channels(spec, scene, job.accs, plan, f.los_abc, cir_totals, masked_rx, lighting)
+    exact = job.info.stop_reason == StopReason.EXACT
+    bandwidth = group_bandwidths(
+        plan.group_weights, f.los_gain, job.los.delay, cir_totals, plan.cir_rank >= 0, exact, bins.t_min, bins.dt
+    )
+    channels, channel_cols = _channels(
+        spec, scene, job.accs, plan, f.los_abc, cir_totals, masked_rx, lighting, bandwidth
+    )
     run = _run_section(job, f.los_gain)
     diagnostics = _diagnostics(job)
     receivers = _receivers(spec, scene)
@@ -464,8 +471,11 @@ def _receivers(spec, scene) -> list[dict]:
     return document_rows(cols, len(rx))
 
 
-def _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=None) -> tuple[list[dict], dict]:
-    """The transmitter groups' channels at every receiver (group-major), as rows and as columns."""
+def _channels(
+    spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=None, bandwidth=None
+) -> tuple[list[dict], dict]:
+    """The transmitter groups' channels at every receiver (group-major), as rows and as columns; `bandwidth`
+    (G, R) their 3 dB bandwidths [Hz] (channel_spectrum.group_bandwidths)."""
     w = plan.group_weights
     if not w.size:
         return [], {}
@@ -491,6 +501,8 @@ def _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=
         "rms_delay_spread_s_stderr": column(flat["rms_delay_spread_s_stderr"]),
         "cir": [None] * (n_groups * n_rx),
     }
+    if bandwidth is not None:
+        cols["bandwidth_3db_hz"] = column(bandwidth.ravel())
     if lighting is not None:
         lighting.add_channel_columns(cols, w, h0, np.where(nan, np.nan, d["rms_delay_spread_s"]), group_power)
     n_tx = w.shape[1]

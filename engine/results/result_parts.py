@@ -202,7 +202,13 @@ MAP_QUANTITIES = {
     "rms_delay_spread_s": ("s", "rms_delay_spread_s_stderr"),
 }
 #: Quantities a map has when the scene asks for them (luminous output, link budget): included where finite.
-OPTIONAL_MAP_QUANTITIES = {"illuminance_lx": "lx", "snr_db": "dB", "ber": "1", "max_bit_rate_bps": "bit/s"}
+OPTIONAL_MAP_QUANTITIES = {
+    "illuminance_lx": "lx",
+    "snr_db": "dB",
+    "ber": "1",
+    "max_bit_rate_bps": "bit/s",
+    "bandwidth_3db_hz": "Hz",  # group channels with a CIR (engine/results/channel_spectrum.py)
+}
 
 
 def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[dict]:
