@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pydantic import PrivateAttr
 
+from owcsim.formats.channel_matrix import ChannelMatrix, channel_matrix
 from owcsim.formats.map_files import to_xarray
 from owcsim.formats.maps import GridMap, maps_of_result
 from owcsim.formats.plots import plot_cir
@@ -82,6 +83,11 @@ class Result(SimulationResultPublic):
         `links` is cir_link) cir and cir_stderr (n, n_bins) [power per bin per watt; NaN = no error bar] and
         by_reflection_order (n, K + 1, n_bins)."""
         return cir_arrays(self)
+
+    def channel_matrix(self) -> ChannelMatrix:
+        """DC gain of every transmitter x receiver with its error, LOS part and CIR (formats.channel_matrix):
+        `.dc_gain[i, j]`, ids in `.transmitters` / `.receivers`, `.to_xarray()`; for MIMO studies."""
+        return channel_matrix(self)
 
     def plot(self, path: str | Path | None = None, link: int | None = None) -> Figure:
         """h(t) per reflection order and total (formats.plots.plot_cir); saved to `path` if given."""
