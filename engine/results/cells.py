@@ -116,6 +116,11 @@ def _propagate(grad: FloatArray, sigma: FloatArray, independent: BoolArray) -> F
     return np.where(independent, np.sqrt((terms**2).sum(axis=0)), terms.sum(axis=0))
 
 
+#: Largest relative error of the OOK allowance (g P_s)^2 / SNR_req - I for which the rate's first-order error is
+#: given (beyond it the rate's cliff at allowance 0 makes the delta method meaningless: null).
+DELTA_LIMIT = 0.2
+
+
 def _ook(budget: lb.LinkBudget, area, power: FloatArray, s: IntArray, cp: CellPowers):
     """OOK-NRZ rate (lb.ook_rate) and its standard error (implicit differentiation of its cubic)."""
     g = budget.responsivity
@@ -131,7 +136,13 @@ def _ook(budget: lb.LinkBudget, area, power: FloatArray, s: IntArray, cp: CellPo
     d_rate = c1 + 2.0 * c2 * rate + 3.0 * c3 * rate**2
     d_y = np.where(others, -2.0 * g * g * power, 2.0 * g * g * power / required)
     grad = np.where(rate > 0, (d_y - 2.0 * lb.Q_E * g * rate) / d_rate, 0.0)
-    return rate, _propagate(grad, cp.stderr, cp.independent)
+    se = _propagate(grad, cp.stderr, cp.independent)
+    # the linearization holds while the allowance Y = (g P_s)^2 / SNR_req - I is well away from 0 (the rate's
+    # cliff): null where its own relative error exceeds DELTA_LIMIT, or where the rate is 0 by a margin of less
+    y = (g * p_s) ** 2 / required - interference
+    se_y = _propagate(d_y, cp.stderr, cp.independent)
+    exact = np.nan_to_num(se_y) == 0
+    return rate, np.where(exact | (se_y < DELTA_LIMIT * np.abs(y)), se, np.nan)
 
 
 def cell_figures(cp: CellPowers, budget: lb.LinkBudget | None, area: FloatArray) -> CellFigures:

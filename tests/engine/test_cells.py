@@ -187,3 +187,28 @@ def test_delta_method_gradients_equal_finite_differences():
                 - cells_module._sinr(budget, area, down, s, factor)[0]
             ) / (2 * h)
             np.testing.assert_allclose(grad[c], fd, rtol=1e-6)
+
+
+def test_delta_method_errors_match_the_spread_of_independent_runs():
+    """40 seeds, reflections (Monte Carlo gains): each figure's reported error against its spread over the runs,
+    pooled over the receivers (the spread of z is known to ~7-10 %, so [0.7, 1.35] is ~4 sigma, and an error bar
+    off by 1.5x fails). BER target 1e-3: the OOK rate of r1 is then away from its cliff."""
+    keys = ("sinr_db", "rate_shannon_bps", "rate_dco_ofdm_bps", "rate_ook_bps")
+    runs = []
+    for seed in range(40):
+        doc = cells_doc()
+        doc["receiver_grids"] = []
+        doc["link_budget"]["ber_target"] = 1e-3
+        doc["simulation"].update(max_reflections=2, paths=3000, seed=seed, direction="forward")
+        doc["outputs"] = {"cir": False, "orders": False}
+        rows = simulate(spec(doc))["cells"]["receivers"]
+        runs.append([[(r[k], r[k + "_stderr"]) for k in keys] for r in rows])
+    a = np.array(runs, float)  # (seed, receiver, key, value / stderr); None -> NaN
+    with np.errstate(invalid="ignore"):  # NaN where a figure has no error bar (left out below)
+        z = (a[..., 0] - a[..., 0].mean(axis=0)) / a[..., 1].mean(axis=0)
+    for k, key in enumerate(keys):
+        ok = (a[:, :, k, 1] > 0).all(axis=0)  # receivers where every run gives this figure an error bar
+        assert ok.sum() >= (1 if key == "rate_ook_bps" else 3), key
+        zz = z[:, ok, k]
+        ratio = math.sqrt((zz**2).sum() / (zz.size - ok.sum()))  # one mean taken out per receiver
+        assert 0.7 < ratio < 1.35, (key, ratio)
