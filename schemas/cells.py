@@ -8,7 +8,7 @@ interfere. With a `link_budget`:
 the noise of the Komine & Nakagawa model with the shot noise of all the received light. Rates:
 Shannon B log2(1 + SINR); DCO-OFDM B (N - 2) / (2N) log2(1 + SINR_ac) with the AC signal
 power (gamma P)^2 / k^2 of a bias of k standard deviations (Dimitrov & Haas 2015); OOK-NRZ the
-highest bit rate R_b whose SINR, with the noise bandwidth B = R_b, reaches Q^-1(BER target)^2.
+highest bit rate R_b <= B whose SINR, with the noise bandwidth R_b, reaches Q^-1(BER target)^2.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ CELL_QUANTITIES = {
     "sinr_db": ("dB", "SINR of the serving cell, 10 log10 SINR"),
     "rate_shannon_bps": ("bit/s", "Shannon rate B log2(1 + SINR)"),
     "rate_dco_ofdm_bps": ("bit/s", "DCO-OFDM rate B (N - 2) / (2N) log2(1 + SINR_ac)"),
-    "rate_ook_bps": ("bit/s", "highest OOK-NRZ bit rate meeting the BER target (noise bandwidth = bit rate)"),
+    "rate_ook_bps": ("bit/s", "highest OOK-NRZ bit rate <= B meeting the BER target (noise bandwidth = bit rate)"),
 }
 
 
@@ -45,7 +45,9 @@ class CellReceiverPublic(_Public):
     rate_dco_ofdm_bps: float | None = Field(None, description="B (N - 2) / (2N) log2(1 + SINR_ac) [bit/s]")
     rate_dco_ofdm_bps_stderr: float | None = Field(None, description="standard error [bit/s]")
     rate_ook_bps: float | None = Field(
-        None, description="highest OOK-NRZ bit rate with SINR(B = R_b) >= Q^-1(BER target)^2 [bit/s]; 0 if none"
+        None,
+        description="highest OOK-NRZ bit rate R_b <= B with SINR(noise bandwidth R_b) >= Q^-1(BER target)^2 "
+        "[bit/s]; 0 if none",
     )
     rate_ook_bps_stderr: float | None = Field(None, description="standard error [bit/s]")
 

@@ -129,14 +129,17 @@ def _ook(budget: lb.LinkBudget, area, power: FloatArray, s: IntArray, cp: CellPo
     p_s = np.take_along_axis(power, s[None], axis=0)[0]
     p_tot = power.sum(axis=0)
     interference = g * g * np.where(others, power**2, 0.0).sum(axis=0)
-    rate = lb.ook_rate(budget, area, p_s, interference, p_tot, required)
+    root = lb.ook_rate(budget, area, p_s, interference, p_tot, required)
+    rate = np.minimum(root, budget.noise_bandwidth)  # NRZ needs a bandwidth ~ R_b: at most the receiver's B
     # F(R, P) = c1(P) R + c2 R^2 + c3 R^3 - Y(P) = 0: dR/dP_c = (dY/dP_c - 2 q g R) / (dF/dR)
     c1 = 2.0 * lb.Q_E * (g * p_tot + budget.background_current * budget.i2)
     c2, c3 = lb.thermal_coefficients(budget, area)
     d_rate = c1 + 2.0 * c2 * rate + 3.0 * c3 * rate**2
     d_y = np.where(others, -2.0 * g * g * power, 2.0 * g * g * power / required)
     grad = np.where(rate > 0, (d_y - 2.0 * lb.Q_E * g * rate) / d_rate, 0.0)
-    se = _propagate(grad, cp.stderr, cp.independent)
+    se_root = _propagate(grad, cp.stderr, cp.independent)
+    capped = root > budget.noise_bandwidth  # the rate is B, surely so when the root is 2 errors above it
+    se = np.where(capped, np.where(root - budget.noise_bandwidth >= 2.0 * se_root, 0.0, np.nan), se_root)
     # the linearization holds while the allowance Y = (g P_s)^2 / SNR_req - I is well away from 0 (the rate's
     # cliff): null where its own relative error exceeds DELTA_LIMIT, or where the rate is 0 by a margin of less
     y = (g * p_s) ** 2 / required - interference

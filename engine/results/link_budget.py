@@ -310,7 +310,7 @@ _OOK_STEPS = 64
 
 def ook_rate(budget: LinkBudget, area, p_signal, interference_a2, p_total, required_snr: float):
     """Highest OOK-NRZ bit rate R_b [bit/s] whose SINR reaches `required_snr`, the noise bandwidth being R_b
-    (Komine & Nakagawa 2004: B = R_b).
+    (Komine & Nakagawa 2004: B = R_b), without the cap at the budget's bandwidth (cells.py applies it).
 
     Solves c1 R + c2 R^2 + c3 R^3 = (gamma P_s)^2 / SNR_req - I for R > 0, with c1 = 2 q (gamma P_total +
     I_bg I2) (shot noise) and c2, c3 the thermal terms (`thermal_coefficients`); the left side grows with R,
