@@ -133,8 +133,8 @@ class ChannelPublic(LightingPublic):
     bandwidth_3db_hz: float | None = Field(
         None,
         description="3 dB bandwidth of the summed channel [Hz], the line of sight as exact delays "
-        "(engine/results/channel_spectrum.py); null without a binned CIR at this receiver (ask `outputs.cir`; "
-        "a line-of-sight-only exact run needs none) or when |H| stays above 1/sqrt(2) up to 1/(2 time_bin_s)",
+        "(engine/results/channel_spectrum.py); null without a binned CIR at this receiver (ask `outputs.cir` for "
+        "grid points) or when |H| stays above 1/sqrt(2) up to 1/(2 time_bin_s)",
     )
     cir: CirPublic | None = None
 

@@ -10,7 +10,7 @@ reflected / scattered part binned (power r_ijk per bin, at the bin centres t_k).
 first f > 0 with |H(f)|^2 = |H(0)|^2 / 2, searched up to the binning's Nyquist frequency 1 / (2 dt): sampled on
 a zero-padded FFT grid (`OVERSAMPLE` x the span of the arrivals), the first crossing refined by bisection on
 the continuous sum. NaN where |H|^2 stays above the threshold up to 1 / (2 dt), where H(0) = 0, and where the
-receiver has no binned CIR (outputs.cir) unless the run is exact (line of sight only: no binned part).
+receiver has no binned CIR (asked with `outputs.cir`).
 """
 
 from __future__ import annotations
@@ -25,6 +25,8 @@ __all__ = ["OVERSAMPLE", "bandwidth_3db", "group_bandwidths"]
 
 #: Samples of |H(f)|^2 per 1 / (span of the arrivals) before the first crossing is refined.
 OVERSAMPLE = 8
+#: Frequencies evaluated at once for the rows whose first crossing is not found yet (most cross in the first).
+FREQ_BLOCK = 32
 #: Bisection steps of the refinement: the FFT grid step / 2^52, below a double's resolution of f.
 REFINE_STEPS = 52
 
@@ -57,15 +59,21 @@ def bandwidth_3db(gain, delay, binned, t_min: float, dt: float) -> FloatArray:
     f_max = 1.0 / (2.0 * dt)
     n_fft = 1 << max(4, math.ceil(math.log2(OVERSAMPLE * max(n_bins, math.ceil(span_max / dt), 2))))
     freqs = np.arange(n_fft // 2 + 1) / (n_fft * dt)  # 0 .. f_max
-    spectrum = np.zeros((m, len(freqs)), complex)
-    if n_bins:  # bin k at t_min + (k + 1/2) dt: the FFT of the bins times the phase of that shift
-        shift = np.exp(-2j * math.pi * freqs * (t_min + 0.5 * dt))
-        spectrum += np.fft.rfft(binned, n=n_fft, axis=1) * shift[None, :]
-    for d in range(gain.shape[1]):  # a loop over the few delta terms of a row (a group's members)
-        spectrum += gain[:, d, None] * np.exp(-2j * math.pi * freqs[None, :] * delay[:, d, None])
-    below = (np.abs(spectrum) ** 2 <= threshold[:, None]) & (freqs[None, :] > 0)
-    found = below.any(axis=1) & (h0 > 0)
-    k = np.argmax(below, axis=1)
+    binned_fft = np.fft.rfft(binned, n=n_fft, axis=1) if n_bins else None
+    shift = np.exp(-2j * math.pi * freqs * (t_min + 0.5 * dt))  # bin k at t_min + (k + 1/2) dt
+    k = np.zeros(m, np.int64)  # first sample at or below the threshold; 0: none (yet)
+    for start in range(1, len(freqs), FREQ_BLOCK):  # blocks of frequencies, only the rows not yet crossed
+        rows = np.flatnonzero(k == 0)
+        if not len(rows):
+            break
+        f = freqs[start : start + FREQ_BLOCK]
+        h = (gain[rows, :, None] * np.exp(-2j * math.pi * f[None, None, :] * delay[rows, :, None])).sum(axis=1)
+        if binned_fft is not None:
+            h += binned_fft[rows, start : start + FREQ_BLOCK] * shift[None, start : start + FREQ_BLOCK]
+        below = np.abs(h) ** 2 <= threshold[rows, None]
+        hit = below.any(axis=1)
+        k[rows[hit]] = start + np.argmax(below[hit], axis=1)
+    found = (k > 0) & (h0 > 0)
     lo = freqs[np.maximum(k - 1, 0)]
     hi = freqs[k]
     for _ in range(REFINE_STEPS):  # bisection on the continuous sum, all rows at once
@@ -75,25 +83,23 @@ def bandwidth_3db(gain, delay, binned, t_min: float, dt: float) -> FloatArray:
     return np.where(found & (hi <= f_max), hi, np.nan)
 
 
-def group_bandwidths(
-    weights, los_gain, los_delay, cir_totals: dict, has_cir, exact: bool, t_min: float, dt: float
-) -> FloatArray:
+def group_bandwidths(weights, los_gain, los_delay, cir_totals: dict, has_cir, t_min: float, dt: float) -> FloatArray:
     """(G, R) 3 dB bandwidth [Hz] of every group's channel at every receiver, NaN where none.
 
     weights (G, n_tx) group weights; los_gain, los_delay (L,) per link (tx-major, masked links 0); cir_totals
     {link: (power per bin with the LOS in its bin, ...)} of result_parts.cir_block; has_cir (R,) receivers with
-    a binned CIR; exact: a run of the line of sight alone (every receiver then has its channel without bins).
+    a binned CIR (the others get NaN: the figure is asked with `outputs.cir`, as its cost is per bin).
     """
     w = np.asarray(weights, float)
     n_groups, n_tx = w.shape
     n_rx = len(has_cir)
     out = np.full((n_groups, n_rx), np.nan)
-    rx = np.arange(n_rx) if exact else np.flatnonzero(has_cir)
+    rx = np.flatnonzero(has_cir)
     if not n_groups or not len(rx):
         return out
     gain = np.asarray(los_gain, float).reshape(n_tx, n_rx)[:, rx]
     delay = np.asarray(los_delay, float).reshape(n_tx, n_rx)[:, rx]
-    links = np.fromiter(cir_totals, np.int64, len(cir_totals)) if not exact else np.zeros(0, np.int64)
+    links = np.fromiter(cir_totals, np.int64, len(cir_totals))
     n_bins = len(cir_totals[int(links[0])][0]) if len(links) else 0
     reflected = np.zeros((n_tx, len(rx), n_bins))
     if n_bins:  # the members' binned CIRs (gathered from the dict), the LOS bin removed: it is a delta term here

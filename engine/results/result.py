@@ -42,7 +42,7 @@ from owcsim.engine.tally.estimates import (
 from owcsim.engine.tally.tally import Accumulator
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.algorithms import Direction, algorithm
-from owcsim.schemas.results import ModeledPublic, SimulationResultPublic, StopReason, UnreachablePublic
+from owcsim.schemas.results import ModeledPublic, SimulationResultPublic, UnreachablePublic
 from owcsim.schemas.units import unit_warnings
 from owcsim.version import __version__  # the package's one version lookup
 
@@ -378,9 +378,8 @@ def build_result(job: FinishedJob) -> SimulationResultPublic:
         lighting.add_link_columns(cols, f.h0, f.delay["rms_delay_spread_s"], f.masked)
     links = document_rows(cols, scene.n_links)
     masked_rx = scene.masked != ""
-    exact = job.info.stop_reason == StopReason.EXACT
     bandwidth = group_bandwidths(
-        plan.group_weights, f.los_gain, job.los.delay, cir_totals, plan.cir_rank >= 0, exact, bins.t_min, bins.dt
+        plan.group_weights, f.los_gain, job.los.delay, cir_totals, plan.cir_rank >= 0, bins.t_min, bins.dt
     )
     channels, channel_cols = _channels(
         spec, scene, job.accs, plan, f.los_abc, cir_totals, masked_rx, lighting, bandwidth

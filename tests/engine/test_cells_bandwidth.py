@@ -27,6 +27,7 @@ def two_lamp_doc(max_reflections=0, **sim) -> dict:
     doc["receiver_grids"] = [
         {"id_prefix": "m", "origin": [1.0, 1.0, 0.8], "size": [2.0, 2.0], "spacing": 0.5, "area": AREA}
     ]
+    doc["outputs"] = {"cir": True}  # the bandwidth needs each point's CIR
     return doc
 
 
@@ -61,6 +62,15 @@ def test_group_bandwidth_equals_the_two_arrival_closed_form_in_line_of_sight():
     assert grid["units"]["bandwidth_3db_hz"] == "Hz"
     np.testing.assert_allclose(np.array(grid["values"]["bandwidth_3db_hz"], float).ravel(), ref[1:], rtol=1e-9)
     assert not np.allclose(got, 1.1 * ref, rtol=1e-3)  # power: a reference 10 % off fails
+
+
+def test_grid_points_without_a_cir_have_no_bandwidth():
+    doc = two_lamp_doc()
+    del doc["outputs"]
+    res = simulate(spec(doc))
+    assert res["channels"][0]["bandwidth_3db_hz"] is not None  # the explicit receiver keeps its CIR by default
+    assert all(c["bandwidth_3db_hz"] is None for c in res["channels"][1:])
+    assert "bandwidth_3db_hz" not in res["maps"][0]["values"]
 
 
 def test_bandwidth_of_deltas_has_no_crossing_for_one_arrival_or_unequal_pairs():
