@@ -18,6 +18,10 @@ Personick 1982, whose noise-bandwidth integrals are I2 and I3):
 with A the receiver's `area` [m^2] and B the noise bandwidth [Hz]. Komine takes B equal to the
 bit rate (I2 and I3 are the noise-bandwidth factors of an NRZ receiver, so I2 * R_b is the
 equivalent noise bandwidth); here B = `bandwidth` when given, else `bit_rate`.
+
+Multi-cell figures (schemas/cells.py, engine/results/cells.py) use the same receiver: the SINR with
+the other cells as interference, and rates at B: Shannon, DCO-OFDM (`dco_ofdm_subcarriers`,
+`dco_ofdm_bias`) and OOK-NRZ at `ber_target`.
 """
 
 from __future__ import annotations

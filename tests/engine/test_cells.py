@@ -219,3 +219,35 @@ def test_delta_method_errors_match_the_spread_of_independent_runs():
         zz = z[:, ok, k]
         ratio = math.sqrt((zz**2).sum() / (zz.size - ok.sum()))  # one mean taken out per receiver
         assert 0.7 < ratio < 1.35, (key, ratio)
+
+
+def test_masked_points_have_no_serving_cell_and_no_boundary():
+    doc = cells_doc()
+    doc["furniture"] = [{"name": "desk", "min": [2.0, 2.0, 0.0], "max": [3.0, 3.0, 1.0], "reflectance": 0.5}]
+    res = simulate(spec(doc))
+    masked = {r["id"] for r in res["receivers"] if r["masked"]}
+    assert masked
+    rows = {r["receiver"]: r for r in res["cells"]["receivers"]}
+    assert all(rows[i]["serving_cell"] is None and rows[i]["sinr_db"] is None for i in masked)
+    for b in res["cells"]["maps"][0]["boundaries"]:  # no segment inside the desk's footprint
+        for p in (b["start"], b["end"]):
+            assert not (2.0 + 0.2 < p[0] < 3.0 - 0.2 and 2.0 + 0.2 < p[1] < 3.0 - 0.2)
+
+
+@pytest.mark.parametrize(
+    "field, value, message",
+    [
+        ("dco_ofdm_subcarriers", 63, "must be even"),
+        ("dco_ofdm_subcarriers", 2, "greater than or equal to 4"),
+        ("ber_target", 0.5, "less than 0.5"),
+        ("dco_ofdm_bias", 0, "greater than 0"),
+    ],
+)
+def test_bad_multi_cell_parameters_are_refused_with_a_located_message(field, value, message):
+    from pydantic import ValidationError
+
+    doc = cells_doc()
+    doc["link_budget"][field] = value
+    with pytest.raises(ValidationError, match=message) as err:
+        spec(doc)
+    assert "link_budget" in str(err.value)
