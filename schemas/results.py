@@ -136,6 +136,9 @@ class ChannelPublic(LightingPublic):
         "(engine/results/channel_spectrum.py); null without a binned CIR at this receiver (ask `outputs.cir` for "
         "grid points) or when |H| stays above 1/sqrt(2) up to 1/(2 time_bin_s)",
     )
+    bandwidth_3db_hz_stderr: float | None = Field(
+        None, description="standard error of bandwidth_3db_hz [Hz] (delta method over the CIR's path groups)"
+    )
     cir: CirPublic | None = None
 
 

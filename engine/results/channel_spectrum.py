@@ -21,7 +21,7 @@ import numpy as np
 
 from owcsim.engine.core.arrays import FloatArray
 
-__all__ = ["OVERSAMPLE", "bandwidth_3db", "group_bandwidths"]
+__all__ = ["OVERSAMPLE", "bandwidth_3db", "bin_gradient", "group_bandwidths"]
 
 #: Samples of |H(f)|^2 per 1 / (span of the arrivals) before the first crossing is refined.
 OVERSAMPLE = 8
@@ -37,6 +37,24 @@ def _power(f: FloatArray, gain, delay, binned, centres) -> FloatArray:
     if binned.shape[1]:
         h = h + (binned * np.exp(-2j * math.pi * f[:, None] * centres[None, :])).sum(axis=1)
     return np.abs(h) ** 2
+
+
+def bin_gradient(f3: FloatArray, gain, delay, binned, t_min: float, dt: float) -> FloatArray:
+    """(M, B) d f_3dB / d r_k of each row at its bandwidth f3 (M,) (NaN rows: 0), by implicit differentiation of
+    g(f, r) = |H(f)|^2 - H(0)^2 / 2 = 0: df/dr_k = -(dg/dr_k) / (dg/df), with
+    dg/dr_k = 2 Re(conj H e^(-2 pi i f t_k)) - H(0) and dg/df = 2 Re(conj H dH/df)."""
+    gain, delay, binned = (np.asarray(a, float) for a in (gain, delay, binned))
+    centres = t_min + dt * (np.arange(binned.shape[1]) + 0.5)
+    f = np.nan_to_num(f3)[:, None]
+    e_los = gain * np.exp(-2j * math.pi * f * delay)
+    e_bin = np.exp(-2j * math.pi * f * centres[None, :])
+    h = e_los.sum(axis=1) + (binned * e_bin).sum(axis=1)
+    dh = (-2j * math.pi * delay * e_los).sum(axis=1) + (-2j * math.pi * centres * binned * e_bin).sum(axis=1)
+    h0 = gain.sum(axis=1) + binned.sum(axis=1)
+    dg_dr = 2.0 * np.real(np.conj(h)[:, None] * e_bin) - h0[:, None]
+    dg_df = 2.0 * np.real(np.conj(h) * dh)
+    ok = np.isfinite(f3) & (dg_df != 0)
+    return np.where(ok[:, None], -dg_dr / np.where(ok, dg_df, 1.0)[:, None], 0.0)
 
 
 def bandwidth_3db(gain, delay, binned, t_min: float, dt: float) -> FloatArray:
@@ -83,30 +101,36 @@ def bandwidth_3db(gain, delay, binned, t_min: float, dt: float) -> FloatArray:
     return np.where(found & (hi <= f_max), hi, np.nan)
 
 
-def group_bandwidths(weights, los_gain, los_delay, cir_totals: dict, has_cir, t_min: float, dt: float) -> FloatArray:
-    """(G, R) 3 dB bandwidth [Hz] of every group's channel at every receiver, NaN where none.
+def group_bandwidths(
+    weights, los_gain, los_delay, cir_totals: dict, has_cir, t_min: float, dt: float
+) -> tuple[FloatArray, FloatArray]:
+    """(G, R) 3 dB bandwidth [Hz] of every group's channel at every receiver and its standard error, NaN where
+    none.
 
     weights (G, n_tx) group weights; los_gain, los_delay (L,) per link (tx-major, masked links 0); cir_totals
-    {link: (power per bin with the LOS in its bin, ...)} of result_parts.cir_block; has_cir (R,) receivers with
-    a binned CIR (the others get NaN: the figure is asked with `outputs.cir`, as its cost is per bin).
+    {link: (power per bin with the LOS in its bin, per path group estimates (n, bins))} of
+    result_parts.cir_block; has_cir (R,) receivers with a binned CIR (the others get NaN: the figure is asked
+    with `outputs.cir`, as its cost is per bin). The error: delta method on the bins, df = grad . dr, its
+    spread over the n path groups (the batch-means error of the group channel's CIR, as `channels[].cir`):
+    se = std_q(grad . r_q) / sqrt(n); NaN with fewer than 2 groups. The line of sight is exact.
     """
     w = np.asarray(weights, float)
     n_groups, n_tx = w.shape
     n_rx = len(has_cir)
-    out = np.full((n_groups, n_rx), np.nan)
+    out, out_se = np.full((n_groups, n_rx), np.nan), np.full((n_groups, n_rx), np.nan)
     rx = np.flatnonzero(has_cir)
     if not n_groups or not len(rx):
-        return out
+        return out, out_se
     gain = np.asarray(los_gain, float).reshape(n_tx, n_rx)[:, rx]
     delay = np.asarray(los_delay, float).reshape(n_tx, n_rx)[:, rx]
     links = np.fromiter(cir_totals, np.int64, len(cir_totals))
     n_bins = len(cir_totals[int(links[0])][0]) if len(links) else 0
     reflected = np.zeros((n_tx, len(rx), n_bins))
+    rank = np.full(n_rx, -1)
+    rank[rx] = np.arange(len(rx))
+    tx_of, rx_of = np.divmod(links, n_rx)
+    keep = rank[rx_of] >= 0
     if n_bins:  # the members' binned CIRs (gathered from the dict), the LOS bin removed: it is a delta term here
-        rank = np.full(n_rx, -1)
-        rank[rx] = np.arange(len(rx))
-        tx_of, rx_of = np.divmod(links, n_rx)
-        keep = rank[rx_of] >= 0
         reflected[tx_of[keep], rank[rx_of[keep]]] = np.stack([cir_totals[int(k)][0] for k in links[keep]])
         with np.errstate(over="ignore", invalid="ignore"):
             pos = (delay - t_min) / dt
@@ -117,5 +141,30 @@ def group_bandwidths(weights, los_gain, los_delay, cir_totals: dict, has_cir, t_
         members = np.flatnonzero(w[g] > 0)
         a = (w[g, members, None] * gain[members]).T
         binned = np.einsum("i,irk->rk", w[g, members], reflected[members])
-        out[g, rx] = bandwidth_3db(a, delay[members].T, binned, t_min, dt)
-    return out
+        bw = bandwidth_3db(a, delay[members].T, binned, t_min, dt)
+        out[g, rx] = bw
+        if n_bins:
+            grad = bin_gradient(bw, a, delay[members].T, binned, t_min, dt)
+            out_se[g, rx] = _group_spread(grad, w[g], members, cir_totals, links[keep], tx_of[keep], rank[rx_of[keep]])
+    return out, out_se
+
+
+def _group_spread(grad, weights, members, cir_totals: dict, links, tx_of, rank_of) -> FloatArray:
+    """(R,) std_q(grad . sum_i w_i r_iq) / sqrt(n) over the n path groups q (NaN: fewer than 2, or unequal
+    group counts among the members)."""
+    n_rows = grad.shape[0]
+    proj: dict[int, np.ndarray] = {}
+    counts = set()
+    for link, i, r in zip(links.tolist(), tx_of.tolist(), rank_of.tolist()):  # the member links with a CIR
+        if weights[i] <= 0:
+            continue
+        est = cir_totals[link][1]
+        counts.add(len(est))
+        proj[r] = proj.get(r, 0.0) + weights[i] * (est @ grad[r])
+    se = np.full(n_rows, np.nan)
+    if len(counts) != 1 or min(counts) < 2:
+        return se
+    n = counts.pop()
+    for r, s in proj.items():  # one small vector per receiver
+        se[r] = float(np.std(s, ddof=1) / math.sqrt(n))
+    return np.where(np.isfinite(grad).all(axis=1) & (np.abs(grad).sum(axis=1) > 0), se, np.nan)

@@ -378,7 +378,7 @@ def build_result(job: FinishedJob) -> SimulationResultPublic:
         lighting.add_link_columns(cols, f.h0, f.delay["rms_delay_spread_s"], f.masked)
     links = document_rows(cols, scene.n_links)
     masked_rx = scene.masked != ""
-    bandwidth = group_bandwidths(
+    bandwidth = group_bandwidths(  # (value, stderr), (G, R) each
         plan.group_weights, f.los_gain, job.los.delay, cir_totals, plan.cir_rank >= 0, bins.t_min, bins.dt
     )
     channels, channel_cols = _channels(
@@ -474,7 +474,7 @@ def _channels(
     spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=None, bandwidth=None
 ) -> tuple[list[dict], dict]:
     """The transmitter groups' channels at every receiver (group-major), as rows and as columns; `bandwidth`
-    (G, R) their 3 dB bandwidths [Hz] (channel_spectrum.group_bandwidths)."""
+    (value, stderr) of their 3 dB bandwidths [Hz], (G, R) each (channel_spectrum.group_bandwidths)."""
     w = plan.group_weights
     if not w.size:
         return [], {}
@@ -501,7 +501,8 @@ def _channels(
         "cir": [None] * (n_groups * n_rx),
     }
     if bandwidth is not None:
-        cols["bandwidth_3db_hz"] = column(bandwidth.ravel())
+        cols["bandwidth_3db_hz"] = column(bandwidth[0].ravel())
+        cols["bandwidth_3db_hz_stderr"] = column(bandwidth[1].ravel())
     if lighting is not None:
         lighting.add_channel_columns(cols, w, h0, np.where(nan, np.nan, d["rms_delay_spread_s"]), group_power)
     n_tx = w.shape[1]
