@@ -251,3 +251,16 @@ def test_bad_multi_cell_parameters_are_refused_with_a_located_message(field, val
     with pytest.raises(ValidationError, match=message) as err:
         spec(doc)
     assert "link_budget" in str(err.value)
+
+
+def test_backward_paths_shared_by_cells_give_the_bound_and_say_so():
+    doc = cells_doc()
+    doc["receiver_grids"] = []
+    doc["simulation"].update(max_reflections=1, paths=2000, seed=3, direction="backward")
+    cells = simulate(spec(doc))["cells"]
+    assert "bound" in cells["note"] and "3 receiver(s)" in cells["note"]
+    assert all(r["sinr_db_stderr"] > 0 for r in cells["receivers"])
+    grad = np.array([[1.0, -2.0], [3.0, 0.5]])
+    sigma = np.array([[0.1, 0.2], [0.3, 0.4]])
+    both = cells_module._propagate(grad, sigma, np.array([True, False]))
+    assert both[0] == pytest.approx(math.hypot(0.1, 0.9)) and both[1] == pytest.approx(0.4 + 0.2)
