@@ -264,3 +264,13 @@ def test_backward_paths_shared_by_cells_give_the_bound_and_say_so():
     sigma = np.array([[0.1, 0.2], [0.3, 0.4]])
     both = cells_module._propagate(grad, sigma, np.array([True, False]))
     assert both[0] == pytest.approx(math.hypot(0.1, 0.9)) and both[1] == pytest.approx(0.4 + 0.2)
+
+
+def test_one_cell_sinr_is_the_channel_snr():
+    doc = cells_doc()
+    doc["transmitter_groups"] = [{"name": "all", "transmitters": [t[0] for t in TX]}]
+    res = simulate(spec(doc))
+    sinr = [r["sinr_db"] for r in res["cells"]["receivers"]]
+    snr = [c["snr_db"] for c in res["channels"]]
+    np.testing.assert_allclose(sinr, snr, rtol=1e-12)
+    assert res["cells"]["maps"][0]["boundaries"] == []
