@@ -170,6 +170,10 @@ def _cmd_run(args) -> int:
         if executor is not None:
             executor.close()
     paths = write_outputs(result, out, plot=not args.no_plot, plot_format=args.plot_format)
+    if args.channel_matrix:  # transmitters x receivers for MIMO studies (formats/channel_matrix.py)
+        from owcsim.formats.channel_matrix import channel_matrix, write_channel_matrix
+
+        paths.append(write_channel_matrix(channel_matrix(result), out / "channel_matrix.npz"))
     _print_links(result)
     run = result.run
     wrote = (
@@ -305,6 +309,11 @@ def build_parser() -> argparse.ArgumentParser:
         "matplotlib (its start-up and drawing: ~0.5-0.8 s)",
     )
     run.add_argument("--no-plot", action="store_true", help="draw no figure (cir, map heatmaps): for sweeps")
+    run.add_argument(
+        "--channel-matrix",
+        action="store_true",
+        help="also write channel_matrix.npz: DC gain of every transmitter x receiver (and CIR when tallied)",
+    )
     _add_simulation_options(run)
     where = run.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=1, help="worker processes on this machine (default 1)")

@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from .algorithms import Direction
 from .lighting import LightingResultPublic
+from .cells import CellsPublic
 from .orientation import CombinedSnrPublic, OrientationPointPublic
 from .scene import SceneSpec
 from .spectra import SpectralResultPublic
@@ -136,6 +137,15 @@ class ChannelPublic(LightingPublic):
     mean_delay_s_stderr: float | None = Field(description="standard error of mean_delay_s [s]")
     rms_delay_spread_s: float | None = Field(description="RMS delay spread of the summed channel [s]")
     rms_delay_spread_s_stderr: float | None = Field(description="standard error of rms_delay_spread_s [s]")
+    bandwidth_3db_hz: float | None = Field(
+        None,
+        description="3 dB bandwidth of the summed channel [Hz], the line of sight as exact delays "
+        "(engine/results/channel_spectrum.py); null without a binned CIR at this receiver (ask `outputs.cir` for "
+        "grid points) or when |H| stays above 1/sqrt(2) up to 1/(2 time_bin_s)",
+    )
+    bandwidth_3db_hz_stderr: float | None = Field(
+        None, description="standard error of bandwidth_3db_hz [Hz] (delta method over the CIR's path groups)"
+    )
     cir: CirPublic | None = None
 
 
@@ -304,6 +314,9 @@ class SimulationResultPublic(PublicModel):
     angle_diversity: list[CombinedSnrPublic] = Field(
         default_factory=list,
         description="per angle-diversity receiver and channel: combined SNRs (docs/orientation.md)",
+    )
+    cells: CellsPublic | None = Field(
+        None, description="multi-cell LiFi: serving cell, SINR, rates, handover boundaries (schemas/cells.py)"
     )
     run: RunPublic
     diagnostics: DiagnosticsPublic

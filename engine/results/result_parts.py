@@ -209,9 +209,10 @@ OPTIONAL_MAP_QUANTITIES = {
     "snr_db": "dB",
     "ber": "1",
     "max_bit_rate_bps": "bit/s",
+    "bandwidth_3db_hz": "Hz",  # group channels with a CIR (engine/results/channel_spectrum.py)
 }
 #: The standard error of an optional quantity: its key in the columns.
-OPTIONAL_MAP_STDERR = {"illuminance_lx": "illuminance_lx_stderr"}
+OPTIONAL_MAP_STDERR = {"illuminance_lx": "illuminance_lx_stderr", "bandwidth_3db_hz": "bandwidth_3db_hz_stderr"}
 
 
 def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[dict]:
@@ -245,7 +246,7 @@ def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[d
             for q, unit in OPTIONAL_MAP_QUANTITIES.items():
                 if q in columns and np.isfinite(arr := part(q)).any():
                     values[q], units[q] = column(arr), unit
-                    if q in OPTIONAL_MAP_STDERR:
+                    if OPTIONAL_MAP_STDERR.get(q) in columns:
                         stderr[q] = column(part(OPTIONAL_MAP_STDERR[q]))
             out.append(
                 {
