@@ -43,7 +43,9 @@ def office(cells: bool = False, **simulation) -> owcsim.SceneSpec:
         half_power_semi_angle_deg=70,
         luminous_output={"center_luminous_intensity": 2628.0},
     )
-    groups = [build.group(f"cell{k + 1}", [t]) for k, t in enumerate(lamps)] if cells else [build.group("ceiling", lamps)]
+    groups = (
+        [build.group(f"cell{k + 1}", [t]) for k, t in enumerate(lamps)] if cells else [build.group("ceiling", lamps)]
+    )
     plane = build.work_plane(room, height=0.85, spacing=0.25, margin=0.125, area=1e-4, fov_deg=90, id_prefix="plane")
     return build.scene(
         room,
@@ -74,7 +76,9 @@ def main() -> None:
     t = time.perf_counter()
     light = light_and_signal(args.target)
     m = light.grid_maps[0]
-    print(f"1. light and signal: {m.shape[0]} x {m.shape[1]} points, every reflection order, {light.run.paths_total:,} paths")
+    print(
+        f"1. light and signal: {m.shape[0]} x {m.shape[1]} points, every reflection order, {light.run.paths_total:,} paths"
+    )
     for area in light.lighting.areas:
         for part in ("task", "surround"):
             a = getattr(area, part)
@@ -90,7 +94,9 @@ def main() -> None:
     rel = np.asarray(m.values["dc_gain_rel_error"]) if "dc_gain_rel_error" in m.values else None
     if rel is not None:
         print(f"   worst point's relative error of H0: {np.nanmax(rel):.2%}")
-    light.plot_map("illuminance_lx", contours=[300, 500, 750, 1000, 1500], path=args.out / "office-planner-illuminance.png")
+    light.plot_map(
+        "illuminance_lx", contours=[300, 500, 750, 1000, 1500], path=args.out / "office-planner-illuminance.png"
+    )
     light.plot_map("snr_db", path=args.out / "office-planner-snr.png")
 
     cells = owcsim.simulate(office(cells=True, target_rel_error=0.02))
@@ -99,7 +105,9 @@ def main() -> None:
     shares = [float(np.mean(serving == k)) for k in range(len(c.cells))]
     print(f"2. cells {c.cells}: each serves {', '.join(f'{s:.0%}' for s in shares)} of the plane")
     sinr = np.asarray(c.maps[0].sinr_db, float)
-    print(f"   SINR {np.nanmin(sinr):.1f} to {np.nanmax(sinr):.1f} dB, {len(c.maps[0].boundaries)} handover boundary segments")
+    print(
+        f"   SINR {np.nanmin(sinr):.1f} to {np.nanmax(sinr):.1f} dB, {len(c.maps[0].boundaries)} handover boundary segments"
+    )
     plot_cells(cells, args.out / "office-planner-cells.png", quantity="sinr_db")
 
     held = office(max_reflections=0)

@@ -14,8 +14,8 @@ from enum import StrEnum
 from pydantic import BaseModel, ConfigDict, Field
 
 from .algorithms import Direction
-from .lighting import LightingResultPublic
 from .cells import CellsPublic
+from .lighting import LightingResultPublic
 from .orientation import CombinedSnrPublic, OrientationPointPublic
 from .scene import SceneSpec
 from .spectra import SpectralResultPublic
