@@ -33,8 +33,11 @@ from owcsim.formats.cell_plots import plot_cells
 DESK = {"name": "desk", "grid": "plane", "min": [1.75, 1.5, 0.85], "max": [3.25, 3.5, 0.85]}
 
 
-def office(cells: bool = False, **simulation) -> owcsim.SceneSpec:
-    """The office scene; `cells`: each lamp its own group (a LiFi cell), else the four lamps one signal."""
+def office(
+    cells: bool = False, orientation: dict | None = None, fov_deg: float = 90.0, **simulation
+) -> owcsim.SceneSpec:
+    """The office scene; `cells`: each lamp its own group (a LiFi cell), else the four lamps one signal;
+    `orientation`: the work plane's receivers held by people (schemas.orientation.OrientationSpec)."""
     room = build.box_room((5, 5, 3), walls=0.8, floor=0.3, ceiling=0.8)
     lamps = build.lamp_array(
         room,
@@ -46,7 +49,16 @@ def office(cells: bool = False, **simulation) -> owcsim.SceneSpec:
     groups = (
         [build.group(f"cell{k + 1}", [t]) for k, t in enumerate(lamps)] if cells else [build.group("ceiling", lamps)]
     )
-    plane = build.work_plane(room, height=0.85, spacing=0.25, margin=0.125, area=1e-4, fov_deg=90, id_prefix="plane")
+    plane = build.work_plane(
+        room,
+        height=0.85,
+        spacing=0.25,
+        margin=0.125,
+        area=1e-4,
+        fov_deg=fov_deg,
+        id_prefix="plane",
+        orientation=orientation,
+    )
     return build.scene(
         room,
         lamps,
@@ -75,9 +87,10 @@ def main() -> None:
 
     t = time.perf_counter()
     light = light_and_signal(args.target)
-    m = light.grid_maps[0]
+    m = light.grid_maps()[0]
     print(
-        f"1. light and signal: {m.shape[0]} x {m.shape[1]} points, every reflection order, {light.run.paths_total:,} paths"
+        f"1. light and signal: {m.shape[0]} x {m.shape[1]} points, every reflection order, "
+        f"{light.run.paths_total:,} paths"
     )
     for area in light.lighting.areas:
         for part in ("task", "surround"):
@@ -104,20 +117,21 @@ def main() -> None:
     serving = np.asarray(c.maps[0].serving_cell, float)
     shares = [float(np.mean(serving == k)) for k in range(len(c.cells))]
     print(f"2. cells {c.cells}: each serves {', '.join(f'{s:.0%}' for s in shares)} of the plane")
-    sinr = np.asarray(c.maps[0].sinr_db, float)
+    sinr = np.asarray(c.maps[0].values["sinr_db"], float)
+    shannon = np.asarray(c.maps[0].values["rate_shannon_bps"], float) / 1e6
     print(
-        f"   SINR {np.nanmin(sinr):.1f} to {np.nanmax(sinr):.1f} dB, {len(c.maps[0].boundaries)} handover boundary segments"
+        f"   SINR {np.nanmin(sinr):.1f} to {np.nanmax(sinr):.1f} dB, "
+        f"Shannon rate {np.nanmin(shannon):.0f} to {np.nanmax(shannon):.0f} Mbit/s, "
+        f"{len(c.maps[0].boundaries)} handover boundary segments"
     )
     plot_cells(cells, args.out / "office-planner-cells.png", quantity="sinr_db")
 
-    held = office(max_reflections=0)
-    held.receiver_grids[0].orientation = owcsim.schemas.orientation.OrientationSpec(model="sitting", samples=32)
-    held = owcsim.SceneSpec.model_validate(held.model_dump())
-    tilted = owcsim.simulate(held)
-    tm = tilted.grid_maps[0]
+    tilted = owcsim.simulate(office(orientation={"model": "sitting", "samples": 32}, fov_deg=60, max_reflections=0))
+    tm = tilted.grid_maps()[0]
     out = np.asarray(tm.values["outage_probability"], float)
     print(
-        f"3. sitting users, 32 orientations per point: outage at 10 Mbit/s {np.nanmin(out):.1%} to {np.nanmax(out):.1%}, "
+        f"3. sitting users, 32 orientations per point: outage at 10 Mbit/s "
+        f"{np.nanmin(out):.1%} to {np.nanmax(out):.1%}, "
         f"mean SNR {np.nanmin(np.asarray(tm.values['snr_mean_db'], float)):.1f} dB at the worst point"
     )
     tilted.plot_map("outage_probability", path=args.out / "office-planner-outage.png")
