@@ -135,15 +135,21 @@ def _emit(ctx: BatchContext, item: WorkItem, rng: np.random.Generator) -> tuple[
     n, i = item.n_paths, item.source
     w0 = ctx.w0 = sources.total_response(i)
     two_sided = settings.mis or settings.both_sides
-    block = qmc.block_size(n, settings.qmc_block)
+    block = 1 if item.packed else qmc.block_size(n, settings.qmc_block)  # packed: pseudo-random paths
     if block > 1:
         first_u = qmc.shifted_blocks(n, block, rng)  # (5, n)
         u = first_u[:2]
     else:
         first_u, u = None, rng.random((2, n))
+    if item.packed:  # several sources of one response and normal (engine/run/allocation.py): their origins
+        src = np.asarray(item.sources, np.int64)
+        starts = (sources.positions[src] + isect.offset * sources.normals[src]).T
+        origins = np.repeat(starts, np.asarray(item.counts, np.int64), axis=1)
+    else:
+        origins = np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1)
     paths = Paths(
         directions=np.ascontiguousarray(sources.sample_directions(i, u[0], u[1]).T),
-        origins=np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1),
+        origins=origins,
         weights=np.full(n, w0),
         lengths=np.zeros(n),
         path=np.arange(n),

@@ -200,6 +200,8 @@ MAP_QUANTITIES = {
     "received_power_dbm": ("dBm", None),
     "mean_delay_s": ("s", "mean_delay_s_stderr"),
     "rms_delay_spread_s": ("s", "rms_delay_spread_s_stderr"),
+    "dc_gain_rel_error": ("1", None),  # each point's achieved relative error: dc_gain_stderr / dc_gain
+    "paths": ("1", None),  # paths traced for each point's channel (its own allocation: engine/run/allocation.py)
 }
 #: Quantities a map has when the scene asks for them (luminous output, link budget): included where finite.
 OPTIONAL_MAP_QUANTITIES = {"illuminance_lx": "lx", "snr_db": "dB", "ber": "1", "max_bit_rate_bps": "bit/s"}
@@ -227,6 +229,10 @@ def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[d
                     p = part("received_power_w")
                     with np.errstate(divide="ignore", invalid="ignore"):
                         arr = np.where(p > 0, 10.0 * np.log10(np.where(p > 0, p, 1.0) / 1e-3), np.nan)
+                elif q == "dc_gain_rel_error":
+                    with np.errstate(divide="ignore", invalid="ignore"):
+                        arr = part("dc_gain_stderr") / part("dc_gain")
+                    arr = np.where(np.isfinite(arr), arr, np.nan)
                 else:
                     arr = part(q)
                 values[q], units[q] = column(arr), unit
