@@ -10,14 +10,19 @@ Prints, each case run in its own process (peak memory is that process's maximum 
      relative to the 100-receiver run: cost must grow no faster than linearly with receivers;
  (d) the two estimator directions on a 10 x 10 grid at fixed paths: time, median and largest relative
      standard error over the points, and the time each would need for 1 % at the worst point
-     (time x (rel. error / 1 %)^2): what `auto` chooses for maps.
-Run: .venv/bin/python benchmarks/map_scale.py [--quick]
+     (time x (rel. error / 1 %)^2): what `auto` chooses for maps;
+ (e) cost against receivers, every order at 1 % per point (10 x 10 ... 100 x 100): in-process time, paths,
+     peak memory and the points' errors, with this tree and, with --baseline PYTHON, another install's
+     interpreter (e.g. main's) in the same run; the exponent of time against receivers fitted on log-log
+     (target <= 0.8), and the whole `owcsim run` command for the largest sizes.
+Run: .venv/bin/python benchmarks/map_scale.py [--quick] [--only abcde] [--baseline /work/main/.venv/bin/python]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import shutil
 import subprocess
@@ -26,8 +31,11 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+if "MAP_SCALE_BASELINE" not in os.environ:  # a baseline install's child imports its own owcsim
+    sys.path.insert(0, str(ROOT))
 EXAMPLE = ROOT / "examples" / "komine_map.json"
 
 
@@ -66,6 +74,7 @@ def child(case: dict) -> dict:
     rel = sorted(r.dc_gain_stderr / r.dc_gain for r in rows if r.dc_gain and r.dc_gain_stderr is not None)
     out["rel_median"] = rel[len(rel) // 2] if rel else None
     out["rel_max"] = rel[-1] if rel else None
+    out["rel_min"] = rel[0] if rel else None
     if case.get("write"):
         from owcsim.formats.result_files import write_outputs
 
@@ -78,18 +87,22 @@ def child(case: dict) -> dict:
     return out
 
 
-def run_child(case: dict) -> dict:
-    proc = subprocess.run(
-        [sys.executable, __file__, "--child"], input=json.dumps(case), capture_output=True, text=True, check=True
-    )
+def run_child(case: dict, python: str = sys.executable) -> dict:
+    env = dict(os.environ)
+    if python != sys.executable:
+        env["MAP_SCALE_BASELINE"] = "1"
+    cmd = [python, __file__, "--child"]
+    proc = subprocess.run(cmd, input=json.dumps(case), capture_output=True, text=True, env=env, cwd="/")
+    if proc.returncode:
+        raise RuntimeError(proc.stderr[-2000:])
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def whole_command(doc: dict) -> float:
+def whole_command(doc: dict, python: str = sys.executable) -> float:
     with tempfile.TemporaryDirectory() as tmp:
         scene = Path(tmp) / "scene.json"
         scene.write_text(json.dumps(doc))
-        owcsim = Path(sys.executable).with_name("owcsim")
+        owcsim = Path(python).with_name("owcsim")
         t = time.perf_counter()
         subprocess.run(
             [str(owcsim), "run", str(scene), "--out", str(Path(tmp) / "out")], check=True, capture_output=True
@@ -100,6 +113,8 @@ def whole_command(doc: dict) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="smaller runs (a smoke test of the script)")
+    ap.add_argument("--only", default="abcde", help="the sections to run, e.g. 'ae'")
+    ap.add_argument("--baseline", help="another install's python: section (e) runs with it too, same machine")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
@@ -107,6 +122,10 @@ def main() -> None:
         return
     side = 12 if args.quick else 50
     print(f"Komine room, 4 lamps in one group, grid at 0.85 m, FOV 85 deg, 1 cm^2; {side} x {side} points")
+    if "e" in args.only:
+        scaling(args.quick, args.baseline)
+    if "a" not in args.only and "b" not in args.only and "c" not in args.only and "d" not in args.only:
+        return
 
     # (a) line of sight only
     los = komine(side, max_reflections=0)
@@ -150,6 +169,36 @@ def main() -> None:
             f"    {direction:<9}   {paths:>12,d}   {r['time_s']:>8.2f}   {r['rel_median']:>14.4f}   "
             f"{r['rel_max']:>13.4f}   {need:>10.1f} s"
         )
+
+
+def scaling(quick: bool, baseline: str | None) -> None:
+    """(e) every order at 1 % per point against receivers: this tree and the baseline's interpreter."""
+    sides = (4, 8, 12) if quick else (10, 25, 50, 100)
+    target = 0.03 if quick else 0.01
+    print(f"(e) every order, {target:.0%} per point: in-process time against receivers (fit: time ~ receivers^p)")
+    print("    install    receivers   time [s]   paths/point   peak [MB]   rel. error min / median / max")
+    for name, python in (("this", sys.executable), ("baseline", baseline)):
+        if python is None:
+            continue
+        times = []
+        for n in sides:
+            r = run_child({"doc": komine(n, target_rel_error=target)}, python)
+            times.append(r["time_s"])
+            print(
+                f"    {name:<9}  {n * n:>9,d}   {r['time_s']:>8.2f}   {r['paths'] / n**2:>11,.0f}   "
+                f"{r['peak_mb']:>9.0f}   {r['rel_min']:.4f} / {r['rel_median']:.4f} / {r['rel_max']:.4f}"
+            )
+        x, y = np.log([n * n for n in sides]), np.log(times)
+        p = np.polyfit(x, y, 1)[0]
+        tail = np.polyfit(x[-2:], y[-2:], 1)[0]
+        print(
+            f"    {name}: exponent p = {p:.2f} over {sides[0] ** 2:,d}-{sides[-1] ** 2:,d} receivers "
+            f"({tail:.2f} between the two largest); target <= 0.8"
+        )
+        if not quick:
+            for n in sides[-2:]:
+                cmd = whole_command(komine(n, target_rel_error=target), python)
+                print(f"    {name}: whole `owcsim run`, {n} x {n}: {cmd:.1f} s (targets: 50 x 50 20 s, 100 x 100 40 s)")
 
 
 if __name__ == "__main__":
