@@ -71,12 +71,13 @@ def packable(scene: Scene, settings: KernelSettings) -> bool:
 
 
 def is_map(job: Job, directions: IntArray) -> bool:
-    """A map run per point: an accuracy run of a scene with receiver grids, every link from its receiver
-    (or skipped), in a kernel that packs, and no receiver keeping a CIR or an order split."""
+    """A map whose batches pack several points: a scene with receiver grids, every link from its receiver (or
+    skipped), in a kernel that packs, no receiver keeping a CIR or an order split, and pseudo-random paths (an
+    accuracy run, or a fixed budget below the quasi-random blocks' floor: KernelSettings.qmc_block 1)."""
     spec, scene, plan = job.spec, job.scene, job.settings.tally
     return (
-        spec.simulation.n_paths is None
-        and bool(spec.receiver_grids)
+        bool(spec.receiver_grids)
+        and (spec.simulation.n_paths is None or job.settings.qmc_block <= 1)
         and bool(np.all((directions == BACKWARD) | (directions == SKIP)))
         and packable(scene, job.settings)
         and not bool((plan.cir_rank >= 0).any() or (plan.order_rank >= 0).any())
@@ -172,15 +173,20 @@ class MapWatch:
 def run_map(
     job: Job, runs: list[Run], directions: IntArray, accs: dict[Direction, Accumulator], merge: Merge, cap: int
 ) -> None:
-    """Run a map in rounds, each point's paths by its own error (module docstring); sets the stop reason."""
+    """Run a map in packed batches: a fixed budget in one round of `paths` per point; an accuracy run in rounds,
+    each point's paths by its own error (module docstring). Sets the stop reason."""
     sim, scene = job.spec.simulation, job.scene
-    target = sim.target_rel_error
-    assert target is not None, "a map run per point is an accuracy run"
     n_rx = len(scene.receivers)
-    served = directions != SKIP
     need = np.zeros(n_rx, np.int64)
-    need[[source for _, source, _ in runs]] = FIRST_PATHS
     watch = MapWatch(job, accs)
+    target = sim.target_rel_error
+    if target is None:  # a fixed budget: every point's paths at once
+        assert sim.n_paths is not None
+        need[[source for _, source, _ in runs]] = sim.n_paths
+        merge(job, accs, pack(runs, need, scene, cap, 0, sim.seed, 0), watch)
+        return
+    served = directions != SKIP
+    need[[source for _, source, _ in runs]] = FIRST_PATHS
     acc = accs[Direction.BACKWARD]
     for round_index in range(1 << 20):
         items = pack(runs, need, scene, cap, round_index, sim.seed, 0)

@@ -530,7 +530,7 @@ def _run(job: Job, directions: IntArray) -> dict[Direction, Accumulator]:
         if job.info.stop_reason is not StopReason.EXACT:
             job.info.stop_reason = StopReason.NOTHING_TO_SIMULATE
         return accs
-    if allocation.is_map(job, directions):  # a map: each point's paths by its own error, packed batches
+    if allocation.is_map(job, directions):  # a map: packed batches; to a target, each point's paths by its own error
         cap = batch_size(sim, job.settings, len(job.scene.transmitters))
         allocation.run_map(job, runs, directions, accs, _merge, cap)
         return accs
