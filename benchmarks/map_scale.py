@@ -15,7 +15,10 @@ Prints, each case run in its own process (peak memory is that process's maximum 
      peak memory and the points' errors, with this tree and, with --baseline PYTHON, another install's
      interpreter (e.g. main's) in the same run; the exponent of time against receivers fitted on log-log
      (target <= 0.8), and the whole `owcsim run` command for the largest sizes.
-Run: .venv/bin/python benchmarks/map_scale.py [--quick] [--only abcde] [--baseline /work/main/.venv/bin/python]
+ (f) the error bars of a map run per point: a 6 x 6 map at 1 % per point (K = 3) with 12 seeds against a
+     fixed-path run of 20 000 paths per point: the fraction of z-scores within 2 and the mean of z^2
+     (a Student t with 255 degrees of freedom: 95.4 % and 1.008).
+Run: .venv/bin/python benchmarks/map_scale.py [--quick] [--only abcdef] [--baseline /work/main/.venv/bin/python]
 """
 
 from __future__ import annotations
@@ -113,7 +116,7 @@ def whole_command(doc: dict, python: str = sys.executable) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="smaller runs (a smoke test of the script)")
-    ap.add_argument("--only", default="abcde", help="the sections to run, e.g. 'ae'")
+    ap.add_argument("--only", default="abcdef", help="the sections to run, e.g. 'ae'")
     ap.add_argument("--baseline", help="another install's python: section (e) runs with it too, same machine")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -124,6 +127,8 @@ def main() -> None:
     print(f"Komine room, 4 lamps in one group, grid at 0.85 m, FOV 85 deg, 1 cm^2; {side} x {side} points")
     if "e" in args.only:
         scaling(args.quick, args.baseline)
+    if "f" in args.only:
+        coverage(4 if args.quick else 12)
     if "a" not in args.only and "b" not in args.only and "c" not in args.only and "d" not in args.only:
         return
 
@@ -199,6 +204,30 @@ def scaling(quick: bool, baseline: str | None) -> None:
             for n in sides[-2:]:
                 cmd = whole_command(komine(n, target_rel_error=target), python)
                 print(f"    {name}: whole `owcsim run`, {n} x {n}: {cmd:.1f} s (targets: 50 x 50 20 s, 100 x 100 40 s)")
+
+
+def coverage(n_seeds: int) -> None:
+    """(f) z-scores of every point of a 6 x 6 map at 1 % per point against a long fixed-path run."""
+    from owcsim.engine.run.simulate import simulate
+    from owcsim.schemas import SceneSpec
+
+    def channels(**simulation):
+        res = simulate(SceneSpec.model_validate(komine(6, max_reflections=3, t_max_s=1e-7, **simulation)))
+        return np.array([[c.dc_gain, c.dc_gain_stderr, c.paths] for c in res.channels], float).T
+
+    ref, se_ref, _ = channels(paths=20_000, seed=99)
+    z, paths = [], []
+    for seed in range(n_seeds):
+        x, se, n = channels(target_rel_error=0.01, seed=seed)
+        z.append((x - ref) / np.sqrt(se**2 + se_ref**2))
+        paths.append(n)
+    zz, nn = np.concatenate(z), np.concatenate(paths)
+    print(
+        f"(f) 6 x 6 map at 1 % per point, {n_seeds} seeds, {len(zz)} points against 20 000 paths per point: "
+        f"{np.mean(np.abs(zz) <= 2):.1%} within 2 sigma (t_255: 95.4 %), mean z^2 {np.mean(zz**2):.2f} "
+        f"(1.008), mean z {np.mean(zz):+.3f} +- {1 / np.sqrt(len(zz)):.3f}; paths per point "
+        f"{nn.min():.0f} to {nn.max():.0f}, mean {nn.mean():.0f}"
+    )
 
 
 if __name__ == "__main__":
