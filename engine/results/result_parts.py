@@ -200,9 +200,10 @@ MAP_QUANTITIES = {
     "received_power_dbm": ("dBm", None),
     "mean_delay_s": ("s", "mean_delay_s_stderr"),
     "rms_delay_spread_s": ("s", "rms_delay_spread_s_stderr"),
-    "dc_gain_rel_error": ("1", None),  # each point's achieved relative error: dc_gain_stderr / dc_gain
-    "paths": ("1", None),  # paths traced for each point's channel (its own allocation: engine/run/allocation.py)
 }
+#: Quantities of a map whose points traced paths (none for an exact line-of-sight map): each point's achieved
+#: relative error dc_gain_stderr / dc_gain, and its paths (its own allocation: engine/run/allocation.py).
+TRACED_MAP_QUANTITIES = {"dc_gain_rel_error": "1", "paths": "1"}
 #: Quantities a map has when the scene asks for them (luminous output, link budget): included where finite.
 OPTIONAL_MAP_QUANTITIES = {"illuminance_lx": "lx", "snr_db": "dB", "ber": "1", "max_bit_rate_bps": "bit/s"}
 
@@ -229,10 +230,6 @@ def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[d
                     p = part("received_power_w")
                     with np.errstate(divide="ignore", invalid="ignore"):
                         arr = np.where(p > 0, 10.0 * np.log10(np.where(p > 0, p, 1.0) / 1e-3), np.nan)
-                elif q == "dc_gain_rel_error":
-                    with np.errstate(divide="ignore", invalid="ignore"):
-                        arr = part("dc_gain_stderr") / part("dc_gain")
-                    arr = np.where(np.isfinite(arr), arr, np.nan)
                 else:
                     arr = part(q)
                 values[q], units[q] = column(arr), unit
@@ -241,6 +238,12 @@ def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[d
             for q, unit in OPTIONAL_MAP_QUANTITIES.items():
                 if q in columns and np.isfinite(arr := part(q)).any():
                     values[q], units[q] = column(arr), unit
+            if "paths" in columns and np.nanmax(part("paths"), initial=0.0) > 0:  # Monte Carlo ran
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    rel = part("dc_gain_stderr") / part("dc_gain")
+                values["dc_gain_rel_error"] = column(np.where(np.isfinite(rel), rel, np.nan))
+                values["paths"] = column(part("paths"))
+                units.update(TRACED_MAP_QUANTITIES)
             out.append(
                 {
                     "grid": grid.id_prefix,

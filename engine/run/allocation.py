@@ -144,6 +144,7 @@ class MapWatch:
     job: Job
     accs: dict[Direction, Accumulator]
     points_done: float = 0.0  # fraction of points ready after the latest round
+    worst: float | None = None  # the worst point's relative standard error after the latest round
     done: int = 0
     progress_at: float = -1.0
 
@@ -160,7 +161,7 @@ class MapWatch:
                     fraction=min(1.0, max(elapsed / budget, self.points_done)),
                     paths=int(max(a.n_paths.max() for a in self.accs.values())),
                     batches=self.done,
-                    dc_gain_rel_stderr=None,
+                    dc_gain_rel_stderr=self.worst,
                     elapsed_s=elapsed,
                 )
             )
@@ -205,6 +206,7 @@ def run_map(
         )
         ready |= ~np.isin(np.arange(n_rx), [source for _, source, _ in runs])  # points not run
         watch.points_done = float(ready.mean()) if n_rx else 1.0
+        watch.worst = float(rel.max()) if n_rx and np.isfinite(rel.max()) else None
         if ready.all():
             job.info.stop_reason = StopReason.TARGET_REACHED
             return
