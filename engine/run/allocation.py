@@ -15,14 +15,14 @@ error bar a point stops on is itself trusted. A map's paths are pseudo-random (e
 sample), so 256 paths give a sample variance with 255 degrees of freedom: the standard error is itself known
 to about 1 / sqrt(2 x 255) = 4.4 % (Cramer 1946 section 27.4), the z-score of a point is a Student t with 255
 degrees of freedom (95.4 % within 2 sigma, E[z^2] = 1.008), and the optional-stopping effect of stopping on
-that error bar is bounded by the same 4 % (tests/engine/test_maps.py measures the coverage of a 6 x 6 map at
-1 % against a long reference run). The quasi-random blocks of 256 paths (engine/core/qmc.py) would make a
+that error bar is bounded by the same 4 % (tests/engine/test_map_allocation.py measures the coverage of a
+6 x 6 map at 1 % against a long reference run; benchmarks/map_scale.py --only f prints it over 12 seeds). The quasi-random blocks of 256 paths (engine/core/qmc.py) would make a
 sample of 256 paths: 2 048 paths gave 8 samples, the fewest the reliability rule accepts.
 
 Packed batches (`WorkItem.sources`, `counts`; engine/tally/packed.py): the points of one round that share
-their device (field of view, normal, gain) and targets are traced together, up to the job's batch size per
-batch (simulate.batch_size), so a map's kernel batch reaches the sizes where the per-step fixed cost is paid
-over many paths (benchmarks/path_cost.py). The plan of round r depends on the tallies merged up to its end
+their targets, field of view and gain (normals may differ) are traced together, up to the job's batch
+size per batch (simulate.batch_size), so a map's kernel batch reaches the sizes where the per-step fixed
+cost is paid over many paths (benchmarks/path_cost.py). The plan of round r depends on the tallies merged up to its end
 (merged in submission order), so the same document and seed give the same bits with any number of workers.
 """
 
@@ -100,14 +100,14 @@ def extra_paths(n: IntArray, rel: np.ndarray, ready: np.ndarray, target: float) 
 def pack(
     runs: list[Run], need: IntArray, scene: Scene, cap: int, round_index: int, seed: int, phase: int
 ) -> list[WorkItem]:
-    """The round's packed batches: the points with need > 0, grouped by targets and device (field of view,
-    normal, gain), in receiver order, at most `cap` paths per batch (a point needing more gets batches of
-    its own)."""
+    """The round's packed batches: the points with need > 0, grouped by targets, field of view and gain (one
+    weight per path; normals may differ: kernel._packed_directions), in receiver order, at most `cap` paths
+    per batch (a point needing more gets batches of its own)."""
     rx = scene.receivers
-    groups: dict[tuple[tuple[int, ...], float, tuple[float, ...], float], list[tuple[int, int]]] = {}
+    groups: dict[tuple[tuple[int, ...], float, float], list[tuple[int, int]]] = {}
     for _, source, targets in runs:  # one entry per point: the grouping keys, no per-path work
         if need[source] > 0:
-            key = (targets, float(rx.cos_fov[source]), tuple(rx.normals[source].tolist()), float(rx.gain[source]))
+            key = (targets, float(rx.cos_fov[source]), float(rx.gain[source]))
             groups.setdefault(key, []).append((source, int(need[source])))
     items: list[WorkItem] = []
     for (targets, *_), members in groups.items():
