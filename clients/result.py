@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from pydantic import PrivateAttr
 
+from owcsim.clients.result_views import result_html, result_text
 from owcsim.formats.map_files import to_xarray
+from owcsim.formats.map_plot import plot_map
 from owcsim.formats.maps import GridMap, maps_of_result
 from owcsim.formats.plots import plot_cir
 from owcsim.formats.result_files import LINK_COLUMNS, write_outputs
@@ -58,7 +60,8 @@ class Result(SimulationResultPublic):
         return maps_of_result(self)[0]
 
     def to_xarray(self, grid: str | None = None) -> xarray.Dataset:
-        """One grid's maps (all channels) as an xarray Dataset (dims channel, i, j); the first grid by default."""
+        """One grid's maps (all channels) as an xarray Dataset in room coordinates (dims channel, y, x for a
+        horizontal grid: formats.map_files.to_xarray); the first grid by default."""
         maps = self.grid_maps()
         if not maps:
             raise ValueError("this result has no receiver grid")
@@ -67,6 +70,23 @@ class Result(SimulationResultPublic):
         if not chosen:
             raise KeyError(f"no grid {name!r}; the grids are {sorted({m.grid for m in maps})}")
         return to_xarray(chosen)
+
+    def plot_map(self, quantity: str = "illuminance_lx", **options: Any) -> Figure:
+        """One quantity of a map in room coordinates, with the room, furniture and luminaires outlined
+        (formats.map_plot.plot_map: grid=, channel=, stderr=, contours=, log=, ax=, path=)."""
+        return plot_map(self, quantity, **options)
+
+    def __repr__(self) -> str:
+        """A few lines (clients/result_views.py), not every field: print(result.model_dump()) shows them all."""
+        return result_text(self)
+
+    __str__ = __repr__
+
+    def _repr_html_(self) -> str:
+        return result_html(self)
+
+    def _repr_pretty_(self, printer: Any, cycle: bool) -> None:
+        printer.text(result_text(self))
 
     def to_dataframe(self) -> pandas.DataFrame:
         """The links' scalar figures as a pandas DataFrame (one row per link)."""

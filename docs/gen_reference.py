@@ -285,7 +285,8 @@ class _Writer:
             "| field | " + ("environment variable | " if env else "") + "type | unit | default | bounds | description |"
         )
         out = [head, "|" + "---|" * (head.count("|") - 1)]
-        for name, info in model.model_fields.items():
+        for attr, info in model.model_fields.items():
+            name = info.validation_alias if isinstance(info.validation_alias, str) else attr  # the document's name
             extra: list[str] = []
             sub = f"{path}.{name}" if path else name
             tp = self.type_of(info.annotation, sub, extra)

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from owcsim.formats.heatmap import heatmap_png
-from owcsim.formats.maps import GridMap, MapDecor
+from owcsim.formats.maps import GridMap, MapDecor, PlaneFrame
 from owcsim.formats.optional import need
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -68,37 +68,55 @@ def _stacked(maps: Sequence[GridMap]) -> tuple[dict[str, np.ndarray], dict[str, 
 
 
 def to_xarray(maps: Sequence[GridMap]) -> xarray.Dataset:
-    """The maps of ONE grid (several channels) as a Dataset over (channel, i, j).
+    """The maps of ONE grid (several channels) as a Dataset, in room coordinates.
 
-    Coordinates channel, x(i), y(j) [m] (offsets along u, v) and position_x/y/z(i, j) [m]; a variable
-    per quantity and `<q>_stderr`, each with a `units` attribute; `mask_reason` string over (i, j) when
-    every channel has the same mask (masks come from the geometry), else over (channel, i, j) (xarray
-    broadcasts either); attributes grid, origin, u, v, normal. netCDF3 does not compress: one string
-    per point and channel would be the largest variable of a big grid.
+    An axis-aligned grid has dims (channel, <later room axis>, <earlier room axis>): ("channel", "y", "x") on
+    a horizontal plane, ("channel", "z", "x") on a wall at y = const, with coordinates in room metres,
+    increasing, so that `ds.illuminance_lx.plot()` (one channel) draws x across and y up the page; a tilted
+    grid has dims (channel, "v", "u"), coordinates the offsets along v and u [m]. Every layout also has the
+    coordinates u, v (offsets along the grid's directions [m]), i, j (grid indices, as in the ids
+    `{grid}[i,j]`) and position_x/y/z [m]; a variable per quantity and `<q>_stderr`, each with a `units`
+    attribute; `mask_reason` over the two plane dims when every channel has the same mask (masks come from
+    the geometry), else with the channel too; attributes grid, origin, u, v, normal. netCDF3 does not
+    compress: one string per point and channel would be the largest variable of a big grid.
     """
     xr = need("xarray", "a map Dataset")
     first = _one_grid(maps)
     values, stderr, units = _stacked(maps)
-    pos = first.positions
-    dims = ("channel", "i", "j")
+    frame = PlaneFrame.of(first)
+    plane = (frame.names[1], frame.names[0])  # (rows, columns): plot() draws the columns across
+    dims = ("channel", *plane)
     data: dict[str, Any] = {}
     for q, a in values.items():
-        data[q] = (dims, a, {"units": units[q]})
+        data[q] = (dims, frame.arrange(a), {"units": units[q]})
         if q in stderr:
-            data[f"{q}_stderr"] = (dims, stderr[q], {"units": units[q], "long_name": f"standard error of {q}"})
+            data[f"{q}_stderr"] = (
+                dims,
+                frame.arrange(stderr[q]),
+                {"units": units[q], "long_name": f"standard error of {q}"},
+            )
     reasons = np.stack([m.reasons for m in maps]).astype(str)
     same = bool(np.all(reasons == reasons[:1]))
     data["mask_reason"] = (
-        dims[1:] if same else dims,
-        reasons[0] if same else reasons,
+        plane if same else dims,
+        frame.arrange(reasons[0] if same else reasons),
         {"long_name": "why the point is masked; empty for a simulated point"},
     )
-    coords = {
+    dim_u, dim_v = (plane[1], plane[0]) if frame.transposed else plane
+    i, j = frame.indices(first.shape)
+    aligned = frame.names != ("u", "v")
+    coords: dict[str, Any] = {
+        plane[0]: (plane[0], frame.up, {"units": "m", "long_name": _axis_name(plane[0], aligned)}),
+        plane[1]: (plane[1], frame.across, {"units": "m", "long_name": _axis_name(plane[1], aligned)}),
+        "i": (dim_u, i, {"long_name": "grid index along u"}),
+        "j": (dim_v, j, {"long_name": "grid index along v"}),
         "channel": ("channel", [m.channel for m in maps]),
-        "x": ("i", first.x, {"units": "m", "long_name": "offset along u"}),
-        "y": ("j", first.y, {"units": "m", "long_name": "offset along v"}),
-        **{f"position_{c}": (("i", "j"), pos[..., k], {"units": "m"}) for k, c in enumerate("xyz")},
     }
+    if aligned:
+        coords["u"] = (dim_u, first.x[i], {"units": "m", "long_name": "offset along u"})
+        coords["v"] = (dim_v, first.y[j], {"units": "m", "long_name": "offset along v"})
+    pos = first.positions
+    coords.update({f"position_{c}": (plane, frame.arrange(pos[..., k]), {"units": "m"}) for k, c in enumerate("xyz")})
     attrs = {
         "grid": first.grid,
         "origin": first.origin,
@@ -106,13 +124,19 @@ def to_xarray(maps: Sequence[GridMap]) -> xarray.Dataset:
         "v": first.v,
         "normal": first.normal,
         "title": f"owcsim coverage map of grid {first.grid}",
-        "comment": "point (i, j) = origin + x[i] u + y[j] v; NaN where masked or not available",
+        "comment": "point (i, j) = origin + u_offset[i] u + v_offset[j] v; NaN where masked or not available",
     }
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
+def _axis_name(name: str, aligned: bool) -> str:
+    return f"{name} (room)" if aligned else f"offset along {name}"
+
+
 def from_xarray(ds: xarray.Dataset) -> list[GridMap]:
     """The maps of a Dataset written by `to_xarray` (a channel that lacked a quantity reads back as NaN)."""
+    dim_u, dim_v = ds["i"].dims[0], ds["j"].dims[0]
+    ds = ds.sortby(["i", "j"]).transpose("channel", dim_u, dim_v, ...)
     quantities = [q for q in ds.data_vars if q != "mask_reason" and not str(q).endswith("_stderr")]
     out = []
     r = ds["mask_reason"].values
@@ -124,8 +148,8 @@ def from_xarray(ds: xarray.Dataset) -> list[GridMap]:
                 origin=ds.attrs["origin"],
                 u=ds.attrs["u"],
                 v=ds.attrs["v"],
-                x=ds["x"].values,
-                y=ds["y"].values,
+                x=ds["u"].values,
+                y=ds["v"].values,
                 values={str(q): ds[q].values[c] for q in quantities},
                 stderr={str(q): ds[f"{q}_stderr"].values[c] for q in quantities if f"{q}_stderr" in ds},
                 units={str(q): str(ds[q].attrs.get("units", "")) for q in quantities},
@@ -240,8 +264,8 @@ def write_map_files(
 
 
 def to_dataframe(maps: GridMap | Sequence[GridMap]):
-    """A long table (pandas): one row per (map, point) with grid, channel, i, j, x, y, position, mask_reason,
-    each quantity and its `_stderr`."""
+    """A long table (pandas): one row per (map, point) with grid, channel, i, j, x, y, z (the point in the room
+    [m]), u, v (its offsets along the grid's directions [m]), mask_reason, each quantity and its `_stderr`."""
     pd = need("pandas", "a map table")
 
     frames = []
@@ -253,11 +277,11 @@ def to_dataframe(maps: GridMap | Sequence[GridMap]):
             "channel": m.channel,
             "i": ii.ravel(),
             "j": jj.ravel(),
-            "x": m.x[ii.ravel()],
-            "y": m.y[jj.ravel()],
-            "position_x": pos[:, 0],
-            "position_y": pos[:, 1],
-            "position_z": pos[:, 2],
+            "x": pos[:, 0],
+            "y": pos[:, 1],
+            "z": pos[:, 2],
+            "u": m.x[ii.ravel()],
+            "v": m.y[jj.ravel()],
             "mask_reason": m.reasons.ravel(),
         }
         for q, a in m.values.items():

@@ -24,17 +24,19 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "GridMap",
     "MapDecor",
+    "PlaneFrame",
     "display_unit",
     "format_summary",
     "format_value",
     "maps_of_result",
     "masked_points",
+    "room_axes",
     "summary",
 ]
 
 _QUANTITY_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,55}\Z")
 #: Names a quantity may not take: they are the coordinates and companions of the Dataset.
-_RESERVED = {"channel", "x", "y", "i", "j", "position_x", "position_y", "position_z", "mask_reason"}
+_RESERVED = {"channel", "x", "y", "z", "u", "v", "i", "j", "position_x", "position_y", "position_z", "mask_reason"}
 #: Units on a logarithmic scale: no uniformity ratio (a ratio of decibels means nothing).
 _LOG_UNITS = {"dB", "dBm", "dBW", "dBi", "dBc"}
 
@@ -186,6 +188,80 @@ class GridMap:
         return self.values[name]
 
 
+# ---------------------------------------------------------------- room coordinates
+
+
+def room_axes(m: GridMap) -> tuple[int, int] | None:
+    """The room axes (0 = x, 1 = y, 2 = z) that u and v lie along (either sign), or None for a plane that is
+    not axis-aligned."""
+    ku, kv = int(np.argmax(np.abs(m.u))), int(np.argmax(np.abs(m.v)))
+    if abs(abs(m.u[ku]) - 1) > 1e-9 or abs(abs(m.v[kv]) - 1) > 1e-9:
+        return None
+    return ku, kv
+
+
+@dataclass(frozen=True, eq=False)
+class PlaneFrame:
+    """A grid's plane as a page shows it: axes `names` (across, up), ("x", "y") on a horizontal grid, ("x", "z")
+    on a wall at y = const, ("u", "v") on a tilted plane; `across` and `up` the points' coordinates along
+    them [m], increasing (room coordinates when axis-aligned, offsets along u and v otherwise). `arrange` turns
+    (..., nu, nv) arrays in grid-index order into (..., rows = up, columns = across); `project` maps room
+    points (n, 3) to (across, up) [m]: (p - base) . e_across and (p - base) . e_up."""
+
+    names: tuple[str, str]
+    across: np.ndarray
+    up: np.ndarray
+    transposed: bool  # rows are the j (v) index
+    flips: tuple[bool, bool]  # (rows, columns) reversed to make the coordinates increase
+    base: np.ndarray
+    e_across: np.ndarray
+    e_up: np.ndarray
+
+    @classmethod
+    def of(cls, m: GridMap) -> PlaneFrame:
+        axes = room_axes(m)
+        if axes is None:
+            return cls(("u", "v"), m.x, m.y, True, (False, False), m.origin, m.u, m.v)
+        ku, kv = axes
+        transposed = kv > ku  # across is the earlier room axis (x before y before z)
+        k_across, k_up = (ku, kv) if transposed else (kv, ku)
+        d_across, d_up = (m.u, m.v) if transposed else (m.v, m.u)
+        o_across, o_up = (m.x, m.y) if transposed else (m.y, m.x)
+        across = m.origin[k_across] + np.sign(d_across[k_across]) * o_across
+        up = m.origin[k_up] + np.sign(d_up[k_up]) * o_up
+        flips = (bool(d_up[k_up] < 0), bool(d_across[k_across] < 0))
+        eye = np.eye(3)
+        return cls(
+            ("xyz"[k_across], "xyz"[k_up]),
+            across[::-1] if flips[1] else across,
+            up[::-1] if flips[0] else up,
+            transposed,
+            flips,
+            np.zeros(3),
+            eye[k_across],
+            eye[k_up],
+        )
+
+    def arrange(self, a: np.ndarray) -> np.ndarray:
+        """(..., nu, nv) in grid-index order -> (..., rows = up, columns = across)."""
+        out = np.swapaxes(a, -1, -2) if self.transposed else np.asarray(a)
+        if self.flips[0]:
+            out = out[..., ::-1, :]
+        if self.flips[1]:
+            out = out[..., :, ::-1]
+        return out
+
+    def indices(self, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """(i along its dim, j along its dim): the grid index at each row or column position."""
+        flip_u, flip_v = (self.flips[1], self.flips[0]) if self.transposed else self.flips
+        return np.arange(shape[0])[:: -1 if flip_u else 1], np.arange(shape[1])[:: -1 if flip_v else 1]
+
+    def project(self, p: np.ndarray) -> np.ndarray:
+        """(n, 3) room points [m] -> (n, 2) (across, up) [m]."""
+        d = np.asarray(p, dtype=float).reshape(-1, 3) - self.base
+        return np.stack([d @ self.e_across, d @ self.e_up], axis=1)
+
+
 # ---------------------------------------------------------------- summary
 
 
@@ -322,6 +398,7 @@ def maps_of_result(result: SimulationResultPublic) -> tuple[list[GridMap], MapDe
     maps = []
     for m in result.maps:
         nu, nv = m.shape
+        su, sv = m.steps
         maps.append(
             GridMap(
                 grid=m.grid,
@@ -329,8 +406,8 @@ def maps_of_result(result: SimulationResultPublic) -> tuple[list[GridMap], MapDe
                 origin=np.asarray(m.origin, float),
                 u=np.asarray(m.u, float),
                 v=np.asarray(m.v, float),
-                x=m.spacing * np.arange(nu),
-                y=m.spacing * np.arange(nv),
+                x=su * np.arange(nu),
+                y=sv * np.arange(nv),
                 values={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m.values.items()},
                 stderr={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m.stderr.items()},
                 units=dict(m.units),

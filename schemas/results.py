@@ -14,6 +14,7 @@ from enum import StrEnum
 from pydantic import BaseModel, ConfigDict, Field
 
 from .algorithms import Direction
+from .orientation import CombinedSnrPublic, OrientationPointPublic
 from .scene import SceneSpec
 from .spectra import SpectralResultPublic
 
@@ -147,8 +148,8 @@ class ReceiverPublic(PublicModel):
 
 class MapPublic(PublicModel):
     """Quantities over one receiver grid for one channel (a transmitter group, or a transmitter when the
-    scene has no groups): `values[name][i][j]`, null where masked. Point (i, j) is at origin + i spacing u +
-    j spacing v."""
+    scene has no groups): `values[name][i][j]`, null where masked. Point (i, j) is at origin + i s_u u +
+    j s_v v, (s_u, s_v) = `spacing_uv`."""
 
     grid: str = Field(description="the grid's id_prefix")
     channel: str = Field(description="transmitter group name, or transmitter id when the scene has no group")
@@ -156,12 +157,28 @@ class MapPublic(PublicModel):
     origin: tuple[float, float, float] = Field(description="point (0, 0) [m]")
     u: tuple[float, float, float] = Field(description="unit vector of the first index")
     v: tuple[float, float, float] = Field(description="unit vector of the second index")
-    spacing: float = Field(description="distance between neighbouring points [m]")
+    spacing: float | None = Field(
+        None, description="distance between neighbouring points [m] when the same along u and v, else null"
+    )
+    spacing_uv: tuple[float, float] | None = Field(
+        None,
+        description="(s_u, s_v): distance between neighbouring points along u and along v [m] (0 along an "
+        "axis of one point); null in documents of engines before rectangular grids: then (spacing, spacing)",
+    )
+    normal: tuple[float, float, float] | None = Field(None, description="unit normal of the grid's receivers")
     units: dict[str, str] = Field(description="unit of each quantity")
     values: dict[str, list[list[float | None]]] = Field(description="quantity -> [i][j] values, null where masked")
     stderr: dict[str, list[list[float | None]]] = Field(
         default_factory=dict, description="quantity -> [i][j] standard errors"
     )
+
+    @property
+    def steps(self) -> tuple[float, float]:
+        """(s_u, s_v) [m]: `spacing_uv`, or (spacing, spacing) in an older document."""
+        if self.spacing_uv is not None:
+            return self.spacing_uv
+        assert self.spacing is not None  # an older document always has it
+        return (self.spacing, self.spacing)
 
 
 class TimeBinsPublic(PublicModel):
@@ -275,6 +292,14 @@ class SimulationResultPublic(PublicModel):
     receivers: list[ReceiverPublic] = Field(default_factory=list)
     channels: list[ChannelPublic] = Field(default_factory=list, description="transmitter groups' channels")
     maps: list[MapPublic] = Field(default_factory=list, description="receiver grids as 2-D arrays")
+    orientation: list[OrientationPointPublic] = Field(
+        default_factory=list,
+        description="per point and channel: statistics over random orientation (docs/orientation.md)",
+    )
+    angle_diversity: list[CombinedSnrPublic] = Field(
+        default_factory=list,
+        description="per angle-diversity receiver and channel: combined SNRs (docs/orientation.md)",
+    )
     run: RunPublic
     diagnostics: DiagnosticsPublic
     warnings: list[str] = Field(default_factory=list, description="what a careful reader of these numbers should know")

@@ -11,6 +11,7 @@ from .devices import ReceiverGridSpec, ReceiverSpec, TransmitterSpec
 from .geometry import BoxSpec, MeshSpec, RoomSpec
 from .link_budget import LinkBudgetSpec
 from .medium import MediumSpec
+from .orientation import AngleDiversityReceiverSpec, check_hidden, hidden_count, hidden_ids, hidden_receiver_fields
 from .outputs import OutputsSpec
 from .simulation import SimulationSpec
 from .spectra import SpectralSpec, check_scene
@@ -44,6 +45,9 @@ class SceneSpec(SpecModel):
     transmitters: list[TransmitterSpec] = Field(min_length=1)
     receivers: list[ReceiverSpec] = Field(default_factory=list)
     receiver_grids: list[ReceiverGridSpec] = Field(default_factory=list)
+    angle_diversity_receivers: list[AngleDiversityReceiverSpec] = Field(
+        default_factory=list, description="several photodiodes at one point, combined (docs/orientation.md)"
+    )
     medium: MediumSpec | None = None
     transmitter_groups: list[TransmitterGroupSpec] = Field(
         default_factory=list,
@@ -71,19 +75,22 @@ class SceneSpec(SpecModel):
     @model_validator(mode="after")
     def _check(self) -> "SceneSpec":
         check_scene(self)
-        if not self.receivers and not self.receiver_grids:
+        if not self.receivers and not self.receiver_grids and not self.angle_diversity_receivers:
             raise ValueError("the scene has no receiver: give `receivers` or `receiver_grids`")
         rx_ids = [r.id for r in self.receivers if r.id is not None] + [i for g in self.receiver_grids for i in g.ids()]
+        rx_ids += [a.id for a in self.angle_diversity_receivers]
+        check_hidden(self)
         tx_given = [d.id for d in self.transmitters if d.id is not None]
         for kind, ids in (("transmitters", tx_given), ("receivers", rx_ids)):
             dup = sorted(i for i, n in Counter(ids).items() if n > 1)  # linear: grids hold 1e5 receivers
             if dup:
                 raise ValueError(f"{kind}: duplicate ids {dup[:20]}")
         # Explicit devices must be placed sensibly; grid points that are not are masked by the engine.
-        devices: list[tuple[str, int, TransmitterSpec | ReceiverSpec]] = [
+        devices: list[tuple[str, int, TransmitterSpec | ReceiverSpec | AngleDiversityReceiverSpec]] = [
             ("transmitters", i, d) for i, d in enumerate(self.transmitters)
         ]
         devices += [("receivers", i, d) for i, d in enumerate(self.receivers)]
+        devices += [("angle_diversity_receivers", i, d) for i, d in enumerate(self.angle_diversity_receivers)]
         for kind, i, d in devices:
             problem = placement_problem(self, d.position, d.normal)
             if problem:
@@ -130,7 +137,9 @@ class SceneSpec(SpecModel):
         return n_cir * n_bins + n_both * (k + s) * n_bins + n_ord * k * s
 
     def grid_receiver_count(self) -> int:
-        return sum(g.count for g in self.receiver_grids)
+        """Receivers after the explicit ones: grid points, then the hidden receivers (orientation samples,
+        angle-diversity photodiodes: schemas/orientation.py), which take the grid points' default outputs."""
+        return sum(g.count for g in self.receiver_grids) + hidden_count(self)
 
     def all_receivers(self) -> list[ReceiverSpec]:
         """Receivers, then every grid expanded, in order."""
@@ -143,13 +152,15 @@ class SceneSpec(SpecModel):
         return [t.id or f"tx{i}" for i, t in enumerate(self.transmitters)]
 
     def receiver_ids(self) -> list[str]:
-        """Ids of the explicit receivers (rx<i> when not given), then of every grid point."""
-        return [r.id or f"rx{i}" for i, r in enumerate(self.receivers)] + [
+        """Ids of the explicit receivers (rx<i> when not given), then of every grid point, then the hidden ones."""
+        ids = [r.id or f"rx{i}" for i, r in enumerate(self.receivers)] + [
             i for g in self.receiver_grids for i in g.ids()
         ]
+        return ids + list(hidden_ids(self, ids))
 
     def receiver_at(self, index: int) -> ReceiverSpec:
-        """The receiver of global index `index` (explicit receivers first, then the grids' points in order)."""
+        """The receiver of global index `index` (explicit receivers first, then the grids' points, then the hidden
+        receivers, in order)."""
         if index < len(self.receivers):
             return self.receivers[index]
         index -= len(self.receivers)
@@ -157,7 +168,8 @@ class SceneSpec(SpecModel):
             if index < g.count:
                 return g.point(*divmod(index, g.shape[1]))
             index -= g.count
-        raise IndexError("receiver index out of range")
+        index += len(self.receivers) + sum(g.count for g in self.receiver_grids)  # back to the global index
+        return ReceiverSpec(**hidden_receiver_fields(self, index))  # a hidden receiver (schemas/orientation.py)
 
 
 def placement_problem(scene: SceneSpec, p, n) -> str | None:

@@ -25,6 +25,7 @@ from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.results import metrics
 from owcsim.engine.results.job import FinishedJob
 from owcsim.engine.results.lighting import Lighting
+from owcsim.engine.results.orientation import receivers_as_held
 from owcsim.engine.results.result_parts import cir_block, column, document_rows, grid_maps, order_block
 from owcsim.engine.results.spectral import result_block
 from owcsim.engine.scene.los import los_gain_grey, los_geometry
@@ -397,6 +398,8 @@ def build_result(job: FinishedJob) -> SimulationResultPublic:
         "diagnostics": diagnostics,
         "scene": job.original or spec,  # the model itself: not validated again
     }
+    held, held_warnings = receivers_as_held(spec, scene, cols, channel_cols, doc["maps"])  # docs/orientation.md
+    doc.update(held, warnings=doc["warnings"] + held_warnings)
     if scene.spectra is not None:  # per band and combined (engine/results/spectral.py)
         g = geometry if geometry is not None else los_geometry(scene)
         doc["spectral"] = result_block(spec, scene, job.accs, g, los_gain_grey(scene, g), job.los.delay)

@@ -218,6 +218,7 @@ def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[d
     for grid, (first, (nu, nv)) in zip(spec.receiver_grids, scene.grid_slices):
         u = np.asarray(grid.u, float) / np.linalg.norm(grid.u)
         v = np.asarray(grid.v, float) / np.linalg.norm(grid.v)
+        su, sv = grid.steps
         for c, name in enumerate(names):
             sl = slice(c * n_rx + first, c * n_rx + first + nu * nv)
 
@@ -252,7 +253,9 @@ def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[d
                     "origin": tuple(grid.origin),
                     "u": tuple(u.tolist()),
                     "v": tuple(v.tolist()),
-                    "spacing": grid.spacing,
+                    "spacing": su if su == sv else None,
+                    "spacing_uv": (su, sv),
+                    "normal": tuple(np.asarray(grid.receiver_normal, float) / np.linalg.norm(grid.receiver_normal)),
                     "units": units,
                     "values": values,
                     "stderr": stderr,

@@ -103,7 +103,7 @@ def memory_estimate(
     """
     sim = spec.simulation
     n_tx = len(spec.transmitters)
-    n_rx = sum(1 for _ in spec.receivers) + sum(g.count for g in spec.receiver_grids)
+    n_rx = len(spec.receivers) + spec.grid_receiver_count()  # grid points and hidden receivers (orientation)
     n_links = n_tx * n_rx
     k = sim.max_reflections if sim.max_reflections is not None else PILOT_CAP
     alg = ALGORITHMS.get(sim.algorithm) if sim.algorithm != "auto" else None  # (schemas/algorithms.py)

@@ -14,11 +14,13 @@ from owcsim.engine.media.model import MediumKind, MediumModel, medium_model
 from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.media.registry import medium_from_spec
 from owcsim.engine.scene.geometry import Geometry, Intersector, build_geometry, check_extent
+from owcsim.engine.scene.orientation import with_hidden_receivers
 from owcsim.engine.sources.devices import Devices, concentrator_gain, transmitters_from_specs
 from owcsim.engine.spectral.spectra import SceneSpectra, carrier_bands, medium_bands, scene_tables, unsupported
 from owcsim.engine.surfaces.bsdf import MirrorPlane, mirror_planes
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.algorithms import ALGORITHMS
+from owcsim.schemas.orientation import hidden_blocks
 
 
 @dataclass
@@ -160,16 +162,56 @@ def _unit_rows(v: np.ndarray) -> np.ndarray:
 
 
 def grid_points(grid) -> tuple[np.ndarray, tuple[int, int]]:
-    """Positions (nu * nv, 3) [m] of a ReceiverGridSpec's points, row-major in (i along u, j along v)."""
+    """Positions (nu * nv, 3) [m] of a ReceiverGridSpec's points, row-major in (i along u, j along v):
+    origin + i s_u u + j s_v v (one step: origin + s (i u + j v), the square grid's bits)."""
     nu, nv = grid.shape
+    su, sv = grid.steps
     u, v = _unit_rows(np.asarray(grid.u, float)), _unit_rows(np.asarray(grid.v, float))
     i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
-    pos = np.asarray(grid.origin, float) + grid.spacing * (i.reshape(-1, 1) * u + j.reshape(-1, 1) * v)
+    if su == sv:
+        pos = np.asarray(grid.origin, float) + su * (i.reshape(-1, 1) * u + j.reshape(-1, 1) * v)
+    else:
+        pos = np.asarray(grid.origin, float) + (su * i.reshape(-1, 1)) * u + (sv * j.reshape(-1, 1)) * v
     return pos, (nu, nv)
 
 
+def _in_area(ab: np.ndarray, outline: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """Per plane point (n, 2) [m]: inside the closed polygon `outline` (k, 2), or within `tol` of its edge.
+
+    Crossing number (even-odd rule, Shimrat 1962), a loop over the k edges vectorized over the points.
+    """
+    a, b = ab[:, 0], ab[:, 1]
+    inside = np.zeros(len(ab), bool)
+    on_edge = np.zeros(len(ab), bool)
+    for (a1, b1), (a2, b2) in zip(outline, np.roll(outline, -1, axis=0)):
+        spans = (b1 > b) != (b2 > b)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cross = a1 + (b - b1) * (a2 - a1) / (b2 - b1)
+        inside ^= spans & (a < cross)
+        d = np.array([a2 - a1, b2 - b1])
+        t = np.clip(((a - a1) * d[0] + (b - b1) * d[1]) / max(float(d @ d), 1e-300), 0.0, 1.0)
+        on_edge |= np.hypot(a - a1 - t * d[0], b - b1 - t * d[1]) <= tol
+    return inside | on_edge
+
+
+def grid_area_reasons(grid) -> np.ndarray:
+    """Per point of a grid (row-major): "" or why its `exclude` / `include` areas mask it."""
+    nu, nv = grid.shape
+    su, sv = grid.steps
+    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+    ab = np.stack([su * i.ravel(), sv * j.ravel()], axis=1)
+    reason = np.full(nu * nv, "", dtype=object)
+    if grid.include:
+        kept = np.any([_in_area(ab, np.asarray(area.vertices(), float)) for area in grid.include], axis=0)
+        reason[~kept] = "outside the grid's include areas"
+    for k, area in enumerate(grid.exclude):
+        reason[_in_area(ab, np.asarray(area.vertices(), float))] = f"in the grid's exclude[{k}]"
+    return reason
+
+
 def receivers_from_scene(spec: SceneSpec) -> tuple[Devices, list]:
-    """Explicit receivers then every grid, as arrays (grids are expanded without building per-point models).
+    """Explicit receivers then every grid, as arrays (grids are expanded without building per-point models), then
+    the hidden receivers of orientation requests and angle-diversity receivers (engine/scene/orientation.py).
 
     Returns the Devices and, per grid, (first receiver index, (nu, nv)).
     """
@@ -179,7 +221,7 @@ def receivers_from_scene(spec: SceneSpec) -> tuple[Devices, list]:
     first = len(spec.receivers)
     for g in spec.receiver_grids:
         pos, (nu, nv) = grid_points(g)
-        rows.append((pos, g.normal, g.area, g.fov_deg, g.filter_gain, g.concentrator_index))
+        rows.append((pos, g.receiver_normal, g.area, g.fov_deg, g.filter_gain, g.concentrator_index))
         slices.append((first, (nu, nv)))
         ids += [f"{g.id_prefix}[{i},{j}]" for i in range(nu) for j in range(nv)]
         first += nu * nv
@@ -207,7 +249,7 @@ def receivers_from_scene(spec: SceneSpec) -> tuple[Devices, list]:
         area=per_point([r[2] for r in rows]),
         patterns=[None] * n,
     )
-    return devices, slices
+    return with_hidden_receivers(spec, devices), slices  # orientation samples, photodiodes (scene/orientation.py)
 
 
 def mask_reasons(spec: SceneSpec, receivers: Devices, n_explicit: int) -> np.ndarray:
@@ -215,7 +257,7 @@ def mask_reasons(spec: SceneSpec, receivers: Devices, n_explicit: int) -> np.nda
 
     Outside the room, strictly inside a furniture box, or on a room face with its normal pointing
     into the face (the rule `schemas.scene.placement_problem` applies to explicit devices, which
-    are refused instead).
+    are refused instead); then, for the points those leave, the grid's `exclude` / `include` areas.
     """
     p, nrm = receivers.positions, receivers.normals
     reason = np.full(len(p), "", dtype=object)
@@ -230,6 +272,19 @@ def mask_reasons(spec: SceneSpec, receivers: Devices, n_explicit: int) -> np.nda
         inside = np.all((p > np.asarray(box.min)) & (p < np.asarray(box.max)), axis=1) & (reason == "")
         reason[inside] = f"inside furniture[{j}]" + (f" ({box.name})" if box.name else "")
     reason[:n_explicit] = ""  # explicit receivers were checked (and refused) by the schema
+    first = n_explicit
+    area = np.full(len(p), "", dtype=object)  # the grids' own masks: exclude / include areas of their planes
+    for grid in spec.receiver_grids:
+        own = grid_area_reasons(grid)
+        area[first : first + len(own)] = own
+        first += len(own)
+    for block in hidden_blocks(spec):  # a point's orientation samples share its area mask (point-major)
+        if block.kind == "orientation":
+            area[block.first : block.first + block.count] = np.repeat(
+                area[block.points.start : block.points.stop], block.per_point
+            )
+    take = (area != "") & (reason == "")
+    reason[take] = area[take]
     return reason
 
 

@@ -186,20 +186,25 @@ def test_netcdf_round_trip(tmp_path):
     path = to_netcdf([a, b], tmp_path / "m.nc")
     with xr.open_dataset(path, engine="scipy") as ds:
         ds = ds.load()
-    assert ds["illuminance"].dims == ("channel", "i", "j") and ds.sizes == {"channel": 2, "i": 5, "j": 4}
+    # A horizontal grid along x and y: dims (channel, y, x) in room metres, so that plot() draws x across.
+    assert ds["illuminance"].dims == ("channel", "y", "x") and ds.sizes == {"channel": 2, "y": 4, "x": 5}
     assert list(ds["channel"].values) == ["tx0", "group A"]
-    np.testing.assert_array_equal(ds["illuminance"].values[0], a.values["illuminance"])
-    np.testing.assert_array_equal(ds["illuminance"].values[1], b.values["illuminance"])
-    np.testing.assert_array_equal(ds["illuminance_stderr"].values[0], a.stderr["illuminance"])
+    np.testing.assert_array_equal(ds["illuminance"].values[0], a.values["illuminance"].T)
+    np.testing.assert_array_equal(ds["illuminance"].values[1], b.values["illuminance"].T)
+    np.testing.assert_array_equal(ds["illuminance_stderr"].values[0], a.stderr["illuminance"].T)
     assert np.all(np.isnan(ds["dc_gain"].values[1])) and np.all(np.isnan(ds["illuminance_stderr"].values[1]))
-    np.testing.assert_array_equal(ds["x"].values, a.x)
-    np.testing.assert_array_equal(ds["y"].values, a.y)
-    np.testing.assert_allclose(np.stack([ds[f"position_{c}"].values for c in "xyz"], -1), a.positions)
+    np.testing.assert_array_equal(ds["x"].values, 1.0 + a.x)  # room coordinates: the origin plus the offsets
+    np.testing.assert_array_equal(ds["y"].values, 0.5 + a.y)
+    np.testing.assert_array_equal(ds["u"].values, a.x)  # the offsets along u and v, and the grid indices
+    np.testing.assert_array_equal(ds["j"].values, np.arange(4))
+    np.testing.assert_allclose(
+        np.stack([ds[f"position_{c}"].values for c in "xyz"], -1), a.positions.transpose(1, 0, 2)
+    )
     assert ds["illuminance"].attrs["units"] == "lx" and ds["received_power_dbm"].attrs["units"] == "dBm"
     assert ds["x"].attrs["units"] == "m" and ds.attrs["grid"] == "wp"
     np.testing.assert_array_equal(ds.attrs["u"], a.u)
-    assert ds["mask_reason"].dims == ("channel", "i", "j")  # the channels' masks differ
-    assert ds["mask_reason"].values[0, 1, 2] == "inside furniture 'desk'" and ds["mask_reason"].values[1, 1, 2] == ""
+    assert ds["mask_reason"].dims == ("channel", "y", "x")  # the channels' masks differ
+    assert ds["mask_reason"].values[0, 2, 1] == "inside furniture 'desk'" and ds["mask_reason"].values[1, 2, 1] == ""
     back = from_xarray(ds)
     assert [m.channel for m in back] == ["tx0", "group A"] and not back[1].masked.any()
     np.testing.assert_array_equal(back[0].values["dc_gain"], a.values["dc_gain"])
@@ -211,7 +216,7 @@ def test_shared_mask_is_stored_once(tmp_path):
     xr = pytest.importorskip("xarray")
     a, b = _field(channel="a", mask=[(0, 0), (4, 3)]), _field(channel="b", mask=[(0, 0), (4, 3)])
     with xr.open_dataset(to_netcdf([a, b], tmp_path / "m.nc"), engine="scipy") as ds:
-        assert ds["mask_reason"].dims == ("i", "j")
+        assert ds["mask_reason"].dims == ("y", "x")
         back = from_xarray(ds.load())
     assert [int(m.masked.sum()) for m in back] == [2, 2] and back[1].mask_reason[4, 3] == "inside furniture 'desk'"
 
@@ -366,9 +371,12 @@ def test_decor_from_scene():
 def test_dataframe_is_long():
     pytest.importorskip("pandas")
     df = to_dataframe([_field(), _field(channel="tx1")])
-    assert len(df) == 2 * 20 and {"channel", "i", "j", "position_z", "illuminance_stderr"} <= set(df.columns)
+    assert len(df) == 2 * 20 and {"channel", "i", "j", "x", "y", "z", "u", "v", "illuminance_stderr"} <= set(df.columns)
     row = df[(df.channel == "tx1") & (df.i == 3) & (df.j == 2)].iloc[0]
     assert row.illuminance == pytest.approx(_direct(5, 4)[(3, 2)], rel=1e-12)
+    assert (row.x, row.y, row.z, row.u, row.v) == pytest.approx(
+        (1.0 + 3 * S, 0.5 + 2 * S, 0.85, 3 * S, 2 * S), abs=1e-15
+    )
 
 
 def test_import_stays_light():
