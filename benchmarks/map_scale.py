@@ -18,7 +18,9 @@ Prints, each case run in its own process (peak memory is that process's maximum 
  (f) the error bars of a map run per point: a 6 x 6 map at 1 % per point (K = 3) with 12 seeds against a
      fixed-path run of 20 000 paths per point: the fraction of z-scores within 2 and the mean of z^2
      (a Student t with 255 degrees of freedom: 95.4 % and 1.008).
-Run: .venv/bin/python benchmarks/map_scale.py [--quick] [--only abcdef] [--baseline /work/main/.venv/bin/python]
+ (g) a map of handheld receivers (8 x 8 points, 16 walking orientations each: 1 024 receivers facing
+     different ways) at 2 % per receiver, K = 3: in-process time, paths and batches, this tree and --baseline.
+Run: .venv/bin/python benchmarks/map_scale.py [--quick] [--only abcdefg] [--baseline /work/main/.venv/bin/python]
 """
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ def child(case: dict) -> dict:
     res = simulate(spec)
     elapsed = time.perf_counter() - t
     out = {
+        "batches": res.run.batches,
         "time_s": elapsed,
         "peak_mb": _peak_mb(),
         "paths": res.run.paths_total,
@@ -116,7 +119,7 @@ def whole_command(doc: dict, python: str = sys.executable) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="smaller runs (a smoke test of the script)")
-    ap.add_argument("--only", default="abcdef", help="the sections to run, e.g. 'ae'")
+    ap.add_argument("--only", default="abcdefg", help="the sections to run, e.g. 'ae'")
     ap.add_argument("--baseline", help="another install's python: section (e) runs with it too, same machine")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -129,6 +132,8 @@ def main() -> None:
         scaling(args.quick, args.baseline)
     if "f" in args.only:
         coverage(4 if args.quick else 12)
+    if "g" in args.only:
+        oriented(args.baseline)
     if "a" not in args.only and "b" not in args.only and "c" not in args.only and "d" not in args.only:
         return
 
@@ -228,6 +233,20 @@ def coverage(n_seeds: int) -> None:
         f"(1.008), mean z {np.mean(zz):+.3f} +- {1 / np.sqrt(len(zz)):.3f}; paths per point "
         f"{nn.min():.0f} to {nn.max():.0f}, mean {nn.mean():.0f}"
     )
+
+
+def oriented(baseline: str | None) -> None:
+    """(g) receivers facing different ways: one grid of walking users' orientations, to 2 % per receiver."""
+    doc = komine(8, target_rel_error=0.02, max_reflections=3, t_max_s=1e-7)
+    doc["receiver_grids"][0]["orientation"] = {"model": "walking", "samples": 16}
+    for name, python in (("this", sys.executable), ("baseline", baseline)):
+        if python is not None:
+            r = run_child({"doc": doc}, python)
+            print(
+                f"(g) {name:<8} 8 x 8 points x 16 orientations, 2 % per receiver: {r['time_s']:.2f} s, "
+                f"{r['paths']:,d} paths in {r['batches']:,d} batches, rel. error median {r['rel_median']:.4f}, "
+                f"max {r['rel_max']:.4f} ({r['stop']})"
+            )
 
 
 if __name__ == "__main__":
