@@ -10,6 +10,7 @@ import numpy as np
 from pydantic import PrivateAttr
 
 from owcsim.clients.result_views import result_html, result_text
+from owcsim.formats.channel_matrix import ChannelMatrix, channel_matrix
 from owcsim.formats.map_files import to_xarray
 from owcsim.formats.map_plot import plot_map
 from owcsim.formats.maps import GridMap, maps_of_result
@@ -102,6 +103,11 @@ class Result(SimulationResultPublic):
         `links` is cir_link) cir and cir_stderr (n, n_bins) [power per bin per watt; NaN = no error bar] and
         by_reflection_order (n, K + 1, n_bins)."""
         return cir_arrays(self)
+
+    def channel_matrix(self) -> ChannelMatrix:
+        """DC gain of every transmitter x receiver with its error, LOS part and CIR (formats.channel_matrix):
+        `.dc_gain[i, j]`, ids in `.transmitters` / `.receivers`, `.to_xarray()`; for MIMO studies."""
+        return channel_matrix(self)
 
     def plot(self, path: str | Path | None = None, link: int | None = None) -> Figure:
         """h(t) per reflection order and total (formats.plots.plot_cir); saved to `path` if given."""

@@ -1,10 +1,10 @@
 """The CIR figure of a result: h(t) per reflection order and total, one panel per link.
 
-One drawing for the command line's cir.png and the client's `Result.plot()` (`plot_cir`) and the
-service's plot.png (server/formats.py draws it from the rows of a stored .npz). matplotlib's object API
-(Figure + the Agg canvas), never pyplot: no global state (the service draws from several
-threads, under a lock), and pyplot's import is not paid. matplotlib is imported inside
-`cir_figure`, so importing this module stays light.
+One drawing for the command line's cir.png (`--plot-format png`; its default cir.svg is svg.py's), the
+client's `Result.plot()` (`plot_cir`) and the service's plot.png (server/formats.py draws it from the rows
+of a stored .npz). matplotlib's object API (Figure + the Agg canvas), never pyplot: no global state (the
+service draws from several threads, under a lock), and pyplot's import is not paid. matplotlib is
+imported inside `cir_figure`, so importing this module stays light.
 """
 
 from __future__ import annotations

@@ -170,7 +170,11 @@ def _cmd_run(args) -> int:
         close()
         if executor is not None:
             executor.close()
-    paths = write_outputs(result, out, plot=not args.no_plot)
+    paths = write_outputs(result, out, plot=not args.no_plot, plot_format=args.plot_format)
+    if args.channel_matrix:  # transmitters x receivers for MIMO studies (formats/channel_matrix.py)
+        from owcsim.formats.channel_matrix import channel_matrix, write_channel_matrix
+
+        paths.append(write_channel_matrix(channel_matrix(result), out / "channel_matrix.npz"))
     _print_links(result)
     run = result.run
     wrote = (
@@ -300,13 +304,21 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="owcsim", description="Optical wireless channel simulator.")
     p.add_argument("--version", action="version", version=f"owcsim {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="simulate a scene; write result.json, cir.csv and cir.png")
+    run = sub.add_parser("run", help="simulate a scene; write result.json, links.csv, cir.csv and cir.svg")
     run.add_argument("scene", help="scene document (JSON)")
     run.add_argument("--out", required=True, help="output folder (created if needed)")
     run.add_argument(
-        "--no-plot",
+        "--plot-format",
+        choices=("svg", "png"),
+        default="svg",
+        help="figures (cir, map heatmaps) as SVG written directly (default, a few ms) or as PNG drawn by "
+        "matplotlib (its start-up and drawing: ~0.5-0.8 s)",
+    )
+    run.add_argument("--no-plot", action="store_true", help="draw no figure (cir, map heatmaps): for sweeps")
+    run.add_argument(
+        "--channel-matrix",
         action="store_true",
-        help="do not draw cir.png (saves matplotlib's start-up, ~0.3-0.5 s: for sweeps)",
+        help="also write channel_matrix.npz: DC gain of every transmitter x receiver (and CIR when tallied)",
     )
     _add_simulation_options(run)
     where = run.add_mutually_exclusive_group()

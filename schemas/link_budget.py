@@ -18,6 +18,10 @@ Personick 1982, whose noise-bandwidth integrals are I2 and I3):
 with A the receiver's `area` [m^2] and B the noise bandwidth [Hz]. Komine takes B equal to the
 bit rate (I2 and I3 are the noise-bandwidth factors of an NRZ receiver, so I2 * R_b is the
 equivalent noise bandwidth); here B = `bandwidth` when given, else `bit_rate`.
+
+Multi-cell figures (schemas/cells.py, engine/results/cells.py) use the same receiver: the SINR with
+the other cells as interference, and rates at B: Shannon, DCO-OFDM (`dco_ofdm_subcarriers`,
+`dco_ofdm_bias`) and OOK-NRZ at `ber_target`.
 """
 
 from __future__ import annotations
@@ -136,11 +140,35 @@ class LinkBudgetSpec(SpecModel):
         IsiSplit.NRZ,
         description="how a CIR splits into signal and ISI power: `nrz` (Komine's rectangular-pulse form) or `window`",
     )
+    ber_target: float = Field(
+        1e-6,
+        gt=0.0,
+        lt=0.5,
+        description="bit-error rate the multi-cell OOK-NRZ rate must meet [-]: the required SINR is "
+        "Q^-1(BER)^2 (13.5 dB at 1e-6)",
+    )
+    dco_ofdm_subcarriers: int = Field(
+        64,
+        ge=4,
+        le=65536,
+        description="IFFT size N of DCO-OFDM [-], even: N/2 - 1 subcarriers carry data (Hermitian symmetry)",
+    )
+    dco_ofdm_bias: float = Field(
+        2.0,
+        gt=0.0,
+        le=10.0,
+        description="DC bias of DCO-OFDM in standard deviations k of the OFDM signal [-] (the bias of "
+        "10 log10(1 + k^2) dB: 7 dB at k = 2); the AC signal power is (gamma P)^2 / k^2",
+    )
 
     @model_validator(mode="after")
     def _rate_or_bandwidth(self) -> "LinkBudgetSpec":
         if self.bit_rate is None and self.bandwidth is None:
             raise ValueError("give `bit_rate` [bit/s] or `bandwidth` [Hz] (or both): the noise needs a bandwidth")
+        if self.dco_ofdm_subcarriers % 2:
+            raise ValueError(
+                f"`dco_ofdm_subcarriers` must be even (Hermitian symmetry), got {self.dco_ofdm_subcarriers}"
+            )
         return self
 
     @property

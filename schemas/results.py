@@ -14,6 +14,8 @@ from enum import StrEnum
 from pydantic import BaseModel, ConfigDict, Field
 
 from .algorithms import Direction
+from .cells import CellsPublic
+from .lighting import LightingResultPublic
 from .orientation import CombinedSnrPublic, OrientationPointPublic
 from .scene import SceneSpec
 from .spectra import SpectralResultPublic
@@ -57,8 +59,13 @@ class LightingPublic(PublicModel):
 
     illuminance_lx: float | None = Field(
         None,
-        description="direct illuminance on the receiver plane [lx] (when the transmitters give a luminous output "
-        "or a photometric file)",
+        description="total illuminance on the receiver plane [lx]: direct light plus every reflection and scattering "
+        "order (when a transmitter gives light: luminous_output, a photometric file or a spectrum; docs/lighting.md)",
+    )
+    illuminance_lx_stderr: float | None = Field(None, description="standard error of illuminance_lx [lx]")
+    illuminance_direct_lx: float | None = Field(None, description="the direct part of illuminance_lx [lx]")
+    cylindrical_illuminance_direct_lx: float | None = Field(
+        None, description="direct cylindrical illuminance [lx] (with lighting.cylindrical)"
     )
     snr_db: float | None = Field(None, description="electrical SNR [dB] (with `link_budget`)")
     ber: float | None = Field(None, description="bit-error rate of OOK-NRZ (with `link_budget`)")
@@ -131,6 +138,15 @@ class ChannelPublic(LightingPublic):
     mean_delay_s_stderr: float | None = Field(description="standard error of mean_delay_s [s]")
     rms_delay_spread_s: float | None = Field(description="RMS delay spread of the summed channel [s]")
     rms_delay_spread_s_stderr: float | None = Field(description="standard error of rms_delay_spread_s [s]")
+    bandwidth_3db_hz: float | None = Field(
+        None,
+        description="3 dB bandwidth of the summed channel [Hz], the line of sight as exact delays "
+        "(engine/results/channel_spectrum.py); null without a binned CIR at this receiver (ask `outputs.cir` for "
+        "grid points) or when |H| stays above 1/sqrt(2) up to 1/(2 time_bin_s)",
+    )
+    bandwidth_3db_hz_stderr: float | None = Field(
+        None, description="standard error of bandwidth_3db_hz [Hz] (delta method over the CIR's path groups)"
+    )
     cir: CirPublic | None = None
 
 
@@ -300,6 +316,9 @@ class SimulationResultPublic(PublicModel):
         default_factory=list,
         description="per angle-diversity receiver and channel: combined SNRs (docs/orientation.md)",
     )
+    cells: CellsPublic | None = Field(
+        None, description="multi-cell LiFi: serving cell, SINR, rates, handover boundaries (schemas/cells.py)"
+    )
     run: RunPublic
     diagnostics: DiagnosticsPublic
     warnings: list[str] = Field(default_factory=list, description="what a careful reader of these numbers should know")
@@ -308,5 +327,8 @@ class SimulationResultPublic(PublicModel):
     )
     spectral: SpectralResultPublic | None = Field(
         None, description="per wavelength band and combined (scenes with `spectral`; docs/spectra.md)"
+    )
+    lighting: LightingResultPublic | None = Field(
+        None, description="luminous fluxes and EN 12464-1 figures (when a transmitter gives light; docs/lighting.md)"
     )
     scene: SceneSpec

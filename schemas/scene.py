@@ -9,6 +9,7 @@ from pydantic import Field, model_validator
 from .base import SpecModel
 from .devices import ReceiverGridSpec, ReceiverSpec, TransmitterSpec
 from .geometry import BoxSpec, MeshSpec, RoomSpec
+from .lighting import LightingSpec, check_lighting
 from .link_budget import LinkBudgetSpec
 from .medium import MediumSpec
 from .orientation import AngleDiversityReceiverSpec, check_hidden, hidden_count, hidden_ids, hidden_receiver_fields
@@ -65,6 +66,9 @@ class SceneSpec(SpecModel):
         description="photodiode and receiver electronics: adds SNR, BER of OOK and the bit rate the delay "
         "spread allows to links, channels and maps (Komine & Nakagawa 2004 noise model)",
     )
+    lighting: LightingSpec | None = Field(
+        None, description="EN 12464-1 task areas and cylindrical illuminance asked of the result (docs/lighting.md)"
+    )
     spectral: SpectralSpec | None = Field(
         None,
         description="wavelength bands: per-band spectra of sources, surfaces, detectors and smoke "
@@ -110,6 +114,7 @@ class SceneSpec(SpecModel):
                 )
             if len(set(g.transmitters)) != len(g.transmitters):
                 raise ValueError(f"transmitter_groups[{gi}] ({g.name}): a transmitter is listed twice")
+        check_lighting(self.lighting, [g.id_prefix for g in self.receiver_grids])
         if self.simulation.is_resolved:  # the engine checks the budget once it has chosen K, S and the window
             self.check_tally_budget()
         return self

@@ -21,6 +21,11 @@ __all__ = [
     "IsiSplit",
     "LinkBudget",
     "ber_ook",
+    "dco_ofdm_rate",
+    "ook_rate",
+    "ook_required_snr",
+    "shannon_rate",
+    "thermal_coefficients",
     "illuminance_los",
     "isi_split",
     "link_budget_from_spec",
@@ -48,6 +53,8 @@ class LinkBudget:
     background_current I_bg [A]; temperature T_k [K]; open_loop_gain G [-];
     capacitance_per_area eta [F/m^2]; channel_noise_factor Gamma [-]; transconductance g_m [S];
     i2, i3 noise-bandwidth factors [-]; isi_split the CIR signal/ISI rule. Defaults: Komine's values.
+    Multi-cell rates (engine/results/cells.py): ber_target of OOK-NRZ [-]; dco_ofdm_subcarriers N [-] and
+    dco_ofdm_bias k [standard deviations] of DCO-OFDM.
     """
 
     noise_bandwidth: float
@@ -62,6 +69,9 @@ class LinkBudget:
     i2: float = 0.562
     i3: float = 0.0868
     isi_split: IsiSplit = IsiSplit.NRZ
+    ber_target: float = 1e-6
+    dco_ofdm_subcarriers: int = 64
+    dco_ofdm_bias: float = 2.0
 
     @property
     def bit_period(self) -> float | None:
@@ -84,6 +94,9 @@ def link_budget_from_spec(spec) -> LinkBudget:
         i2=spec.noise_bandwidth_factor_i2,
         i3=spec.noise_bandwidth_factor_i3,
         isi_split=spec.isi_split,
+        ber_target=spec.ber_target,
+        dco_ofdm_subcarriers=spec.dco_ofdm_subcarriers,
+        dco_ofdm_bias=spec.dco_ofdm_bias,
     )
 
 
@@ -255,3 +268,68 @@ def isi_split(cir_power, dt, bit_period, *, t_min=0.0, t_first=None, rule=IsiSpl
     signal = (h * np.diff(_signal_primitive(x, bit_period, rule), axis=-1) / dt).sum(axis=-1)
     isi = (h * np.diff(_isi_primitive(x, bit_period, rule), axis=-1) / dt).sum(axis=-1)
     return signal, isi
+
+
+# --- rates (multi-cell LiFi, engine/results/cells.py) -----------------------------------------
+
+
+def shannon_rate(bandwidth, sinr_linear):
+    """Shannon rate C = B log2(1 + SINR) [bit/s]; bandwidth B [Hz], SINR linear [-] (NaN stays NaN)."""
+    return bandwidth * np.log2(1.0 + np.maximum(np.asarray(sinr_linear, float), 0.0))
+
+
+def dco_ofdm_rate(bandwidth, sinr_ac, subcarriers: int):
+    """DCO-OFDM rate R = B (N - 2) / (2N) log2(1 + SINR_ac) [bit/s] (Dimitrov & Haas 2015, ch. 4-5).
+
+    An N-point IFFT with Hermitian symmetry carries data on N/2 - 1 of its N subcarriers (the DC and the
+    N/2 subcarrier are zero), each at most log2(1 + SINR_ac) bits per symbol (Gaussian signalling, flat
+    channel), B the sampling rate [Hz]. SINR_ac [-] is the SINR of the AC (data) part of the signal.
+    """
+    n = float(subcarriers)
+    return bandwidth * (n - 2.0) / (2.0 * n) * np.log2(1.0 + np.maximum(np.asarray(sinr_ac, float), 0.0))
+
+
+def ook_required_snr(ber_target: float) -> float:
+    """SNR [-] at which OOK-NRZ reaches a BER: Q(sqrt(SNR)) = BER, so SNR = Q^-1(BER)^2 (`ber_ook`)."""
+    from scipy.special import erfcinv  # on first use (scipy's import time)
+
+    return float((math.sqrt(2.0) * erfcinv(2.0 * ber_target)) ** 2)
+
+
+def thermal_coefficients(budget: LinkBudget, area):
+    """(c2, c3) of sigma_thermal^2 = c2 B^2 + c3 B^3 [A^2] (`noise_variances`), per receiver area A [m^2]."""
+    kt, cap = K_B * budget.temperature, budget.capacitance_per_area * np.asarray(area, float)
+    c2 = 8.0 * math.pi * kt / budget.open_loop_gain * cap * budget.i2
+    c3 = 16.0 * math.pi**2 * kt * budget.channel_noise_factor / budget.transconductance * cap**2 * budget.i3
+    return c2, c3
+
+
+#: Bisection steps of `ook_rate` on a bracket [r/3, r]: 3^(-2^-60) ~ 1e-18 relative width at the end.
+_OOK_STEPS = 64
+
+
+def ook_rate(budget: LinkBudget, area, p_signal, interference_a2, p_total, required_snr: float):
+    """Highest OOK-NRZ bit rate R_b [bit/s] whose SINR reaches `required_snr`, the noise bandwidth being R_b
+    (Komine & Nakagawa 2004: B = R_b), without the cap at the budget's bandwidth (cells.py applies it).
+
+    Solves c1 R + c2 R^2 + c3 R^3 = (gamma P_s)^2 / SNR_req - I for R > 0, with c1 = 2 q (gamma P_total +
+    I_bg I2) (shot noise) and c2, c3 the thermal terms (`thermal_coefficients`); the left side grows with R,
+    so the root is unique, bracketed by [r / 3, r], r = min(Y/c1, sqrt(Y/c2), cbrt(Y/c3)) and found by
+    bisection. 0 where the interference I [A^2] alone exceeds the allowance (no rate meets it), NaN where
+    an input is NaN. p_signal, p_total [W]; interference_a2 = sum (gamma P_k)^2 [A^2].
+    """
+    g = budget.responsivity
+    c1 = 2.0 * Q_E * (g * np.asarray(p_total, float) + budget.background_current * budget.i2)
+    c2, c3 = thermal_coefficients(budget, area)
+    y = (g * np.asarray(p_signal, float)) ** 2 / required_snr - np.asarray(interference_a2, float)
+    c1, c2, c3, y = np.broadcast_arrays(c1, c2, c3, y)
+    ok = y > 0
+    yy = np.where(ok, y, 1.0)
+    hi = np.minimum(np.minimum(yy / c1, np.sqrt(yy / c2)), np.cbrt(yy / c3))
+    lo = hi / 3.0
+    for _ in range(_OOK_STEPS):  # a loop over bisection steps, each over all receivers at once
+        mid = np.sqrt(lo * hi)
+        above = c1 * mid + c2 * mid**2 + c3 * mid**3 >= yy
+        hi, lo = np.where(above, mid, hi), np.where(above, lo, mid)
+    rate = np.where(ok, np.sqrt(lo * hi), 0.0)
+    return np.where(np.isnan(y), np.nan, rate)

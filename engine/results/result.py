@@ -23,6 +23,8 @@ from owcsim.engine.integrator.lobe import LOBE_PEAK, phase_lobe_wanted
 from owcsim.engine.integrator.path import KernelSettings
 from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.results import metrics
+from owcsim.engine.results.cells import cells_block
+from owcsim.engine.results.channel_spectrum import group_bandwidths
 from owcsim.engine.results.job import FinishedJob
 from owcsim.engine.results.lighting import Lighting
 from owcsim.engine.results.orientation import receivers_as_held
@@ -372,12 +374,17 @@ def build_result(job: FinishedJob) -> SimulationResultPublic:
     cols = _link_columns(job, f)
     cir_totals = _cir_and_orders(job, f, cols)
     geometry = job.los.geometry
-    lighting = Lighting(spec, scene, geometry) if geometry is not None else None
+    lighting = Lighting(spec, scene, geometry, job.accs) if geometry is not None else None
     if lighting is not None:
         lighting.add_link_columns(cols, f.h0, f.delay["rms_delay_spread_s"], f.masked)
     links = document_rows(cols, scene.n_links)
     masked_rx = scene.masked != ""
-    channels, channel_cols = _channels(spec, scene, job.accs, plan, f.los_abc, cir_totals, masked_rx, lighting)
+    bandwidth = group_bandwidths(  # (value, stderr), (G, R) each
+        plan.group_weights, f.los_gain, job.los.delay, cir_totals, plan.cir_rank >= 0, bins.t_min, bins.dt
+    )
+    channels, channel_cols = _channels(
+        spec, scene, job.accs, plan, f.los_abc, cir_totals, masked_rx, lighting, bandwidth
+    )
     run = _run_section(job, f.los_gain)
     diagnostics = _diagnostics(job)
     receivers = _receivers(spec, scene)
@@ -394,12 +401,18 @@ def build_result(job: FinishedJob) -> SimulationResultPublic:
         "maps": grid_maps(spec, scene, channel_cols, [g.name for g in spec.transmitter_groups])
         if channels
         else grid_maps(spec, scene, cols, list(scene.transmitters.ids)),
+        "cells": cells_block(spec, scene, plan, cols, channel_cols, job.directions),
         "run": run,
         "diagnostics": diagnostics,
         "scene": job.original or spec,  # the model itself: not validated again
     }
     held, held_warnings = receivers_as_held(spec, scene, cols, channel_cols, doc["maps"])  # docs/orientation.md
     doc.update(held, warnings=doc["warnings"] + held_warnings)
+    if lighting is not None:  # luminous fluxes and EN 12464-1 figures (engine/results/lighting.py)
+        doc["lighting"] = lighting.section(
+            plan.group_weights, [g.name for g in spec.transmitter_groups] or list(scene.transmitters.ids), masked_rx
+        )
+        doc["warnings"] += lighting.warnings
     if scene.spectra is not None:  # per band and combined (engine/results/spectral.py)
         g = geometry if geometry is not None else los_geometry(scene)
         doc["spectral"] = result_block(spec, scene, job.accs, g, los_gain_grey(scene, g), job.los.delay)
@@ -471,8 +484,11 @@ def _channel_paths(accs, w: np.ndarray) -> np.ndarray:
     return np.where(w[:, :, None] > 0, n_paths[None], 0).max(axis=1)
 
 
-def _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=None) -> tuple[list[dict], dict]:
-    """The transmitter groups' channels at every receiver (group-major), as rows and as columns."""
+def _channels(
+    spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=None, bandwidth=None
+) -> tuple[list[dict], dict]:
+    """The transmitter groups' channels at every receiver (group-major), as rows and as columns; `bandwidth`
+    (value, stderr) of their 3 dB bandwidths [Hz], (G, R) each (channel_spectrum.group_bandwidths)."""
     w = plan.group_weights
     if not w.size:
         return [], {}
@@ -499,6 +515,9 @@ def _channels(spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=
         "rms_delay_spread_s_stderr": column(flat["rms_delay_spread_s_stderr"]),
         "cir": [None] * (n_groups * n_rx),
     }
+    if bandwidth is not None:
+        cols["bandwidth_3db_hz"] = column(bandwidth[0].ravel())
+        cols["bandwidth_3db_hz_stderr"] = column(bandwidth[1].ravel())
     if lighting is not None:
         lighting.add_channel_columns(cols, w, h0, np.where(nan, np.nan, d["rms_delay_spread_s"]), group_power)
     n_tx = w.shape[1]

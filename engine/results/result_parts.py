@@ -205,7 +205,17 @@ MAP_QUANTITIES = {
 #: relative error dc_gain_stderr / dc_gain, and its paths (its own allocation: engine/run/allocation.py).
 TRACED_MAP_QUANTITIES = {"dc_gain_rel_error": "1", "paths": "1"}
 #: Quantities a map has when the scene asks for them (luminous output, link budget): included where finite.
-OPTIONAL_MAP_QUANTITIES = {"illuminance_lx": "lx", "snr_db": "dB", "ber": "1", "max_bit_rate_bps": "bit/s"}
+OPTIONAL_MAP_QUANTITIES = {
+    "illuminance_lx": "lx",
+    "illuminance_direct_lx": "lx",
+    "cylindrical_illuminance_direct_lx": "lx",
+    "snr_db": "dB",
+    "ber": "1",
+    "max_bit_rate_bps": "bit/s",
+    "bandwidth_3db_hz": "Hz",  # group channels with a CIR (engine/results/channel_spectrum.py)
+}
+#: The standard error of an optional quantity: its key in the columns.
+OPTIONAL_MAP_STDERR = {"illuminance_lx": "illuminance_lx_stderr", "bandwidth_3db_hz": "bandwidth_3db_hz_stderr"}
 
 
 def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[dict]:
@@ -239,6 +249,8 @@ def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[d
             for q, unit in OPTIONAL_MAP_QUANTITIES.items():
                 if q in columns and np.isfinite(arr := part(q)).any():
                     values[q], units[q] = column(arr), unit
+                    if OPTIONAL_MAP_STDERR.get(q) in columns:
+                        stderr[q] = column(part(OPTIONAL_MAP_STDERR[q]))
             if "paths" in columns and np.nanmax(part("paths"), initial=0.0) > 0:  # Monte Carlo ran
                 with np.errstate(divide="ignore", invalid="ignore"):
                     rel = part("dc_gain_stderr") / part("dc_gain")

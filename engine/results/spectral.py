@@ -2,7 +2,8 @@
 
 Channels of a spectral scene (engine/spectral/spectra.py, V = B + 3 per link): the B bands' gain H_b, then
 the optical H = sum_b f_b H_b [-], electrical G = sum_b f_b T_b R_b H_b [A/W] and luminous
-H_v = sum_b f_b K_m Vbar_b H_b [lm/W] combinations; illuminance E_v = P_t H_v / (A T_s g) [lx]. Their means
+H_v = sum_b f_b K_m Vbar_b H_b [lm/W] combinations; illuminance E_v = P_t H_v / (A T_s g) [lx] x Phi_v / Phi_spectrum
+(the transmitter's one luminous flux, engine/results/illuminance.py, against its spectrum's). Their means
 and errors come from the channel tallies (engine/tally/spectral.py) plus the line of sight of every channel.
 """
 
@@ -13,6 +14,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from owcsim.engine.results import metrics
+from owcsim.engine.results.illuminance import resolve_fluxes
 from owcsim.engine.results.result_parts import column
 from owcsim.engine.scene.los import LosGeometry, los_channels
 from owcsim.engine.scene.scene import Scene
@@ -46,14 +48,15 @@ def result_block(
         "transmitters": _transmitters(scene, sp),
         "receivers": _receivers(spec, scene, sp),
         "medium_bands": sp.medium_bands or None,
-        "links": _links(scene, sp, los, mean, cov),
+        "links": _links(spec, scene, sp, los, mean, cov),
         "model": "bands traced together: carrier = largest reflectance / least-attenuated band, per-band ratios "
         "(engine/spectral/spectra.py); curves averaged over each band",
     }
 
 
-def _links(scene: Scene, sp: SceneSpectra, los: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> list[dict]:
-    """Per link (rows of the document): every channel's gain, delays and errors, photocurrent, illuminance."""
+def _links(spec, scene: Scene, sp: SceneSpectra, los: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> list[dict]:
+    """Per link (rows of the document): every channel's gain, delays and errors, photocurrent, illuminance (in the
+    receiver's FOV, at the transmitter's one luminous flux)."""
     V, B, L = sp.n_channels, sp.n_bands, scene.n_links
     d = metrics.delay_metrics_from_moments(mean, cov)
     n_rx = len(scene.receivers)
@@ -69,6 +72,8 @@ def _links(scene: Scene, sp: SceneSpectra, los: np.ndarray, mean: np.ndarray, co
     ob, el, lu = B, B + 1, B + 2
     gain = scene.receivers.gain.take(ri)  # A T_s g [m^2]
     power = scene.transmitters.power.take(ti)
+    # the luminous figures at the transmitter's one luminous flux (illuminance.resolve_fluxes): x Phi_v / Phi_spectrum
+    lum_power = power * np.nan_to_num(resolve_fluxes(spec, scene).spectrum_ratio(), nan=1.0).take(ti)
     has_e = sp.rx_responsive.take(ri)
     lux_ok = sp.has_luminous
     links = []
@@ -91,13 +96,13 @@ def _links(scene: Scene, sp: SceneSpectra, los: np.ndarray, mean: np.ndarray, co
             if has_e[k]
             else None,
             "illuminance_by_band_lx": column(
-                power[k] / gain[k] * sp.tx_fraction[ti[k]] * sp.tx_luminous[ti[k]] * h[:B, k]
+                lum_power[k] / gain[k] * sp.tx_fraction[ti[k]] * sp.tx_luminous[ti[k]] * h[:B, k]
             )
             if lux_ok
             else None,
-            "illuminance_lx": column(h[lu, k : k + 1] * power[k] / gain[k])[0] if lux_ok else None,
-            "illuminance_lx_stderr": column(h_se[lu, k : k + 1] * power[k] / gain[k])[0] if lux_ok else None,
-            "illuminance_direct_lx": float(los[lu, k] * power[k] / gain[k]) if lux_ok and not masked[k] else None,
+            "illuminance_lx": column(h[lu, k : k + 1] * lum_power[k] / gain[k])[0] if lux_ok else None,
+            "illuminance_lx_stderr": column(h_se[lu, k : k + 1] * lum_power[k] / gain[k])[0] if lux_ok else None,
+            "illuminance_direct_lx": float(los[lu, k] * lum_power[k] / gain[k]) if lux_ok and not masked[k] else None,
         }
         links.append(row)
     return links

@@ -88,6 +88,7 @@ def pilot_run(resolved: SceneSpec, scene: Scene, job_scene: Scene, need_k: bool,
             "receivers": [resolved.receiver_at(i) for i in pick],
             "receiver_grids": [],
             "transmitter_groups": [],
+            "lighting": None,  # its task areas name the grids left out
             "outputs": OutputsSpec(cir=True, orders=True),  # the pilot reads the order split and the CIR
             "simulation": sim.model_copy(
                 update=dict(

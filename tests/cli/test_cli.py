@@ -55,7 +55,8 @@ def test_run_writes_result_csv_png(tmp_path, capsys):
     csv = (out / "cir.csv").read_text().splitlines()
     assert csv[0].startswith("transmitter,receiver,t_start_s,t_end_s,h_per_s")
     assert len(csv) == 1 + res["time_bins"]["n_bins"]
-    assert (out / "cir.png").read_bytes()[:4] == b"\x89PNG"
+    assert (out / "cir.svg").read_text().startswith("<svg ")  # formats/svg.py: no matplotlib
+    assert not (out / "cir.png").exists()
     assert "H0 =" in capsys.readouterr().out
 
 
@@ -183,8 +184,45 @@ def test_algorithm_flag_with_an_s_it_cannot_honour_set_is_refused(tmp_path, caps
     assert "`max_scattering` 7 cannot be honoured: give 1 or 2" in err and "Traceback" not in err
 
 
-def test_no_plot_skips_the_png_and_matplotlib(tmp_path):
-    """--no-plot writes every file but cir.png, and the command never imports matplotlib (nor trimesh, scipy)."""
+def test_plot_format_png_draws_with_matplotlib(tmp_path):
+    out = tmp_path / "o"
+    assert main(["run", BARRY, "--out", str(out), "--paths", "2000", "--plot-format", "png"]) == 0
+    assert (out / "cir.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and not (out / "cir.svg").exists()
+
+
+def test_default_plot_imports_no_matplotlib(tmp_path):
+    """The default figure is SVG written directly: the command never imports matplotlib (nor trimesh, scipy)."""
+    out = tmp_path / "o"
+    code = (
+        "import sys; from owcsim.cli import main; "
+        f"assert main(['run', {BARRY!r}, '--out', {str(out)!r}, '--paths', '2000']) == 0; "
+        "print(sorted(m for m in ('matplotlib', 'trimesh', 'scipy') if m in sys.modules))"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=tmp_path)
+    assert proc.stdout.strip().splitlines()[-1] == "[]"
+    assert sorted(p.name for p in out.iterdir()) == ["cir.csv", "cir.svg", "links.csv", "result.json"]
+
+
+def test_map_heatmaps_are_svg_png_or_none(tmp_path):
+    """A map's heatmaps follow --plot-format; --no-plot draws none (the netCDF and .mat files stay)."""
+    doc = json.loads((EXAMPLES / "komine_map.json").read_text())
+    doc["receiver_grids"][0]["spacing"] = 1.225  # 5 x 5 points
+    doc["simulation"] = {"max_reflections": 0}
+    scene = tmp_path / "map.json"
+    scene.write_text(json.dumps(doc))
+    drawn = {}
+    for flags, ext in (([], "svg"), (["--plot-format", "png"], "png"), (["--no-plot"], None)):
+        out = tmp_path / f"o{ext}"
+        assert main(["run", str(scene), "--out", str(out), *flags]) == 0
+        names = {p.name for p in out.iterdir()}
+        assert {"result.json", "links.csv", "map_plane.nc", "maps.mat"} <= names
+        drawn[ext] = sorted(n for n in names if n.startswith("map_plane_"))
+    assert "map_plane_ceiling_illuminance_lx.svg" in drawn["svg"] and drawn[None] == []
+    assert [n.replace(".svg", ".png") for n in drawn["svg"]] == drawn["png"]
+
+
+def test_no_plot_skips_the_figure_and_matplotlib(tmp_path):
+    """--no-plot writes every file but the figure, and the command never imports matplotlib (nor trimesh, scipy)."""
     out = tmp_path / "o"
     code = (
         "import sys; from owcsim.cli import main; "

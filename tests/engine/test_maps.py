@@ -203,7 +203,7 @@ def test_command_line_prints_a_map_summary_and_writes_map_files(tmp_path, capsys
     assert "plane/ceiling" in out and "illuminance_lx" in out and "links" in out
     assert out.count("\n") < 30  # a summary, not one line per link
     names = {p.name for p in (tmp_path / "out").iterdir()}
-    assert {"result.json", "links.csv", "map_plane.nc", "maps.mat", "map_plane_ceiling_illuminance_lx.png"} <= names
+    assert {"result.json", "links.csv", "map_plane.nc", "maps.mat", "map_plane_ceiling_illuminance_lx.svg"} <= names
     assert "cir.csv" not in names  # no link asked for a CIR
 
 
