@@ -110,6 +110,7 @@ def _scene_overrides(args) -> list[tuple[str, object]]:
         "algorithm": args.algorithm,
         "target_rel_error": args.target_rel_error,
         "direction": args.direction,
+        "target_scope": args.target_scope,
     }
     overrides: list[tuple[str, object]] = [(f"simulation.{k}", v) for k, v in flags.items() if v is not None]
     if isinstance(args.algorithm, int):  # the document's S may be another algorithm's: kept only if N honours it
@@ -284,6 +285,11 @@ def _add_simulation_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--direction", choices=("auto", "forward", "backward"))
     p.add_argument("--target-rel-error", type=float, help="stop when stderr(H0)/H0 reaches this, every link")
+    p.add_argument(
+        "--target-scope",
+        choices=("channels", "links", "both"),
+        help="what --target-rel-error holds on: group channels, links, or both (docs/scene.md)",
+    )
     p.add_argument(
         "--set",
         action="append",

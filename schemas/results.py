@@ -129,6 +129,7 @@ class ChannelPublic(LightingPublic):
     group: str = Field(description="the transmitter group's name")
     receiver: str = Field(description="receiver id")
     receiver_index: int = Field(description="index of the receiver in `receivers`")
+    paths: int | None = Field(None, description="paths traced for this channel: the most of its member links'")
     dc_gain: float | None = Field(description="H0 of the summed channel, per watt of the group's power [-]")
     dc_gain_stderr: float | None = Field(description="standard error of dc_gain")
     path_loss_db: float | None = Field(description="-10 log10 H0 [dB]")

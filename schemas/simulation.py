@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from enum import StrEnum
 from typing import Literal
 
 from pydantic import Field, model_validator
@@ -24,6 +25,18 @@ def check_bin_budget(t_min_s: float, t_max_s: float, time_bin_s: float, automati
             f"{where} {t_min_s:g}..{t_max_s:g} s at {time_bin_s:g} s per bin needs {ratio:.4g} bins, "
             f"more than the budget of {MAX_BINS:,}: {fix}"
         )
+
+
+class TargetScope(StrEnum):
+    """What an accuracy run's `target_rel_error` must hold on (a `str` enum: `TargetScope.LINKS == "links"`).
+
+    On a map each point counts on its own (engine/run/allocation.py): LINKS, the point's link to each
+    transmitter; CHANNELS, the point's channel of each transmitter group (and its links to transmitters in no
+    group); BOTH, all of these."""
+
+    CHANNELS = "channels"
+    LINKS = "links"
+    BOTH = "both"
 
 
 #: Paths used when neither `paths` nor `target_rel_error` is given.
@@ -104,12 +117,13 @@ class SimulationSpec(SpecModel):
         lt=1.0,
         description="an accuracy run: stop when stderr(H0)/H0 <= this on every quantity `target_scope` names",
     )
-    target_scope: Literal["channels", "links", "both"] = Field(
-        "channels",
+    target_scope: TargetScope = Field(
+        TargetScope.CHANNELS,
         description="what `target_rel_error` must hold on: 'channels' (default) what the result reports as "
         "channels, every transmitter group's summed channel at each receiver (per watt of group power) and "
         "every link of a transmitter in no group; 'links' every link (transmitter, receiver), grouped or not; "
-        "'both' all of these. Without transmitter_groups the three are the same: every link",
+        "'both' all of these. Without transmitter_groups the three are the same: every link. On a map each "
+        "point stops on its own when its quantities meet the target: its links, its group channels, or both",
     )
     time_budget_s: float = Field(600.0, gt=0.0, description="wall-time limit of an accuracy run [s]")
     seed: int = Field(

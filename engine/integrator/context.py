@@ -25,6 +25,7 @@ from owcsim.engine.core.constants import SPEED_OF_LIGHT
 from owcsim.engine.integrator.path import BatchState, Paths, WorkItem, dot, dot_vector, item_links, rows
 from owcsim.engine.integrator.weights import connection_weight, side_weight
 from owcsim.engine.surfaces.bsdf import Materials
+from owcsim.engine.tally.packed import PackedBuilder
 from owcsim.engine.tally.spectral import ChannelBuilder
 from owcsim.engine.tally.tally import BatchBuilder, BatchTally
 from owcsim.schemas.algorithms import Direction
@@ -153,7 +154,7 @@ class BatchContext(BatchState):
         self.channels: ChannelBuilder | None = None  # the per-(link, channel) sums of spectral scenes
         self.w0 = 1.0  # the source's weight W_source (trace_batch), the roulette's scale
         self.pending: dict[int, list[tuple[Any, ...]]] = {}  # depth k + s -> estimate groups waiting for their step
-        self.builder: BatchBuilder | None = None  # the batch's tally (trace_batch)
+        self.builder: BatchBuilder | PackedBuilder | None = None  # the batch's tally (trace_batch)
         #: (2, n_paths) quasi-random uniforms of the first bounce (KernelSettings.qmc_block), step 0
         self.first_bounce_u: FloatArray | None = None
 
@@ -175,8 +176,15 @@ class BatchContext(BatchState):
             or settings.both_sides
             or settings.in_then_out
         )
-        block = qmc.block_size(item.n_paths, settings.qmc_block)  # paths per independent sample
         links = item_links(self.scene, item)
+        if item.packed:  # several sources' paths (engine/run/allocation.py): per-path sums, reduced per source
+            plan = settings.tally
+            kept = max(plan.cir_slots(links).max(initial=-1), plan.order_slots(links).max(initial=-1))
+            if several or self.spectra is not None or kept >= 0:
+                raise RuntimeError("a packed batch needs algorithm 1 without mirrors, spectra, CIR or order split")
+            self.builder = PackedBuilder(plan, links, len(self.tgt), np.asarray(item.sources), np.asarray(item.counts))
+            return
+        block = qmc.block_size(item.n_paths, settings.qmc_block)  # paths per independent sample
         if self.spectra is not None:  # per-(link, channel) sums (tally/spectral.py)
             self.channels = ChannelBuilder(
                 self.spectra, item.direction, item.source, self.tgt, links, item.n_paths, block

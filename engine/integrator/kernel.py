@@ -69,7 +69,8 @@ import numpy as np
 
 from owcsim.engine.core import qmc
 from owcsim.engine.core.allocator import tune_allocator
-from owcsim.engine.core.arrays import FloatArray
+from owcsim.engine.core.arrays import FloatArray, IntArray
+from owcsim.engine.core.sampling import sample_cosine_cone, to_world
 from owcsim.engine.integrator.context import BatchContext
 from owcsim.engine.integrator.events import medium_collision, medium_next_events, surface_vertex
 from owcsim.engine.integrator.lobe import lobe_connections
@@ -79,6 +80,7 @@ from owcsim.engine.integrator.single_scatter import segment_scatter
 from owcsim.engine.integrator.uniform_medium import EquiangularFrames
 from owcsim.engine.integrator.weights import first_vertex_factor
 from owcsim.engine.scene.scene import Scene
+from owcsim.engine.sources.devices import Devices
 from owcsim.engine.tally.tally import BatchTally
 from owcsim.schemas.algorithms import Direction
 
@@ -135,15 +137,22 @@ def _emit(ctx: BatchContext, item: WorkItem, rng: np.random.Generator) -> tuple[
     n, i = item.n_paths, item.source
     w0 = ctx.w0 = sources.total_response(i)
     two_sided = settings.mis or settings.both_sides
-    block = qmc.block_size(n, settings.qmc_block)
+    block = 1 if item.packed else qmc.block_size(n, settings.qmc_block)  # packed: pseudo-random paths
     if block > 1:
         first_u = qmc.shifted_blocks(n, block, rng)  # (5, n)
         u = first_u[:2]
     else:
         first_u, u = None, rng.random((2, n))
+    if item.packed:  # several receivers of one field of view and gain (engine/run/allocation.py): their origins
+        src, counts = np.asarray(item.sources, np.int64), np.asarray(item.counts, np.int64)
+        origins = np.repeat((sources.positions[src] + isect.offset * sources.normals[src]).T, counts, axis=1)
+        directions = _packed_directions(sources, src, counts, u)
+    else:
+        origins = np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1)
+        directions = np.ascontiguousarray(sources.sample_directions(i, u[0], u[1]).T)
     paths = Paths(
-        directions=np.ascontiguousarray(sources.sample_directions(i, u[0], u[1]).T),
-        origins=np.repeat((sources.positions[i] + isect.offset * sources.normals[i])[:, None], n, axis=1),
+        directions=directions,
+        origins=origins,
         weights=np.full(n, w0),
         lengths=np.zeros(n),
         path=np.arange(n),
@@ -161,6 +170,17 @@ def _emit(ctx: BatchContext, item: WorkItem, rng: np.random.Generator) -> tuple[
     if settings.phase_lobe and (free_flight or points_on_segments and settings.mis):
         lobe_connections(ctx, n, rng, segments=not free_flight)  # Tx -> p -> Rx from the phase lobe (lobe.py)
     return paths, first_u
+
+
+def _packed_directions(sources: Devices, src: IntArray, counts: IntArray, u: FloatArray) -> FloatArray:
+    """(3, n) emission directions of a packed batch's paths: about their sources' one normal (Devices
+    .sample_directions), or, when the receivers face different ways (random orientation, several planes),
+    each path about its own receiver's normal with the same pdf (the cone of the shared field of view)."""
+    normals = sources.normals[src]
+    if not np.ptp(normals, axis=0).any():
+        return np.ascontiguousarray(sources.sample_directions(int(src[0]), u[0], u[1]).T)
+    local = sample_cosine_cone(sources.cos_fov[src[0]], u[0], u[1])  # (n, 3); receivers: the FOV cone
+    return np.ascontiguousarray(to_world(local, np.repeat(normals, counts, axis=0)).T)
 
 
 def _step(

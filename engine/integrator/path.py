@@ -100,12 +100,24 @@ class WorkItem:
     n_paths: int
     seed: int
     phase: int = 0  # 0 = main run, 1 = pilot
+    #: a packed batch (maps, engine/run/allocation.py): paths of several sources of one device kind, `counts[m]`
+    #: paths from `sources[m]`, in that order (`n_paths` is their sum; `source` is sources[0]); empty: one source
+    sources: tuple[int, ...] = ()
+    counts: tuple[int, ...] = ()
+    part: int = 0  # a packed batch's index among the round's packed batches (its random stream)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "direction", Direction(self.direction))  # one spelling: the enum
 
+    @property
+    def packed(self) -> bool:
+        """True for a batch of several sources' paths (`sources`, `counts`)."""
+        return len(self.sources) > 0
+
     def rng(self) -> np.random.Generator:
-        key = (self.phase, self.direction.code, self.source, self.batch)
+        key: tuple[int, ...] = (self.phase, self.direction.code, self.source, self.batch)
+        if self.packed:  # its own streams: a packed batch's first source may run a batch of that index alone
+            key += (len(self.sources), self.part)
         return np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=key))
 
 
@@ -117,8 +129,14 @@ def device_sets(scene: Scene, direction: Direction) -> tuple[Devices, Devices]:
 
 
 def item_links(scene: Scene, item: WorkItem) -> IntArray:
-    """Global link index of each of the item's targets."""
+    """Global link index of each of the item's targets; a packed batch: of each (target, source) pair, (T * M,)
+    in target-major order."""
     t = np.asarray(item.targets)
+    if item.packed:
+        src = np.asarray(item.sources, np.int64)[None, :]
+        if item.direction is Direction.FORWARD:
+            return np.asarray(scene.link(src, t[:, None])).ravel()
+        return np.asarray(scene.link(t[:, None], src)).ravel()
     if item.direction is Direction.FORWARD:
         return scene.link(item.source, t)
     return scene.link(t, item.source)

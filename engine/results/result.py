@@ -478,6 +478,12 @@ def _receivers(spec, scene) -> list[dict]:
     return document_rows(cols, len(rx))
 
 
+def _channel_paths(accs, w: np.ndarray) -> np.ndarray:
+    """(G, R) paths traced for each group's channel at each receiver: the most of its member links'."""
+    n_paths = np.sum([a.n_paths for a in accs.values()], axis=0).reshape(w.shape[1], -1)
+    return np.where(w[:, :, None] > 0, n_paths[None], 0).max(axis=1)
+
+
 def _channels(
     spec, scene, accs, plan, los_abc, cir_totals, masked_rx, lighting=None, bandwidth=None
 ) -> tuple[list[dict], dict]:
@@ -498,6 +504,7 @@ def _channels(
         "group": [spec.transmitter_groups[g].name for g in g_idx],
         "receiver": [scene.receivers.ids[j] for j in r_idx],
         "receiver_index": r_idx.tolist(),
+        "paths": _channel_paths(accs, w).ravel().tolist(),
         "dc_gain": column(h0.ravel()),
         "dc_gain_stderr": column(flat["dc_gain_stderr"]),
         "path_loss_db": column(metrics.path_loss_db(h0.ravel())),

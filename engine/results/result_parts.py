@@ -201,6 +201,9 @@ MAP_QUANTITIES = {
     "mean_delay_s": ("s", "mean_delay_s_stderr"),
     "rms_delay_spread_s": ("s", "rms_delay_spread_s_stderr"),
 }
+#: Quantities of a map whose points traced paths (none for an exact line-of-sight map): each point's achieved
+#: relative error dc_gain_stderr / dc_gain, and its paths (its own allocation: engine/run/allocation.py).
+TRACED_MAP_QUANTITIES = {"dc_gain_rel_error": "1", "paths": "1"}
 #: Quantities a map has when the scene asks for them (luminous output, link budget): included where finite.
 OPTIONAL_MAP_QUANTITIES = {
     "illuminance_lx": "lx",
@@ -248,6 +251,12 @@ def grid_maps(spec, scene, columns: dict[str, list], names: list[str]) -> list[d
                     values[q], units[q] = column(arr), unit
                     if OPTIONAL_MAP_STDERR.get(q) in columns:
                         stderr[q] = column(part(OPTIONAL_MAP_STDERR[q]))
+            if "paths" in columns and np.nanmax(part("paths"), initial=0.0) > 0:  # Monte Carlo ran
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    rel = part("dc_gain_stderr") / part("dc_gain")
+                values["dc_gain_rel_error"] = column(np.where(np.isfinite(rel), rel, np.nan))
+                values["paths"] = column(part("paths"))
+                units.update(TRACED_MAP_QUANTITIES)
             out.append(
                 {
                     "grid": grid.id_prefix,

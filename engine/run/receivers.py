@@ -20,6 +20,9 @@ from owcsim.engine.spectral import spectra
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.devices import ReceiverSpec
 
+#: Receivers whose field of view is tested in one call of `unreachable_receivers` (x n_rays rays).
+RECEIVER_CHUNK = 4096
+
 
 def with_receivers(scene: Scene, spec: SceneSpec) -> Scene:
     """The built scene with the receivers of `spec` (same surfaces, transmitters and medium): what
@@ -74,15 +77,14 @@ def unreachable_receivers(scene: Scene, seen: BoolArray | None = None, n_rays: i
         in_solid |= np.all((front > box.min) & (front < box.max), axis=1)
     if spec.room is not None:
         in_solid |= ~np.all((front >= spec.room.lo) & (front <= spec.room.hi), axis=1)
-    out = []
-    for j in range(len(rx)):  # a loop over devices, each one vectorized call
-        if seen is not None and seen[j]:
-            continue
-        if in_solid[j]:
-            out.append(j)
-            continue
-        dirs = to_world(sample_cosine_cone(rx.cos_fov[j], u[:, 0], u[:, 1]), rx.normals[j])
-        prim, t = isect.intersect(front[j] + 2.0 * isect.offset * dirs, dirs)
-        if np.all((prim >= 0) & (t <= 10.0 * isect.offset)):
-            out.append(j)
-    return out
+    candidates = np.flatnonzero(~in_solid if seen is None else ~in_solid & ~np.asarray(seen, bool))
+    flush = np.zeros(len(rx), bool)
+    for lo in range(0, len(candidates), RECEIVER_CHUNK):  # chunks bound memory; each one vectorized call
+        j = candidates[lo : lo + RECEIVER_CHUNK]
+        local = sample_cosine_cone(rx.cos_fov[j][:, None], u[None, :, 0], u[None, :, 1])  # (J, n_rays, 3)
+        dirs = to_world(local, rx.normals[j][:, None, :]).reshape(-1, 3)
+        origins = np.repeat(front[j], len(u), axis=0) + 2.0 * isect.offset * dirs
+        prim, t = isect.intersect(origins, dirs)
+        flush[j] = np.all(((prim >= 0) & (t <= 10.0 * isect.offset)).reshape(len(j), len(u)), axis=1)
+    solid = in_solid if seen is None else in_solid & ~np.asarray(seen, bool)
+    return np.flatnonzero(solid | flush).tolist()

@@ -37,7 +37,7 @@ from owcsim.engine.integrator.lobe import phase_lobe_wanted
 from owcsim.engine.integrator.path import KernelSettings, WorkItem
 from owcsim.engine.results.job import FinishedJob, LineOfSight, RunInfo
 from owcsim.engine.results.result import build_result
-from owcsim.engine.run import auto
+from owcsim.engine.run import allocation, auto
 from owcsim.engine.run.execution import Executor, JobRef, ProcessExecutor, SerialExecutor, job_ref
 from owcsim.engine.run.job import Job, Progress, ProgressFn, Watch
 from owcsim.engine.run.receivers import unreachable_receivers
@@ -529,6 +529,10 @@ def _run(job: Job, directions: IntArray) -> dict[Direction, Accumulator]:
     if not runs:  # every link exact or skipped (unreachable receivers): nothing to run, not an endless loop
         if job.info.stop_reason is not StopReason.EXACT:
             job.info.stop_reason = StopReason.NOTHING_TO_SIMULATE
+        return accs
+    if allocation.is_map(job, directions):  # a map: packed batches; to a target, each point's paths by its own error
+        cap = batch_size(sim, job.settings, len(job.scene.transmitters))
+        allocation.run_map(job, runs, directions, accs, _merge, cap)
         return accs
     watch = BatchWatch(job, accs, directions, len(runs), total_batches)
     _merge(job, accs, _items(runs, sim, job.settings, MAIN_PHASE, n_paths), watch)

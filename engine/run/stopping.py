@@ -4,7 +4,8 @@ A run of a given number of paths stops after its last batch. An accuracy run (pa
 checked at the end of every round (one batch per source): it stops once every link has
 MIN_PATHS_FOR_STOP paths and its relative standard error of H0 is at or below the target (and the
 reliability rule agrees, engine/tally/estimates.may_stop), or when the time budget is spent. The
-caller's `should_stop` cancels any run.
+caller's `should_stop` cancels any run. A map whose points pack into shared batches runs per point
+instead (engine/run/allocation.py: rounds, each point's paths by its own error, no blanket minimum).
 """
 
 from __future__ import annotations

@@ -157,3 +157,56 @@ def may_stop(
         rel = reliability.group_reliability(means[:, links], counts[:, links], los_gain[links])
         ok = reliability.may_stop(rel_links[links], rel, target, served[links], samples[links], shift[links])
     return ok
+
+
+def ready_points(
+    accs: Mapping[Direction, Accumulator],
+    los_gain: np.ndarray,
+    scene,
+    plan: TallyPlan,
+    target: float,
+    served: np.ndarray,
+    scope: str = "channels",
+    heavy_tails: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per receiver: (ready (R,) bool, worst relative standard error of H0 (R,)) of the quantities `scope` names
+    at that receiver (see `reported_rel_stderr`): its links, its group channels, or both. Ready: every one meets
+    the accuracy rule of `may_stop` (reliability.ready: the target on a trusted error bar, with the heavy-tail
+    floor and shift limit when `heavy_tails`); quantities not served count as ready and as error 0."""
+    w = plan.group_weights
+    n_rx = plan.n_rx
+    n_tx = len(los_gain) // max(n_rx, 1)
+    zeros = np.zeros(len(los_gain))
+    los_abc = los_moments(los_gain, zeros)
+    mean, cov = link_moments(accs, los_abc)
+    rel_links = _rel(mean[:, 0], cov[:, 0, 0])
+    means, counts = reliability.group_means(accs.values())
+    samples, shift = reliability.sample_shift(accs.values())
+    if not len(samples) or not heavy_tails:  # nothing traced yet, or no floor and no shift limit
+        samples = np.full(len(los_gain), reliability.MIN_SAMPLES if not heavy_tails else 0)
+        shift = zeros
+    ready = np.ones(n_rx, bool)
+    worst = np.zeros(n_rx)
+    links = np.ones(len(rel_links), bool) if not w.size or scope != "channels" else _solo_links(w, n_rx)
+    if links.any():
+        rel = reliability.group_reliability(means, counts, los_gain)
+        ok = reliability.ready(rel_links, rel, target, samples, shift) | ~served | ~links
+        ready &= ok.reshape(n_tx, n_rx).all(axis=0)
+        worst = np.maximum(worst, np.where(served & links, rel_links, 0.0).reshape(n_tx, n_rx).max(axis=0))
+    if w.size and scope != "links":
+        ch_mean, ch_cov = channel_moments(accs, los_abc, plan)
+        g_means = np.einsum("gi,bir->bgr", w, means.reshape(-1, n_tx, n_rx)).reshape(means.shape[0], -1)
+        member_counts = np.where(w[:, :, None] > 0, counts.reshape(-1, 1, n_tx, n_rx), np.inf).min(axis=2)
+        g_counts = np.where(np.isfinite(member_counts), member_counts, 0.0).reshape(means.shape[0], -1)
+        g_los = (w @ los_gain.reshape(n_tx, n_rx)).ravel()
+        member = (w > 0)[:, :, None] & served.reshape(1, n_tx, n_rx)
+        ch_served = member.any(axis=1)
+        ch_samples = np.where(member, samples.reshape(1, n_tx, n_rx), np.iinfo(np.int64).max).min(axis=1)
+        ch_samples = np.where(ch_served, ch_samples, 0)
+        ch_shift = w @ shift.reshape(n_tx, n_rx)
+        ch_rel = _rel(ch_mean[..., 0], ch_cov[..., 0, 0])
+        g_rel = reliability.group_reliability(g_means, g_counts, g_los)
+        ok = reliability.ready(ch_rel.ravel(), g_rel, target, ch_samples.ravel(), ch_shift.ravel())
+        ready &= (ok.reshape(ch_rel.shape) | ~ch_served).all(axis=0)
+        worst = np.maximum(worst, np.where(ch_served, ch_rel, 0.0).max(axis=0))
+    return ready, worst

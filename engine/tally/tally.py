@@ -108,6 +108,10 @@ class BatchTally:
     medium_evaluations: int = 0
     #: a spectral scene's channel sums (tally/spectral.py), None when grey
     spectral: ChannelBatch | None = None
+    #: a packed batch (tally/packed.py): paths per link (T,) and its sources (M,); every path one sample,
+    #: h0_group_paths (T, N_GROUPS) per link, channel_s1 (G, M, 3) and channel_s2 (G, M, 3, 3) per source
+    link_paths: np.ndarray | None = None
+    sources: np.ndarray | None = None
 
 
 def _accumulate(out: np.ndarray, idx: np.ndarray, weights: np.ndarray) -> None:
@@ -467,6 +471,9 @@ class Accumulator:
 
     def add(self, batch: BatchTally, batch_index: int, source: int) -> None:
         """Add one batch of `source` (a transmitter forward, a receiver backward); call in batch order."""
+        if batch.link_paths is not None:
+            self._add_packed(batch, batch_index)
+            return
         ln, m = batch.links, batch.block
         n_samples = batch.n_paths // m
         self.n_paths[ln] += batch.n_paths
@@ -519,6 +526,34 @@ class Accumulator:
         if not self.backward:
             self.surface_power[source] = self.surface_power.get(source, 0.0) + batch.surface_power
             self.escaped_power[source] = self.escaped_power.get(source, 0.0) + batch.escaped_power
+
+    def _add_packed(self, batch: BatchTally, batch_index: int) -> None:
+        """Add a packed batch (tally/packed.py): per-link path counts, every path one sample, receivers' paths."""
+        assert self.backward and batch.link_paths is not None and batch.sources is not None
+        assert batch.h0_groups is not None and batch.h0_group_paths is not None and batch.h0_sample_max is not None
+        ln, n = batch.links, batch.link_paths
+        self.n_paths[ln] += n
+        self.n_samples[ln] += n
+        self.s1[ln] += batch.s1
+        self.s2_samples[ln] += batch.s2
+        self.q1[ln] += batch.s1
+        self.q0[ln] += n
+        self.group_paths[batch_index % N_GROUPS, ln] += n
+        self.group_h0[:, ln] += batch.h0_groups.T
+        self.h0_group_paths[:, ln] += batch.h0_group_paths.T
+        self.sample_max[ln] = np.maximum(self.sample_max[ln], batch.h0_sample_max)
+        if batch.channel_s1 is not None:
+            assert batch.channel_s2 is not None
+            src, per_source = batch.sources, n[: len(batch.sources)]
+            self.channel_n[:, src] += per_source
+            self.channel_samples[:, src] += per_source
+            self.channel_s1[:, src] += batch.channel_s1
+            self.channel_s2[:, src] += batch.channel_s2
+            self.channel_q1[:, src] += batch.channel_s1
+            self.channel_q0[:, src] += per_source
+        self.rays_intersect += batch.rays_intersect
+        self.rays_occluded += batch.rays_occluded
+        self.medium_evaluations += batch.medium_evaluations
 
     @property
     def s2(self) -> np.ndarray:

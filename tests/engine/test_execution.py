@@ -6,7 +6,7 @@ import time
 
 from owcsim.engine.scene.scene import build_scene
 from tests.results import simulate_document as simulate
-from tests.scenes import room_doc, spec
+from tests.scenes import EXAMPLES, room_doc, spec
 
 
 def _strip(res):
@@ -46,6 +46,21 @@ def test_accuracy_mode_bit_identical_across_workers():
     two = simulate(spec(doc), workers=2)
     assert one["run"]["stop_reason"] == two["run"]["stop_reason"] == "target_reached"
     assert _strip(one) == _strip(two)
+
+
+def test_map_rounds_bit_identical_across_workers_and_cancellable():
+    """A map per point (engine/run/allocation.py): rounds planned from the merged tallies, packed batches of
+    several receivers; the same bits with 1 or 2 workers, and a cancel stops it."""
+    doc = json.loads((EXAMPLES / "komine_map.json").read_text())
+    doc["receiver_grids"][0]["spacing"] = 4.9 / 5
+    doc["simulation"] = {"seed": 5, "target_rel_error": 0.01, "max_reflections": 3, "batch_size": 2048}
+    one = simulate(spec(doc), workers=1)
+    two = simulate(spec(doc), workers=2)
+    assert one["run"]["stop_reason"] == "target_reached" and one["run"]["batches"] > 2
+    assert _strip(one) == _strip(two)
+    seen = []
+    res = simulate(spec(doc), progress=seen.append, should_stop=lambda: True)
+    assert res["run"]["stop_reason"] == "cancelled" and res["run"]["batches"] == 1
 
 
 def test_progress_is_reported_and_cancel_stops():
