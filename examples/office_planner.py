@@ -31,6 +31,8 @@ from owcsim.formats.cell_plots import plot_cells
 
 #: The desk of the task area [m] (room coordinates on the 0.85 m plane) and its 0.5 m surround.
 DESK = {"name": "desk", "grid": "plane", "min": [1.75, 1.5, 0.85], "max": [3.25, 3.5, 0.85]}
+#: The whole work plane as a task area (no surround inside the room): the plane's own uniformity.
+PLANE = {"name": "plane", "grid": "plane", "min": [0.0, 0.0, 0.85], "max": [5.0, 5.0, 0.85]}
 
 
 def office(
@@ -73,7 +75,7 @@ def office(
 
 def light_and_signal(target: float) -> owcsim.Result:
     spec = office(target_rel_error=target).model_copy(
-        update={"lighting": owcsim.schemas.lighting.LightingSpec(task_areas=[DESK], surround_width=0.5)}
+        update={"lighting": owcsim.schemas.lighting.LightingSpec(task_areas=[DESK, PLANE], surround_width=0.5)}
     )
     return owcsim.simulate(spec)
 
@@ -95,6 +97,8 @@ def main() -> None:
     for area in light.lighting.areas:
         for part in ("task", "surround"):
             a = getattr(area, part)
+            if a is None or not a.points:
+                continue
             print(
                 f"   {area.name} {part}: E_avg {a.illuminance_avg_lx:.0f} ± {a.illuminance_avg_lx_stderr:.0f} lx, "
                 f"E_min {a.illuminance_min_lx:.0f} ± {a.illuminance_min_lx_stderr:.0f} lx, "
@@ -108,7 +112,7 @@ def main() -> None:
     if rel is not None:
         print(f"   worst point's relative error of H0: {np.nanmax(rel):.2%}")
     light.plot_map(
-        "illuminance_lx", contours=[300, 500, 750, 1000, 1500], path=args.out / "office-planner-illuminance.png"
+        "illuminance_lx", contours=[1300, 1400, 1500, 1600], path=args.out / "office-planner-illuminance.png"
     )
     light.plot_map("snr_db", path=args.out / "office-planner-snr.png")
 

@@ -110,7 +110,9 @@ def plot_cells(
             Line2D([], [], marker="o", ls="none", mfc=c, mec="black", label=n) for n, c in zip(cells, cell_colours)
         ],
         title="cell (luminaires)",
-        loc="upper right",
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.12),  # below the room: a legend inside it would hide luminaires
+        ncol=min(len(cells), 6),
         fontsize="small",
     )
     ax.set_aspect("equal")
@@ -119,5 +121,5 @@ def plot_cells(
     what = "serving cell" if quantity is None else quantity
     ax.set_title(f"{m.grid}: {what}, handover boundaries")
     if path is not None:
-        fig.savefig(path, dpi=100)
+        fig.savefig(path, dpi=100, bbox_inches="tight")
     return fig

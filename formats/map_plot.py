@@ -221,7 +221,8 @@ def plot_map(
         GridMap(m.grid, m.channel, m.origin, m.u, m.v, m.x, m.y, {quantity: a}, {}, {quantity: unit}, m.mask_reason)
     )[quantity]
     factor, shown_unit = display_unit(unit, a)
-    figures = "" if s["mean"] is None else f"mean {s['mean'] * factor:.4g} {shown_unit}"
+    shown_unit = "" if shown_unit == "1" else f" {shown_unit}"  # a ratio or a probability: no unit
+    figures = "" if s["mean"] is None else f"mean {s['mean'] * factor:.4g}{shown_unit}"
     if s["uniformity"] is not None:
         figures += f", min/mean {s['uniformity']:.3f}"
     axes[0].set_title(f"{m.grid} / {m.channel}: {label}" + (f"\n{figures}" if figures else ""), fontsize=9)

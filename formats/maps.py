@@ -39,6 +39,8 @@ _QUANTITY_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,55}\Z")
 _RESERVED = {"channel", "x", "y", "z", "u", "v", "i", "j", "position_x", "position_y", "position_z", "mask_reason"}
 #: Units on a logarithmic scale: no uniformity ratio (a ratio of decibels means nothing).
 _LOG_UNITS = {"dB", "dBm", "dBW", "dBi", "dBc"}
+#: Quantities whose min / mean is no uniformity: probabilities, error figures and path counts.
+_NO_UNIFORMITY = {"ber", "outage_probability", "dc_gain_rel_error", "paths"}
 
 
 def _vec3(a: Any, what: str) -> np.ndarray:
@@ -313,7 +315,7 @@ def summary(m: GridMap) -> dict[str, dict]:
                 min_index=(int(imin[0]), int(imin[1])),
                 max_index=(int(imax[0]), int(imax[1])),
             )
-            if m.units[q] not in _LOG_UNITS and mean > 0 and row["min"] >= 0:
+            if m.units[q] not in _LOG_UNITS and q not in _NO_UNIFORMITY and mean > 0 and row["min"] >= 0:
                 row["uniformity"] = row["min"] / mean
         if q in m.stderr:
             se = m.stderr[q]
