@@ -129,7 +129,10 @@ class TaskAreaPublic(PublicModel):
 
     name: str = Field(description="the task area's name (the grid's id_prefix when no task area was given)")
     grid: str = Field(description="the grid's id_prefix")
-    channel: str = Field(description="transmitter group name, or transmitter id when the scene has no group")
+    channel: str = Field(
+        description="transmitter group name, or transmitter id when the scene has no group; `all luminaires` "
+        "for the light of every transmitter together (scenes with several channels)"
+    )
     task: AreaFiguresPublic = Field(description="the points of the task area")
     surround: AreaFiguresPublic | None = Field(
         None, description="the points of the immediate surround band (null without task area or with width 0)"

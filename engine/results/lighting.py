@@ -32,6 +32,9 @@ from owcsim.engine.results.result_parts import column
 from owcsim.engine.results.uniformity import ERRORS_NOTE, area_figures, replicate_reflected
 from owcsim.engine.scene.los import LosGeometry
 
+#: The `channel` of the area figures of every luminaire together (a scene with several channels: cells).
+ALL_LUMINAIRES = "all luminaires"
+
 
 class Lighting:
     """Per-link illuminance and link-budget figures, shared by links, channels and maps."""
@@ -136,6 +139,11 @@ class Lighting:
         totals = np.where(masked_rx[None, :], np.nan, member @ np.nan_to_num(self.illuminance))
         lit = np.any(member * np.isfinite(self.fluxes.flux_lm)[None, :] > 0, axis=1)
         channels = [(n, member[g], totals[g]) for g, n in enumerate(names) if lit[g]]
+        if len(names) > 1:  # EN 12464-1 asks of the installation's light: every luminaire together, too
+            every = np.isfinite(self.fluxes.flux_lm).astype(float)
+            channels.append(
+                (ALL_LUMINAIRES, every, np.where(masked_rx, np.nan, every @ np.nan_to_num(self.illuminance)))
+            )
         reps = replicate_reflected(self.scene, self.accs, self.fluxes.flux_lm) if self.accs is not None else None
         areas, warns = area_figures(self.spec, self.scene, channels, reps)
         self.warnings += warns + self._fov_warning()

@@ -91,6 +91,22 @@ def test_without_task_area_the_whole_grid_is_reported():
     assert area["task"]["uniformity_u0"] == pytest.approx(min(e) / np.mean(e), rel=1e-9)
 
 
+def test_cells_get_the_figures_of_every_luminaire_together():
+    """Each lamp its own cell: each cell's area figures are its own lamp's light, and `all luminaires` the light
+    of the four together, equal to the one-group scene's figures (exact in line of sight, Komine's closed form)."""
+    doc = office({"task_areas": [DESK], "surround_width": 0.5})
+    doc["transmitter_groups"] = [{"name": f"cell{k + 1}", "transmitters": [f"led{k + 1}"]} for k in range(4)]
+    areas = {a["channel"]: a for a in simulate(spec(doc))["lighting"]["areas"]}
+    assert sorted(areas) == ["all luminaires", "cell1", "cell2", "cell3", "cell4"]
+    task = _points(1.5, 3.5)
+    e = np.array([komine_direct(p) for _, p in task])
+    together = areas["all luminaires"]["task"]
+    assert together["illuminance_avg_lx"] == pytest.approx(e.mean(), rel=1e-9)
+    assert together["uniformity_u0"] == pytest.approx(e.min() / e.mean(), rel=1e-9)
+    one = areas["cell1"]["task"]["illuminance_avg_lx"]
+    assert one < 0.5 * together["illuminance_avg_lx"]  # one lamp of four: a cell alone is not the room's light
+
+
 def test_an_area_off_the_grid_plane_is_null_and_warned():
     off = dict(DESK, min=[1.5, 1.5, 0.5], max=[3.5, 3.5, 0.6])
     res = simulate(spec(office({"task_areas": [off], "surround_width": 0.0}, spacing=1.0)))
