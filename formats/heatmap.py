@@ -13,7 +13,16 @@ from typing import Any
 
 import numpy as np
 
-from owcsim.formats.maps import GridMap, MapDecor, display_unit, format_value, masked_points, summary
+from owcsim.formats.maps import (
+    GridMap,
+    MapDecor,
+    box_corners,
+    convex_hull,
+    display_unit,
+    format_value,
+    masked_points,
+    summary,
+)
 from owcsim.formats.optional import need
 
 __all__ = ["heatmap_png"]
@@ -27,43 +36,10 @@ def _edges(c: np.ndarray, fallback: float) -> np.ndarray:
     return np.concatenate([[c[0] - (mid[0] - c[0])], mid, [c[-1] + (c[-1] - mid[-1])]])
 
 
-def _hull(p: np.ndarray) -> np.ndarray:
-    """Convex hull (k, 2) of 2D points, counter-clockwise (Andrew's monotone chain, 1979).
-
-    Our own 10 lines rather than scipy's Qhull, which refuses the degenerate (flat) projections of
-    thin boxes that a map must still draw.
-    """
-    pts = sorted({(round(a, 12), round(b, 12)) for a, b in p})
-    if len(pts) <= 2:
-        return np.array(pts)
-
-    def half(points):
-        chain: list[tuple[float, float]] = []
-        for q in points:
-            while (
-                len(chain) >= 2
-                and (
-                    (chain[-1][0] - chain[-2][0]) * (q[1] - chain[-2][1])
-                    - (chain[-1][1] - chain[-2][1]) * (q[0] - chain[-2][0])
-                )
-                <= 0
-            ):
-                chain.pop()
-            chain.append(q)
-        return chain
-
-    return np.array(half(pts)[:-1] + half(pts[::-1])[:-1])
-
-
 def _project(m: GridMap, pts: np.ndarray) -> np.ndarray:
     """(n, 3) points -> (n, 2) coordinates (along u, along v) in the grid plane [m]."""
     d = np.asarray(pts, dtype=float).reshape(-1, 3) - m.origin
     return np.stack([d @ m.u, d @ m.v], axis=1)
-
-
-def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    sel = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)])
-    return np.where(sel == 1, hi, lo)
 
 
 def _overlaps(poly: np.ndarray, lim: tuple[float, float, float, float]) -> bool:
@@ -117,7 +93,7 @@ class _Frame:
         grid_box = (lim[0], lim[1], lim[2], lim[3])
         room = None
         if decor is not None and decor.room is not None:
-            room = _hull(_project(m, _box_corners(*decor.room)))
+            room = convex_hull(_project(m, box_corners(*decor.room)))
             rlo, rhi = room.min(axis=0), room.max(axis=0)
             # Show the walls when the grid covers most of the room; a small patch of a big hall keeps its own frame.
             if (rhi[0] - rlo[0]) <= 2 * (lim[1] - lim[0]) and (rhi[1] - rlo[1]) <= 2 * (lim[3] - lim[2]):
@@ -163,7 +139,7 @@ def _draw_furniture(ax: Any, m: GridMap, decor: MapDecor, frame: _Frame) -> None
 
     lim = frame.lim
     for name, box_lo, box_hi in decor.furniture:
-        poly = _hull(_project(m, _box_corners(box_lo, box_hi)))
+        poly = convex_hull(_project(m, box_corners(box_lo, box_hi)))
         if len(poly) and _overlaps(poly, frame.grid_box):
             ax.add_patch(Polygon(poly, closed=len(poly) > 2, fill=False, edgecolor="black", linewidth=1.4))
             # name at the centre of the visible part of the footprint's bounding box

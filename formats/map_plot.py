@@ -16,7 +16,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from owcsim.formats.maps import GridMap, MapDecor, PlaneFrame, display_unit, maps_of_result, summary
+from owcsim.formats.maps import (
+    GridMap,
+    MapDecor,
+    PlaneFrame,
+    box_corners,
+    convex_hull,
+    display_unit,
+    maps_of_result,
+    summary,
+)
 from owcsim.formats.optional import need
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -74,33 +83,6 @@ def _extent(c: np.ndarray, step: float) -> tuple[float, float]:
     return float(c[0] - half), float(c[-1] + half)
 
 
-def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    sel = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)])
-    return np.where(sel == 1, hi, lo)
-
-
-def _hull(p: np.ndarray) -> np.ndarray:
-    """Convex hull (k, 2) of 2-D points, counter-clockwise (Andrew's monotone chain, 1979); a flat set keeps its
-    two ends."""
-    pts = sorted({(round(float(a), 12), round(float(b), 12)) for a, b in p})
-    if len(pts) <= 2:
-        return np.array(pts)
-
-    def half(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
-        chain: list[tuple[float, float]] = []
-        for q in points:
-            while len(chain) >= 2 and (
-                (chain[-1][0] - chain[-2][0]) * (q[1] - chain[-2][1])
-                - (chain[-1][1] - chain[-2][1]) * (q[0] - chain[-2][0])
-                <= 0
-            ):
-                chain.pop()
-            chain.append(q)
-        return chain
-
-    return np.array(half(pts)[:-1] + half(pts[::-1])[:-1])
-
-
 def _norm(shown: np.ndarray, unit: str, log: bool | None) -> tuple[np.ndarray, Any]:
     """(values to draw, colour norm): logarithmic when asked, or by default for a gain or a power in W whose
     positive values span more than two decades (non-positive values are then not drawn)."""
@@ -128,11 +110,11 @@ def _decorate(ax: Axes, frame: PlaneFrame, decor: MapDecor | None, luminaires: b
         return []
     box: list[float] = []
     if decor.room is not None:
-        room = _hull(frame.project(_box_corners(*decor.room)))
+        room = convex_hull(frame.project(box_corners(*decor.room)))
         ax.add_patch(Polygon(room, closed=True, fill=False, edgecolor="0.2", lw=1.2, label=ROOM_LABEL))
         box = [room[:, 0].min(), room[:, 0].max(), room[:, 1].min(), room[:, 1].max()]
     for name, lo, hi in decor.furniture:
-        outline = _hull(frame.project(_box_corners(lo, hi)))
+        outline = convex_hull(frame.project(box_corners(lo, hi)))
         if len(outline) >= 3:
             ax.add_patch(
                 Polygon(outline, closed=True, fill=False, edgecolor="k", lw=1.0, ls="--", label=FURNITURE_LABEL)

@@ -193,6 +193,35 @@ class GridMap:
 # ---------------------------------------------------------------- room coordinates
 
 
+def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The 8 corners (8, 3) of the axis-aligned box lo..hi [m]."""
+    sel = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)])
+    return np.where(sel == 1, hi, lo)
+
+
+def convex_hull(p: np.ndarray) -> np.ndarray:
+    """Convex hull (k, 2) of 2-D points, counter-clockwise (Andrew's monotone chain, 1979); a flat set keeps its
+    two ends. Our own lines rather than scipy's Qhull, which refuses the degenerate (flat) projections of thin
+    boxes that a map must still draw."""
+    pts = sorted({(round(float(a), 12), round(float(b), 12)) for a, b in p})
+    if len(pts) <= 2:
+        return np.array(pts)
+
+    def half(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        chain: list[tuple[float, float]] = []
+        for q in points:
+            while len(chain) >= 2 and (
+                (chain[-1][0] - chain[-2][0]) * (q[1] - chain[-2][1])
+                - (chain[-1][1] - chain[-2][1]) * (q[0] - chain[-2][0])
+                <= 0
+            ):
+                chain.pop()
+            chain.append(q)
+        return chain
+
+    return np.array(half(pts)[:-1] + half(pts[::-1])[:-1])
+
+
 def room_axes(m: GridMap) -> tuple[int, int] | None:
     """The room axes (0 = x, 1 = y, 2 = z) that u and v lie along (either sign), or None for a plane that is
     not axis-aligned."""

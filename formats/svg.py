@@ -268,8 +268,8 @@ def heatmap_svg(
     dashed, luminaires as stars with their ids; `log`: colour scale (None: log for a gain or a power in W
     whose positive values span more than two decades). Colour map viridis.
     """
-    from owcsim.formats.heatmap import _box_corners, _Frame, _hull, _overlaps, _project, _title
-    from owcsim.formats.maps import display_unit, masked_points, summary
+    from owcsim.formats.heatmap import _Frame, _overlaps, _project, _title
+    from owcsim.formats.maps import box_corners, convex_hull, display_unit, masked_points, summary
 
     a = m.quantity(quantity)
     unit = m.units[quantity]
@@ -338,7 +338,7 @@ def heatmap_svg(
         )
     if decor is not None:
         for name, box_lo, box_hi in decor.furniture:
-            poly = _hull(_project(m, _box_corners(box_lo, box_hi)))
+            poly = convex_hull(_project(m, box_corners(box_lo, box_hi)))
             if len(poly) and _overlaps(poly, frame.grid_box):
                 tag = "polygon" if len(poly) > 2 else "polyline"
                 doc.add(

@@ -11,9 +11,9 @@ import sys
 import numpy as np
 import pytest
 
-from owcsim.formats.heatmap import _hull, _project, heatmap_png
+from owcsim.formats.heatmap import _project, heatmap_png
 from owcsim.formats.map_files import from_xarray, to_dataframe, to_netcdf, to_xarray, write_map_files
-from owcsim.formats.maps import GridMap, MapDecor, format_summary, masked_points, summary
+from owcsim.formats.maps import GridMap, MapDecor, convex_hull, format_summary, masked_points, summary
 from tests.scenes import room_doc, spec
 
 S = 0.5  # grid spacing [m]
@@ -346,12 +346,12 @@ def test_log_scale_is_chosen_for_gains_spanning_decades(tmp_path, monkeypatch):
 def test_furniture_footprint_projection():
     m = _field(origin=(0, 0, 0), u=np.array([1, -1, 0]) / math.sqrt(2), v=np.array([1, 1, -2]) / math.sqrt(6))
     corners = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)], dtype=float)
-    hull = _hull(_project(m, corners))
+    hull = convex_hull(_project(m, corners))
     x, y = hull[:, 0], hull[:, 1]
     area = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
     # a unit cube seen along its diagonal: a regular hexagon of area |nx| + |ny| + |nz| = sqrt(3)
     assert len(hull) == 6 and area == pytest.approx(math.sqrt(3), rel=1e-12)
-    flat = _hull(_project(_field(), np.array([[1, 0, 0], [1, 2, 0], [1, 0, 1], [1, 2, 1]], dtype=float)))
+    flat = convex_hull(_project(_field(), np.array([[1, 0, 0], [1, 2, 0], [1, 0, 1], [1, 2, 1]], dtype=float)))
     assert len(flat) == 2  # a box seen edge-on is a segment, not an error
 
 
