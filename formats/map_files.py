@@ -1,7 +1,8 @@
 """Coverage-map files: an xarray Dataset and netCDF per grid, one MATLAB .mat file, a pandas table;
 `write_map_files` writes a folder of them with the heatmaps (heatmap.py).
 
-netCDF through xarray's scipy backend (netCDF3 64-bit offset). It needs no HDF5 library and
+netCDF3 (64-bit offset) written directly with scipy.io.netcdf_file in the layout xarray writes and reads
+(`to_netcdf`; the `h5netcdf` / `netcdf4` engines go through xarray). It needs no HDF5 library and
 scipy is already an engine dependency; a map of 1e5 points x a few quantities is a few MB, far from
 any netCDF3 limit, and netCDF3 files open in every netCDF reader (xarray, MATLAB `ncread`, ncview,
 Panoply). Pass `engine="h5netcdf"` to `to_netcdf` for netCDF4 if that package is installed.
@@ -67,6 +68,10 @@ def _stacked(maps: Sequence[GridMap]) -> tuple[dict[str, np.ndarray], dict[str, 
     return values, stderr, units
 
 
+#: A Dataset's parts: name -> (dims, values, attributes), for its data variables and its coordinates.
+Parts = dict[str, tuple[tuple[str, ...], Any, dict[str, Any]]]
+
+
 def to_xarray(maps: Sequence[GridMap]) -> xarray.Dataset:
     """The maps of ONE grid (several channels) as a Dataset, in room coordinates.
 
@@ -81,6 +86,12 @@ def to_xarray(maps: Sequence[GridMap]) -> xarray.Dataset:
     compress: one string per point and channel would be the largest variable of a big grid.
     """
     xr = need("xarray", "a map Dataset")
+    data, coords, attrs = _dataset_parts(maps)
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def _dataset_parts(maps: Sequence[GridMap]) -> tuple[Parts, Parts, dict[str, Any]]:
+    """(data variables, coordinates, attributes) of `to_xarray`'s Dataset, without xarray."""
     first = _one_grid(maps)
     values, stderr, units = _stacked(maps)
     frame = PlaneFrame.of(first)
@@ -110,7 +121,7 @@ def to_xarray(maps: Sequence[GridMap]) -> xarray.Dataset:
         plane[1]: (plane[1], frame.across, {"units": "m", "long_name": _axis_name(plane[1], aligned)}),
         "i": (dim_u, i, {"long_name": "grid index along u"}),
         "j": (dim_v, j, {"long_name": "grid index along v"}),
-        "channel": ("channel", [m.channel for m in maps]),
+        "channel": (("channel",), np.array([m.channel for m in maps]), {}),
     }
     if aligned:
         coords["u"] = (dim_u, first.x[i], {"units": "m", "long_name": "offset along u"})
@@ -126,7 +137,7 @@ def to_xarray(maps: Sequence[GridMap]) -> xarray.Dataset:
         "title": f"owcsim coverage map of grid {first.grid}",
         "comment": "point (i, j) = origin + u_offset[i] u + v_offset[j] v; NaN where masked or not available",
     }
-    return xr.Dataset(data, coords=coords, attrs=attrs)
+    return data, coords, attrs
 
 
 def _axis_name(name: str, aligned: bool) -> str:
@@ -162,10 +173,49 @@ def from_xarray(ds: xarray.Dataset) -> list[GridMap]:
 def to_netcdf(
     maps: Sequence[GridMap], path: str | Path, *, engine: Literal["netcdf4", "scipy", "h5netcdf"] = "scipy"
 ) -> Path:
-    """Write the maps of one grid as a netCDF file (netCDF3 through scipy by default); returns the path."""
+    """Write the maps of one grid as a netCDF file (netCDF3 through scipy by default); returns the path.
+
+    The scipy engine writes `to_xarray`'s Dataset directly with scipy.io.netcdf_file (`_write_netcdf3`):
+    building an xarray Dataset costs a command most of a second (xarray looks for dask, and its file
+    locks for dask.distributed), more than the rest of a line-of-sight map's run."""
     path = Path(path)
-    to_xarray(maps).to_netcdf(path, engine=engine)
+    if engine == "scipy":
+        _write_netcdf3(*_dataset_parts(maps), path)
+    else:
+        to_xarray(maps).to_netcdf(path, engine=engine)
     return path
+
+
+def _write_netcdf3(data: Parts, coords: Parts, attrs: dict[str, Any], path: Path) -> None:
+    """A netCDF3 file (64-bit offset) of the Dataset parts, as xarray writes them: strings as char arrays
+    along a `string<n>` dimension with `_Encoding` utf-8, integers as int32, floats as float64, NaN kept."""
+    netcdf = need("scipy.io", "a netCDF file").netcdf_file
+    with netcdf(path, "w", version=2) as f:
+        for key, value in attrs.items():
+            setattr(f, key, np.asarray(value, float) if isinstance(value, tuple | list) else value)
+        extra = {c: set(d) for c, (d, _, _) in coords.items() if (c,) != d}  # not a dimension's own coordinate
+        for name, (dims, values, var_attrs) in {**coords, **data}.items():
+            if name in data:  # CF: the coordinates of a variable are named in its `coordinates` attribute
+                own = " ".join(c for c, d in extra.items() if d <= set(dims))
+                var_attrs = {**var_attrs, "coordinates": own} if own else var_attrs
+            a = np.asarray(values)
+            if a.dtype.kind == "U":  # strings: one char per byte, xarray's CharacterArrayCoder
+                raw = np.char.encode(a, "utf-8")
+                width = max(1, raw.dtype.itemsize)
+                a = raw.astype(f"S{width}").view("S1").reshape(*a.shape, width)
+                dims = (*dims, f"string{width}")
+                var_attrs = {**var_attrs, "_Encoding": "utf-8"}
+            elif a.dtype.kind in "iu":
+                a = a.astype(np.int32)
+            else:
+                a = a.astype(float)
+            for dim, size in zip(dims, a.shape):
+                if dim not in f.dimensions:
+                    f.createDimension(dim, size)
+            var = f.createVariable(name, a.dtype, dims)
+            var[...] = a
+            for key, value in var_attrs.items():
+                setattr(var, key, value)
 
 
 def _safe_name(name: str) -> str:
