@@ -40,7 +40,7 @@ SMALL_TRIANGLES = 10_000
 
 
 def is_small(spec: SceneSpec) -> bool:
-    receivers = len(spec.receivers) + sum(g.count for g in spec.receiver_grids)
+    receivers = len(spec.receivers) + spec.grid_receiver_count()  # with orientation samples and photodiodes
     triangles = sum(len(m.faces or ()) for m in spec.meshes)
     return (
         receivers <= SMALL_RECEIVERS

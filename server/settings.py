@@ -23,7 +23,9 @@ class Settings(BaseSettings):
     retry_after_s: int = Field(5, ge=1, description="Retry-After [s] sent with 429 when the queue is full")
     max_body_bytes: int = Field(32 * 2**20, ge=1024, description="largest request body [bytes]")
     max_triangles: int = Field(1_000_000, ge=12, description="most triangles in a scene")
-    max_receivers: int = Field(100_000, ge=1, description="most receivers in a scene, grids included")
+    max_receivers: int = Field(
+        100_000, ge=1, description="most receivers in a scene, grids, orientation samples and photodiodes included"
+    )
     max_paths_per_job: int = Field(10**9, ge=1, description="most paths of a fixed-budget job, all sources")
     max_wall_time_s: float = Field(3600.0, gt=0, description="longest run of one job [s]")
     api_keys: str = Field("", description="comma-separated bearer tokens; empty (and no file) = no auth")

@@ -179,6 +179,13 @@ def check_limits(spec: SceneSpec, settings: Settings) -> None:
     ]
     if errors:
         raise _invalid(errors)
+    n_rx = len(spec.receivers) + spec.grid_receiver_count()  # with the hidden ones: orientation, photodiodes
+    if n_rx > settings.max_receivers:
+        raise _limit(
+            "body.receiver_grids",
+            f"the scene has {n_rx:,d} receivers, counting each orientation sample and angle-diversity "
+            f"photodiode; this server accepts at most {settings.max_receivers:,d} (setting max_receivers)",
+        )
     triangles = (12 if spec.room else 0) + 12 * len(spec.furniture) + sum(len(m.faces or ()) for m in spec.meshes)
     if triangles > settings.max_triangles:
         raise _limit(
@@ -188,7 +195,7 @@ def check_limits(spec: SceneSpec, settings: Settings) -> None:
         )
     sim = spec.simulation
     if sim.n_paths is not None:
-        n_tx, n_rx = len(spec.transmitters), len(spec.receivers) + sum(g.count for g in spec.receiver_grids)
+        n_tx = len(spec.transmitters)
         # source devices: exact for a fixed direction; for auto the fewest the engine can use
         sources = {"forward": n_tx, "backward": n_rx}.get(sim.direction, min(n_tx, n_rx))
         if sim.n_paths * sources > settings.max_paths_per_job:

@@ -184,6 +184,11 @@ def test_server_limits(tmp_path):
         doc["receiver_grids"] = [{"origin": [0.5, 0.5, 0.5], "size": [4, 4], "spacing": 0.5, "area": 1e-4}]
         p = problem(c.post("/v1/jobs", json=doc), 422, "limit-exceeded")
         assert locs(p) == {"body.receiver_grids"} and "82 receivers" in p["detail"]
+        doc["receiver_grids"] = [  # 9 points, each also held 8 ways: 81 hidden receivers
+            {"origin": [1, 1, 0.5], "size": [2, 2], "spacing": 1, "area": 1e-4, "orientation": {"samples": 8}}
+        ]
+        p = problem(c.post("/v1/jobs", json=doc), 422, "limit-exceeded")
+        assert locs(p) == {"body.receiver_grids"} and "82 receivers, counting each orientation" in p["detail"]
         assert c.post("/v1/jobs", json=quick_doc(paths=10_000)).status_code == 202
 
 
