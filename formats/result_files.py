@@ -18,7 +18,7 @@ from owcsim.formats.result_tables import cir_csv_chunks, csv_cell
 from owcsim.formats.svg import PlotFormat, cir_svg, heatmap_svg
 from owcsim.schemas.results import SimulationResultPublic
 
-#: Scalar columns of links.csv (and of the command line's summaries).
+#: Scalar columns of links.csv (and of the client's links table).
 LINK_COLUMNS = (
     "transmitter",
     "receiver",
@@ -34,6 +34,8 @@ LINK_COLUMNS = (
     "rms_delay_spread_s_stderr",
     "los_gain",
     "illuminance_lx",
+    "illuminance_lx_stderr",
+    "illuminance_direct_lx",
     "snr_db",
     "ber",
     "max_bit_rate_bps",
