@@ -223,6 +223,15 @@ def test_oriented_grid_keeps_its_maps_and_adds_the_orientation_quantities():
     assert r["received_power_mean_w"] == pytest.approx(np.mean(samples), rel=1e-12)
 
 
+def test_a_masked_oriented_point_is_one_masked_grid_point_in_the_warning():
+    doc = _grid_doc({"model": "sitting", "samples": 16})
+    doc["receiver_grids"][0]["exclude"] = [{"min": [-0.1, -0.1], "max": [0.1, 0.1]}]
+    res = simulate(spec(doc))
+    (warning,) = [w for w in res["warnings"] if "not simulated" in w]
+    assert warning.startswith("1 grid point(s) not simulated") and "g[0,0]" in warning
+    assert sum(1 for r in res["receivers"] if r["masked"]) == 1 + 16  # the point and its samples
+
+
 def test_hidden_receivers_agree_with_receiver_at():
     """The scene's arrays and SceneSpec.receiver_at (the truncation pilot's view) give the same receivers."""
     doc = _grid_doc({"model": "walking", "samples": 4})
