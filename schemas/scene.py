@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from collections import Counter
+from typing import Any
 
 from pydantic import Field, model_validator
 
-from .base import SpecModel
+from .base import Point, SpecModel
 from .devices import ReceiverGridSpec, ReceiverSpec, TransmitterSpec
 from .geometry import BoxSpec, MeshSpec, RoomSpec
 from .lighting import LightingSpec, check_lighting
@@ -99,6 +100,7 @@ class SceneSpec(SpecModel):
             problem = placement_problem(self, d.position, d.normal)
             if problem:
                 raise ValueError(f"{kind}[{i}]" + (f" ({d.id})" if d.id else "") + f": {problem}")
+        _check_oriented_points(self)
         tx_ids = self.transmitter_ids()
         known = set(tx_ids)
         names = [g.name for g in self.transmitter_groups]
@@ -175,6 +177,35 @@ class SceneSpec(SpecModel):
             index -= g.count
         index += len(self.receivers) + sum(g.count for g in self.receiver_grids)  # back to the global index
         return ReceiverSpec(**hidden_receiver_fields(self, index))  # a hidden receiver (schemas/orientation.py)
+
+
+def _check_oriented_points(scene: SceneSpec) -> None:
+    """ValueError when an `orientation` would tilt a point on a room face into that face: the engine masks such
+    samples, so the point's statistics would be null. A grid's points on a face include a corner (the grid is a
+    rectangle), so its four corners are checked."""
+    oriented: list[tuple[str, Any, list[Point], Any]] = [
+        (f"receivers[{i}]" + (f" ({r.id})" if r.id else ""), r.orientation, [r.position], r.normal)
+        for i, r in enumerate(scene.receivers)
+        if r.orientation is not None
+    ]
+    for k, g in enumerate(scene.receiver_grids):
+        if g.orientation is not None:
+            nu, nv = g.shape
+            corners = [g.point(i, j).position for i in {0, nu - 1} for j in {0, nv - 1}]
+            oriented.append((f"receiver_grids[{k}] ({g.id_prefix})", g.orientation, corners, g.receiver_normal))
+    for where, orientation, points, normal in oriented:
+        normals = orientation.normals(normal)
+        for p in points:
+            if placement_problem(scene, p, normal):  # a masked grid point (or a refused receiver): not ours
+                continue
+            for n in normals:
+                problem = placement_problem(scene, p, n)
+                if problem:
+                    raise ValueError(
+                        f"{where}: the point at {tuple(round(c, 6) for c in p)} {problem.replace('faces', 'would face')} "
+                        "when tilted by `orientation`, which gives it no statistics: move it off the face (e.g. "
+                        "1 cm into the room)"
+                    )
 
 
 def placement_problem(scene: SceneSpec, p, n) -> str | None:
