@@ -236,7 +236,9 @@ def test_an_oriented_point_on_a_wall_is_refused_in_one_sentence():
     """Its samples tilted into the wall would be masked: null statistics, silently, before this check."""
     doc = _grid_doc({"model": "sitting", "samples": 8})
     doc["receiver_grids"][0]["origin"] = [0.0, 1.0, 0.8]  # the grid's first row on the wall x = 0
-    with pytest.raises(ValueError, match=r"receiver_grids\[0\] \(g\): the point at \(0.0, 1.0, 0.8\) sits on a room face"):
+    with pytest.raises(
+        ValueError, match=r"receiver_grids\[0\] \(g\): the point at \(0.0, 1.0, 0.8\) sits on a room face"
+    ):
         spec(doc)
     doc["receiver_grids"][0]["origin"] = [0.01, 1.0, 0.8]
     spec(doc)  # 1 cm into the room: fine
