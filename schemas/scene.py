@@ -201,10 +201,10 @@ def _check_oriented_points(scene: SceneSpec) -> None:
             for n in normals:
                 problem = placement_problem(scene, p, n)
                 if problem:
+                    at = tuple(round(c, 6) for c in p)
                     raise ValueError(
-                        f"{where}: the point at {tuple(round(c, 6) for c in p)} {problem.replace('faces', 'would face')} "
-                        "when tilted by `orientation`, which gives it no statistics: move it off the face (e.g. "
-                        "1 cm into the room)"
+                        f"{where}: the point at {at} {problem.replace('faces', 'would face')} when tilted by "
+                        "`orientation`, which gives it no statistics: move it off the face (e.g. 1 cm into the room)"
                     )
 
 
