@@ -117,6 +117,12 @@ class SceneSpec(SpecModel):
             if len(set(g.transmitters)) != len(g.transmitters):
                 raise ValueError(f"transmitter_groups[{gi}] ({g.name}): a transmitter is listed twice")
         check_lighting(self.lighting, [g.id_prefix for g in self.receiver_grids])
+        lit = self.spectral is not None or any(t.luminous_output or t.photometry for t in self.transmitters)
+        if self.lighting is not None and not lit:  # a grey scene's flux: luminous_output or a photometric file
+            raise ValueError(
+                "lighting: no transmitter gives a luminous flux, so there would be no figures: give the lamps "
+                "`luminous_output` (luminous_flux [lm] or center_luminous_intensity [cd]) or a `photometry` file"
+            )
         if self.simulation.is_resolved:  # the engine checks the budget once it has chosen K, S and the window
             self.check_tally_budget()
         return self
