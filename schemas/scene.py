@@ -201,10 +201,13 @@ def _check_oriented_points(scene: SceneSpec) -> None:
             oriented.append((f"receiver_grids[{k}] ({g.id_prefix})", g.orientation, corners, g.receiver_normal))
     for where, orientation, points, normal in oriented:
         normals = orientation.normals(normal)
+        # per axis the sample normal leaning most toward -axis and +axis: the only ones a face can refuse
+        extremes = [min(normals, key=lambda n: n[ax]) for ax in range(3)]
+        extremes += [max(normals, key=lambda n: n[ax]) for ax in range(3)]
         for p in points:
             if placement_problem(scene, p, normal):  # a masked grid point (or a refused receiver): not ours
                 continue
-            for n in normals:
+            for n in extremes:
                 problem = placement_problem(scene, p, n)
                 if problem:
                     at = tuple(round(c, 6) for c in p)
