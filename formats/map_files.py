@@ -300,7 +300,8 @@ def write_map_files(
     for ms, name, mat_name in zip(groups.values(), names, mat_names):
         written.append(to_netcdf(ms, folder / f"map_{name}.nc"))
         mat[mat_name] = _mat_struct(ms)
-    savemat(folder / "maps.mat", mat, do_compression=True, oned_as="column")
+    # long_field_names: MATLAB names up to 63 characters (cylindrical_illuminance_direct_lx has 33)
+    savemat(folder / "maps.mat", mat, do_compression=True, oned_as="column", long_field_names=True)
     written.append(folder / "maps.mat")
     if heatmaps is False:
         return written

@@ -40,7 +40,8 @@ def _cmd_validate(args) -> int:
     scene = build_scene(spec, Path(args.scene).resolve().parent)
     sim = spec.simulation
     window = f"{sim.n_bins} time bins" if sim.t_max_s is not None else "time window chosen when it runs"
-    masked = int((scene.masked != "").sum())
+    points = len(spec.receivers) + sum(g.count for g in spec.receiver_grids)  # not their orientation samples
+    masked = int((scene.masked[:points] != "").sum())
     from owcsim.engine.results.result import surface_extent
     from owcsim.schemas.units import unit_warnings
 

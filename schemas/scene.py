@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from collections import Counter
+from typing import Any
 
 from pydantic import Field, model_validator
 
-from .base import SpecModel
+from .base import Point, SpecModel
 from .devices import ReceiverGridSpec, ReceiverSpec, TransmitterSpec
 from .geometry import BoxSpec, MeshSpec, RoomSpec
 from .lighting import LightingSpec, check_lighting
@@ -99,6 +100,7 @@ class SceneSpec(SpecModel):
             problem = placement_problem(self, d.position, d.normal)
             if problem:
                 raise ValueError(f"{kind}[{i}]" + (f" ({d.id})" if d.id else "") + f": {problem}")
+        _check_oriented_points(self)
         tx_ids = self.transmitter_ids()
         known = set(tx_ids)
         names = [g.name for g in self.transmitter_groups]
@@ -115,6 +117,12 @@ class SceneSpec(SpecModel):
             if len(set(g.transmitters)) != len(g.transmitters):
                 raise ValueError(f"transmitter_groups[{gi}] ({g.name}): a transmitter is listed twice")
         check_lighting(self.lighting, [g.id_prefix for g in self.receiver_grids])
+        lit = self.spectral is not None or any(t.luminous_output or t.photometry for t in self.transmitters)
+        if self.lighting is not None and not lit:  # a grey scene's flux: luminous_output or a photometric file
+            raise ValueError(
+                "lighting: no transmitter gives a luminous flux, so there would be no figures: give the lamps "
+                "`luminous_output` (luminous_flux [lm] or center_luminous_intensity [cd]) or a `photometry` file"
+            )
         if self.simulation.is_resolved:  # the engine checks the budget once it has chosen K, S and the window
             self.check_tally_budget()
         return self
@@ -175,6 +183,38 @@ class SceneSpec(SpecModel):
             index -= g.count
         index += len(self.receivers) + sum(g.count for g in self.receiver_grids)  # back to the global index
         return ReceiverSpec(**hidden_receiver_fields(self, index))  # a hidden receiver (schemas/orientation.py)
+
+
+def _check_oriented_points(scene: SceneSpec) -> None:
+    """ValueError when an `orientation` would tilt a point on a room face into that face: the engine masks such
+    samples, so the point's statistics would be null. A grid's points on a face include a corner (the grid is a
+    rectangle), so its four corners are checked."""
+    oriented: list[tuple[str, Any, list[Point], Any]] = [
+        (f"receivers[{i}]" + (f" ({r.id})" if r.id else ""), r.orientation, [r.position], r.normal)
+        for i, r in enumerate(scene.receivers)
+        if r.orientation is not None
+    ]
+    for k, g in enumerate(scene.receiver_grids):
+        if g.orientation is not None:
+            nu, nv = g.shape
+            corners = [g.point(i, j).position for i in {0, nu - 1} for j in {0, nv - 1}]
+            oriented.append((f"receiver_grids[{k}] ({g.id_prefix})", g.orientation, corners, g.receiver_normal))
+    for where, orientation, points, normal in oriented:
+        normals = orientation.normals(normal)
+        # per axis the sample normal leaning most toward -axis and +axis: the only ones a face can refuse
+        extremes = [min(normals, key=lambda n: n[ax]) for ax in range(3)]
+        extremes += [max(normals, key=lambda n: n[ax]) for ax in range(3)]
+        for p in points:
+            if placement_problem(scene, p, normal):  # a masked grid point (or a refused receiver): not ours
+                continue
+            for n in extremes:
+                problem = placement_problem(scene, p, n)
+                if problem:
+                    at = tuple(round(c, 6) for c in p)
+                    raise ValueError(
+                        f"{where}: the point at {at} {problem.replace('faces', 'would face')} when tilted by "
+                        "`orientation`, which gives it no statistics: move it off the face (e.g. 1 cm into the room)"
+                    )
 
 
 def placement_problem(scene: SceneSpec, p, n) -> str | None:

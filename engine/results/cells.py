@@ -243,9 +243,17 @@ def cells_block(spec, scene, plan, link_cols: dict, channel_cols: dict, directio
     if len(cp.names) < 2 and spec.link_budget is None:
         return None
     budget = lb.link_budget_from_spec(spec.link_budget) if spec.link_budget is not None else None
-    fig = cell_figures(cp, budget, scene.receivers.area)
     notes = []
-    if budget is None:
+    w = plan.group_weights
+    shared_tx = [scene.transmitters.ids[i] for i in np.flatnonzero((w > 0).sum(axis=0) > 1)] if w.size else []
+    if shared_tx and budget is not None:  # a transmitter sends one signal: it cannot serve one cell and jam another
+        budget = None
+        notes.append(
+            f"{', '.join(shared_tx)} belong to several transmitter groups, so the cells overlap (a transmitter "
+            "sends one signal): SINR and rates are null; give each transmitter one group for the cell figures"
+        )
+    fig = cell_figures(cp, budget, scene.receivers.area)
+    if budget is None and not shared_tx:
         notes.append("SINR and rates need `link_budget` (the receiver's noise): null here")
     shared = (~cp.independent & (fig.serving >= 0)).sum()
     if budget is not None and shared:

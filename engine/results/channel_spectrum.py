@@ -151,7 +151,7 @@ def group_bandwidths(
 
 def _group_spread(grad, weights, members, cir_totals: dict, links, tx_of, rank_of) -> FloatArray:
     """(R,) std_q(grad . sum_i w_i r_iq) / sqrt(n) over the n path groups q (NaN: fewer than 2, or unequal
-    group counts among the members)."""
+    group counts among the member links that have paths)."""
     n_rows = grad.shape[0]
     proj: dict[int, np.ndarray] = {}
     counts = set()
@@ -159,6 +159,8 @@ def _group_spread(grad, weights, members, cir_totals: dict, links, tx_of, rank_o
         if weights[i] <= 0:
             continue
         est = cir_totals[link][1]
+        if not len(est):  # a masked point's link: no paths, nothing to spread (its own bandwidth is NaN)
+            continue
         counts.add(len(est))
         proj[r] = proj.get(r, 0.0) + weights[i] * (est @ grad[r])
     se = np.full(n_rows, np.nan)

@@ -139,6 +139,14 @@ class Lighting:
         totals = np.where(masked_rx[None, :], np.nan, member @ np.nan_to_num(self.illuminance))
         lit = np.any(member * np.isfinite(self.fluxes.flux_lm)[None, :] > 0, axis=1)
         channels = [(n, member[g], totals[g]) for g, n in enumerate(names) if lit[g]]
+        dark = ~np.isfinite(self.fluxes.flux_lm)
+        for g, n in enumerate(names):  # a loop over groups: a lit group with dark members counts their light as 0
+            unlit = [tx.ids[i] for i in np.flatnonzero((member[g] > 0) & dark)]
+            if lit[g] and unlit:
+                self.warnings.append(
+                    f"lighting: the illuminance of {n} leaves out {', '.join(unlit)}, which give no luminous flux "
+                    "(no luminous_output, photometry or spectrum): give them one to count their light"
+                )
         if len(names) > 1:  # EN 12464-1 asks of the installation's light: every luminaire together, too
             every = np.isfinite(self.fluxes.flux_lm).astype(float)
             channels.append(

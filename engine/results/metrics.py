@@ -78,7 +78,10 @@ def delay_metrics_from_moments(m, cov) -> dict:
         reach = a > 0
         sa = _safe(a, reach)
         tau0 = b / sa
-        v = np.maximum(c / sa - tau0**2, 0.0)
+        v = c / sa - tau0**2
+        # below the rounding of the difference (a single arrival: c/a = (b/a)^2 up to an ulp) the spread is 0, not
+        # ~1e-16 s (which made max_bit_rate_bps ~1e14 bit/s at some line-of-sight map points)
+        v = np.where(v > 8.0 * np.finfo(float).eps * np.abs(c / sa), v, 0.0)
         zero = np.zeros_like(a)
 
         def se(g):

@@ -448,7 +448,9 @@ def _peaked_phase_warnings(scene, settings: KernelSettings) -> list[str]:
 
 
 def _mask_warnings(scene) -> list[str]:
-    masked = np.flatnonzero(scene.masked != "")
+    spec = scene.spec  # the grid points only: their orientation samples (hidden receivers after them) share the mask
+    points = len(spec.receivers) + sum(g.count for g in spec.receiver_grids)
+    masked = np.flatnonzero(scene.masked[:points] != "")
     if not len(masked):
         return []
     return [

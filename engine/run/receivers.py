@@ -44,12 +44,14 @@ def with_receivers(scene: Scene, spec: SceneSpec) -> Scene:
 
 
 def extreme_receivers(spec: SceneSpec) -> list[ReceiverSpec]:
-    """The explicit receivers and the corners of every grid: the farthest point from any transmitter is one
-    of them (the distance to a point is convex over a grid's rectangle)."""
+    """The explicit receivers, the corners of every grid and the angle-diversity receivers: the farthest point
+    from any transmitter is one of them (the distance to a point is convex over a grid's rectangle)."""
     out = list(spec.receivers)
     for g in spec.receiver_grids:
         nu, nv = g.shape
         out += [g.point(i, j) for i in {0, nu - 1} for j in {0, nv - 1}]
+    for a in spec.angle_diversity_receivers:  # its photodiodes sit at its one point
+        out.append(ReceiverSpec(id=a.id, position=a.position, **a.expanded()[0].model_dump()))
     return out
 
 

@@ -148,6 +148,18 @@ def test_validate_a_scene_with_an_automatic_window(tmp_path, capsys):
     assert "chosen when it runs" in capsys.readouterr().out
 
 
+def test_validate_counts_masked_grid_points_not_their_orientation_samples(tmp_path, capsys):
+    doc = json.loads(Path(BARRY).read_text())
+    doc["receiver_grids"] = [
+        {"id_prefix": "g", "origin": [1.0, 1.0, 0.8], "size": [2.0, 2.0], "shape": [3, 3], "area": 1e-4,
+         "exclude": [{"min": [-0.1, -0.1], "max": [0.1, 0.1]}], "orientation": {"samples": 8}}
+    ]  # fmt: skip
+    scene = tmp_path / "held.json"
+    scene.write_text(json.dumps(doc))
+    assert main(["validate", str(scene)]) == 0
+    assert "(1 grid points masked)" in capsys.readouterr().out
+
+
 def test_version_flag(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["--version"])

@@ -142,3 +142,15 @@ def test_a_receiver_needs_one_form():
     doc["angle_diversity_receivers"][0]["photodiodes"] = CUSTOM
     with pytest.raises(ValueError, match="exactly one of `photodiodes` and `pyramid`"):
         spec(doc)
+
+
+def test_a_scene_whose_only_receiver_is_an_angle_diversity_one_runs_with_the_automatic_window():
+    """The line-of-sight window reaches the angle-diversity receivers (without other receivers it had none)."""
+    doc = adr_doc()
+    del doc["receivers"]
+    for key in ("t_max_s", "time_bin_s"):
+        doc["simulation"].pop(key)
+    res = simulate(spec(doc))
+    (row,) = [r for r in res["angle_diversity"] if r["receiver"] == "pyr"]
+    ref = reference(pyramid_photodiodes())
+    np.testing.assert_allclose(row["received_power_w"], ref["power"], rtol=1e-9, atol=1e-20)

@@ -142,6 +142,17 @@ def test_without_groups_each_transmitter_is_a_cell_and_without_budget_sinr_is_nu
     assert cells["maps"][0]["values"] == {}
 
 
+def test_groups_sharing_a_transmitter_give_no_sinr_and_say_why():
+    """An `all` group beside A and B would serve everywhere and count A's own light as interference."""
+    doc = cells_doc()
+    doc["transmitter_groups"].append({"name": "all", "transmitters": [t[0] for t in TX]})
+    cells = simulate(spec(doc))["cells"]
+    assert cells["cells"] == ["A", "B", "all"]
+    assert "a1, a2, b1 belong to several transmitter groups" in cells["note"]
+    assert all(r["sinr_db"] is None and r["rate_shannon_bps"] is None for r in cells["receivers"])
+    assert cells["maps"][0]["values"] == {}
+
+
 def test_one_cell_without_budget_has_no_cells_section():
     doc = cells_doc(budget=False)
     doc["transmitter_groups"] = [{"name": "all", "transmitters": [t[0] for t in TX]}]

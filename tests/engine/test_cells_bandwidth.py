@@ -150,3 +150,17 @@ def test_bandwidth_error_matches_the_spread_of_independent_runs():
         errors.append(ch["bandwidth_3db_hz_stderr"])
     ratio = np.std(values, ddof=1) / np.mean(errors)
     assert 0.6 < ratio < 1.6, ratio
+
+
+def test_a_masked_grid_point_leaves_the_other_points_bandwidth_errors():
+    """A masked point's links have no path groups: the others' errors are as without the mask (not all null)."""
+    doc = two_lamp_doc(max_reflections=2, paths=2000, seed=3)
+    doc["simulation"]["time_bin_s"] = 2e-10
+    plain = simulate(spec(doc))["channels"]
+    doc["receiver_grids"][0]["exclude"] = [{"min": [0.4, 0.4], "max": [0.6, 0.6]}]  # m[1,1]
+    masked = {c["receiver"]: c for c in simulate(spec(doc))["channels"]}
+    assert masked["m[1,1]"]["bandwidth_3db_hz_stderr"] is None
+    for c in plain:
+        if c["receiver"] != "m[1,1]" and c["bandwidth_3db_hz_stderr"] is not None:
+            assert masked[c["receiver"]]["bandwidth_3db_hz_stderr"] == c["bandwidth_3db_hz_stderr"]
+    assert sum(c["bandwidth_3db_hz_stderr"] is not None for c in masked.values()) >= 10

@@ -214,6 +214,15 @@ def test_group_channel_and_map_illuminance_sum_the_members():
         assert m["stderr"]["illuminance_lx"][i][jj] == pytest.approx(c["illuminance_lx_stderr"], rel=1e-12)
 
 
+def test_a_group_with_a_member_without_flux_warns_that_its_light_is_left_out():
+    doc = _office(max_reflections=0)
+    del doc["transmitters"][3]["luminous_output"]  # a grey scene: led4 has no flux at all
+    res = simulate(spec(doc))
+    (warning,) = [w for w in res["warnings"] if "leaves out" in w]
+    assert "ceiling" in warning and "led4" in warning and "led1" not in warning
+    assert not [w for w in simulate(spec(_office(max_reflections=0)))["warnings"] if "leaves out" in w]
+
+
 @pytest.mark.parametrize("direction", ["forward", "backward"])
 def test_members_of_different_efficacy_bound_the_channel_error(direction):
     """Forward paths: the members' errors are independent, so the channel's is the root sum of squares; backward

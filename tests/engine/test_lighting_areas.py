@@ -131,6 +131,18 @@ def test_bad_lighting_requests_are_refused_with_one_sentence(lighting, message):
     assert message in str(err.value)
 
 
+def test_lighting_without_any_luminous_flux_is_refused_in_one_sentence():
+    """A grey scene's lamps without luminous_output or photometry give no light: the figures were silently absent."""
+    doc = office({"task_areas": [DESK]})
+    for t in doc["transmitters"]:
+        del t["luminous_output"]
+    with pytest.raises(ValidationError) as err:
+        spec(doc)
+    assert "lighting: no transmitter gives a luminous flux" in str(err.value)
+    doc["transmitters"][0]["luminous_output"] = {"luminous_flux": 1000.0}
+    spec(doc)  # one lamp with a flux: figures (and a warning for the group's other members)
+
+
 def _stats(seed: int) -> tuple[np.ndarray, np.ndarray]:
     res = simulate(spec(office({"task_areas": [DESK]}, spacing=1.0, max_reflections=3, paths=1000, seed=seed)))
     t = res["lighting"]["areas"][0]["task"]

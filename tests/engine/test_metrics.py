@@ -52,6 +52,20 @@ def test_two_tap_closed_form():
         assert r[k + "_stderr"] == pytest.approx(0.0, abs=1e-6 * r[k])
 
 
+def test_a_single_arrival_has_zero_spread_whatever_the_rounding():
+    """c/a - (b/a)^2 of one arrival is 0 up to an ulp: the spread is 0 (not ~1e-16 s, a 1e14 bit/s max_bit_rate)."""
+    from owcsim.engine.results.metrics import delay_metrics_from_moments
+
+    a = np.geomspace(1e-9, 1e-4, 40)[:, None]
+    t = np.linspace(3.0, 30.0, 50)[None, :] * NS
+    m = np.stack(np.broadcast_arrays(a, a * t, a * t * t), -1)
+    rms = delay_metrics_from_moments(m, np.zeros(m.shape + (3,)))["rms_delay_spread_s"]
+    assert np.all(rms == 0.0)
+    t1, t2 = 10 * NS, 10.002 * NS  # two equal arrivals 2 ps apart: a spread of 1 ps stays
+    two = delay_metrics_from_moments(np.array([2.0, t1 + t2, t1**2 + t2**2]), np.zeros((3, 3)))
+    assert two["rms_delay_spread_s"] == pytest.approx(1e-12, rel=1e-3)
+
+
 def test_dc_gain_stderr_is_sample_stderr():
     rng = np.random.default_rng(1)
     x = random_paths(rng, (), 500)

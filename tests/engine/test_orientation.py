@@ -223,6 +223,30 @@ def test_oriented_grid_keeps_its_maps_and_adds_the_orientation_quantities():
     assert r["received_power_mean_w"] == pytest.approx(np.mean(samples), rel=1e-12)
 
 
+def test_a_masked_oriented_point_is_one_masked_grid_point_in_the_warning():
+    doc = _grid_doc({"model": "sitting", "samples": 16})
+    doc["receiver_grids"][0]["exclude"] = [{"min": [-0.1, -0.1], "max": [0.1, 0.1]}]
+    res = simulate(spec(doc))
+    (warning,) = [w for w in res["warnings"] if "not simulated" in w]
+    assert warning.startswith("1 grid point(s) not simulated") and "g[0,0]" in warning
+    assert sum(1 for r in res["receivers"] if r["masked"]) == 1 + 16  # the point and its samples
+
+
+def test_an_oriented_point_on_a_wall_is_refused_in_one_sentence():
+    """Its samples tilted into the wall would be masked: null statistics, silently, before this check."""
+    doc = _grid_doc({"model": "sitting", "samples": 8})
+    doc["receiver_grids"][0]["origin"] = [0.0, 1.0, 0.8]  # the grid's first row on the wall x = 0
+    with pytest.raises(
+        ValueError, match=r"receiver_grids\[0\] \(g\): the point at \(0.0, 1.0, 0.8\) sits on a room face"
+    ):
+        spec(doc)
+    doc["receiver_grids"][0]["origin"] = [0.01, 1.0, 0.8]
+    spec(doc)  # 1 cm into the room: fine
+    floor = _grid_doc(None)
+    floor["receivers"][0].update(position=[2.0, 2.0, 0.0], orientation={"samples": 8})  # on the floor, facing up
+    spec(floor)  # tilts of at most 90 deg never face into the floor
+
+
 def test_hidden_receivers_agree_with_receiver_at():
     """The scene's arrays and SceneSpec.receiver_at (the truncation pilot's view) give the same receivers."""
     doc = _grid_doc({"model": "walking", "samples": 4})

@@ -265,6 +265,17 @@ def test_write_map_files_and_mat_round_trip(tmp_path):
     assert np.all(mat["map_wall_north_1"]["mask_code"] == 0)
 
 
+def test_mat_file_keeps_quantity_names_longer_than_31_characters(tmp_path):
+    """`lighting.cylindrical` maps `cylindrical_illuminance_direct_lx` (33 characters): MATLAB's limit is 63."""
+    loadmat = pytest.importorskip("scipy.io").loadmat
+    m = _field()
+    m.values["cylindrical_illuminance_direct_lx"] = m.values["illuminance"] / 3
+    m.units["cylindrical_illuminance_direct_lx"] = "lx"
+    write_map_files([m], tmp_path, heatmaps=False)
+    wp = loadmat(tmp_path / "maps.mat", simplify_cells=True)["map_wp"]
+    np.testing.assert_array_equal(wp["values"]["cylindrical_illuminance_direct_lx"], m.values["illuminance"] / 3)
+
+
 def _decor():
     return MapDecor(
         room=((0, 0, 0), (5, 5, 3)),
