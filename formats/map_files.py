@@ -133,7 +133,7 @@ def _dataset_parts(maps: Sequence[GridMap]) -> tuple[Parts, Parts, dict[str, Any
         "origin": first.origin,
         "u": first.u,
         "v": first.v,
-        "normal": first.normal,
+        "normal": first.receiver_normal,  # the receivers' (u x v may face the other way)
         "title": f"owcsim coverage map of grid {first.grid}",
         "comment": "point (i, j) = origin + u_offset[i] u + v_offset[j] v; NaN where masked or not available",
     }
@@ -165,6 +165,7 @@ def from_xarray(ds: xarray.Dataset) -> list[GridMap]:
                 stderr={str(q): ds[f"{q}_stderr"].values[c] for q in quantities if f"{q}_stderr" in ds},
                 units={str(q): str(ds[q].attrs.get("units", "")) for q in quantities},
                 mask_reason=(r if r.ndim == 2 else r[c]).astype(str),
+                receiver_normal=ds.attrs.get("normal"),
             )
         )
     return out
@@ -262,7 +263,7 @@ def _mat_struct(maps: list[GridMap]) -> dict[str, Any]:
         "origin": first.origin,
         "u": first.u,
         "v": first.v,
-        "normal": first.normal,
+        "normal": first.receiver_normal,  # the receivers' (u x v may face the other way)
         "x": first.x,
         "y": first.y,
         "position": first.positions,

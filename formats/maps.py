@@ -106,6 +106,7 @@ class GridMap:
     stderr: dict[str, np.ndarray]
     units: dict[str, str]
     mask_reason: np.ndarray | None = None
+    receiver_normal: np.ndarray | None = None  # the receivers' unit normal; None: u x v
 
     def __post_init__(self) -> None:
         where = f"map {self.grid!r} / {self.channel!r}"
@@ -146,6 +147,10 @@ class GridMap:
             if reason.shape != shape:
                 raise ValueError(f"{where}: mask_reason has shape {reason.shape}, the grid {shape}")
         set_(self, "mask_reason", reason)
+        n = np.cross(u, v) if self.receiver_normal is None else _vec3(self.receiver_normal, f"{where}: receiver_normal")
+        if abs(np.linalg.norm(n) - 1) > 1e-6:
+            raise ValueError(f"{where}: receiver_normal must be a unit vector, got {n}")
+        set_(self, "receiver_normal", n)
 
     @staticmethod
     def _shaped(a: Any, shape: tuple[int, int], what: str) -> np.ndarray:
@@ -443,6 +448,7 @@ def maps_of_result(result: SimulationResultPublic) -> tuple[list[GridMap], MapDe
                 stderr={q: np.array(v, dtype=float).reshape(nu, nv) for q, v in m.stderr.items()},
                 units=dict(m.units),
                 mask_reason=reasons[m.grid],
+                receiver_normal=None if m.normal is None else np.asarray(m.normal, float),
             )
         )
     return maps, MapDecor.from_scene(result.scene)

@@ -171,3 +171,21 @@ def test_imports_stay_light():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_map_files_carry_the_receivers_normal_not_u_cross_v(tmp_path):
+    """A floor plan indexed (y, x): u x v points down while its receivers face up. The netCDF file and its read-back
+    say up (the receivers'), and a map without a given normal keeps u x v."""
+    import xarray as xr
+
+    from owcsim.formats.map_files import to_netcdf
+
+    m = _map(u=(0.0, 1.0, 0.0), v=(1.0, 0.0, 0.0))
+    assert np.allclose(m.receiver_normal, [0, 0, -1])  # u x v: the default
+    up = GridMap(m.grid, m.channel, m.origin, m.u, m.v, m.x, m.y, m.values, m.stderr, m.units, None, (0, 0, 1))
+    with xr.open_dataset(to_netcdf([up], tmp_path / "m.nc"), engine="scipy") as ds:
+        assert np.allclose(ds.attrs["normal"], [0, 0, 1])
+        (back,) = from_xarray(ds.load())
+    assert np.allclose(back.receiver_normal, [0, 0, 1])
+    with pytest.raises(ValueError, match="receiver_normal must be a unit vector"):
+        GridMap(m.grid, m.channel, m.origin, m.u, m.v, m.x, m.y, m.values, m.stderr, m.units, None, (0, 0, 2))
