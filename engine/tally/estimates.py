@@ -15,6 +15,7 @@ them into H0, mean delay and RMS delay spread with standard errors.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
@@ -104,6 +105,61 @@ def link_reliability(accs: Mapping[Direction, Accumulator], los_gain: np.ndarray
     return reliability.from_accumulators(accs.values(), los_gain)
 
 
+@dataclass(frozen=True)
+class _LinkStats:
+    """What the accuracy rule reads of every link: relative standard error of H0, the batch groups' means and
+    counts, and the heavy-tail guard's samples and largest-sample shift (reliability.sample_shift)."""
+
+    rel: np.ndarray
+    means: np.ndarray
+    counts: np.ndarray
+    samples: np.ndarray
+    shift: np.ndarray
+
+    @classmethod
+    def of(cls, accs: Mapping[Direction, Accumulator], los_abc, n_links: int, heavy_tails: bool) -> _LinkStats:
+        mean, cov = link_moments(accs, los_abc)
+        means, counts = reliability.group_means(accs.values())
+        samples, shift = reliability.sample_shift(accs.values())
+        if not len(samples) or not heavy_tails:  # nothing traced yet, or no floor and no shift limit
+            samples = np.full(n_links, reliability.MIN_SAMPLES if not heavy_tails else 0)
+            shift = np.zeros(n_links)
+        return cls(_rel(mean[:, 0], cov[:, 0, 0]), means, counts, samples, shift)
+
+
+@dataclass(frozen=True)
+class _ChannelStats:
+    """The same of every group's channel, (G, R) each: a channel runs where one of its members' links is served;
+    its samples are its fewest among the served members, its shift at most the members' weighted sum."""
+
+    rel: np.ndarray
+    group_rel: Any  # reliability.group_reliability of the channels, raveled
+    served: np.ndarray
+    samples: np.ndarray
+    shift: np.ndarray
+
+    @classmethod
+    def of(cls, accs, los_abc, los_gain: np.ndarray, plan: TallyPlan, links: _LinkStats, served: np.ndarray):
+        w, n_rx = plan.group_weights, plan.n_rx
+        n_tx = w.shape[1]
+        ch_mean, ch_cov = channel_moments(accs, los_abc, plan)
+        means, counts = links.means, links.counts
+        g_means = np.einsum("gi,bir->bgr", w, means.reshape(-1, n_tx, n_rx)).reshape(means.shape[0], -1)
+        member_counts = np.where(w[:, :, None] > 0, counts.reshape(-1, 1, n_tx, n_rx), np.inf).min(axis=2)
+        g_counts = np.where(np.isfinite(member_counts), member_counts, 0.0).reshape(means.shape[0], -1)
+        g_los = (w @ los_gain.reshape(n_tx, n_rx)).ravel()
+        member = (w > 0)[:, :, None] & served.reshape(1, n_tx, n_rx)
+        ch_served = member.any(axis=1)
+        ch_samples = np.where(member, links.samples.reshape(1, n_tx, n_rx), np.iinfo(np.int64).max).min(axis=1)
+        return cls(
+            _rel(ch_mean[..., 0], ch_cov[..., 0, 0]),
+            reliability.group_reliability(g_means, g_counts, g_los),
+            ch_served,
+            np.where(ch_served, ch_samples, 0),
+            w @ links.shift.reshape(n_tx, n_rx),
+        )
+
+
 def may_stop(
     accs: Mapping[Direction, Accumulator],
     los_gain: np.ndarray,
@@ -119,43 +175,19 @@ def may_stop(
     both, each on a trusted error bar; `heavy_tails` adds the floor of samples and the largest sample's
     shift (reliability.MIN_SAMPLES, SHIFT_FACTOR: the bounds on optional stopping)."""
     w = plan.group_weights
-    zeros = np.zeros(len(los_gain))
-    mean, cov = link_moments(accs, los_moments(los_gain, zeros))
-    rel_links = _rel(mean[:, 0], cov[:, 0, 0])
-    means, counts = reliability.group_means(accs.values())
-    samples, shift = reliability.sample_shift(accs.values())
-    if not len(samples):  # nothing traced yet
-        samples, shift = np.zeros(len(los_gain), np.int64), np.zeros(len(los_gain))
-    if not heavy_tails:  # no floor, no shift limit
-        samples, shift = np.full(len(los_gain), reliability.MIN_SAMPLES), np.zeros(len(los_gain))
+    los_abc = los_moments(los_gain, np.zeros(len(los_gain)))
+    lk = _LinkStats.of(accs, los_abc, len(los_gain), heavy_tails)
     if not w.size or scope == "links":
-        rel = reliability.group_reliability(means, counts, los_gain)
-        return reliability.may_stop(rel_links, rel, target, served, samples, shift)
-    n_tx, n_rx = w.shape[1], plan.n_rx
-    ch_mean, ch_cov = channel_moments(accs, los_moments(los_gain, zeros), plan)
-    g_means = np.einsum("gi,bir->bgr", w, means.reshape(-1, n_tx, n_rx)).reshape(means.shape[0], -1)
-    member_counts = np.where(w[:, :, None] > 0, counts.reshape(-1, 1, n_tx, n_rx), np.inf).min(axis=2)
-    g_counts = np.where(np.isfinite(member_counts), member_counts, 0.0).reshape(means.shape[0], -1)
-    g_los = (w @ los_gain.reshape(n_tx, n_rx)).ravel()
-    # a group's channel at a receiver runs when one of its members' links does
-    member = (w > 0)[:, :, None] & served.reshape(1, n_tx, n_rx)
-    ch_served = member.any(axis=1).ravel()
-    # a channel's samples: its fewest among the served members; its shift: at most the members' weighted sum
-    ch_samples = np.where(member, samples.reshape(1, n_tx, n_rx), np.iinfo(np.int64).max).min(axis=1)
-    ch_samples = np.where(member.any(axis=1), ch_samples, 0).ravel()
-    ch_shift = (w @ shift.reshape(n_tx, n_rx)).ravel()
+        rel = reliability.group_reliability(lk.means, lk.counts, los_gain)
+        return reliability.may_stop(lk.rel, rel, target, served, lk.samples, lk.shift)
+    ch = _ChannelStats.of(accs, los_abc, los_gain, plan, lk, served)
     ok = reliability.may_stop(
-        _rel(ch_mean[..., 0], ch_cov[..., 0, 0]).ravel(),
-        reliability.group_reliability(g_means, g_counts, g_los),
-        target,
-        ch_served,
-        ch_samples,
-        ch_shift,
+        ch.rel.ravel(), ch.group_rel, target, ch.served.ravel(), ch.samples.ravel(), ch.shift.ravel()
     )
-    links = np.ones(len(rel_links), bool) if scope == "both" else _solo_links(w, n_rx)
+    links = np.ones(len(lk.rel), bool) if scope == "both" else _solo_links(w, plan.n_rx)
     if ok and links.any():
-        rel = reliability.group_reliability(means[:, links], counts[:, links], los_gain[links])
-        ok = reliability.may_stop(rel_links[links], rel, target, served[links], samples[links], shift[links])
+        rel = reliability.group_reliability(lk.means[:, links], lk.counts[:, links], los_gain[links])
+        ok = reliability.may_stop(lk.rel[links], rel, target, served[links], lk.samples[links], lk.shift[links])
     return ok
 
 
@@ -176,37 +208,19 @@ def ready_points(
     w = plan.group_weights
     n_rx = plan.n_rx
     n_tx = len(los_gain) // max(n_rx, 1)
-    zeros = np.zeros(len(los_gain))
-    los_abc = los_moments(los_gain, zeros)
-    mean, cov = link_moments(accs, los_abc)
-    rel_links = _rel(mean[:, 0], cov[:, 0, 0])
-    means, counts = reliability.group_means(accs.values())
-    samples, shift = reliability.sample_shift(accs.values())
-    if not len(samples) or not heavy_tails:  # nothing traced yet, or no floor and no shift limit
-        samples = np.full(len(los_gain), reliability.MIN_SAMPLES if not heavy_tails else 0)
-        shift = zeros
+    los_abc = los_moments(los_gain, np.zeros(len(los_gain)))
+    lk = _LinkStats.of(accs, los_abc, len(los_gain), heavy_tails)
     ready = np.ones(n_rx, bool)
     worst = np.zeros(n_rx)
-    links = np.ones(len(rel_links), bool) if not w.size or scope != "channels" else _solo_links(w, n_rx)
+    links = np.ones(len(lk.rel), bool) if not w.size or scope != "channels" else _solo_links(w, n_rx)
     if links.any():
-        rel = reliability.group_reliability(means, counts, los_gain)
-        ok = reliability.ready(rel_links, rel, target, samples, shift) | ~served | ~links
+        rel = reliability.group_reliability(lk.means, lk.counts, los_gain)
+        ok = reliability.ready(lk.rel, rel, target, lk.samples, lk.shift) | ~served | ~links
         ready &= ok.reshape(n_tx, n_rx).all(axis=0)
-        worst = np.maximum(worst, np.where(served & links, rel_links, 0.0).reshape(n_tx, n_rx).max(axis=0))
+        worst = np.maximum(worst, np.where(served & links, lk.rel, 0.0).reshape(n_tx, n_rx).max(axis=0))
     if w.size and scope != "links":
-        ch_mean, ch_cov = channel_moments(accs, los_abc, plan)
-        g_means = np.einsum("gi,bir->bgr", w, means.reshape(-1, n_tx, n_rx)).reshape(means.shape[0], -1)
-        member_counts = np.where(w[:, :, None] > 0, counts.reshape(-1, 1, n_tx, n_rx), np.inf).min(axis=2)
-        g_counts = np.where(np.isfinite(member_counts), member_counts, 0.0).reshape(means.shape[0], -1)
-        g_los = (w @ los_gain.reshape(n_tx, n_rx)).ravel()
-        member = (w > 0)[:, :, None] & served.reshape(1, n_tx, n_rx)
-        ch_served = member.any(axis=1)
-        ch_samples = np.where(member, samples.reshape(1, n_tx, n_rx), np.iinfo(np.int64).max).min(axis=1)
-        ch_samples = np.where(ch_served, ch_samples, 0)
-        ch_shift = w @ shift.reshape(n_tx, n_rx)
-        ch_rel = _rel(ch_mean[..., 0], ch_cov[..., 0, 0])
-        g_rel = reliability.group_reliability(g_means, g_counts, g_los)
-        ok = reliability.ready(ch_rel.ravel(), g_rel, target, ch_samples.ravel(), ch_shift.ravel())
-        ready &= (ok.reshape(ch_rel.shape) | ~ch_served).all(axis=0)
-        worst = np.maximum(worst, np.where(ch_served, ch_rel, 0.0).max(axis=0))
+        ch = _ChannelStats.of(accs, los_abc, los_gain, plan, lk, served)
+        ok = reliability.ready(ch.rel.ravel(), ch.group_rel, target, ch.samples.ravel(), ch.shift.ravel())
+        ready &= (ok.reshape(ch.rel.shape) | ~ch.served).all(axis=0)
+        worst = np.maximum(worst, np.where(ch.served, ch.rel, 0.0).max(axis=0))
     return ready, worst
