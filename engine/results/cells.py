@@ -23,7 +23,7 @@ import numpy as np
 
 from owcsim.engine.core.arrays import BoolArray, FloatArray, IntArray
 from owcsim.engine.results import link_budget as lb
-from owcsim.engine.results.result_parts import column, document_rows
+from owcsim.engine.results.result_parts import column, document_rows, group_power
 from owcsim.schemas.algorithms import Direction
 from owcsim.schemas.cells import CELL_QUANTITIES
 
@@ -57,10 +57,10 @@ def cell_powers(spec, scene, plan, link_cols: dict, channel_cols: dict, directio
     members = [list(g.transmitters) for g in spec.transmitter_groups] + [[tx.ids[i]] for i in solo]
     power, stderr = [], []
     if w.size:
-        group_power = np.array([tx.power[w[g] > 0].sum() for g in range(len(w))])
+        g_power = group_power(w, tx.power)
         n_groups = len(w)
-        power.append(_floats(channel_cols["dc_gain"]).reshape(n_groups, n_rx) * group_power[:, None])
-        stderr.append(_floats(channel_cols["dc_gain_stderr"]).reshape(n_groups, n_rx) * group_power[:, None])
+        power.append(_floats(channel_cols["dc_gain"]).reshape(n_groups, n_rx) * g_power[:, None])
+        stderr.append(_floats(channel_cols["dc_gain_stderr"]).reshape(n_groups, n_rx) * g_power[:, None])
     h0 = _floats(link_cols["dc_gain"]).reshape(n_tx, n_rx)[solo]
     h0_se = _floats(link_cols["dc_gain_stderr"]).reshape(n_tx, n_rx)[solo]
     power.append(h0 * tx.power[solo, None])

@@ -28,7 +28,7 @@ from owcsim.engine.results.channel_spectrum import group_bandwidths
 from owcsim.engine.results.job import FinishedJob
 from owcsim.engine.results.lighting import Lighting
 from owcsim.engine.results.orientation import receivers_as_held
-from owcsim.engine.results.result_parts import cir_block, column, document_rows, grid_maps, order_block
+from owcsim.engine.results.result_parts import cir_block, column, document_rows, grid_maps, group_power, order_block
 from owcsim.engine.results.spectral import result_block
 from owcsim.engine.scene.los import los_gain_grey, los_geometry
 from owcsim.engine.scene.scene import Scene
@@ -497,7 +497,7 @@ def _channels(
     mean, cov = channel_moments(accs, los_abc, plan)
     d = metrics.delay_metrics_from_moments(mean, cov)
     n_groups, n_rx = mean.shape[:2]
-    group_power = np.array([scene.transmitters.power[w[g] > 0].sum() for g in range(n_groups)])
+    power = group_power(w, scene.transmitters.power)
     nan = masked_rx[None, :]
     h0 = np.where(nan, np.nan, d["dc_gain"])
     g_idx, r_idx = np.divmod(np.arange(n_groups * n_rx), n_rx)
@@ -510,7 +510,7 @@ def _channels(
         "dc_gain": column(h0.ravel()),
         "dc_gain_stderr": column(flat["dc_gain_stderr"]),
         "path_loss_db": column(metrics.path_loss_db(h0.ravel())),
-        "received_power_w": column((h0 * group_power[:, None]).ravel()),
+        "received_power_w": column((h0 * power[:, None]).ravel()),
         "mean_delay_s": column(flat["mean_delay_s"]),
         "mean_delay_s_stderr": column(flat["mean_delay_s_stderr"]),
         "rms_delay_spread_s": column(flat["rms_delay_spread_s"]),
@@ -521,7 +521,7 @@ def _channels(
         cols["bandwidth_3db_hz"] = column(bandwidth[0].ravel())
         cols["bandwidth_3db_hz_stderr"] = column(bandwidth[1].ravel())
     if lighting is not None:
-        lighting.add_channel_columns(cols, w, h0, np.where(nan, np.nan, d["rms_delay_spread_s"]), group_power)
+        lighting.add_channel_columns(cols, w, h0, np.where(nan, np.nan, d["rms_delay_spread_s"]), power)
     n_tx = w.shape[1]
     for j in np.flatnonzero(plan.cir_rank >= 0):  # receivers with a CIR: a loop over few explicit receivers
         members = [cir_totals.get(i * n_rx + j) for i in range(n_tx)]

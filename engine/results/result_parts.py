@@ -192,6 +192,11 @@ def _num(x) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def group_power(weights: np.ndarray, power: np.ndarray) -> np.ndarray:
+    """(G,) optical power of each transmitter group [W]: the sum of its members' `power` (weights (G, n_tx) > 0)."""
+    return np.array([power[weights[g] > 0].sum() for g in range(len(weights))])
+
+
 #: Map quantities: key in the link / channel columns -> (unit, the key of its standard error or None).
 MAP_QUANTITIES = {
     "dc_gain": ("1", "dc_gain_stderr"),
