@@ -15,7 +15,7 @@ def _inline(spec: InlineFramesSpec) -> MediumFrames:
 
     def stack(values: list[float | list[float]]) -> np.ndarray:
         return np.stack(
-            [np.broadcast_to(np.asarray(v, np.float64).reshape(-1), (np.prod(spec.shape),)) for v in values]
+            [np.broadcast_to(np.asarray(v, np.float64).reshape(-1), (int(np.prod(spec.shape)),)) for v in values]
         ).reshape(shape)
 
     return MediumFrames(
