@@ -12,9 +12,10 @@ The mapping, step by step (printed in the result as `FramesReportPublic`):
    density there). Cells inside obstructions get sigma = 0 (FDS itself writes extinction 0 there).
 3. Meshes. All meshes of the slice are joined onto one grid (fdsreader's `to_global`); they must have
    the same uniform cell size and fill a box, else a SceneError says which mesh differs.
-4. Wavelength. sigma_t = K (632.8 nm / lambda)^x, x = `wavelength_exponent` (default 1: absorption by
-   particles small against the wavelength, E(m) constant: Bohren & Huffman 1983 eq. 5.11; measured flame-soot
-   exponents: docs/fds-input.md).
+4. Wavelength. sigma_t = K (632.8 nm / lambda)^x, x = `wavelength_exponent`. Default 1: black carbon's
+   absorption Angstrom exponent (Bond & Bergstrom 2006, Aerosol Sci. Technol. 40:27-67; the small-particle
+   limit with a refractive index independent of wavelength), soot's extinction being mostly absorption;
+   measured values for other soots and bands: docs/fds-input.md. Exactly 1 at 632.8 nm.
 5. Albedo and phase: given, or Mie (frames.scattering_optics); sigma_s = albedo sigma_t, sigma_a = the rest.
 6. Room. room = FDS coordinates + `origin` [m]; the grid box is the joined meshes' box moved by `origin`.
 

@@ -1,5 +1,7 @@
-"""Build `MediumFrames` (frames.py) from their document (schemas/frames.py); one function per kind of source:
-inline (here), FDS output (fds.py), netCDF (frames_netcdf.py)."""
+"""Build `MediumFrames` (frames.py) from their document (schemas/frames.py); one function per kind of source.
+
+Inline frames here, FDS output in fds.py, netCDF files in frames_netcdf.py.
+"""
 
 from __future__ import annotations
 

@@ -167,15 +167,21 @@ def test_soot_density_times_8700_is_the_extinction(case):
     # the masked nodes (gas density 1.195 kg/m3 inside the Burner) do not leak into the cells
     assert soot.sigma_t.max() < 8700 * 3.6e-4 * 1.01
     # the cell-centred slice is FDS's cell values; the 8-node means smooth them, close on the room average
-    cell = case[0]
-    assert abs(ext.sigma_t[-1].mean() - cell.sigma_t[-1].mean()) < 0.01 * cell.sigma_t[-1].mean()
+    cell = case[0].sigma_t[-1].mean()
+    print(
+        f"\nroom mean sigma_t at 90 s, 8-node means of EXT_3D / cell-centred slice: {ext.sigma_t[-1].mean() / cell:.5f}"
+    )
+    assert abs(ext.sigma_t[-1].mean() - cell) < 0.01 * cell
 
 
 def test_smoke3d_soot_density_reads(case):
     s3d = _frames(quantity="soot_density", source="smoke3d", times_s=[45.0, 90.0])
     assert s3d.n_frames == 2 and s3d.times[-1] == 90.0
     assert s3d.frames_report().data_id == "SMOKE3D"
-    assert 0.5 < s3d.sigma_t[-1].mean() < 2.0  # 8-bit codes: the magnitude, not the values (docs/fds-input.md)
+    cell = case[0].sigma_t[-1].mean()
+    ratio = s3d.sigma_t[-1].mean() / cell
+    print(f"\nroom mean sigma_t at 90 s, SMOKE3D / cell-centred slice: {ratio:.3f}")
+    assert 0.8 < ratio < 1.05  # 8-bit obscuration codes: the magnitude, a few % low (docs/fds-input.md)
 
 
 def _scene_doc(frames, f):
