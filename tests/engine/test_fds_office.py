@@ -210,15 +210,19 @@ def _scene_doc(frames, f):
     }
 
 
+def _with_medium(spec, medium):
+    """The scene of `spec` with its medium (and the medium's phase function) replaced by `medium`."""
+    return dataclasses.replace(build_scene(spec), medium=medium, phase=medium.phase)
+
+
 def test_frame_equals_the_static_grid_through_simulate():
     frames = _frames(albedo=0.3, phase={"type": "hg", "g": 0.6}, times_s=[60.0])
     spec = SceneSpec.model_validate(_scene_doc(frames, 0))
     static = simulate(spec)
-    scene = dataclasses.replace(build_scene(spec), medium=frames.frame(0))
-    framed = simulate(spec, scene=scene)
+    framed = simulate(spec, scene=_with_medium(spec, frames.frame(0)))
     a = static.links[0].model_dump()
     b = framed.links[0].model_dump()
     assert a["dc_gain"] > 0 and a == b
     other = _frames(albedo=0.3, phase={"type": "hg", "g": 0.6}, times_s=[30.0])
-    changed = simulate(spec, scene=dataclasses.replace(build_scene(spec), medium=other.frame(0)))
+    changed = simulate(spec, scene=_with_medium(spec, other.frame(0)))
     assert changed.links[0].model_dump()["dc_gain"] != a["dc_gain"]  # power: another frame differs
