@@ -88,6 +88,7 @@ class _FileFramesSpec(SpecModel):
 
     @model_validator(mode="after")
     def _optics_and_times(self) -> "_FileFramesSpec":
+        self._check_source()
         if not self._gives_extinction():
             if self.albedo is not None or self.particles is not None:
                 raise ValueError("the file gives sigma_a and sigma_s: no `albedo` or `particles` (only `phase`)")
@@ -103,6 +104,9 @@ class _FileFramesSpec(SpecModel):
         if self.t_min is not None and self.t_max is not None and self.t_max < self.t_min:
             raise ValueError("`t_max` must not be below `t_min` [s]")
         return self
+
+    def _check_source(self) -> None:
+        """The kind's own checks of what to read, before the optics (raise ValueError)."""
 
     def _gives_extinction(self) -> bool:
         """True when the file holds the extinction only (then the albedo is given or Mie's)."""
@@ -165,14 +169,11 @@ class NetcdfFramesSpec(_FileFramesSpec):
     sigma_a_variable: str | None = Field(None, description="absorption sigma_a [1/m], dims (time, z, y, x)")
     sigma_s_variable: str | None = Field(None, description="scattering sigma_s [1/m], dims (time, z, y, x)")
 
-    @model_validator(mode="after")
-    def _variables(self) -> "NetcdfFramesSpec":
-        pair = (self.sigma_a_variable is None, self.sigma_s_variable is None)
-        if pair[0] != pair[1]:
+    def _check_source(self) -> None:
+        if (self.sigma_a_variable is None) != (self.sigma_s_variable is None):
             raise ValueError("give both `sigma_a_variable` and `sigma_s_variable`")
         if (self.variable is None) == (self.sigma_a_variable is None):
             raise ValueError("give either `variable` (extinction) or `sigma_a_variable` and `sigma_s_variable`")
-        return self
 
     def _gives_extinction(self) -> bool:
         return self.variable is not None
