@@ -53,6 +53,9 @@ def test_values_written_are_values_read(one_mesh):
     assert np.array_equal(frames.sigma_s, np.zeros_like(frames.sigma_s))
     assert np.array_equal(frames.times, TIMES.astype(np.float64))
     assert frames.shape == (6, 4, 3) and frames.frames_report().masked_cells == 2
+    by_file = frames_from_spec(_spec(path / "one.smv"))  # the .smv file itself, as fdsreader takes it
+    assert np.array_equal(by_file.sigma_t, frames.sigma_t)
+    assert sorted(p.name for p in path.iterdir()) == ["one.smv", "one_1_1.sf"]  # no cache file written
 
 
 def test_origin_moves_the_grid_and_albedo_splits(one_mesh):
