@@ -74,7 +74,12 @@ class _FileFramesSpec(SpecModel):
     the size-averaged Mie phase function; engine/media/mie.py).
     """
 
-    path: str = Field(min_length=1, description="the file (or folder) to read; relative to the document's folder")
+    path: str | None = Field(
+        None, min_length=1, description="the file (or folder) to read; relative to the document's folder"
+    )
+    data_base64: str | None = Field(
+        None, min_length=1, description="the input in the document instead of `path` (base64; see the kind)"
+    )
     origin: Point = Field(description="room coordinates [m] of the file's point (0, 0, 0): room = file + origin")
     times_s: list[float] | None = Field(
         None, min_length=1, max_length=MAX_FRAMES, description="times [s]: the frame nearest each is taken"
@@ -88,6 +93,8 @@ class _FileFramesSpec(SpecModel):
 
     @model_validator(mode="after")
     def _optics_and_times(self) -> "_FileFramesSpec":
+        if (self.path is None) == (self.data_base64 is None):
+            raise ValueError("give exactly one of `path` and `data_base64`")
         self._check_source()
         if not self._gives_extinction():
             if self.albedo is not None or self.particles is not None:
@@ -116,7 +123,8 @@ class _FileFramesSpec(SpecModel):
 class FdsFramesSpec(_FileFramesSpec):
     """Frames from FDS (NIST Fire Dynamics Simulator) output, read with `fdsreader` (pip install 'owcsim[fire]').
 
-    `path`: the folder holding the case's .smv file, or the .smv file. `quantity`:
+    `path`: the folder holding the case's .smv file, or the .smv file; or `data_base64`: a zip archive of the
+    case (one .smv and the files it names; over HTTP, where server paths are refused). `quantity`:
     - "extinction": FDS's SOOT EXTINCTION COEFFICIENT K [1/m] (= FDS's K_m rho_soot), from a 3D slice
       (a cell-centred one, `CELL_CENTERED=.TRUE.`, is preferred: it holds FDS's exact cell values);
     - "soot_density": SOOT DENSITY rho_soot [kg/m^3] from a 3D slice (`source` "slice") or from the SMOKE3D
@@ -158,10 +166,11 @@ class FdsFramesSpec(_FileFramesSpec):
 class NetcdfFramesSpec(_FileFramesSpec):
     """Frames from a netCDF file (any source): variables with dims (time, z, y, x) and coordinates.
 
-    Coordinates `time` [s] and `x`, `y`, `z` [m] hold cell centres, uniformly spaced on each axis; the grid's
-    box reaches half a cell beyond the first and last centre. Either one `variable` of extinction sigma_t
-    [1/m] (with `albedo`/`phase` or `particles`), or `sigma_a_variable` and `sigma_s_variable` [1/m] (then the
-    albedo comes from the file and only `phase` is given). NaN is refused.
+    The file at `path`, or its bytes in `data_base64`. Coordinates `time` [s] and `x`, `y`, `z` [m] hold cell
+    centres, uniformly spaced on each axis; the grid's box reaches half a cell beyond the first and last centre.
+    Either one `variable` of extinction sigma_t [1/m] (with `albedo`/`phase` or `particles`), or
+    `sigma_a_variable` and `sigma_s_variable` [1/m] (then the albedo comes from the file and only `phase` is
+    given). NaN is refused.
     """
 
     type: Literal["netcdf"] = "netcdf"

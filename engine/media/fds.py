@@ -25,6 +25,11 @@ the case's folder is only read.
 
 from __future__ import annotations
 
+import base64
+import binascii
+import io
+import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +44,9 @@ fdsreader = LazyModule("fdsreader")
 
 #: Relative tolerance on cell sizes (FDS writes node coordinates with 6-7 significant digits).
 CELL_SIZE_RTOL = 1e-4
+#: Most files and bytes an FDS case sent as a zip archive (`data_base64`) may unpack to.
+MAX_ARCHIVE_MEMBERS = 10_000
+MAX_ARCHIVE_BYTES = 2_000_000_000
 #: The FDS quantity names of the two inputs.
 FDS_QUANTITIES = {"extinction": "SOOT EXTINCTION COEFFICIENT", "soot_density": "SOOT DENSITY"}
 
@@ -211,13 +219,41 @@ def wavelength_factor(spec: FdsFramesSpec) -> float:
     return float((REFERENCE_WAVELENGTH_NM / spec.wavelength_nm) ** spec.wavelength_exponent)
 
 
+def unpack_case(data_base64: str, folder: Path) -> Path:
+    """Unpack a base64 zip archive of an FDS case into `folder`; the path of its one .smv file."""
+    try:
+        archive = zipfile.ZipFile(io.BytesIO(base64.b64decode(data_base64, validate=True)))
+    except (binascii.Error, zipfile.BadZipFile) as err:
+        raise SceneError(f"frames: `data_base64` is not a base64 zip archive of an FDS case ({err})") from err
+    with archive:
+        members = archive.infolist()
+        size = sum(m.file_size for m in members)
+        if len(members) > MAX_ARCHIVE_MEMBERS or size > MAX_ARCHIVE_BYTES:
+            raise SceneError(
+                f"frames: the FDS archive unpacks to {len(members)} files, {size} bytes; at most "
+                f"{MAX_ARCHIVE_MEMBERS} files and {MAX_ARCHIVE_BYTES} bytes"
+            )
+        archive.extractall(folder)  # zipfile drops absolute paths and '..' from member names
+    smv = sorted(folder.rglob("*.smv"))
+    if len(smv) != 1:
+        raise SceneError(f"frames: the FDS archive must hold exactly one .smv file, it holds {len(smv)}")
+    return smv[0]
+
+
 def fds_frames(spec: FdsFramesSpec, base_dir: str | Path | None = None) -> MediumFrames:
-    """The frames of an FDS case (see the module's docstring for the mapping)."""
-    path = Path(spec.path)
-    if not path.is_absolute() and base_dir is not None:
-        path = Path(base_dir) / path
-    sim = open_simulation(path)
-    data = read_fds_cells(sim, spec)
+    """The frames of an FDS case (see the module's docstring for the mapping): at `path`, or unpacked from
+    `data_base64` into a temporary folder (deleted once the frames are read)."""
+    if spec.data_base64 is not None:
+        with tempfile.TemporaryDirectory(prefix="owcsim-fds-") as tmp:
+            smv = unpack_case(spec.data_base64, Path(tmp))
+            data = read_fds_cells(open_simulation(smv), spec)
+            data["file"] = f"data_base64:{smv.relative_to(tmp)}"
+    else:
+        assert spec.path is not None  # the schema asks for one of the two
+        path = Path(spec.path)
+        if not path.is_absolute() and base_dir is not None:
+            path = Path(base_dir) / path
+        data = read_fds_cells(open_simulation(path), spec)
     idx = select_frame_indices(data["times"], spec.times_s, spec.t_min, spec.t_max, spec.every)
     values = np.maximum(data["values"][idx], 0.0)  # FDS may write round-off negatives (-1e-20)
     factor = wavelength_factor(spec)

@@ -10,6 +10,9 @@ sigma_s directly. NaN or negative values are refused with the first bad cell nam
 
 from __future__ import annotations
 
+import base64
+import binascii
+import io
 from pathlib import Path
 
 import numpy as np
@@ -58,24 +61,33 @@ def _variable(ds, name: str) -> np.ndarray:
     return a
 
 
-def _open(path: Path):
-    if not path.is_file():
-        raise SceneError(f"frames: netCDF file {str(path)!r} not found")
+def _open(spec: NetcdfFramesSpec, base_dir: str | Path | None):
+    """(dataset, name for messages) of the file at `path`, or of the bytes in `data_base64`."""
+    if spec.data_base64 is not None:
+        try:
+            source: Path | io.BytesIO = io.BytesIO(base64.b64decode(spec.data_base64, validate=True))
+        except binascii.Error as err:
+            raise SceneError(f"frames: `data_base64` is not valid base64 ({err})") from err
+        name = "data_base64"
+    else:
+        assert spec.path is not None  # the schema asks for one of the two
+        path = Path(spec.path)
+        source = Path(base_dir) / path if not path.is_absolute() and base_dir is not None else path
+        if not source.is_file():
+            raise SceneError(f"frames: netCDF file {str(source)!r} not found")
+        name = str(source)
     try:
-        return xarray.open_dataset(path)
+        return xarray.open_dataset(source), name
     except (ValueError, OSError, TypeError) as err:
         raise SceneError(
-            f"frames: could not read {str(path)!r} as netCDF ({err}); "
-            "netCDF-4 files need the netCDF4 or h5netcdf package"
+            f"frames: could not read {name!r} as netCDF ({err}); netCDF-4 files need the netCDF4 or h5netcdf package"
         ) from err
 
 
 def netcdf_frames(spec: NetcdfFramesSpec, base_dir: str | Path | None = None) -> MediumFrames:
     """The frames of a netCDF file (see the module's docstring)."""
-    path = Path(spec.path)
-    if not path.is_absolute() and base_dir is not None:
-        path = Path(base_dir) / path
-    with _open(path) as ds:
+    ds, name = _open(spec, base_dir)
+    with ds:
         edges = [_axis(ds, a) for a in "xyz"]
         if "time" not in ds.coords:
             raise SceneError("frames: the netCDF file has no coordinate 'time' [s]")
@@ -102,7 +114,7 @@ def netcdf_frames(spec: NetcdfFramesSpec, base_dir: str | Path | None = None) ->
     hi = np.array([e[1] for e in edges]) + origin
     report = FramesReportPublic(
         kind="netcdf",
-        file=str(path),
+        file=name,
         quantity=quantity,
         data_id=data_id,
         cell_values="cell-centred values of the file, transposed (time, z, y, x) -> (time, x, y, z)",

@@ -83,3 +83,17 @@ def test_bad_netcdf_is_refused(tmp_path):
         frames_from_spec(_spec(tmp_path / "ok.nc", variable="soot"), base_dir=tmp_path)
     with pytest.raises(SceneError, match="not found"):
         frames_from_spec(_spec(tmp_path / "missing.nc"), base_dir=tmp_path)
+
+
+def test_file_bytes_in_the_document_read_the_same(tmp_path):
+    import base64
+
+    _write(tmp_path / "smoke.nc")
+    by_path = frames_from_spec(_spec(tmp_path / "smoke.nc"), base_dir=tmp_path)
+    data = base64.b64encode((tmp_path / "smoke.nc").read_bytes()).decode()
+    doc = {"type": "netcdf", "data_base64": data, "origin": [0, 0, 0], "variable": "extinction", "albedo": 0.2}
+    inline = frames_from_spec(TypeAdapter(FramesSpec).validate_python(doc))
+    assert np.array_equal(inline.sigma_a, by_path.sigma_a) and np.array_equal(inline.sigma_s, by_path.sigma_s)
+    assert inline.frames_report().file == "data_base64"
+    with pytest.raises(SceneError, match="not valid base64"):
+        frames_from_spec(TypeAdapter(FramesSpec).validate_python({**doc, "data_base64": "%%%"}))

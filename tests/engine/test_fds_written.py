@@ -188,3 +188,34 @@ def test_bad_fds_input_is_refused(one_mesh, tmp_path, monkeypatch):
     monkeypatch.setattr(fds_module, "fdsreader", LazyModule("owcsim_no_such_module_fdsreader"))
     with pytest.raises(SceneError, match=r"pip install 'owcsim\[fire\]'"):
         frames_from_spec(_spec(path))
+
+
+def test_a_zipped_case_in_the_document_reads_the_same(one_mesh, tmp_path_factory):
+    """`data_base64`: the case as a zip archive (in a sub-folder, as users zip folders), e.g. over HTTP."""
+    import base64
+    import io
+    import zipfile
+
+    path, _ = one_mesh
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as z:
+        for f in sorted(path.iterdir()):
+            z.write(f, f"case/{f.name}")
+    doc = {
+        "type": "fds",
+        "data_base64": base64.b64encode(buffer.getvalue()).decode(),
+        "origin": [0, 0, 0],
+        "albedo": 0.0,
+    }
+    frames = frames_from_spec(TypeAdapter(FramesSpec).validate_python(doc))
+    assert np.array_equal(frames.sigma_t, frames_from_spec(_spec(path)).sigma_t)
+    assert frames.frames_report().file == "data_base64:case/one.smv"
+    with zipfile.ZipFile(buffer, "a") as z:
+        z.writestr("other/two.smv", "CHID\n two\n")
+    doc["data_base64"] = base64.b64encode(buffer.getvalue()).decode()
+    with pytest.raises(SceneError, match="exactly one .smv file, it holds 2"):
+        frames_from_spec(TypeAdapter(FramesSpec).validate_python(doc))
+    with pytest.raises(SceneError, match="not a base64 zip archive"):
+        frames_from_spec(TypeAdapter(FramesSpec).validate_python({**doc, "data_base64": "bm90IGEgemlw"}))
+    with pytest.raises(ValidationError, match="exactly one of `path` and `data_base64`"):
+        TypeAdapter(FramesSpec).validate_python({**doc, "path": str(path)})
