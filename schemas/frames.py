@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
 
 from .base import Point, SpecModel
 from .medium import MAX_COEFFICIENT, MAX_GRID_CELLS, IsotropicPhaseSpec, ParticlesSpec, PhaseSpec
@@ -188,8 +188,24 @@ class NetcdfFramesSpec(_FileFramesSpec):
         return self.variable is not None
 
 
-#: The sources of frames, told apart by `type`.
-FramesSpec = Annotated[InlineFramesSpec | FdsFramesSpec | NetcdfFramesSpec, Field(discriminator="type")]
+def _frames_kind(value: object) -> str:
+    """The `type` of a frames document; "inline" when it has none (documents written before the file kinds)."""
+    if isinstance(value, dict):
+        return str(value.get("type", "inline"))
+    return str(getattr(value, "type", "inline"))
+
+
+#: The sources of frames, told apart by `type` (default "inline").
+FramesSpec = Annotated[
+    Annotated[InlineFramesSpec, Tag("inline")]
+    | Annotated[FdsFramesSpec, Tag("fds")]
+    | Annotated[NetcdfFramesSpec, Tag("netcdf")],
+    Discriminator(
+        _frames_kind,
+        custom_error_type="frames_type",
+        custom_error_message="frames `type` must be 'inline', 'fds' or 'netcdf'",
+    ),
+]
 
 
 class FramesReportPublic(BaseModel):

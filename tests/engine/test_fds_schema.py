@@ -31,7 +31,10 @@ def test_the_union_tells_the_kinds_apart():
     assert isinstance(fds, FdsFramesSpec) and fds.mass_extinction_m2_per_kg == 8700.0 and fds.wavelength_nm == 632.8
     assert isinstance(ADAPTER.validate_python(NC), NetcdfFramesSpec)
     assert ADAPTER.validate_python({**FDS, "albedo": None, "particles": PARTICLES, "wavelength_nm": 850}).particles
-    assert set(ADAPTER.json_schema()["discriminator"]["mapping"]) == {"inline", "fds", "netcdf"}
+    assert isinstance(ADAPTER.validate_python({k: v for k, v in inline.items() if k != "type"}), InlineFramesSpec)
+    assert len(ADAPTER.json_schema()["oneOf"]) == 3
+    with pytest.raises(ValidationError, match="frames `type` must be 'inline', 'fds' or 'netcdf'"):
+        ADAPTER.validate_python({**FDS, "type": "hdf5"})
 
 
 @pytest.mark.parametrize(
