@@ -104,3 +104,21 @@ def test_the_engine_imports_neither_fdsreader_nor_xarray():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.split() == ["False", "False"]
+
+
+def test_inline_frames_report_themselves():
+    from owcsim.engine.media.frame_sources import frames_from_spec
+
+    doc = {
+        "times": [0, 5],
+        "min": [0, 0, 0],
+        "max": [2, 1, 1],
+        "shape": [2, 1, 1],
+        "sigma_a": [0.1, [0.2, 0.3]],
+        "sigma_s": [0.0, 0.4],
+    }
+    frames = frames_from_spec(ADAPTER.validate_python(doc))
+    report = frames.frames_report()
+    assert report.kind == "inline" and report.times_s == [0.0, 5.0] and report.grid_shape == (2, 1, 1)
+    assert report.max_sigma_t == pytest.approx(0.7)
+    assert frames.select([1]).frames_report().times_s == [5.0]
