@@ -18,6 +18,7 @@ space, killed after 10 s, so the test fails instead of stalling or swapping.
 from __future__ import annotations
 
 import base64
+import json
 import multiprocessing as mp
 import os
 import re
@@ -163,7 +164,6 @@ def test_a_scene_file_that_never_ends_is_refused_not_read_until_memory_runs_out(
 
 
 def test_a_scene_given_as_a_pipe_is_still_read(tmp_path):
-    import json
     import threading
 
     fifo = tmp_path / "scene.json"
@@ -182,8 +182,6 @@ def test_a_scene_given_as_a_pipe_is_still_read(tmp_path):
 
 # ----------------------------------------------------------------------------- the command line
 def test_owcsim_submit_says_which_photometric_file_it_refuses(tmp_path, capsys):
-    import json
-
     from owcsim.cli import main
 
     (tmp_path / "secret").write_text("not for the server")
@@ -302,6 +300,14 @@ def test_7_a_tabulated_phase_function_at_the_float_max_is_accepted_over_http(tmp
         "sigma_s": 0.1,
         "phase": {"type": "tabulated", "cos_theta": c.tolist(), "values": [sys.float_info.max] * 5},
     }
+    body = json.dumps(doc)
     with app_client(tmp_path) as client:
-        r = client.post("/v1/jobs", json=doc)
+        r = client.post("/v1/jobs", content=body, headers={"content-type": "application/json"})
         assert r.status_code == 202, r.text
+        for token in ("1e999", "NaN", "Infinity"):  # JSON Python reads as inf or nan: refused at the value
+            # the second of the five values becomes the token
+            bad = body.replace(repr(sys.float_info.max), token, 2).replace(token, repr(sys.float_info.max), 1)
+            r = client.post("/v1/jobs", content=bad, headers={"content-type": "application/json"})
+            assert r.status_code == 422, (token, r.text)
+            (error,) = r.json()["errors"]
+            assert error["loc"] == "body.medium.homogeneous.phase.tabulated.values.1", (token, error)
