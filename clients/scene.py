@@ -69,6 +69,8 @@ def read_input_file(
         flags &= ~os.O_NONBLOCK  # a pipe given on purpose is read as it comes
     try:
         fd = os.open(path, flags)
+    except ValueError:  # a NUL byte in the name
+        raise error(f"{name} is not a usable file name (it contains a NUL byte)") from None
     except OSError as exc:
         if not follow_links and os.path.islink(path):
             raise error(f"{name} is a symbolic link: give the file itself") from None

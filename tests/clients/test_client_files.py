@@ -311,3 +311,29 @@ def test_7_a_tabulated_phase_function_at_the_float_max_is_accepted_over_http(tmp
             assert r.status_code == 422, (token, r.text)
             (error,) = r.json()["errors"]
             assert error["loc"] == "body.medium.homogeneous.phase.tabulated.values.1", (token, error)
+
+
+# ----------------------------------------------------------------------------- adversarial pass: other readers
+def test_a_file_name_with_a_nul_byte_is_an_input_file_error_not_a_trace(tmp_path):
+    doc = quick_doc()
+    doc["meshes"] = [{"file": "a\x00b.stl", "reflectance": 0.5}]
+    with pytest.raises(client_scene.MeshFileError, match="not a usable file name"):
+        client_scene.scene_document(doc, tmp_path)
+
+
+def _engine_read(path):
+    from owcsim.engine.core.inputs import read_input
+
+    read_input(path, None, None, "mesh file")
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device", "folder"])
+def test_owcsim_run_names_a_fifo_device_or_folder_instead_of_not_found(tmp_path, kind):
+    """`owcsim run` / `validate` read files through the engine: a FIFO or a device is refused at once with the
+    right reason (it was 'not found')."""
+    path = _special(tmp_path, kind, name="mesh.stl")
+    name, msg, _ = _outcome(_engine_read, path)
+    word = {"fifo": "a FIFO", "device": "a device", "folder": "a folder"}[kind]
+    assert name == "SceneError" and f"mesh file {path!r} is {word}, not a regular file" in msg, (name, msg)
+    name, msg, _ = _outcome(_engine_read, str(tmp_path / "none.stl"))
+    assert name == "SceneError" and "not found" in msg, (name, msg)
