@@ -226,7 +226,7 @@ def _cmd_submit(args) -> int:
     try:
         from owcsim.clients.client import Client
         from owcsim.clients.errors import ApiError, ConnectionFailed, InvalidRequest, JobFailed
-        from owcsim.clients.scene import MeshFileError
+        from owcsim.clients.scene import InputFileError
     except ImportError as exc:
         raise InputError(
             f"`owcsim submit` needs the client extra ({exc.name} is missing): pip install 'owcsim[client]'"
@@ -249,7 +249,7 @@ def _cmd_submit(args) -> int:
                 print(f"owcsim: interrupted; job {job.id} cancelled", file=sys.stderr)
                 return 130
             result = job.result(wait=False)
-    except (FileNotFoundError, MeshFileError) as exc:
+    except (FileNotFoundError, InputFileError) as exc:  # a mesh or photometric file the client will not read
         raise InputError(str(exc)) from None
     except InvalidRequest as exc:
         raise InputError(f"the server refused the scene: {exc}") from None
