@@ -170,7 +170,8 @@ def check_timeline(scene: Any) -> None:
             raise ValueError(f"{where}: moving transmitters are not supported yet: only receivers move")
         if traj.device not in explicit:
             raise ValueError(
-                f"{where}: no receiver with this id; a trajectory moves one of `receivers` (ids {sorted(explicit)[:10]})"
+                f"{where}: no receiver with this id; a trajectory moves one of `receivers` "
+                f"(ids {sorted(explicit)[:10]})"
             )
         if explicit[traj.device].orientation is not None:
             raise ValueError(f"{where}: a receiver with `orientation` statistics cannot move yet")

@@ -67,17 +67,16 @@ def outage_intervals(
     """Intervals where y < threshold (y already in its interpolation scale, larger = better); y_lo, y_hi the
     error bar's ends. NaN counts as out (no signal)."""
     t = np.asarray(times, float)
-    y = np.where(np.isfinite(y), y, -np.inf)
+    y = np.where(np.isnan(y), -np.inf, y)  # +inf (a BER of 0) is perfect
     out = y < threshold
     amb = (np.nan_to_num(y_lo, nan=-np.inf) < threshold) != (np.nan_to_num(y_hi, nan=-np.inf) < threshold)
-    yc = np.maximum(y, min(LOG_FLOOR, threshold - 1.0))
+    floor = min(LOG_FLOOR, threshold - 1.0)
+    yc = np.clip(y, floor, max(-LOG_FLOOR, threshold + 1.0))
     change = np.flatnonzero(out[1:] != out[:-1])  # crossing between times i and i + 1
     with np.errstate(divide="ignore", invalid="ignore"):
         w = np.clip((threshold - yc[change]) / (yc[change + 1] - yc[change]), 0.0, 1.0)
     cross = t[change] + w * (t[change + 1] - t[change])
-    starts = ([(float(t[0]), 0)] if out[0] else []) + [
-        (float(c), int(i)) for c, i in zip(cross, change) if out[i + 1]
-    ]
+    starts = ([(float(t[0]), 0)] if out[0] else []) + [(float(c), int(i)) for c, i in zip(cross, change) if out[i + 1]]
     ends = [(float(c), int(i)) for c, i in zip(cross, change) if out[i]] + ([(None, len(t) - 1)] if out[-1] else [])
     return [
         OutageIntervalPublic(start_s=s, end_s=e, uncertain=bool(amb[i0 : min(i1 + 2, len(t))].any()))
@@ -141,12 +140,8 @@ def timeline_link(
         dc_gain_stderr=[e.dc_gain_stderr for e in entries],
         dc_gain_diff_stderr=_none(diff),
         los_gain=[e.los_gain if isinstance(e, LinkPublic) else None for e in entries],
-        dc_gain_by_reflection_order=(
-            [e.dc_gain_by_reflection_order for e in entries] if isinstance(entries[0], LinkPublic) else None
-        ),
-        dc_gain_by_scattering_order=(
-            [e.dc_gain_by_scattering_order for e in entries] if isinstance(entries[0], LinkPublic) else None
-        ),
+        dc_gain_by_reflection_order=[getattr(e, "dc_gain_by_reflection_order", None) for e in entries] or None,
+        dc_gain_by_scattering_order=[getattr(e, "dc_gain_by_scattering_order", None) for e in entries] or None,
         rms_delay_spread_s=[e.rms_delay_spread_s for e in entries],
         received_power_w=[e.received_power_w for e in entries],
         snr_db=[e.snr_db for e in entries] if budgeted else None,

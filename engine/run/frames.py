@@ -80,9 +80,7 @@ def _check(spec: SceneSpec, frames: MediumFrames, frame_of_receiver: IntArray | 
     if frame_of_receiver is None:
         return
     if len(frame_of_receiver) != len(spec.receivers):
-        raise SceneError(
-            f"frame_of_receiver has {len(frame_of_receiver)} entries for {len(spec.receivers)} receivers"
-        )
+        raise SceneError(f"frame_of_receiver has {len(frame_of_receiver)} entries for {len(spec.receivers)} receivers")
     if np.any(frame_of_receiver < -1) or np.any(frame_of_receiver >= frames.n_frames):
         raise SceneError(f"frame_of_receiver: entries must be -1 or a frame index 0..{frames.n_frames - 1}")
     counts = {len(_receivers_of(frame_of_receiver, f)) for f in range(frames.n_frames)}  # type: ignore[arg-type]

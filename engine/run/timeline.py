@@ -63,7 +63,8 @@ def expand_receivers(spec: SceneSpec, times: FloatArray) -> tuple[SceneSpec, Int
     ids `id@t<i>`, frame i. `base[r]` = (timeline id, None for a static receiver or its copy's id)."""
     assert spec.timeline is not None
     moving = {t.device: t for t in spec.timeline.trajectories}
-    static, copies, frame, base = [], [], [], []
+    static, copies, frame = [], [], []
+    base: list[tuple[str, str | None]] = []
     for k, r in enumerate(spec.receivers):
         rid = r.id or f"rx{k}"
         if rid not in moving:
@@ -115,7 +116,7 @@ def _series(
         for name, kind, w in senders:
             entries = [tables[i][(name, ids[i])] for i in range(len(times))]
             x, n = [], []
-            for i, res in enumerate(results):
+            for i in range(len(results)):
                 gh0, gp = groups[i]
                 n_rx = gh0.shape[0] // len(tx_ids)
                 flat = np.arange(len(tx_ids)) * n_rx + rx_index[i][ids[i]]
