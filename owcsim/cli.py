@@ -164,9 +164,20 @@ def _cmd_run(args) -> int:
         executor = executor_from_scheduler(args.scheduler)
     update, close = _progress_bar()
     try:
-        result = simulate(
-            spec, base_dir=Path(args.scene).resolve().parent, workers=args.workers, progress=update, executor=executor
-        )
+        if spec.timeline is not None:  # the channel over time: one run per time (engine/run/timeline.py)
+            from owcsim.engine.run.timeline import run_timeline
+
+            result = run_timeline(
+                spec, base_dir=Path(args.scene).resolve().parent, workers=args.workers, progress=update
+            )
+        else:
+            result = simulate(
+                spec,
+                base_dir=Path(args.scene).resolve().parent,
+                workers=args.workers,
+                progress=update,
+                executor=executor,
+            )
     finally:
         close()
         if executor is not None:
