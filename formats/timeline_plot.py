@@ -91,11 +91,10 @@ def timeline_svg(tl: TimelineResultPublic, path: str | Path) -> Path:
         for c, k in enumerate(links):  # outage bands first, under the curves
             for o in k.outages:
                 a, b = float(px(o.start_s)), float(px(thi if o.end_s is None else o.end_s))
-                fill = f'fill="{TAB10[c % 10]}" fill-opacity="{0.10 if o.uncertain else 0.18}"'
-                dash = ' stroke="#888" stroke-dasharray="4 3"' if o.uncertain else ""
-                doc.add(
-                    f'<rect class="outage" x="{a:.1f}" y="{y0}" width="{max(b - a, 0.5):.1f}" height="{h}" {fill}{dash}/>'
-                )
+                style = f'fill="{TAB10[c % 10]}" fill-opacity="{0.10 if o.uncertain else 0.18}"'
+                style += ' stroke="#888" stroke-dasharray="4 3"' if o.uncertain else ""
+                box = f'x="{a:.1f}" y="{y0}" width="{max(b - a, 0.5):.1f}" height="{h}"'
+                doc.add(f'<rect class="outage" {box} {style}/>')
         xt = nice_ticks(tlo, thi, 8)
         step = float(xt[1] - xt[0]) if len(xt) > 1 else 1.0
         for v in xt:
@@ -113,17 +112,16 @@ def timeline_svg(tl: TimelineResultPublic, path: str | Path) -> Path:
         doc.text(0, 0, label, 11, extra=f' transform="translate({x0 - 62},{y0 + h / 2}) rotate(-90)"')
         thr = _threshold(tl, field)
         if thr is not None:
-            y = float(py(thr))
-            doc.add(
-                f'<line class="threshold" x1="{x0}" y1="{y:.1f}" x2="{x0 + w}" y2="{y:.1f}" stroke="#d62728" stroke-dasharray="6 4"/>'
-            )
+            yt_ = float(py(thr))
+            line = f'x1="{x0}" y1="{yt_:.1f}" x2="{x0 + w}" y2="{yt_:.1f}"'
+            doc.add(f'<line class="threshold" {line} stroke="#d62728" stroke-dasharray="6 4"/>')
         doc.add(f'<clipPath id="tclip{r}"><rect x="{x0}" y="{y0}" width="{w}" height="{h}"/></clipPath>')
         doc.add(f'<g clip-path="url(#tclip{r})" fill="none">')
         for c, k in enumerate(links):
-            y, se = _series(k, field)
+            values, se = _series(k, field)
             colour = TAB10[c % 10]
             if se is not None and np.isfinite(se).any():
-                top, bot = py(y + np.nan_to_num(se)), py(np.maximum(y - np.nan_to_num(se), lo))
+                top, bot = py(values + np.nan_to_num(se)), py(np.maximum(values - np.nan_to_num(se), lo))
                 ok = np.isfinite(top) & np.isfinite(bot)
                 d = _path_d(
                     np.concatenate([px(t), px(t)[::-1]]),
@@ -131,7 +129,7 @@ def timeline_svg(tl: TimelineResultPublic, path: str | Path) -> Path:
                     np.concatenate([ok, ok[::-1]]),
                 )
                 doc.add(f'<path class="band" d="{d}Z" fill="{colour}" fill-opacity="0.25" stroke="none"/>')
-            d = _path_d(px(t), py(y), np.isfinite(py(y)))
+            d = _path_d(px(t), py(values), np.isfinite(py(values)))
             doc.add(f'<path class="curve" data-label="{k.tx} -> {k.rx}" d="{d}" stroke="{colour}" stroke-width="1.5"/>')
         doc.add("</g></g>")
     y_leg = _H * len(rows) + 4
