@@ -21,13 +21,7 @@ from . import problems
 from .dispatcher import Dispatcher, start_forkserver
 from .limits import RequestLimits
 from .preflight import Preflighter
-from .routes import (
-    docs,
-    jobs,
-    results,
-    service,
-    timeline,  # issue 26: a timeline job's files
-)
+from .routes import docs, jobs, results, service, timeline
 from .routes.service import owcsim_version
 from .settings import Settings
 from .store import JobStore
