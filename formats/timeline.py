@@ -10,6 +10,7 @@ the receiver's position_x/y/z [m] over time. netCDF3 is written directly with th
 from __future__ import annotations
 
 import csv
+import io
 import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -23,7 +24,7 @@ from owcsim.schemas.timeline import TimelineLinkPublic, TimelineResultPublic
 if TYPE_CHECKING:  # pragma: no cover
     import xarray
 
-__all__ = ["in_outage", "timeline_csv", "to_netcdf", "to_xarray"]
+__all__ = ["in_outage", "timeline_csv", "timeline_rows", "to_netcdf", "to_xarray", "write_timeline_files"]
 
 #: The per-time figures of a timeline link and their units.
 FIGURES = {
@@ -106,20 +107,26 @@ def to_netcdf(tl: TimelineResultPublic, path: str | Path) -> Path:
     return path
 
 
-def timeline_csv(tl: TimelineResultPublic, path: str | Path) -> Path:
-    """One row per link and time: time_s, tx, rx, kind, the figures, in_outage."""
-    path = Path(path)
+def timeline_rows(tl: TimelineResultPublic) -> str:
+    """The CSV text: one row per link and time (time_s, tx, rx, kind, the figures, in_outage)."""
     n = len(tl.times_s)
-    with path.open("w", newline="", encoding="utf-8") as f:
-        w = csv.writer(f)
-        w.writerow(["time_s", "tx", "rx", "kind", *FIGURES, "dc_gain_diff_stderr_to_next", "in_outage"])
-        for k in tl.links:  # a few links x times: the table's rows
-            cols = [_values(k, name, n) for name in FIGURES]
-            diff = np.append(_values(k, "dc_gain_diff_stderr", max(n - 1, 0)), np.nan)
-            out = in_outage(k, tl.times_s)
-            for i, t in enumerate(tl.times_s):
-                row = [repr(float(c[i])) if np.isfinite(c[i]) else "" for c in [*cols, diff]]
-                w.writerow([repr(float(t)), k.tx, k.rx, k.kind, *row, int(out[i])])
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["time_s", "tx", "rx", "kind", *FIGURES, "dc_gain_diff_stderr_to_next", "in_outage"])
+    for k in tl.links:  # a few links x times: the table's rows
+        cols = [_values(k, name, n) for name in FIGURES]
+        diff = np.append(_values(k, "dc_gain_diff_stderr", max(n - 1, 0)), np.nan)
+        out = in_outage(k, tl.times_s)
+        for i, t in enumerate(tl.times_s):
+            row = [repr(float(c[i])) if np.isfinite(c[i]) else "" for c in [*cols, diff]]
+            w.writerow([repr(float(t)), k.tx, k.rx, k.kind, *row, int(out[i])])
+    return buf.getvalue()
+
+
+def timeline_csv(tl: TimelineResultPublic, path: str | Path) -> Path:
+    """Write `timeline_rows` to `path`."""
+    path = Path(path)
+    path.write_text(timeline_rows(tl), encoding="utf-8")
     return path
 
 

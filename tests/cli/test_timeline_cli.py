@@ -73,3 +73,22 @@ def test_in_outage_and_the_matplotlib_figure(tmp_path):
     np.testing.assert_array_equal(in_outage(tl.links[0], [0.0, 60.0, 1e6]), [0, 1, 1])
     fig = timeline_figure(tl)
     assert len(fig.axes) == 2 and fig.axes[1].get_ylabel().startswith("BER")
+
+
+def test_the_python_api_runs_a_timeline_and_its_result_has_views(tmp_path):
+    import owcsim
+    from owcsim.clients.result import Result
+
+    result = owcsim.simulate(_doc())
+    assert isinstance(result, Result) and result.timeline is not None
+    ds = result.timeline_to_xarray()
+    assert ds["dc_gain"].dims == ("link", "time") and list(ds["time"].values) == result.timeline.times_s
+    df = result.timeline_dataframe()
+    assert list(df["dc_gain"]) == result.timeline.links[0].dc_gain and list(df["in_outage"]) == [0, 1, 1, 1, 1]
+    result.plot_timeline(tmp_path / "t.png")
+    assert (tmp_path / "t.png").stat().st_size > 0
+    # the same document served by HTTP: the client's Result from the JSON keeps the timeline
+    again = Result.from_document(json.loads(result.model_dump_json()))
+    assert again.timeline == result.timeline
+    names = {p.name for p in again.save(tmp_path / "saved")}
+    assert {"timeline.nc", "timeline.csv", "timeline.png"} <= names
