@@ -1,4 +1,5 @@
-"""The timeline plot (issue 26): H0 and BER (or SNR, without a bit rate) against time, each link in its colour
+"""The timeline plot (issue 26): H0 and BER (or SNR, without a bit rate) against time, each link (the group
+channels when the scene has transmitter groups) in its colour
 with its error band (one standard error), the outage intervals shaded in the link's colour (hatched where
 uncertain) and the threshold drawn where it is on the panel's quantity.
 
@@ -22,6 +23,15 @@ __all__ = ["panels", "timeline_figure", "timeline_svg"]
 
 #: Most links drawn (the rest are in the files).
 MAX_LINKS = 10
+#: BER drawn no lower than this (a BER of 1e-100 is zero on any axis; the files keep the value).
+BER_FLOOR = 1e-12
+
+
+def drawn(tl: TimelineResultPublic) -> list[TimelineLinkPublic]:
+    """The links drawn: the transmitter groups' channels when the scene has groups (what a receiver of a group
+    sees), else every link; at most MAX_LINKS."""
+    channels = [k for k in tl.links if k.kind == "channel"]
+    return (channels or tl.links)[:MAX_LINKS]
 _W, _H = 820, 300
 _L, _R, _T, _B = 84, 20, 34, 46
 
@@ -34,7 +44,7 @@ def panels(tl: TimelineResultPublic) -> list[tuple[str, str, bool]]:
     """(field, axis label, log scale) of each panel: H0, then BER, else SNR, else received power."""
     out = [("dc_gain", "H0 [-]", True)]
     if any(k.ber for k in tl.links):
-        out.append(("ber", "BER (OOK-NRZ)", True))
+        out.append(("ber", f"BER (OOK-NRZ, floor {BER_FLOOR:g})", True))
     elif any(k.snr_db for k in tl.links):
         out.append(("snr_db", "SNR [dB]", False))
     return out
@@ -42,6 +52,8 @@ def panels(tl: TimelineResultPublic) -> list[tuple[str, str, bool]]:
 
 def _series(link: TimelineLinkPublic, field: str) -> tuple[np.ndarray, np.ndarray | None]:
     y = _arr(getattr(link, field))
+    if field == "ber":
+        y = np.maximum(y, BER_FLOOR)
     se = _arr(link.dc_gain_stderr) if field == "dc_gain" else None
     return y, se
 
@@ -55,8 +67,6 @@ def _range(tl: TimelineResultPublic, links: list[TimelineLinkPublic], field: str
     thr = _threshold(tl, field)
     y = np.append(y, thr) if thr is not None else y
     ok = y[np.isfinite(y) & (y > 0)] if log else y[np.isfinite(y)]
-    if field == "ber":
-        ok = ok[ok > 1e-30]  # a BER of 1e-200 is zero on any axis
     if not ok.size:
         return (1e-30, 1.0) if log else (0.0, 1.0)
     lo, hi = float(ok.min()), float(ok.max())
@@ -69,7 +79,7 @@ def _range(tl: TimelineResultPublic, links: list[TimelineLinkPublic], field: str
 def timeline_svg(tl: TimelineResultPublic, path: str | Path) -> Path:
     """The timeline plot as SVG."""
     rows = panels(tl)
-    links = tl.links[:MAX_LINKS]
+    links = drawn(tl)
     doc = _Doc(_W, _H * len(rows) + 20 * math.ceil(len(links) / 4))
     t = np.asarray(tl.times_s, float)
     tlo, thi = (float(t[0]), float(t[-1])) if len(t) > 1 and t[-1] > t[0] else (float(t[0]) - 1, float(t[0]) + 1)
@@ -152,7 +162,7 @@ def timeline_figure(tl: TimelineResultPublic) -> Any:
     axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
     t = np.asarray(tl.times_s, float)
     for ax, (field, label, log) in zip(axes, rows):
-        for c, k in enumerate(tl.links[:MAX_LINKS]):
+        for c, k in enumerate(drawn(tl)):
             colour = TAB10[c % 10]
             for o in k.outages:
                 end = t[-1] if o.end_s is None else o.end_s
@@ -165,8 +175,6 @@ def timeline_figure(tl: TimelineResultPublic) -> Any:
                     lw=0,
                 )
             y, se = _series(k, field)
-            if field == "ber":
-                y = np.where(y > 1e-30, y, np.nan)
             ax.plot(t, y, color=colour, label=f"{k.tx} -> {k.rx}")
             if se is not None and np.isfinite(se).any():
                 ax.fill_between(
