@@ -59,29 +59,27 @@ def frames_at(frames: MediumFrames, times: FloatArray) -> MediumFrames:
 def expand_receivers(spec: SceneSpec, times: FloatArray) -> tuple[SceneSpec, IntArray, list[tuple[str, str | None]]]:
     """The document with every moving receiver copied once per time: (spec, frame_of_receiver, base ids).
 
-    Static receivers keep their place (frame -1, every time); the copies of a moving receiver `id` follow,
-    ids `id@t<i>`, frame i. `base[r]` = (timeline id, None for a static receiver or its copy's id)."""
+    In document order: a static receiver stays (frame -1, every time); a moving receiver `id` becomes its
+    copies `id@t<i>` at its position and normal at time i (frame i), so each time's run sees the receivers
+    in document order. `base[r]` = (timeline id, None for a static receiver or its copy's id)."""
     assert spec.timeline is not None
     moving = {t.device: t for t in spec.timeline.trajectories}
-    static, copies, frame = [], [], []
+    receivers, frame = [], []
     base: list[tuple[str, str | None]] = []
-    for k, r in enumerate(spec.receivers):
+    for k, r in enumerate(spec.receivers):  # the document's explicit receivers, not a loop over paths
         rid = r.id or f"rx{k}"
         if rid not in moving:
-            static.append(r.model_copy(update={"id": rid}))
+            receivers.append(r.model_copy(update={"id": rid}))
             frame.append(-1)
             base.append((rid, None))
-    for k, r in enumerate(spec.receivers):
-        rid = r.id or f"rx{k}"
-        if rid in moving:
-            p, n = positions_at(moving[rid], times), normals_at(moving[rid], r.normal, times)
-            for i in range(len(times)):  # the copies of one receiver (its times), not a loop over paths
-                cid = f"{rid}@t{i}"
-                copies.append(r.model_copy(update={"id": cid, "position": tuple(p[i]), "normal": tuple(n[i])}))
-                frame.append(i)
-                base.append((rid, cid))
-    out = spec.model_copy(update={"receivers": static + copies})
-    return out, np.asarray(frame, np.int64), base
+            continue
+        p, n = positions_at(moving[rid], times), normals_at(moving[rid], r.normal, times)
+        for i in range(len(times)):
+            cid = f"{rid}@t{i}"
+            receivers.append(r.model_copy(update={"id": cid, "position": tuple(p[i]), "normal": tuple(n[i])}))
+            frame.append(i)
+            base.append((rid, cid))
+    return spec.model_copy(update={"receivers": receivers}), np.asarray(frame, np.int64), base
 
 
 def _lookup(result: SimulationResultPublic) -> dict[tuple[str, str], LinkPublic | ChannelPublic]:

@@ -275,3 +275,47 @@ def test_reweighted_is_refused_in_this_build():
 
     with pytest.raises(SceneError, match="not available"):
         simulate_frames(spec(room_doc(**SMOKY)), _random_frames(), method=FrameMethod.REWEIGHTED)
+
+
+def test_a_walker_in_frames_is_each_time_a_run_of_that_frame_with_the_receiver_there():
+    """Smoke frames and a moving receiver on one time axis: time i's link is, bit for bit, the run of the
+    medium at t_i (frames interpolated) with the receiver placed where the trajectory puts it then."""
+    doc = room_doc(**SMOKY, rx=(1.0, 1.0, 0.5))
+    doc["receivers"].append({"id": "desk", "position": [4.0, 4.0, 0.8], "normal": [0, 0, 1], "area": 1e-4})
+    doc["timeline"] = {
+        "frames": {
+            "type": "inline",
+            "times": [0.0, 20.0],
+            "min": [0, 0, 0],
+            "max": [5, 5, 3],
+            "shape": [1, 1, 2],
+            "sigma_a": [0.05, [0.05, 0.4]],
+            "sigma_s": [0.1, [0.1, 0.3]],
+        },
+        "times_s": [0.0, 10.0, 20.0],
+        "trajectories": [
+            {"device": "rx", "waypoints": [[1, 1, 0.5], [4, 1, 0.5]], "speed_m_s": 0.1, "orientation": "heading"}
+        ],
+    }
+    sp = spec(doc)
+    result = run_timeline(sp)
+    tl = result.timeline
+    walker, desk = tl.link("tx", "rx"), tl.link("tx", "desk")
+    np.testing.assert_allclose(walker.receiver_position, [[1, 1, 0.5], [2, 1, 0.5], [3, 1, 0.5]])
+    assert desk.receiver_position == [(4.0, 4.0, 0.8)] * 3
+    frames = frames_at(_inline(sp), np.array([0.0, 10.0, 20.0]))
+    for i, x in enumerate((1.0, 2.0, 3.0)):
+        moved = [sp.receivers[0].model_copy(update={"position": (x, 1.0, 0.5)}), sp.receivers[1]]
+        alone = simulate(
+            sp.model_copy(update={"medium": frame_medium(frames, i), "timeline": None, "receivers": moved})
+        )
+        assert alone.links[0].dc_gain == walker.dc_gain[i] and alone.links[1].dc_gain == desk.dc_gain[i]
+        assert alone.links[0].dc_gain_stderr == walker.dc_gain_stderr[i]
+    assert all(d is not None and d > 0 for d in walker.dc_gain_diff_stderr + desk.dc_gain_diff_stderr)
+    assert len(result.links) == 2  # the first time's run: the desk and the walker at t = 0
+
+
+def _inline(sp):
+    from owcsim.engine.media.frame_sources import frames_from_spec
+
+    return frames_from_spec(sp.timeline.frames)
