@@ -50,7 +50,9 @@ def corridor(paths: int) -> dict:
         "room": {"size": list(SIZE), "reflectance": {"floor": 0.3, "ceiling": 0.7, "walls": 0.6}},
         "transmitters": lamps,
         "transmitter_groups": [{"name": "ceiling", "transmitters": [lamp["id"] for lamp in lamps]}],
-        "receivers": [{"id": "walker", "position": [7.5, 1.25, 0.85], "normal": [0, 0, 1], "area": 1e-4, "fov_deg": 60}],
+        "receivers": [
+            {"id": "walker", "position": [7.5, 1.25, 0.85], "normal": [0, 0, 1], "area": 1e-4, "fov_deg": 60}
+        ],
         "link_budget": {"bit_rate": 5e7},
         "simulation": {
             "algorithm": 5,
