@@ -188,6 +188,12 @@ def _cmd_run(args) -> int:
 
         paths.append(write_channel_matrix(channel_matrix(result), out / "channel_matrix.npz"))
     _print_links(result)
+    if result.timeline is not None:  # the channel over time: its outages (timeline.csv holds every figure)
+        tl = result.timeline
+        print(f"timeline: {len(tl.times_s)} times from {tl.times_s[0]:g} to {tl.times_s[-1]:g} s ({tl.method})")
+        for k in tl.links:
+            if k.time_to_first_outage_s is not None:
+                print(f"  {k.tx} -> {k.rx}: {len(k.outages)} outage(s), the first at {k.outages[0].start_s:.4g} s")
     run = result.run
     wrote = (
         ", ".join(str(p) for p in paths)
@@ -268,6 +274,12 @@ def _cmd_submit(args) -> int:
         print(f"owcsim: error: {exc}", file=sys.stderr)
         return 1
     _print_links(result)
+    if result.timeline is not None:  # the channel over time: its outages (timeline.csv holds every figure)
+        tl = result.timeline
+        print(f"timeline: {len(tl.times_s)} times from {tl.times_s[0]:g} to {tl.times_s[-1]:g} s ({tl.method})")
+        for k in tl.links:
+            if k.time_to_first_outage_s is not None:
+                print(f"  {k.tx} -> {k.rx}: {len(k.outages)} outage(s), the first at {k.outages[0].start_s:.4g} s")
     run = result.run
     wrote = f"; wrote {', '.join(str(p) for p in result.save(args.out))}" if args.out else ""
     print(f"{run.paths_total:,d} paths in {run.wall_time_s:.2f} s ({run.stop_reason}); job {job.id}{wrote}")

@@ -38,6 +38,11 @@ def test_run_writes_the_timeline_files(tmp_path, capsys):
     scene.write_text(json.dumps(_doc()))
     out = tmp_path / "out"
     assert main(["run", str(scene), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert (
+        "timeline: 5 times from 0 to 100 s (independent)" in printed
+        and "tx -> rx: 1 outage(s), the first at 21.05 s" in printed
+    )
     for name in ("result.json", "timeline.nc", "timeline.csv", "timeline.svg"):
         assert (out / name).is_file(), name
     result = SimulationResultPublic.model_validate_json((out / "result.json").read_text())
