@@ -38,6 +38,7 @@ def live_fast(tmp_path):
         yield client
 
 
+@pytest.mark.filterwarnings("ignore:You should not use the 'timeout' argument")  # the client on a TestClient
 def test_a_timeline_job_reports_progress_per_time_and_serves_its_files(live_fast):
     job = live_fast.post("/v1/jobs", json=_doc()).json()
     seen = set()
@@ -69,6 +70,14 @@ def test_a_timeline_job_reports_progress_per_time_and_serves_its_files(live_fast
     assert nc.status_code == 200 and nc.content[:3] == b"CDF"
     svg = live_fast.get(files["timeline.svg"])
     assert svg.status_code == 200 and svg.headers["content-type"].startswith("image/svg+xml")
+    # the Python client: the job's Result carries the timeline views, the job its files
+    from owcsim.clients.client import Client
+
+    client_job = Client("http://testserver", http=live_fast).job(job["id"])
+    served = client_job.result()
+    assert served.timeline == served.model_validate(result).timeline
+    assert list(served.timeline_dataframe()["dc_gain"]) == link["dc_gain"]
+    assert client_job.timeline_file("timeline.nc") == nc.content
 
 
 def test_a_job_without_timeline_has_no_timeline_files(live):
