@@ -3,8 +3,8 @@
 INDEPENDENT: frame f is its own run of the scene with the frame as its static medium (a `GridMediumSpec`
 of the frame's cells, so a frame equals the same grid given as a static medium, bit for bit), every run
 with the document's seed: common random numbers, so the frame-to-frame changes are smooth and the error of
-a difference is small. Automatic settings ("auto" K, S, window) are resolved once, on the frame of the
-largest total extinction, and every frame runs with them (the same plan, the same random streams).
+a difference is small. Automatic settings ("auto" K, S, window) are resolved once, by running the frame of the
+largest total extinction first, and every frame runs with them (the same plan, the same random streams).
 Each run keeps its path groups' H0 estimates (engine/tally/reliability.py `group_means`, the groups
 lighting's jackknife uses): group g holds the same sample indices in every frame, so the spread of the
 groups' differences gives the error of a difference between frames (engine/results/timeline.py).
@@ -88,15 +88,32 @@ def _check(spec: SceneSpec, frames: MediumFrames, frame_of_receiver: IntArray | 
         raise SceneError("frame_of_receiver: every frame needs the same number (>= 1) of receivers")
 
 
-def _resolved(spec: SceneSpec, frames: MediumFrames, frame_of_receiver, base_dir, executor) -> SceneSpec:
-    """The document with explicit settings: "auto" resolved once on the frame of the largest total extinction."""
+@dataclass
+class _Run:
+    """One frame's run: its result and its finished job (the tallies' path groups)."""
+
+    result: SimulationResultPublic
+    finished: FinishedJob
+
+
+def _run(spec: SceneSpec, base_dir, executor: Executor, should_stop) -> _Run:
+    finished: list[FinishedJob] = []
+    result = simulate(spec, base_dir=base_dir, executor=executor, should_stop=should_stop, on_finished=finished.append)
+    return _Run(result, finished[0])
+
+
+def _resolved(
+    spec: SceneSpec, frames: MediumFrames, frame_of_receiver, base_dir, executor, should_stop
+) -> tuple[SceneSpec, dict[int, _Run]]:
+    """The document with explicit settings: "auto" resolved once, by running the frame of the largest total
+    extinction (kept: its main run is the run of the resolved document, the same bits)."""
     if spec.simulation.is_resolved:
-        return spec
+        return spec, {}
     heavy = int(np.argmax(frames.sigma_t.reshape(frames.n_frames, -1).sum(axis=1)))
-    seen: list[FinishedJob] = []
-    pilot = frame_spec(spec, frames, heavy, _receivers_of(frame_of_receiver, heavy))
-    simulate(pilot, base_dir=base_dir, executor=executor, on_finished=seen.append)
-    return spec.model_copy(update={"simulation": seen[0].spec.simulation})
+    run = _run(
+        frame_spec(spec, frames, heavy, _receivers_of(frame_of_receiver, heavy)), base_dir, executor, should_stop
+    )
+    return spec.model_copy(update={"simulation": run.finished.spec.simulation}), {heavy: run}
 
 
 def simulate_frames(
@@ -121,19 +138,13 @@ def simulate_frames(
     results: list[SimulationResultPublic] = []
     groups: list[tuple[FloatArray, FloatArray]] = []
     try:
-        resolved = _resolved(spec, frames, for_rx, base_dir, executor)
+        resolved, done = _resolved(spec, frames, for_rx, base_dir, executor, should_stop)
         for f in range(frames.n_frames):  # one run per frame: a loop over frames, each a vectorized run
-            finished: list[FinishedJob] = []
-            result = simulate(
-                frame_spec(resolved, frames, f, _receivers_of(for_rx, f)),
-                base_dir=base_dir,
-                executor=executor,
-                should_stop=should_stop,
-                on_finished=finished.append,
-            )
-            means, counts = reliability.group_means(finished[0].accs.values())
-            groups.append(((means + finished[0].los.gain[None, :]).T, counts.T))
-            results.append(result)
+            keep = _receivers_of(for_rx, f)
+            run = done.pop(f, None) or _run(frame_spec(resolved, frames, f, keep), base_dir, executor, should_stop)
+            means, counts = reliability.group_means(run.finished.accs.values())
+            groups.append(((means + run.finished.los.gain[None, :]).T, counts.T))
+            results.append(run.result)
             if progress is not None:
                 progress(f + 1, frames.n_frames)
             if should_stop is not None and should_stop():

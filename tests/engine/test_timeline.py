@@ -319,3 +319,18 @@ def _inline(sp):
     from owcsim.engine.media.frame_sources import frames_from_spec
 
     return frames_from_spec(sp.timeline.frames)
+
+
+def test_auto_settings_are_resolved_once_on_the_heaviest_frame():
+    doc = room_doc()
+    for key in ("algorithm", "max_reflections", "t_max_s", "paths"):
+        doc["simulation"].pop(key)
+    doc["simulation"]["target_rel_error"] = 0.05
+    sp = spec(doc)
+    frames = _random_frames(2)
+    frames = MediumFrames(frames.times, frames.lo, frames.hi, frames.sigma_a * [[[[0.5]]], [[[2.0]]]], frames.sigma_s)
+    out = simulate_frames(sp, frames)
+    resolved = out.results[0].scene.simulation  # frame 0 ran with the settings frame 1 (heavier) chose
+    assert resolved.is_resolved and not out.results[1].scene.simulation.is_resolved
+    again = simulate(sp.model_copy(update={"simulation": resolved, "medium": frame_medium(frames, 1)}))
+    assert _links(again) == _links(out.results[1])  # the heavy frame's auto run is the resolved run, bit for bit
