@@ -128,8 +128,9 @@ class TimelineSpec(SpecModel):
             raise ValueError("`times_s` must be strictly increasing [s]")
         if self.frames is None and self.times_s is None:
             raise ValueError("without `frames`, give the evaluation times `times_s` [s]")
-        if self.frames is not None and self.times_s is not None:
-            t0, t1 = self.frames.times[0], self.frames.times[-1]
+        frame_times = getattr(self.frames, "times", None)  # in the document (inline); file kinds: checked when read
+        if frame_times and self.times_s is not None:
+            t0, t1 = frame_times[0], frame_times[-1]
             out = [t for t in self.times_s if t < t0 or t > t1]
             if out:
                 raise ValueError(
@@ -142,13 +143,6 @@ class TimelineSpec(SpecModel):
         if len(set(devices)) != len(devices):
             raise ValueError("`trajectories`: a device has two trajectories")
         return self
-
-    def times(self) -> list[float]:
-        """The evaluation times [s]."""
-        if self.times_s is not None:
-            return list(self.times_s)
-        assert self.frames is not None
-        return list(self.frames.times)
 
 
 def check_timeline(scene: Any) -> None:

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from owcsim.engine.core.arrays import FloatArray, IntArray
+from owcsim.engine.core.errors import SceneError
 from owcsim.engine.media.frame_sources import frames_from_spec
 from owcsim.engine.media.frames import MediumFrames
 from owcsim.engine.results.job import FinishedJob
@@ -41,7 +42,11 @@ def frames_at(frames: MediumFrames, times: FloatArray) -> MediumFrames:
     """The medium at `times` [s] (within the frames' times): linear interpolation in time, cell by cell."""
     t = np.asarray(times, np.float64)
     if t.min() < frames.times[0] or t.max() > frames.times[-1]:
-        raise ValueError(f"times outside the frames' {frames.times[0]:g}..{frames.times[-1]:g} s")
+        out = t[(t < frames.times[0]) | (t > frames.times[-1])]
+        raise SceneError(
+            f"timeline.times_s {out[:5].tolist()} lie outside the frames' times {frames.times[0]:g}.."
+            f"{frames.times[-1]:g} s: the medium is known only between the first and the last frame"
+        )
     if frames.n_frames == 1:
         i, w = np.zeros(len(t), np.int64), np.zeros(len(t))
     else:
@@ -142,11 +147,14 @@ def run_timeline(
     tl = spec.timeline
     assert tl is not None, "run_timeline needs a document with a `timeline`"
     t0 = time.perf_counter()
-    times = np.asarray(tl.times(), np.float64)
+    read = frames_from_spec(tl.frames, base_dir) if tl.frames is not None else None
+    given = tl.times_s if tl.times_s is not None else (read.times if read is not None else None)
+    assert given is not None, "the schema asks for times_s without frames"
+    times = np.asarray(given, np.float64)
     expanded, frame_of_rx, base = expand_receivers(spec, times)
     notes = ["links, receivers and maps of this result are those of the first time; `timeline` holds every time"]
-    if tl.frames is not None:
-        frames = frames_at(frames_from_spec(tl.frames, base_dir), times)
+    if read is not None:
+        frames = frames_at(read, times)
 
         def per_frame(done: int, total: int) -> None:
             if progress is not None:

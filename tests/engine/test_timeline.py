@@ -170,6 +170,10 @@ def test_frames_interpolated_linearly_in_time():
     assert np.array_equal(mid.sigma_a[0], frames.sigma_a[0]) and np.array_equal(mid.sigma_a[3], frames.sigma_a[2])
     assert np.array_equal(mid.sigma_s[2], frames.sigma_s[1])
     np.testing.assert_allclose(mid.sigma_a[1], 0.75 * frames.sigma_a[0] + 0.25 * frames.sigma_a[1], rtol=1e-15)
+    from owcsim.engine.core.errors import SceneError
+
+    with pytest.raises(SceneError, match=r"\[25\.0\] lie outside the frames' times 0\.\.20 s"):
+        frames_at(frames, [0.0, 25.0])  # frames from files: their times are known only once read
 
 
 def test_waypoints_at_speed_by_hand():
