@@ -32,6 +32,8 @@ def drawn(tl: TimelineResultPublic) -> list[TimelineLinkPublic]:
     sees), else every link; at most MAX_LINKS."""
     channels = [k for k in tl.links if k.kind == "channel"]
     return (channels or tl.links)[:MAX_LINKS]
+
+
 _W, _H = 820, 300
 _L, _R, _T, _B = 84, 20, 34, 46
 
