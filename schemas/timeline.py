@@ -17,7 +17,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from .base import Direction, Point, SpecModel
-from .frames import MAX_FRAMES, FramesSpec
+from .frames import MAX_FRAMES, FramesReportPublic, FramesSpec
 
 #: Most evaluation times and trajectory table rows.
 MAX_TIMES = MAX_FRAMES
@@ -230,6 +230,9 @@ class TimelineResultPublic(_Public):
     times_s: list[float] = Field(description="evaluation times [s]")
     method: str = Field(description="how the frames ran: independent or reweighted")
     frames_source: str | None = Field(None, description="where the frames came from and how they became sigma")
+    frames_report: FramesReportPublic | None = Field(
+        None, description="the frames' source, file, quantity, K_m, wavelength factor, albedo, grid and mapping"
+    )
     medium_in_time: str = Field(description="how the medium at a time is made from the frames")
     outage: OutageSpec | None = None
     links: list[TimelineLinkPublic]

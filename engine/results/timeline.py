@@ -22,6 +22,7 @@ import numpy as np
 
 from owcsim.engine.core.arrays import FloatArray
 from owcsim.engine.results.link_budget import LinkBudget, ber_ook, snr
+from owcsim.schemas.frames import FramesReportPublic
 from owcsim.schemas.results import ChannelPublic, LinkPublic
 from owcsim.schemas.timeline import (
     OutageIntervalPublic,
@@ -165,6 +166,7 @@ def build_timeline(
     method: str,
     frames_source: str | None,
     medium_in_time: str,
+    frames_report: FramesReportPublic | None = None,
     cir: bool = False,
     notes: list[str] | None = None,
 ) -> TimelineResultPublic:
@@ -173,6 +175,7 @@ def build_timeline(
         times_s=[float(t) for t in times],
         method=method,
         frames_source=frames_source,
+        frames_report=frames_report,
         medium_in_time=medium_in_time,
         outage=outage,
         links=[timeline_link(times, s, outage, budget, cir) for s in series],

@@ -58,7 +58,9 @@ def frames_at(frames: MediumFrames, times: FloatArray) -> MediumFrames:
     def mix(x: FloatArray) -> FloatArray:
         return (1.0 - wb) * x[i] + wb * x[j]
 
-    return MediumFrames(t, frames.lo, frames.hi, mix(frames.sigma_a), mix(frames.sigma_s), frames.phase, frames.source)
+    return MediumFrames(
+        t, frames.lo, frames.hi, mix(frames.sigma_a), mix(frames.sigma_s), frames.phase, frames.source, frames.report
+    )
 
 
 def expand_receivers(spec: SceneSpec, times: FloatArray) -> tuple[SceneSpec, IntArray, list[tuple[str, str | None]]]:
@@ -175,7 +177,8 @@ def run_timeline(
         done = len(results)
         assert outcome.dc_gain_groups is not None and outcome.group_paths is not None
         groups = [(outcome.dc_gain_groups[i], outcome.group_paths[i]) for i in range(done)]
-        method_name, source = outcome.method.value, frames.source
+        method_name, report = outcome.method.value, read.frames_report()
+        source = report.text()
     else:
         seen: list[FinishedJob] = []
         one = simulate(
@@ -188,7 +191,7 @@ def run_timeline(
         )
         done = len(times)
         results, groups = [one] * done, [_groups(seen[0])] * done
-        method_name, source = "one_run", None
+        method_name, source, report = "one_run", None, None
         notes.append("the medium does not change: one run traced every time's receivers together")
     if done < len(times):
         notes.append(f"stopped after {done} of {len(times)} times: the timeline holds those")
@@ -201,6 +204,7 @@ def run_timeline(
         budget=budget,
         method=method_name,
         frames_source=source,
+        frames_report=report,
         medium_in_time=MEDIUM_IN_TIME if tl.frames is not None else "the document's static medium (no frames)",
         cir=tl.cir,
         notes=notes,
