@@ -1,0 +1,133 @@
+"""Issue 25, items 3, 4, 5, 10, 11, 13: faults of the disk and the store, slow and greedy clients.
+
+Each test fails on the service before the change (the report of the change says how it was checked).
+Fast ones inject the fault (SQLite's "database or disk is full") in-process; the ones marked slow use
+a real `owcsim serve`, a small tmpfs (root only, skipped otherwise) and raw sockets on loopback.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import multiprocessing as mp
+import os
+import shutil
+import signal
+import socket
+import sqlite3
+import subprocess
+import threading
+import time
+
+import httpx
+import pytest
+
+from owcsim.schemas import SceneSpec
+from owcsim.server.store import JobStore, StoreError
+from owcsim.server.worker import WorkerLimits, run_job
+
+from .helpers import ServerProcess, app_client, long_doc, quick_doc, wait_for
+
+DISK_FULL = "database or disk is full"
+
+
+def thread_cpu_s(tid: int) -> float:
+    """CPU time (user + system) of one thread of this process [s] (/proc, clock-tick resolution)."""
+    with open(f"/proc/self/task/{tid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def process_cpu_s(pid: int) -> float:
+    """CPU time (user + system, all threads) of a process [s]."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _fail_while(monkeypatch, event: threading.Event, *names: str) -> None:
+    """JobStore methods `names` raise SQLite's disk-full error while `event` is set."""
+    for name in names:
+        real = getattr(JobStore, name)
+
+        def patched(self, *args, _real=real, **kwargs):
+            if event.is_set():
+                raise sqlite3.OperationalError(DISK_FULL)
+            return _real(self, *args, **kwargs)
+
+        monkeypatch.setattr(JobStore, name, patched)
+
+
+# -- 3. disk full while jobs run ------------------------------------------------------------------------
+
+
+def test_3_disk_full_a_dead_worker_does_not_spin_the_dispatcher(tmp_path, monkeypatch):
+    """A worker dies while the store cannot be written: settling its run fails. The dispatcher must back
+    off (the old one waited on the dead worker's sentinel again at once: 50-60 % of a core), health must
+    say 503 with the reason, and the run is settled once there is space."""
+    full = threading.Event()
+    _fail_while(monkeypatch, full, "settle", "next_queued", "claim_next")
+    with app_client(tmp_path, run_jobs=True) as c:
+        job = c.post("/v1/jobs", json=long_doc()).json()
+        wait_for(c, job["id"], "running")
+        dispatcher = c.app.state.dispatcher
+        deadline = time.monotonic() + 10
+        while job["id"] not in dispatcher.running():
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        full.set()
+        os.kill(dispatcher.running()[job["id"]], signal.SIGKILL)
+        deadline = time.monotonic() + 5
+        while (h := c.get("/v1/health")).status_code == 200:
+            assert time.monotonic() < deadline, "health still 200 with the disk full"
+            time.sleep(0.05)
+        assert h.status_code == 503 and "disk full" in h.json()["reason"] and h.headers["retry-after"]
+        tid = dispatcher._thread.native_id
+        cpu0, t0 = thread_cpu_s(tid), time.monotonic()
+        time.sleep(2.0)
+        share = (thread_cpu_s(tid) - cpu0) / (time.monotonic() - t0)
+        assert share < 0.10, f"the dispatcher used {100 * share:.0f} % of a core while the disk was full"
+        store = c.app.state.store
+        assert store.get(job["id"]).crashes == 0  # not settled yet
+        full.clear()
+        deadline = time.monotonic() + 15
+        while store.get(job["id"]).crashes != 1:  # settled: retried after the worker's death
+            assert time.monotonic() < deadline, "the dead run was not settled once there was space"
+            time.sleep(0.1)
+        assert c.get("/v1/health").status_code == 200 or time.sleep(1) or c.get("/v1/health").status_code == 200
+        c.post(f"/v1/jobs/{job['id']}/cancel")
+
+
+def test_3_disk_full_a_worker_waits_to_store_its_outcome(tmp_path, monkeypatch, caplog):
+    """The worker's progress and outcome writes fail with a full disk: the run goes on, its outcome is
+    stored when there is space, one warning each and no traceback (the old worker raised out of run_job)."""
+    store = JobStore(tmp_path / "jobs.sqlite")
+    scene = SceneSpec.model_validate(quick_doc(paths=4096)).model_dump_json()
+    store.submit(owner="o", scene_json=scene, name=None, request_hash="h", idempotency_key=None, max_queued=10)
+    job_id, token = store.claim_next()
+    left = {"progress": 2, "finish": 3}
+    for name in left:
+        real = getattr(JobStore, name)
+
+        def failing(self, *args, _real=real, _name=name, **kwargs):
+            if left[_name]:
+                left[_name] -= 1
+                raise sqlite3.OperationalError(DISK_FULL)
+            return _real(self, *args, **kwargs)
+
+        monkeypatch.setattr(JobStore, name, failing)
+    lifeline_r, lifeline_w = mp.Pipe(duplex=False)
+    sigint = signal.getsignal(signal.SIGINT)
+    caplog.set_level(logging.WARNING)
+    try:
+        run_job(str(store.path), job_id, token, WorkerLimits(1, 60.0, 1e-6), lifeline_r)
+    finally:
+        signal.signal(signal.SIGINT, sigint)
+        lifeline_w.close()
+    assert left == {"progress": 0, "finish": 0}
+    row = store.get(job_id)
+    assert row.status == "succeeded" and row.has_result, row
+    mine = [r for r in caplog.records if r.name.startswith("owcsim")]
+    assert not any(r.exc_info for r in mine), [r.getMessage() for r in mine if r.exc_info]
+    assert sum("disk is full" in r.getMessage() for r in mine) == 2, [r.getMessage() for r in mine]
+    store.close()
