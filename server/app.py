@@ -17,7 +17,7 @@ from starlette.concurrency import run_in_threadpool
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.errors import PROBLEM_MEDIA_TYPE
 
-from . import problems
+from . import faults, problems
 from .dispatcher import Dispatcher, start_forkserver
 from .limits import RequestLimits
 from .preflight import Preflighter
@@ -88,6 +88,7 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
     app.state.preflighter = preflighter
     app.state.heavy = app.state.submissions = None  # set at startup (they belong to the running event loop)
     problems.install(app)
+    faults.install(app)  # a store overwritten or damaged while running: 503, not 500
     app.add_middleware(RequestLimits, body_timeout_s=settings.body_timeout_s)
     for module in (jobs, results, service, docs):
         app.include_router(module.router, prefix=API_PREFIX)

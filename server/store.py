@@ -73,6 +73,7 @@ class JobStore:
         self.server = server
         self._store_fd: int | None = None  # the server's own descriptor of the store file (its identity lock)
         self._identity: tuple[int, int] | None = None  # (device, inode) of the file the server locked
+        self.broken: str | None = None  # why `check` found the file unusable (every read and write refused)
         created = False
         if server:
             created = self._check_file()
@@ -163,27 +164,33 @@ class JobStore:
         return False
 
     def check(self) -> None:
-        """The server's store is still the file it locked, and still an SQLite file (StoreError if not):
-        two system calls, made on every pass of the dispatcher."""
+        """The server's store is still the file it locked, and still an SQLite file: two system calls, made
+        on every pass of the dispatcher. If not, StoreError, and every read and write of this store is refused
+        (sqlite3.DatabaseError, answered 503) until the file is back."""
         if self._store_fd is None:
             return
+        self.broken = self._whats_wrong()
+        if self.broken is not None:
+            raise StoreError(self.broken)
+
+    def _whats_wrong(self) -> str | None:
+        assert self._store_fd is not None
         where = f"job store {str(self.path)!r}"
         try:
             st = os.stat(self.path)
         except OSError as exc:
-            raise StoreError(
-                f"{where} is gone ({exc.strerror}) while the server runs: put it back and restart the server"
-            ) from None
+            return f"{where} is gone ({exc.strerror}) while the server runs: put it back and restart the server"
         if (st.st_dev, st.st_ino) != self._identity:
-            raise StoreError(
+            return (
                 f"{where} was replaced by another file while the server runs: put the old one back, or restart "
                 "the server to use the new one"
             )
         if os.pread(self._store_fd, 16, 0) != SQLITE_MAGIC:
-            raise StoreError(
+            return (
                 f"{where} was overwritten while the server runs (it is no SQLite file any more): restore it "
                 "from a backup and restart the server"
             )
+        return None
 
     def _check_integrity(self, con: sqlite3.Connection) -> None:
         rows = [r[0] for r in con.execute("PRAGMA quick_check").fetchall()]
@@ -194,6 +201,8 @@ class JobStore:
             )
 
     def _con(self) -> sqlite3.Connection:
+        if self.broken is not None:  # found replaced or overwritten by `check`: no answer from stale pages
+            raise sqlite3.DatabaseError(self.broken)
         con = getattr(self._local, "con", None)
         if con is None:
             con = sqlite3.connect(self.path, timeout=30.0, isolation_level=None, check_same_thread=False)

@@ -131,3 +131,64 @@ def test_3_disk_full_a_worker_waits_to_store_its_outcome(tmp_path, monkeypatch, 
     assert not any(r.exc_info for r in mine), [r.getMessage() for r in mine if r.exc_info]
     assert sum("disk is full" in r.getMessage() for r in mine) == 2, [r.getMessage() for r in mine]
     store.close()
+
+
+# -- 10. one server per store file, whatever its name ---------------------------------------------------
+
+
+def test_10_a_second_server_through_a_hard_link_refuses_to_start(tmp_path):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    with app_client(tmp_path / "a"):
+        os.link(tmp_path / "a" / "jobs.sqlite", tmp_path / "b" / "other.sqlite")
+        with pytest.raises(StoreError, match="in use by another owcsim server"):
+            JobStore(tmp_path / "b" / "other.sqlite", server=True)
+    JobStore(tmp_path / "b" / "other.sqlite", server=True).close()  # free once the first has stopped
+
+
+# -- 11. a damaged store: clear errors, at start and while running ------------------------------------
+
+
+def test_11_a_folder_in_the_stores_place_is_a_clear_error(tmp_path, capsys):
+    from owcsim.cli import main
+
+    (tmp_path / "jobs.sqlite").mkdir()
+    with pytest.raises(StoreError, match="is a folder"):
+        JobStore(tmp_path / "jobs.sqlite", server=True)
+    assert main(["serve", "--db", str(tmp_path / "jobs.sqlite"), "--port", "9"]) == 2
+    err = capsys.readouterr().err
+    assert "is a folder" in err and "Traceback" not in err
+
+
+def test_11_an_empty_file_is_not_silently_an_empty_store(tmp_path, caplog):
+    (tmp_path / "jobs.sqlite").write_bytes(b"")
+    with pytest.raises(StoreError, match=r"empty file \(0 bytes\)"):
+        JobStore(tmp_path / "jobs.sqlite", server=True)
+    assert (tmp_path / "jobs.sqlite").stat().st_size == 0  # left as it was
+    caplog.set_level(logging.WARNING)
+    JobStore(tmp_path / "new.sqlite", server=True).close()  # a new store is started, and said so
+    assert any("did not exist: started an empty one" in r.getMessage() for r in caplog.records)
+
+
+@pytest.mark.parametrize("how", ["overwritten", "replaced"])
+def test_11_a_store_overwritten_while_running_is_503_and_health_says_so(tmp_path, how):
+    with app_client(tmp_path, run_jobs=True) as c:
+        job = c.post("/v1/jobs", json=quick_doc()).json()
+        wait_for(c, job["id"], "succeeded")
+        assert c.get("/v1/health").status_code == 200
+        path = tmp_path / "jobs.sqlite"
+        if how == "overwritten":  # e.g. a restore copied over the live file: the same inode, other bytes
+            with open(path, "r+b") as f:
+                f.write(b"\0" * path.stat().st_size)
+        else:  # another file moved into its place
+            (tmp_path / "other").write_bytes(b"not a store " * 1000)
+            os.replace(tmp_path / "other", path)
+        deadline = time.monotonic() + 5
+        while (h := c.get("/v1/health")).status_code == 200:
+            assert time.monotonic() < deadline, "health still 200"
+            time.sleep(0.05)
+        assert h.status_code == 503 and how in h.json()["reason"], h.text
+        for url in ("/v1/jobs", f"/v1/jobs/{job['id']}", f"/v1/jobs/{job['id']}/result"):
+            r = c.get(url)
+            assert r.status_code == 503 and r.json()["type"].endswith("store-damaged"), (url, r.text)
+            assert how in r.json()["detail"] and r.headers["retry-after"]
