@@ -7,15 +7,12 @@ a real `owcsim serve`, a small tmpfs (root only, skipped otherwise) and raw sock
 
 from __future__ import annotations
 
-import json
 import logging
 import multiprocessing as mp
 import os
-import shutil
 import signal
 import socket
 import sqlite3
-import subprocess
 import threading
 import time
 
@@ -192,3 +189,131 @@ def test_11_a_store_overwritten_while_running_is_503_and_health_says_so(tmp_path
             r = c.get(url)
             assert r.status_code == 503 and r.json()["type"].endswith("store-damaged"), (url, r.text)
             assert how in r.json()["detail"] and r.headers["retry-after"]
+
+
+# -- 4, 5, 13. slow and greedy clients (a real server, raw sockets from other loopback addresses) ------
+
+
+@pytest.fixture(scope="module")
+def srv(tmp_path_factory):
+    """Default connection limits (200 connections, 50 per client address, 30 s for a body, 10 s for headers);
+    bodies of at most 1 MiB, 1.5 MiB of them in memory at once."""
+    tmp = tmp_path_factory.mktemp("faults")
+    with ServerProcess(tmp / "jobs.sqlite", max_body_bytes=1 << 20, body_memory_bytes=3 << 19) as s:
+        yield s
+
+
+def _connect_from(srv, address: str) -> socket.socket:
+    """A connection to the server from another loopback address (another client, as the server sees it)."""
+    return socket.create_connection(("127.0.0.1", srv.port), timeout=10, source_address=(address, 0))
+
+
+def _answer(sock: socket.socket, limit_s: float = 5.0) -> bytes:
+    sock.settimeout(limit_s)
+    out = b""
+    try:
+        while chunk := sock.recv(65536):
+            out += chunk
+            if b"\r\n\r\n" in out and b"Content-Length" not in out.split(b"\r\n\r\n")[0]:
+                break
+            head, _, body = out.partition(b"\r\n\r\n")
+            for line in head.split(b"\r\n"):
+                if line.lower().startswith(b"content-length:") and len(body) >= int(line.split(b":")[1]):
+                    return out
+    except (TimeoutError, ConnectionResetError):
+        pass
+    return out
+
+
+def _post_head(length: int) -> bytes:
+    return (
+        b"POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+        b"Content-Length: " + str(length).encode() + b"\r\n\r\n"
+    )
+
+
+def test_4_slow_bodies_do_not_hold_up_a_normal_submission(srv):
+    """8 clients send their bodies 1 byte at a time: a normal submission is answered at once (the old
+    service gave each slow body one of its 6 submission slots: it waited until their 30 s deadline)."""
+    slow = [_connect_from(srv, "127.0.0.2") for _ in range(8)]
+    stop = threading.Event()
+
+    def trickle():
+        while not stop.is_set():
+            for s in slow:
+                try:
+                    s.sendall(b" ")
+                except OSError:
+                    pass
+            stop.wait(0.5)
+
+    try:
+        for s in slow:
+            s.sendall(_post_head(10_000))
+        feeder = threading.Thread(target=trickle, daemon=True)
+        feeder.start()
+        time.sleep(1.0)  # every slow body has started
+        t0 = time.monotonic()
+        r = httpx.post(f"{srv.url}/v1/jobs", json=quick_doc(seed=4), timeout=60)
+        took = time.monotonic() - t0
+        assert r.status_code == 202, r.text
+        assert took < 5.0, f"a normal submission took {took:.1f} s behind 8 slow bodies"
+    finally:
+        stop.set()
+        for s in slow:
+            s.close()
+
+
+def test_4_bodies_in_memory_are_bounded_and_the_one_past_it_gets_503(srv):
+    """Two bodies of 0.9 MiB arrive (1.5 MiB may be held): the second is refused 503 with Retry-After, and
+    a small submission still gets through beside the first."""
+    first, second = _connect_from(srv, "127.0.0.5"), _connect_from(srv, "127.0.0.6")
+    part = b" " * 900_000
+    try:
+        first.sendall(_post_head(1_000_000) + part)
+        time.sleep(0.5)
+        second.sendall(_post_head(1_000_000))
+        try:
+            second.sendall(part)
+        except OSError:
+            pass
+        answer = _answer(second)
+        assert answer.startswith(b"HTTP/1.1 503"), answer[:300]
+        assert b"retry-after" in answer.lower() and b"body_memory_bytes" in answer, answer[:600]
+        r = httpx.post(f"{srv.url}/v1/jobs", json=quick_doc(seed=5), timeout=30)
+        assert r.status_code == 202, r.text
+    finally:
+        first.close()
+        second.close()
+
+
+def test_5_one_client_address_cannot_fill_the_connection_cap(srv):
+    """400 slow-header connections from one address: beyond 50 they get 503 + Retry-After at once, and
+    health checks from another address are all answered 200 (the old service: 118 of 143 got 503)."""
+    socks = [_connect_from(srv, "127.0.0.3") for _ in range(400)]
+    try:
+        for s in socks:
+            try:
+                s.sendall(b"GET /v1/health HTTP/1.1\r\nHost: x\r\n")  # a head that never ends
+            except OSError:
+                pass
+        time.sleep(0.5)
+        codes = []
+        for _ in range(50):
+            with httpx.Client(timeout=10) as h:  # a new connection each time, as a load balancer's probe
+                codes.append(h.get(f"{srv.url}/v1/health").status_code)
+        assert codes == [200] * 50, {c: codes.count(c) for c in set(codes)}
+        refused = _answer(socks[-1], 3)
+        assert refused.startswith(b"HTTP/1.1 503") and b"retry-after: 1" in refused.lower(), refused[:300]
+        assert b"max_connections_per_client" in refused
+    finally:
+        for s in socks:
+            s.close()
+
+
+def test_13_a_request_head_over_64_kib_is_refused_even_when_it_arrives_at_once(srv):
+    for size, expected in ((70_000, b"HTTP/1.1 431"), (100_000, b"HTTP/1.1 431"), (60_000, b"HTTP/1.1 200")):
+        with _connect_from(srv, "127.0.0.4") as s:
+            s.sendall(b"GET /v1/health HTTP/1.1\r\nHost: x\r\nX-Big: " + b"a" * size + b"\r\n\r\n")
+            answer = _answer(s)
+        assert answer.startswith(expected), (size, answer[:200])
