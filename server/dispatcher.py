@@ -41,6 +41,9 @@ log = logging.getLogger("owcsim.server")
 
 TICK_S = 0.2
 
+#: Health says 503 "disk full" when the store's file system has less than this left [bytes].
+MIN_FREE_BYTES = 1 << 20
+
 
 @dataclass
 class _Run:
@@ -206,9 +209,12 @@ class Dispatcher:
                 self._reap()
                 self._fill()
                 self._counts, self._counts_at = self.store.counts(), time.monotonic()
-                if self._error is not None:
+                low = self._disk_low()  # workers waiting to store an outcome write nothing the loop would see
+                if self._error is not None and low is None:
                     log.warning("dispatcher: the job store works again")
-                self._error, pause = None, TICK_S
+                if low is not None and self._error is None:
+                    log.error("dispatcher: %s", low)
+                self._error, pause = low, TICK_S
             except Exception as exc:  # e.g. disk full, the store busy for too long: log, back off
                 self._error = ("disk full" if is_disk_full(exc) else "store error") + f": {exc}"
                 now = time.monotonic()
@@ -224,6 +230,17 @@ class Dispatcher:
             ready = wait(sentinels + [self._wake_r], pause)
             if self._wake_r in ready:
                 os.read(self._wake_r, 4096)
+
+    def _disk_low(self) -> str | None:
+        """"disk full: ..." when the store's file system has less than MIN_FREE_BYTES left, else None."""
+        try:
+            st = os.statvfs(self.store.path.parent)
+        except OSError:
+            return None
+        free = st.f_bavail * st.f_frsize
+        if free >= MIN_FREE_BYTES:
+            return None
+        return f"disk full: {free / 2**20:.2f} MiB free on the job store's file system (jobs wait for space)"
 
     def _fill(self) -> None:
         cap = self.settings.job_memory_cap

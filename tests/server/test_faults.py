@@ -10,9 +10,11 @@ from __future__ import annotations
 import logging
 import multiprocessing as mp
 import os
+import shutil
 import signal
 import socket
 import sqlite3
+import subprocess
 import threading
 import time
 
@@ -128,6 +130,68 @@ def test_3_disk_full_a_worker_waits_to_store_its_outcome(tmp_path, monkeypatch, 
     assert not any(r.exc_info for r in mine), [r.getMessage() for r in mine if r.exc_info]
     assert sum("disk is full" in r.getMessage() for r in mine) == 2, [r.getMessage() for r in mine]
     store.close()
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A tmpfs of 8 MiB (root and mount(8) needed: skipped otherwise), unmounted afterwards."""
+    mnt = tmp_path / "small"
+    mnt.mkdir()
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        pytest.skip("a tmpfs needs root")
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=8m", "tmpfs", str(mnt)], capture_output=True)
+    if done.returncode != 0:
+        pytest.skip(f"mount refused: {done.stderr.decode().strip()}")
+    try:
+        yield mnt
+    finally:
+        subprocess.run(["umount", "-l", str(mnt)], check=False)
+
+
+def fill(directory) -> int:
+    """Write a file in `directory` until the disk is full; returns its size [bytes]."""
+    size = 0
+    with open(directory / "filler", "wb", buffering=0) as f:
+        try:
+            while True:
+                size += f.write(b"\0" * 65536)
+        except OSError:
+            pass
+    return size
+
+
+@pytest.mark.slow
+def test_3_a_really_full_disk_idle_503_and_jobs_finish_when_space_returns(tmp_path, small_disk):
+    """A real full disk (tmpfs): the server stays idle (< 10 % of a core), health is 503 with the reason,
+    submissions 507, no traceback in the log; every job succeeds once the space is back."""
+    log = tmp_path / "server.log"
+    with ServerProcess(small_disk / "jobs.sqlite", log=log, max_concurrent_jobs=1) as srv:
+        ids = [
+            httpx.post(f"{srv.url}/v1/jobs", json=quick_doc(paths=3_000_000, batch_size=4096, seed=i)).json()["id"]
+            for i in range(3)
+        ]
+        fill(small_disk)
+        deadline = time.monotonic() + 10
+        while (h := httpx.get(f"{srv.url}/v1/health")).status_code == 200:
+            assert time.monotonic() < deadline, "health still 200 with the disk full"
+            time.sleep(0.1)
+        assert h.status_code == 503 and "disk full" in h.json()["reason"], h.text
+        r = httpx.post(f"{srv.url}/v1/jobs", json=quick_doc(seed=99))
+        assert r.status_code in (503, 507) and r.headers["retry-after"], r.text
+        time.sleep(3)  # the running job has ended meanwhile and waits to store its outcome
+        cpu0, t0 = process_cpu_s(srv.proc.pid), time.monotonic()
+        time.sleep(3)
+        share = (process_cpu_s(srv.proc.pid) - cpu0) / (time.monotonic() - t0)
+        assert share < 0.10, f"the server used {100 * share:.0f} % of a core while the disk was full"
+        (small_disk / "filler").unlink()
+        deadline = time.monotonic() + 90
+        for job_id in ids:
+            while (job := httpx.get(f"{srv.url}/v1/jobs/{job_id}").json())["status"] != "succeeded":
+                assert job["status"] in ("queued", "running") and time.monotonic() < deadline, job
+                time.sleep(0.2)
+        assert httpx.get(f"{srv.url}/v1/health").status_code == 200
+    text = log.read_text()
+    assert "Traceback" not in text, text[text.index("Traceback") - 500 :][:3000]
 
 
 # -- 10. one server per store file, whatever its name ---------------------------------------------------
