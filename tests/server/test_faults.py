@@ -25,7 +25,7 @@ from owcsim.schemas import SceneSpec
 from owcsim.server.store import JobStore, StoreError
 from owcsim.server.worker import WorkerLimits, run_job
 
-from .helpers import ServerProcess, app_client, long_doc, quick_doc, wait_for
+from .helpers import ROOT, ServerProcess, app_client, free_port, long_doc, quick_doc, wait_for
 
 DISK_FULL = "database or disk is full"
 
@@ -381,3 +381,92 @@ def test_13_a_request_head_over_64_kib_is_refused_even_when_it_arrives_at_once(s
             s.sendall(b"GET /v1/health HTTP/1.1\r\nHost: x\r\nX-Big: " + b"a" * size + b"\r\n\r\n")
             answer = _answer(s)
         assert answer.startswith(expected), (size, answer[:200])
+
+
+# -- 5. the reverse proxy in front of the service (docker/nginx/owcsim.conf) -------------------------------
+
+NGINX_CONF = ROOT / "docker" / "nginx" / "owcsim.conf"
+
+
+@pytest.fixture(scope="module")
+def proxied(tmp_path_factory):
+    """`owcsim serve` (its per-address cap off, as the configuration says) behind nginx running the
+    repository's configuration; skipped only where nginx is not installed."""
+    nginx = shutil.which("nginx") or next((p for p in ("/usr/sbin/nginx",) if os.path.exists(p)), None)
+    if nginx is None:
+        pytest.skip("nginx is not installed (apt-get install -y nginx)")
+    tmp = tmp_path_factory.mktemp("proxy")
+    with ServerProcess(tmp / "jobs.sqlite", max_connections_per_client=0) as srv:
+        port = free_port()
+        conf = NGINX_CONF.read_text()
+        assert "server 127.0.0.1:8000;" in conf and "listen 8080;" in conf
+        conf = conf.replace("server 127.0.0.1:8000;", f"server 127.0.0.1:{srv.port};")
+        (tmp / "owcsim.conf").write_text(conf.replace("listen 8080;", f"listen 127.0.0.1:{port};"))
+        temp = " ".join(f"{k}_temp_path {tmp / k};" for k in ("client_body", "proxy", "fastcgi", "uwsgi", "scgi"))
+        (tmp / "nginx.conf").write_text(
+            f"worker_processes 1; pid {tmp / 'nginx.pid'}; events {{ worker_connections 1024; }}\n"
+            f"http {{ access_log off; {temp} include {tmp / 'owcsim.conf'}; }}\n"
+        )
+        cmd = [nginx, "-p", str(tmp), "-e", str(tmp / "error.log"), "-c", str(tmp / "nginx.conf")]
+        proc = subprocess.Popen([*cmd, "-g", "daemon off; master_process off;"], stderr=subprocess.PIPE)
+        url = f"http://127.0.0.1:{port}"
+        try:
+            deadline = time.monotonic() + 10
+            while True:
+                assert proc.poll() is None, proc.stderr.read().decode()
+                try:
+                    httpx.get(f"{url}/v1/version", timeout=1)
+                    break
+                except httpx.TransportError:
+                    assert time.monotonic() < deadline, "nginx did not start"
+                    time.sleep(0.1)
+            yield url, port
+        finally:
+            proc.terminate()
+            proc.wait(10)
+
+
+def test_5_the_proxy_configuration_passes_requests_and_holds_its_limits(proxied):
+    url, port = proxied
+    assert httpx.get(f"{url}/v1/health").status_code == 200
+    r = httpx.post(f"{url}/v1/jobs", json=quick_doc(seed=7))
+    assert r.status_code == 202 and r.headers["location"].startswith("/v1/jobs/"), r.text
+    assert httpx.get(url + r.headers["location"]).json()["id"] == r.json()["id"]
+    # a body over client_max_body_size (owcsim's max_body_bytes): 413 from its Content-Length
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        s.sendall(_post_head(40 * 2**20))
+        assert _answer(s).startswith(b"HTTP/1.1 413")
+    # a header line over large_client_header_buffers (16 KiB): refused by nginx
+    r = httpx.get(f"{url}/v1/health", headers={"X-Big": "a" * 20_000})
+    assert r.status_code in (400, 431, 494), r.status_code
+    # slow bodies are buffered by nginx: a normal submission beside 8 of them is answered at once
+    slow = [_connect_from_port(port, "127.0.0.2") for _ in range(8)]
+    try:
+        for s in slow:
+            s.sendall(_post_head(10_000) + b" ")
+        time.sleep(0.5)
+        t0 = time.monotonic()
+        assert httpx.post(f"{url}/v1/jobs", json=quick_doc(seed=8), timeout=60).status_code == 202
+        assert time.monotonic() - t0 < 5.0
+    finally:
+        for s in slow:
+            s.close()
+    # limit_conn: 20 requests at once from one address (bodies still arriving); the 21st gets 503
+    held = [_connect_from_port(port, "127.0.0.3") for _ in range(20)]
+    try:
+        for s in held:
+            s.sendall(_post_head(10_000) + b" ")
+        time.sleep(0.5)
+        with _connect_from_port(port, "127.0.0.3") as s:
+            s.sendall(b"GET /v1/health HTTP/1.1\r\nHost: x\r\n\r\n")
+            assert _answer(s).startswith(b"HTTP/1.1 503")
+        with _connect_from_port(port, "127.0.0.4") as s:  # another address is not affected
+            s.sendall(b"GET /v1/health HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+            assert _answer(s).startswith(b"HTTP/1.1 200")
+    finally:
+        for s in held:
+            s.close()
+
+
+def _connect_from_port(port: int, address: str) -> socket.socket:
+    return socket.create_connection(("127.0.0.1", port), timeout=10, source_address=(address, 0))

@@ -119,7 +119,7 @@ def test_health_answers_while_60_clients_download_large_results(tmp_path):
     doc["receiver_grids"] = [
         {"id_prefix": "g", "origin": [0.5, 0.5, 0.0], "size": [4.0, 4.0], "spacing": 4.0 / 29, "area": 1e-4}
     ]
-    with ServerProcess(tmp_path / "jobs.sqlite", max_connections=500) as srv:
+    with ServerProcess(tmp_path / "jobs.sqlite", max_connections=500, max_connections_per_client=0) as srv:
         with Client(srv.url) as owc:
             job = owc.submit(doc)
             job.wait(timeout=120)
