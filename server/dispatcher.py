@@ -232,7 +232,7 @@ class Dispatcher:
                 os.read(self._wake_r, 4096)
 
     def _disk_low(self) -> str | None:
-        """"disk full: ..." when the store's file system has less than MIN_FREE_BYTES left, else None."""
+        """A reason ("disk full: ...") when the store's file system has less than MIN_FREE_BYTES left, else None."""
         try:
             st = os.statvfs(self.store.path.parent)
         except OSError:
