@@ -185,9 +185,12 @@ class Dispatcher:
                 self._wake_w = None
         if not self._runs:
             return
-        self.store.take_back_running(
-            "requeued: the server stopped while the job was running", self.settings.max_attempts
-        )
+        try:
+            self.store.take_back_running(
+                "requeued: the server stopped while the job was running", self.settings.max_attempts
+            )
+        except Exception as exc:  # disk full, store replaced: the workers are stopped all the same; the next
+            log.error("dispatcher: could not requeue the running jobs on stop: %s", exc)  # start requeues them
         for run in self._runs.values():
             run.lifeline.close()
         deadline = time.monotonic() + self.settings.cancel_grace_s
