@@ -273,17 +273,16 @@ def _connect_from(srv, address: str) -> socket.socket:
 
 
 def _answer(sock: socket.socket, limit_s: float = 5.0) -> bytes:
+    """One answer: its head, and its body when it says its length (else up to the end of the connection)."""
     sock.settimeout(limit_s)
     out = b""
     try:
         while chunk := sock.recv(65536):
             out += chunk
-            if b"\r\n\r\n" in out and b"Content-Length" not in out.split(b"\r\n\r\n")[0]:
+            head, blank, body = out.partition(b"\r\n\r\n")
+            lengths = [ln for ln in head.lower().split(b"\r\n") if ln.startswith(b"content-length:")]
+            if blank and lengths and len(body) >= int(lengths[0].split(b":")[1]):
                 break
-            head, _, body = out.partition(b"\r\n\r\n")
-            for line in head.split(b"\r\n"):
-                if line.lower().startswith(b"content-length:") and len(body) >= int(line.split(b":")[1]):
-                    return out
     except (TimeoutError, ConnectionResetError):
         pass
     return out
