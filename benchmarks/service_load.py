@@ -73,6 +73,7 @@ def run(args, root: Path, python: str, label: str) -> int:
         retry_after_s=1,
         max_queued_per_key=50,
         max_connections=500,
+        max_connections_per_client=0,  # every client is 127.0.0.1 here
     ) as srv:
         big = quick_doc(paths=1024, direction="forward", t_max_s=2e-7)
         big["receivers"] = []

@@ -17,7 +17,7 @@ from starlette.concurrency import run_in_threadpool
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.errors import PROBLEM_MEDIA_TYPE
 
-from . import problems
+from . import faults, problems
 from .dispatcher import Dispatcher, start_forkserver
 from .limits import RequestLimits
 from .preflight import Preflighter
@@ -56,8 +56,8 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
         # Heavy request work (validation, waiting for a pre-flight, drawing a plot) has its own threads,
         # so that health and status requests never queue behind it in the default pool.
         app.state.heavy = anyio.CapacityLimiter(settings.preflight_concurrency + 2)
-        # Submissions read and check their bodies a few at a time: at most this many x max_body_bytes in memory
-        # (the others wait, their bodies in the kernel's socket buffers, within body_timeout_s).
+        # Submissions check their bodies a few at a time, once the body has arrived (a slow sender holds no
+        # slot); the bodies held in memory meanwhile are bounded by app.state.bodies (body_memory_bytes).
         app.state.submissions = anyio.Semaphore(2 * settings.preflight_concurrency + 2)
         await run_in_threadpool(start_forkserver)  # pre-flights and workers start from it, engine imported
         if run_jobs:
@@ -87,7 +87,9 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
     app.state.settings, app.state.store, app.state.dispatcher, app.state.owners = settings, store, dispatcher, owners
     app.state.preflighter = preflighter
     app.state.heavy = app.state.submissions = None  # set at startup (they belong to the running event loop)
+    app.state.bodies = jobs.BodyBudget(settings.body_memory_cap, settings.retry_after_s)
     problems.install(app)
+    faults.install(app)  # a store overwritten or damaged while running: 503, not 500
     app.add_middleware(RequestLimits, body_timeout_s=settings.body_timeout_s)
     for module in (jobs, results, service, docs, timeline):
         app.include_router(module.router, prefix=API_PREFIX)

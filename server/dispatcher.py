@@ -16,7 +16,10 @@ threads is ever forked. The dispatcher also watches its workers:
   memory estimate fits in what the running jobs leave (it waits otherwise; smaller jobs
   behind it do not overtake it); each worker's address space is capped from its estimate;
 - a store error (disk full, a lock held too long) is logged at most once a minute and
-  retried with a growing pause (no busy loop); `state()` tells health about it.
+  retried with a growing pause (no busy loop: a dead worker whose run cannot be settled yet is
+  not waited on again, its run is settled on a later pass); `state()` tells health about it;
+- every pass also checks that the store file is still the one the server locked (`JobStore.check`):
+  a store replaced or overwritten while the server runs makes health 503 with the reason.
 """
 
 from __future__ import annotations
@@ -31,12 +34,15 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 
 from .settings import Settings
-from .store import JobStore, is_disk_full
+from .store import JobStore, StoreError, is_disk_full
 from .worker import WorkerLimits, run_job
 
 log = logging.getLogger("owcsim.server")
 
 TICK_S = 0.2
+
+#: Health says 503 "disk full" when the store's file system has less than this left [bytes].
+MIN_FREE_BYTES = 1 << 20
 
 
 @dataclass
@@ -50,6 +56,7 @@ class _Run:
     kill_reason: str | None = None
     progress: float = -1.0  # the last progress (elapsed_s) seen, and when it changed
     progress_seen: float = 0.0
+    exited: bool = False  # joined: its sentinel is not waited on any more (settle may wait for the store)
 
     def end(self) -> None:
         self.lifeline.close()
@@ -178,9 +185,12 @@ class Dispatcher:
                 self._wake_w = None
         if not self._runs:
             return
-        self.store.take_back_running(
-            "requeued: the server stopped while the job was running", self.settings.max_attempts
-        )
+        try:
+            self.store.take_back_running(
+                "requeued: the server stopped while the job was running", self.settings.max_attempts
+            )
+        except Exception as exc:  # disk full, store replaced: the workers are stopped all the same; the next
+            log.error("dispatcher: could not requeue the running jobs on stop: %s", exc)  # start requeues them
         for run in self._runs.values():
             run.lifeline.close()
         deadline = time.monotonic() + self.settings.cancel_grace_s
@@ -198,12 +208,16 @@ class Dispatcher:
         pause = TICK_S
         while not self._stop.is_set():
             try:
+                self.store.check()
                 self._reap()
                 self._fill()
                 self._counts, self._counts_at = self.store.counts(), time.monotonic()
-                if self._error is not None:
+                low = self._disk_low()  # workers waiting to store an outcome write nothing the loop would see
+                if self._error is not None and low is None:
                     log.warning("dispatcher: the job store works again")
-                self._error, pause = None, TICK_S
+                if low is not None and self._error is None:
+                    log.error("dispatcher: %s", low)
+                self._error, pause = low, TICK_S
             except Exception as exc:  # e.g. disk full, the store busy for too long: log, back off
                 self._error = ("disk full" if is_disk_full(exc) else "store error") + f": {exc}"
                 now = time.monotonic()
@@ -212,12 +226,24 @@ class Dispatcher:
                     log.error(
                         "dispatcher: %s (retrying every few seconds; logged once a minute)",
                         self._error,
-                        exc_info=not is_disk_full(exc),
+                        exc_info=not (is_disk_full(exc) or isinstance(exc, StoreError)),
                     )
                 pause = min(5.0, pause * 2)
-            ready = wait([run.process.sentinel for run in self._runs.values()] + [self._wake_r], pause)
+            sentinels = [run.process.sentinel for run in self._runs.values() if not run.exited]
+            ready = wait(sentinels + [self._wake_r], pause)
             if self._wake_r in ready:
                 os.read(self._wake_r, 4096)
+
+    def _disk_low(self) -> str | None:
+        """A reason ("disk full: ...") when the store's file system has less than MIN_FREE_BYTES left, else None."""
+        try:
+            st = os.statvfs(self.store.path.parent)
+        except OSError:
+            return None
+        free = st.f_bavail * st.f_frsize
+        if free >= MIN_FREE_BYTES:
+            return None
+        return f"disk full: {free / 2**20:.2f} MiB free on the job store's file system (jobs wait for space)"
 
     def _fill(self) -> None:
         cap = self.settings.job_memory_cap
@@ -251,8 +277,9 @@ class Dispatcher:
                 continue
             finally:
                 lifeline_r.close()
-            self.store.set_worker_pid(job_id, token, process.pid)
+            # watched before the next write: if that write fails (disk full), the worker is not lost
             self._runs[job_id] = _Run(process, token, time.monotonic(), lifeline_w, memory)
+            self.store.set_worker_pid(job_id, token, process.pid)
 
     def _reap(self) -> None:
         if not self._runs:
@@ -260,8 +287,10 @@ class Dispatcher:
         flags = self.store.running_flags()
         now, grace = time.monotonic(), self.settings.cancel_grace_s
         for job_id, run in list(self._runs.items()):
-            if not run.process.is_alive():
-                run.process.join()
+            if run.exited or not run.process.is_alive():
+                if not run.exited:
+                    run.process.join()
+                    run.exited = True  # a settle that fails (disk full) is retried after the pause, not at once
                 reason = run.kill_reason or describe_exit(run.process.exitcode, run.memory_bytes)
                 status = self.store.settle(
                     job_id, run.token, reason, retries=self.settings.crash_retries, retry=run.kill_reason is None

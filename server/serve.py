@@ -6,16 +6,14 @@ import logging
 
 from .settings import Settings
 
-#: Largest request head (request line + headers) a client may send [bytes].
-MAX_HEAD_BYTES = 64 * 1024
-
 
 def uvicorn_config(settings: Settings, host: str, port: int, log_level: str = "info"):
-    """uvicorn's Config: the app, and limits on connections, idle time, header time and head size."""
+    """uvicorn's Config: the app, and limits on connections (all, and per client address), idle time, header
+    time and head size (connections.py)."""
     import uvicorn
 
     from .app import create_app
-    from .limits import protocol_with_header_timeout
+    from .connections import MAX_HEAD_BYTES, protocol_class
 
     return uvicorn.Config(
         create_app(settings),
@@ -24,7 +22,7 @@ def uvicorn_config(settings: Settings, host: str, port: int, log_level: str = "i
         log_level=log_level,
         timeout_graceful_shutdown=10,
         server_header=False,
-        http=protocol_with_header_timeout(settings.header_timeout_s),
+        http=protocol_class(settings),
         timeout_keep_alive=settings.keep_alive_s,  # type: ignore[arg-type]  # uvicorn passes it to call_later: a float works
         limit_concurrency=settings.max_connections,
         h11_max_incomplete_event_size=MAX_HEAD_BYTES,

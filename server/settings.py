@@ -84,6 +84,18 @@ class Settings(BaseSettings):
         description="Dask scheduler address (tcp://host:8786): jobs run their "
         "batches on its cluster instead of workers_per_job local processes",
     )
+    max_connections_per_client: int = Field(
+        50,
+        ge=0,
+        description="open connections from one client address (the TCP peer's: behind a reverse proxy, the "
+        "proxy's); a connection beyond gets 503 with Retry-After and is closed (0: no limit)",
+    )
+    body_memory_bytes: int | None = Field(
+        None,
+        ge=1024,
+        description="request bodies held in memory at once, all submissions together [bytes]; a submission "
+        "whose body would pass it gets 503 with Retry-After (default 4 x max_body_bytes)",
+    )
 
     @field_validator("scheduler", mode="after")
     @classmethod
@@ -103,6 +115,11 @@ class Settings(BaseSettings):
     @classmethod
     def _absolute(cls, v: Path) -> Path:
         return v.expanduser().resolve()
+
+    @property
+    def body_memory_cap(self) -> int:
+        """Request bodies held in memory at once [bytes]: never less than one body of max_body_bytes."""
+        return max(self.body_memory_bytes or 4 * self.max_body_bytes, self.max_body_bytes)
 
     @property
     def job_memory_cap(self) -> int:

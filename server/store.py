@@ -7,10 +7,11 @@ the dispatcher settles it, a restart requeueing a job) are decided by the job's
 carries an old token changes nothing. Documents are stored zlib-compressed; a job's renders
 (result.json, CSV, NPZ, PNG, made once by its worker) gzip-compressed, read back in chunks.
 
-The server process holds an exclusive lock on `<store>.lock` (a second server on the same file
-refuses to start), checks the file's integrity at start, and checkpoints the WAL into the
-main file when it stops. Files are created 0600. Dispatch is fair between owners (API keys):
-the next job is the oldest of the owner with the fewest running jobs, ties broken by whose
+The server process holds an exclusive lock on `<store>.lock` and on the store file itself (its
+device and inode: a second server on the same file refuses to start, under any name or hard link),
+refuses a folder or an empty file in the store's place, checks the file's integrity at start, and
+checkpoints the WAL into the main file when it stops. Files are created 0600. Dispatch is fair
+between owners (API keys): the next job is the oldest of the owner with the fewest running jobs, ties broken by whose
 turn came longest ago; each owner has its own queue quota.
 """
 
@@ -20,8 +21,10 @@ import builtins
 import contextlib
 import fcntl
 import json
+import logging
 import os
 import sqlite3
+import stat
 import threading
 import time
 import uuid
@@ -44,6 +47,11 @@ from .job_rows import (
 )
 from .sqlite_io import BlobFile, Transaction
 
+log = logging.getLogger("owcsim.server")
+
+#: The first 16 bytes of every SQLite database file.
+SQLITE_MAGIC = b"SQLite format 3\x00"
+
 #: What the store raises and returns, for its callers (server routes, dispatcher, worker, command line).
 __all__ = ["CHUNK_BYTES", "IdempotencyConflict", "JobRow", "JobStore", "QueueFull", "StoreError", "is_disk_full"]
 
@@ -63,11 +71,17 @@ class JobStore:
         self._lock = threading.Lock()
         self._lock_fd: int | None = None
         self.server = server
+        self._store_fd: int | None = None  # the server's own descriptor of the store file (its identity lock)
+        self._identity: tuple[int, int] | None = None  # (device, inode) of the file the server locked
+        self.broken: str | None = None  # why `check` found the file unusable (every read and write refused)
+        created = False
         if server:
+            created = self._check_file()
             self._take_lock()
         try:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)  # before SQLite: -wal/-shm inherit its mode
-            os.close(fd)
+            if not server:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)  # before SQLite: -wal/-shm inherit its mode
+                os.close(fd)
             con = self._con()
             if server:
                 self._check_integrity(con)
@@ -87,6 +101,8 @@ class JobStore:
                     f"job store {str(self.path)!r} was written by a newer owcsim (schema {version}, "
                     f"this one reads up to {SCHEMA_VERSION})"
                 )
+            if created:
+                log.warning("job store %s did not exist: started an empty one", self.path)
         except sqlite3.DatabaseError as exc:
             self.close(checkpoint=False)
             raise StoreError(
@@ -109,6 +125,72 @@ class JobStore:
                 f"{str(lock_path)!r}): run one server per store file"
             ) from None
         self._lock_fd = fd
+        # the file itself, whatever its name: a hard link (or another path to it) is the same store. flock
+        # and SQLite's own fcntl locks do not interact; this descriptor stays open until close()
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)  # before SQLite: -wal/-shm inherit its mode
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            os.close(self._lock_fd)
+            self._lock_fd = None
+            raise StoreError(
+                f"job store {str(self.path)!r} is in use by another owcsim server (the same file under "
+                "another name, e.g. a hard link): run one server per store file"
+            ) from None
+        st = os.fstat(fd)
+        self._store_fd, self._identity = fd, (st.st_dev, st.st_ino)
+
+    def _check_file(self) -> bool:
+        """Before the server opens its store: True if there is none yet (it starts an empty one);
+        StoreError for something that is no store (a folder, a device, an empty file)."""
+        try:
+            st = os.stat(self.path)
+        except FileNotFoundError:
+            return True
+        except OSError as exc:
+            raise StoreError(f"job store {str(self.path)!r} cannot be used: {exc.strerror}") from None
+        if not stat.S_ISREG(st.st_mode):
+            kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+            raise StoreError(
+                f"job store {str(self.path)!r} is {kind}: give the path of the store file (setting db), "
+                "or move it away to start with an empty store"
+            )
+        if st.st_size == 0:  # SQLite would start an empty store in it: the jobs it held would be gone silently
+            raise StoreError(
+                f"job store {str(self.path)!r} is an empty file (0 bytes), not a job store: restore it from a "
+                "backup, or delete it to start with an empty store"
+            )
+        return False
+
+    def check(self) -> None:
+        """The server's store is still the file it locked, and still an SQLite file: two system calls, made
+        on every pass of the dispatcher. If not, StoreError, and every read and write of this store is refused
+        (sqlite3.DatabaseError, answered 503) until the file is back."""
+        if self._store_fd is None:
+            return
+        self.broken = self._whats_wrong()
+        if self.broken is not None:
+            raise StoreError(self.broken)
+
+    def _whats_wrong(self) -> str | None:
+        assert self._store_fd is not None
+        where = f"job store {str(self.path)!r}"
+        try:
+            st = os.stat(self.path)
+        except OSError as exc:
+            return f"{where} is gone ({exc.strerror}) while the server runs: put it back and restart the server"
+        if (st.st_dev, st.st_ino) != self._identity:
+            return (
+                f"{where} was replaced by another file while the server runs: put the old one back, or restart "
+                "the server to use the new one"
+            )
+        if os.pread(self._store_fd, 16, 0) != SQLITE_MAGIC:
+            return (
+                f"{where} was overwritten while the server runs (it is no SQLite file any more): restore it "
+                "from a backup and restart the server"
+            )
+        return None
 
     def _check_integrity(self, con: sqlite3.Connection) -> None:
         rows = [r[0] for r in con.execute("PRAGMA quick_check").fetchall()]
@@ -119,6 +201,8 @@ class JobStore:
             )
 
     def _con(self) -> sqlite3.Connection:
+        if self.broken is not None:  # found replaced or overwritten by `check`: no answer from stale pages
+            raise sqlite3.DatabaseError(self.broken)
         con = getattr(self._local, "con", None)
         if con is None:
             con = sqlite3.connect(self.path, timeout=30.0, isolation_level=None, check_same_thread=False)
@@ -143,6 +227,9 @@ class JobStore:
             if self._lock_fd is not None:
                 os.close(self._lock_fd)
                 self._lock_fd = None
+            if self._store_fd is not None:  # after SQLite's connections: closing it would drop their locks
+                os.close(self._store_fd)
+                self._store_fd = None
         self._local = threading.local()
 
     def _tx(self):

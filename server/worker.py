@@ -18,6 +18,7 @@ compressed) and stores the renders with the outcome: serving a result never re-r
 from __future__ import annotations
 
 import ctypes
+import functools
 import logging
 import resource
 import signal
@@ -30,6 +31,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .formats import render_all
+from .job_rows import is_disk_full
 
 if TYPE_CHECKING:
     from owcsim.engine.run.simulate import Progress
@@ -89,6 +91,7 @@ class _Watch:
         self.last_check = 0.0
         self.pending: tuple | None = None
         self.reason: str | None = None  # why the run stops early: cancelled, abandoned, time limit
+        self.disk_full_logged = False
 
     def progress(self, p: Progress) -> None:
         self.pending = (p.fraction, p.paths, p.batches, p.dc_gain_rel_stderr, p.elapsed_s)
@@ -98,8 +101,15 @@ class _Watch:
 
     def flush(self) -> None:
         self.last_write = time.monotonic()
-        if self.pending is not None and not self.store.progress(self.job_id, self.token, *self.pending):
-            self.reason = self.reason or "abandoned"
+        try:
+            if self.pending is not None and not self.store.progress(self.job_id, self.token, *self.pending):
+                self.reason = self.reason or "abandoned"
+        except Exception as exc:  # disk full: progress is not kept for now; the run goes on
+            if not is_disk_full(exc):
+                raise
+            if not self.disk_full_logged:
+                self.disk_full_logged = True
+                log.warning("job %s: the disk is full: its progress is not recorded until there is space", self.job_id)
 
     def should_stop(self) -> bool:
         now = time.monotonic()
@@ -112,6 +122,42 @@ class _Watch:
             if self.reason is None and now - self.t0 > self.limits.max_wall_time_s:
                 self.reason = "time_limit"
         return self.reason is not None
+
+
+#: Longest pause between two tries to store a run's outcome while the disk is full [s].
+DISK_FULL_PAUSE_S = 5.0
+
+
+def while_disk_full(write, job_id: str, lifeline) -> bool:
+    """`write()` (a store write, or files then a store write), tried again while the disk is full (pauses of
+    0.2 s growing to DISK_FULL_PAUSE_S) until it succeeds or the server lets the run go (its lifeline
+    closed: the job is queued again). One warning line, no traceback. False if nothing was written."""
+    pause, logged = 0.2, False
+    while True:
+        try:
+            return bool(write())
+        except Exception as exc:
+            if not is_disk_full(exc):
+                raise
+            if not logged:
+                logged = True
+                log.warning("job %s: the disk is full: its outcome is stored when there is space again", job_id)
+        if lifeline.poll(pause):  # the server stopped or is gone: its next run starts afresh
+            return False
+        pause = min(DISK_FULL_PAUSE_S, 2 * pause)
+
+
+def store_outcome(store, job_id: str, token: int, status: str, lifeline, **outcome) -> bool:
+    """`store.finish`, waiting for space while the disk is full (see `while_disk_full`)."""
+    return while_disk_full(lambda: store.finish(job_id, token, status, **outcome), job_id, lifeline)
+
+
+def _render_and_store(store, job_id: str, token: int, status: str, result, text: str, notes, db_path: str) -> bool:
+    """Render the result once and store it with the outcome (the renders' files are on the store's disk:
+    all made again after a disk-full error)."""
+    with tempfile.TemporaryDirectory(prefix=f"owcsim-{job_id[:8]}-", dir=Path(db_path).parent) as tmp:
+        renders = render_all(result, text, Path(tmp))
+        return store.finish(job_id, token, status, result_json=text, warnings=notes, renders=renders)
 
 
 def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifeline, memory_bytes: int = 0) -> None:
@@ -154,15 +200,22 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
                 )
         notes = list(dict.fromkeys(str(w.message) for w in caught))
     except EngineError as exc:
-        store.finish(job_id, token, "failed", error=str(exc))
+        store_outcome(store, job_id, token, "failed", lifeline, error=str(exc))
         return
     except MemoryError:
         result = None  # free what can be freed before writing
-        store.finish(job_id, token, "failed", error=out_of_memory_reason(memory_bytes))
+        store_outcome(store, job_id, token, "failed", lifeline, error=out_of_memory_reason(memory_bytes))
         return
     except Exception as exc:  # a bug, not the user's input: keep the trace in the server log
         log.exception("job %s: the engine failed", job_id)
-        store.finish(job_id, token, "failed", error=f"internal error in the engine ({type(exc).__name__}: {exc})")
+        store_outcome(
+            store,
+            job_id,
+            token,
+            "failed",
+            lifeline,
+            error=f"internal error in the engine ({type(exc).__name__}: {exc})",
+        )
         return
     finally:
         if executor is not None:
@@ -175,10 +228,12 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
     if watch.reason == "abandoned":
         return
     if watch.reason == "time_limit":
-        store.finish(
+        store_outcome(
+            store,
             job_id,
             token,
             "failed",
+            lifeline,
             warnings=notes,
             error=f"stopped at the server's wall-time limit of {limits.max_wall_time_s:g} s after "
             f"{result.run.paths_total:,d} paths: ask for fewer paths or a larger "
@@ -187,17 +242,19 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
         return
     watch.flush()
     status = "cancelled" if watch.reason == "cancelled" else "succeeded"
+
     try:
         text = result.model_dump_json()  # JSON has no NaN/inf: the model writes them as null
-        with tempfile.TemporaryDirectory(prefix=f"owcsim-{job_id[:8]}-", dir=Path(db_path).parent) as tmp:
-            renders = render_all(result, text, Path(tmp))
-            store.finish(job_id, token, status, result_json=text, warnings=notes, renders=renders)
+        write = functools.partial(_render_and_store, store, job_id, token, status, result, text, notes, db_path)
+        while_disk_full(write, job_id, lifeline)
     except MemoryError:
         result = text = None
-        store.finish(
+        store_outcome(
+            store,
             job_id,
             token,
             "failed",
+            lifeline,
             warnings=notes,
             error=out_of_memory_reason(memory_bytes) + " (while storing the result)",
         )

@@ -36,6 +36,40 @@ IdempotencyKey = Annotated[
 ]
 
 
+class BodyBudget:
+    """Bytes of request bodies held in memory, all submissions together (counted on the event loop).
+
+    A body is counted as it arrives and until its submission is answered; one whose next bytes would pass
+    `cap` is refused with 503 and Retry-After (the others go on: no request waits for another's body)."""
+
+    def __init__(self, cap: int, retry_after_s: int = 5):
+        self.cap, self.used, self.retry_after_s = cap, 0, retry_after_s
+
+    def counted(self, receive, held: list[int]):
+        """`receive`, counting the body bytes of each message into `held[0]` and `used`."""
+
+        async def counted_receive():
+            message = await receive()
+            size = len(message.get("body", b"")) if message["type"] == "http.request" else 0
+            if size and self.used + size > self.cap:
+                raise ProblemError(
+                    503,
+                    "server-busy",
+                    f"the server holds {self.cap:,d} bytes of request bodies already (setting body_memory_bytes): "
+                    "try again in a few seconds",
+                    headers={"Retry-After": str(self.retry_after_s)},
+                )
+            self.used += size
+            held[0] += size
+            return message
+
+        return counted_receive
+
+    def release(self, held: list[int]) -> None:
+        self.used -= held[0]
+        held[0] = 0
+
+
 @router.post(
     "",
     status_code=202,
@@ -63,19 +97,25 @@ async def submit_job(
 ) -> JobPublic:
     """Validate the scene (the document `owcsim run` takes), check the server's limits, pre-flight it in
     the engine, and queue it. Answers 202 with the job and its URL in `Location`."""
-    # bodies held in memory: a few at a time, not one per connection (no limit if the app runs without its lifespan)
-    async with request.app.state.submissions or contextlib.nullcontext():
-        body = await read_body(request, settings.max_body_bytes)
-        job, created = await anyio.to_thread.run_sync(
-            _submit,
-            body,
-            owner,
-            idempotency_key,
-            store,
-            settings,
-            request.app.state.preflighter,
-            limiter=request.app.state.heavy,
-        )
+    # the body first, without a slot (a slow sender holds none: issue 25, item 4), its bytes counted against
+    # body_memory_bytes; then a slot to check it: a few at a time (no limit if the app runs without its lifespan)
+    budget: BodyBudget = request.app.state.bodies
+    held = [0]
+    try:
+        body = await read_body(Request(request.scope, budget.counted(request.receive, held)), settings.max_body_bytes)
+        async with request.app.state.submissions or contextlib.nullcontext():
+            job, created = await anyio.to_thread.run_sync(
+                _submit,
+                body,
+                owner,
+                idempotency_key,
+                store,
+                settings,
+                request.app.state.preflighter,
+                limiter=request.app.state.heavy,
+            )
+    finally:
+        budget.release(held)
     if created:
         dispatcher.wake()
     else:

@@ -42,6 +42,7 @@ async def health(
         reason = error or (None if age < STALE_S else f"the dispatcher has not read the store for {age:.0f} s")
     else:  # no dispatcher (an app built with run_jobs=False): ask the store itself
         try:
+            await run_in_threadpool(store.check)  # still the file it locked, still an SQLite file
             counts, store_ok = await run_in_threadpool(store.counts), True
         except Exception as exc:
             counts, store_ok, reason = {}, False, f"store error: {exc}"

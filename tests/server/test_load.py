@@ -119,7 +119,7 @@ def test_health_answers_while_60_clients_download_large_results(tmp_path):
     doc["receiver_grids"] = [
         {"id_prefix": "g", "origin": [0.5, 0.5, 0.0], "size": [4.0, 4.0], "spacing": 4.0 / 29, "area": 1e-4}
     ]
-    with ServerProcess(tmp_path / "jobs.sqlite", max_connections=500) as srv:
+    with ServerProcess(tmp_path / "jobs.sqlite", max_connections=500, max_connections_per_client=0) as srv:
         with Client(srv.url) as owc:
             job = owc.submit(doc)
             job.wait(timeout=120)
@@ -164,3 +164,88 @@ def test_health_answers_while_60_clients_download_large_results(tmp_path):
     )
     assert not failures, failures[:3]
     assert max(health) < 2.0  # the container's health check allows 5 s
+
+
+@pytest.mark.slow
+def test_submissions_and_health_under_slow_and_greedy_clients(tmp_path):
+    """Issue 25, items 4 and 5, under load: 10 clients submit 50 jobs while 300 connections from another
+    address never end their request heads and 8 send their bodies 1 byte every 0.5 s. Every job succeeds,
+    health answers 200 throughout, no submission waits behind a slow body."""
+    import socket
+
+    with ServerProcess(tmp_path / "jobs.sqlite", max_concurrent_jobs=2) as srv:
+
+        def attacker(address: str) -> socket.socket:
+            return socket.create_connection(("127.0.0.1", srv.port), timeout=10, source_address=(address, 0))
+
+        heads = [attacker("127.0.0.2") for _ in range(300)]
+        bodies = [attacker("127.0.0.3") for _ in range(8)]
+        stop = threading.Event()
+
+        def hostile():
+            for s in heads:
+                try:
+                    s.sendall(b"GET /v1/health HTTP/1.1\r\nHost: x\r\n")
+                except OSError:
+                    pass
+            for s in bodies:
+                s.sendall(b"POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n")
+                s.sendall(b"Content-Length: 100000\r\n\r\n")
+            while not stop.wait(0.5):
+                for s in bodies:
+                    try:
+                        s.sendall(b" ")
+                    except OSError:
+                        pass
+
+        health: list[tuple[int, float]] = []
+        latency: list[float] = []
+        errors: list[BaseException] = []
+        lock = threading.Lock()
+
+        def monitor():
+            while not stop.is_set():
+                t0 = time.perf_counter()
+                with httpx.Client(timeout=10) as h:
+                    code = h.get(f"{srv.url}/v1/health").status_code
+                health.append((code, time.perf_counter() - t0))
+                time.sleep(0.1)
+
+        def client(i: int):
+            try:
+                with Client(srv.url, retry=RetryPolicy(retries=20, backoff_s=0.2, max_backoff_s=2.0)) as owc:
+                    for k in range(5):
+                        t0 = time.perf_counter()
+                        owc.submit(quick_doc(seed=1000 + 5 * i + k))
+                        with lock:
+                            latency.append(time.perf_counter() - t0)
+            except BaseException as exc:  # reported below
+                errors.append(exc)
+
+        side = [threading.Thread(target=f, daemon=True) for f in (hostile, monitor)]
+        for t in side:
+            t.start()
+        time.sleep(1.0)
+        threads = [threading.Thread(target=client, args=(i,)) for i in range(10)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(120)
+        with Client(srv.url) as owc:
+            deadline = time.monotonic() + 120
+            while len(done := list(owc.jobs(status=["succeeded"]))) < 50 and time.monotonic() < deadline:
+                time.sleep(0.5)
+        stop.set()
+        for t in side:
+            t.join(15)
+        for s in heads + bodies:
+            s.close()
+    assert not errors, errors[:3]
+    assert len(latency) == 50 and len(done) == 50
+    codes = [c for c, _ in health]
+    assert codes and set(codes) == {200}, {c: codes.count(c) for c in set(codes)}
+    print(
+        f"\nslow and greedy clients: 50 submissions, p50 {_pct(latency, 50):.3f} s, max {max(latency):.3f} s; "
+        f"health {len(health)} probes all 200, p99 {1e3 * _pct([t for _, t in health], 99):.0f} ms"
+    )
+    assert max(latency) < 10.0
