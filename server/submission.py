@@ -177,6 +177,16 @@ def check_limits(spec: SceneSpec, settings: Settings) -> None:
         for i, t in enumerate(spec.transmitters)
         if t.photometry is not None and t.photometry.file is not None
     ]
+    frames = spec.timeline.frames if spec.timeline is not None else None
+    if frames is not None and getattr(frames, "path", None) is not None:
+        errors.append(
+            ProblemField(
+                loc="body.timeline.frames.path",
+                type="path_not_allowed",
+                msg="frames cannot be read from a path on the server: send the file as `data_base64` (a netCDF "
+                "file's bytes, or a zip of the FDS case folder)",
+            )
+        )
     if errors:
         raise _invalid(errors)
     n_rx = len(spec.receivers) + spec.grid_receiver_count()  # with the hidden ones: orientation, photodiodes

@@ -107,3 +107,12 @@ def test_bad_timelines_are_located_422s(api, change, message):
     assert answer.status_code == 422
     body = answer.json()
     assert message in body["detail"] and "timeline" in body["detail"]  # located: the section, the entry
+
+
+def test_frames_from_a_server_path_are_refused_at_their_field(api):
+    doc = _doc()
+    doc["timeline"]["frames"] = {"type": "netcdf", "path": "/etc/passwd", "variable": "K", "albedo": 0.0, "origin": [0, 0, 0]}
+    r = api.post("/v1/jobs", json=doc)
+    assert r.status_code == 422, r.text
+    fields = r.json()["errors"]
+    assert [f["loc"] for f in fields] == ["body.timeline.frames.path"] and fields[0]["type"] == "path_not_allowed"
