@@ -14,9 +14,11 @@ from __future__ import annotations
 import base64
 import copy
 import errno
+import io
 import json
 import os
 import stat
+import zipfile
 from pathlib import Path
 
 from owcsim.docs import MAX_SCENE_BYTES
@@ -41,6 +43,8 @@ MAX_MESH_BYTES = 32 * 2**20
 #: Largest photometric file read for a submission [bytes]: the largest EULUMDAT table (721 C planes x 361
 #: angles) is about 2 MB of text.
 MAX_PHOTOMETRY_BYTES = 4 * 2**20
+#: Largest frames input read for a submission [bytes]: a netCDF file, or an FDS case folder (all its files).
+MAX_FRAMES_BYTES = 32 * 2**20
 
 _OPEN_FLAGS = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
 
@@ -150,4 +154,33 @@ def inline_mesh_files(doc: dict, base_dir: Path) -> dict:
             if not phot.get("format"):
                 phot["format"] = path.suffix[1:].lower() or None
             phot["data_base64"] = base64.b64encode(data).decode("ascii")
+    timeline = doc.get("timeline")
+    frames = timeline.get("frames") if isinstance(timeline, dict) else None
+    if isinstance(frames, dict) and isinstance(frames.get("path"), str):  # smoke over time: a file or FDS case
+        path = Path(frames.pop("path"))
+        path = path if path.is_absolute() else base_dir / path
+        data = (
+            _fds_case_zip(path)
+            if frames.get("type") == "fds"
+            else read_input_file(path, "frames file", MAX_FRAMES_BYTES)
+        )
+        frames["data_base64"] = base64.b64encode(data).decode("ascii")
     return doc
+
+
+def _fds_case_zip(path: Path, max_bytes: int = MAX_FRAMES_BYTES) -> bytes:
+    """A zip archive of the FDS case at `path` (its folder, or its .smv file's folder): every regular file of
+    the folder but fdsreader's cache (*.pickle), each read by `read_input_file`, at most `max_bytes` in all."""
+    folder = path.parent if path.suffix == ".smv" else path
+    if not folder.is_dir():
+        raise InputFileError(f"FDS case {str(path)!r} is not a folder holding a .smv file")
+    names = sorted(p for p in folder.iterdir() if p.suffix != ".pickle" and not p.is_symlink() and p.is_file())
+    if not any(p.suffix == ".smv" for p in names):
+        raise InputFileError(f"FDS case {str(folder)!r} holds no .smv file")
+    buffer, left = io.BytesIO(), max_bytes
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
+        for p in names:
+            data = read_input_file(p, "FDS output file", left)
+            left -= len(data)
+            archive.writestr(p.name, data)
+    return buffer.getvalue()
