@@ -9,15 +9,19 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Callable
+from dataclasses import dataclass
 
 from fastapi import Request
 from pydantic import ValidationError
 
-from owcsim.schemas import ReceiverGridSpec, SceneSpec
+from owcsim.schemas import SceneSpec
 from owcsim.schemas.errors import ProblemField
+from owcsim.schemas.medium import MAX_MIXTURE_COMPONENTS
 
-from .preflight import Preflight, Preflighter
-from .problems import ProblemError, field_errors
+from .preflight import Preflight, Preflighter, as_tuple
+from .prescan import Found, check_photometry, count_receivers, mixtures, scan_keys
+from .problems import MAX_LISTED_ERRORS, ProblemError, field_errors
 from .settings import Settings
 
 JSON_TYPES = ("application/json",)
@@ -48,11 +52,19 @@ async def read_body(request: Request, max_bytes: int) -> bytes:
     return b"".join(chunks)
 
 
-def _invalid(errors: list[ProblemField], kind: str = "invalid-scene", status: int = 422) -> ProblemError:
-    detail = "; ".join(f"{e.loc}: {e.msg}" for e in errors[:5])
-    if len(errors) > 5:
-        detail += f"; and {len(errors) - 5} more"
-    return ProblemError(status, kind, detail, errors=errors)
+def _invalid(
+    errors: list[ProblemField], kind: str = "invalid-scene", status: int = 422, count: int | None = None
+) -> ProblemError:
+    """A refusal that lists the first MAX_LISTED_ERRORS errors and counts all (`error_count`; `count` when the
+    errors given are only the first of more)."""
+    count = max(count or 0, len(errors))
+    listed = errors[:MAX_LISTED_ERRORS]
+    detail = "; ".join(f"{e.loc}: {e.msg}" for e in listed[:5])
+    if count > 5:
+        detail += f"; and {count - 5:,d} more"
+    if count > len(listed):
+        detail += f" (the first {len(listed)} listed)"
+    return ProblemError(status, kind, detail, errors=listed, error_count=count)
 
 
 def parse_scene(body: bytes, settings: Settings) -> SceneSpec:
@@ -76,11 +88,12 @@ def parse_scene(body: bytes, settings: Settings) -> SceneSpec:
     if not isinstance(doc, dict):
         raise _invalid([ProblemField(loc="body", msg="a scene document is a JSON object", type="dict_type")])
     _check_text_lengths(doc, settings.max_text_chars)
-    _check_receiver_count(doc, settings)
+    _check_counts(doc, settings)
     try:
         return SceneSpec.model_validate(doc)
     except ValidationError as err:
-        raise _invalid(field_errors(err.errors(include_url=False), ("body",))) from None
+        first = err.errors(include_url=False)[:MAX_LISTED_ERRORS]
+        raise _invalid(field_errors(first, ("body",)), count=err.error_count()) from None
     except RecursionError:
         raise _invalid([ProblemField(loc="body", msg="document nested too deeply", type="value_error")]) from None
     except ArithmeticError as exc:  # a rule of the schema met a number it cannot compute with
@@ -131,24 +144,47 @@ def _check_text_lengths(doc, max_chars: int) -> None:
         raise _invalid(errors, "limit-exceeded")
 
 
-def _check_receiver_count(doc: dict, settings: Settings) -> None:
-    """Grids expand into receivers during validation: bound their number first."""
-    grids = doc.get("receiver_grids")
-    receivers = doc.get("receivers")
-    count = len(receivers) if isinstance(receivers, list) else 0
-    for i, g in enumerate(grids if isinstance(grids, list) else []):
-        try:
-            count += ReceiverGridSpec.model_validate(g).count
-        except ArithmeticError as exc:  # e.g. size / spacing overflows
-            raise _invalid([_out_of_range(f"body.receiver_grids.{i}", exc)]) from None
-        except (ValidationError, ValueError, TypeError):
-            pass  # reported by the full validation
+def _check_counts(doc: dict, settings: Settings) -> None:
+    """The pre-scan (prescan.py): unknown keys, then the counts a model would build, before any model builds."""
+    found = Found()
+    scan_keys(doc, found)
+    if found.count:
+        raise _invalid(found.listed, count=found.count)
+    transmitters = doc.get("transmitters")
+    if isinstance(transmitters, list) and len(transmitters) > settings.max_transmitters:
+        raise _limit(
+            "body.transmitters",
+            f"the scene has {len(transmitters):,d} transmitters; this server accepts at most "
+            f"{settings.max_transmitters:,d} (setting max_transmitters)",
+        )
+    try:
+        count = count_receivers(doc, settings.max_receivers)
+    except ArithmeticError as exc:  # e.g. size / spacing overflows
+        raise _invalid([_out_of_range("body.receiver_grids", exc)]) from None
     if count > settings.max_receivers:
         raise _limit(
             "body.receiver_grids",
-            f"the scene has {count:,d} receivers; this server accepts at most "
-            f"{settings.max_receivers:,d} (setting max_receivers)",
+            f"the scene has {count:,d} receivers (at least; orientation samples and photodiodes counted); this "
+            f"server accepts at most {settings.max_receivers:,d} (setting max_receivers)",
         )
+    meshes = doc.get("meshes")
+    faces = sum(
+        len(m["faces"])
+        for m in (meshes if isinstance(meshes, list) else [])
+        if isinstance(m, dict) and isinstance(m.get("faces"), list)
+    )
+    if faces > settings.max_triangles:
+        raise _limit(
+            "body.meshes",
+            f"the scene has {faces:,d} triangles; this server accepts at most "
+            f"{settings.max_triangles:,d} (setting max_triangles)",
+        )
+    for loc, n in mixtures(doc):
+        if n > MAX_MIXTURE_COMPONENTS:
+            found.add(loc, f"a mixture of {n:,d} components; at most {MAX_MIXTURE_COMPONENTS} are accepted", "too_long")
+    check_photometry(doc, found)
+    if found.count:
+        raise _invalid(found.listed, "limit-exceeded", count=found.count)
 
 
 def _limit(loc: str, msg: str) -> ProblemError:
@@ -212,7 +248,9 @@ def check_limits(spec: SceneSpec, settings: Settings) -> None:
         )
 
 
-def check_runnable(spec: SceneSpec, scene_json: str, settings: Settings, preflighter: Preflighter) -> Preflight:
+def check_runnable(
+    spec: SceneSpec, scene_json: str, settings: Settings, preflighter: Callable[[SceneSpec, str], Preflight]
+) -> Preflight:
     """The server's limits, the engine's pre-flight and the memory estimate of a validated scene;
     returns the pre-flight's figures, raises ProblemError."""
     check_limits(spec, settings)
@@ -234,6 +272,57 @@ def check_runnable(spec: SceneSpec, scene_json: str, settings: Settings, preflig
             "most the engine may choose), or a smaller batch_size",
         )
     return out
+
+
+@dataclass(frozen=True)
+class Admitted:
+    """A valid document: its canonical JSON, name and hash; `check` gives its pre-flight figures."""
+
+    canonical: str
+    name: str | None
+    digest: str
+    spec: SceneSpec | None  # a small body: checked in this process when `check` is called
+    checked: Preflight | None  # a large body: already checked in a pre-flight process
+
+    def check(self, settings: Settings, preflighter: Preflighter) -> Preflight:
+        if self.checked is not None:
+            return self.checked
+        assert self.spec is not None
+        return check_runnable(self.spec, self.canonical, settings, preflighter)
+
+
+def admit(body: bytes, settings: Settings, preflighter: Preflighter) -> Admitted:
+    """Parse and validate a body. A body of at most `inprocess_body_bytes` is parsed here (its limits and
+    pre-flight wait for `Admitted.check`); a larger one is parsed, pre-scanned, validated, limited and
+    pre-flighted in a pre-flight process, so that the server's memory and interpreter stay free.
+    Blocking (call it from a worker thread); raises ProblemError."""
+    if len(body) <= settings.inprocess_body_bytes:
+        spec = parse_scene(body, settings)
+        canonical = spec.model_dump_json()
+        return Admitted(canonical, spec.name, request_hash(canonical), spec, None)
+    what = "the validation and pre-flight of this document"
+    _, canonical, name, triangles, memory = preflighter.in_process(what, check_document, body, settings)
+    checked = Preflight(triangles=triangles, memory_bytes=memory)
+    return Admitted(canonical, name, request_hash(canonical), None, checked)
+
+
+def check_document(body: bytes, settings: Settings) -> tuple:
+    """In a pre-flight process: the whole admission of a body, as ("ok", canonical, name, triangles, memory)
+    or a problem tuple."""
+    inline = Preflighter(
+        concurrency=1,
+        timeout_s=settings.preflight_timeout_s,
+        memory_bytes=settings.preflight_memory_bytes,
+        max_triangles=settings.max_triangles,
+        workers=settings.workers_per_job,
+    ).inline
+    try:
+        spec = parse_scene(body, settings)
+        canonical = spec.model_dump_json()
+        checked = check_runnable(spec, canonical, settings, inline)
+    except ProblemError as exc:
+        return as_tuple(exc)
+    return ("ok", canonical, spec.name, checked.triangles, checked.memory_bytes)
 
 
 def request_hash(canonical: str) -> str:
