@@ -109,7 +109,9 @@ def _run(spec: SceneSpec, max_triangles: int, workers: int) -> tuple:
     triangles = len(scene.geometry.faces)
     points = [scene.geometry.vertices, scene.transmitters.positions, scene.receivers.positions]
     extent = float(np.ptp(np.concatenate(points), axis=0).max())
-    return ("ok", triangles, job_memory_bytes(spec, triangles=triangles, extent_m=extent, workers=workers))
+    values = sum(p.intensity.size + p.c.size + p.gamma.size for p in scene.transmitters.patterns if p is not None)
+    memory = job_memory_bytes(spec, triangles=triangles, extent_m=extent, workers=workers, photometry_values=values)
+    return ("ok", triangles, memory)
 
 
 def _child(conn, memory_bytes: int, what: str, fn, *args) -> None:

@@ -76,14 +76,13 @@ def scan_keys(doc: dict, found: Found) -> None:
     while stack:
         node, loc, is_map = stack.pop()
         if isinstance(node, dict):
-            if len(node) > MAX_OBJECT_KEYS:
+            too_many = len(node) > MAX_OBJECT_KEYS  # its unknown keys are counted, its values not scanned
+            if too_many:
                 found.add(loc, f"an object of {len(node):,d} keys; at most {MAX_OBJECT_KEYS} are accepted", "too_long")
-                continue
             for k, v in node.items():
                 if not is_map and k not in names:
                     found.add(f"{loc}.{k}", "Extra inputs are not permitted", "extra_forbidden")
-                    continue
-                if isinstance(v, dict | list):
+                elif not too_many and isinstance(v, dict | list):
                     stack.append((v, f"{loc}.{k}", not is_map and k in free))
         elif isinstance(node, list):
             stack.extend((v, f"{loc}.{i}", False) for i, v in enumerate(node) if isinstance(v, dict | list))

@@ -148,8 +148,9 @@ def _check_counts(doc: dict, settings: Settings) -> None:
     """The pre-scan (prescan.py): unknown keys, then the counts a model would build, before any model builds."""
     found = Found()
     scan_keys(doc, found)
-    if found.count:
-        raise _invalid(found.listed, count=found.count)
+    if found.count > MAX_LISTED_ERRORS or any(e.type != "extra_forbidden" for e in found.listed):
+        raise _invalid(found.listed, count=found.count)  # (a few unknown keys: reported with the other errors)
+    found = Found()
     transmitters = doc.get("transmitters")
     if isinstance(transmitters, list) and len(transmitters) > settings.max_transmitters:
         raise _limit(
@@ -164,8 +165,8 @@ def _check_counts(doc: dict, settings: Settings) -> None:
     if count > settings.max_receivers:
         raise _limit(
             "body.receiver_grids",
-            f"the scene has {count:,d} receivers (at least; orientation samples and photodiodes counted); this "
-            f"server accepts at most {settings.max_receivers:,d} (setting max_receivers)",
+            f"the scene has at least {count:,d} receivers, counting each orientation sample and angle-diversity "
+            f"photodiode; this server accepts at most {settings.max_receivers:,d} (setting max_receivers)",
         )
     meshes = doc.get("meshes")
     faces = sum(
@@ -276,24 +277,19 @@ def check_runnable(
 
 @dataclass(frozen=True)
 class Admitted:
-    """A valid document: its canonical JSON, name and hash; `check` gives its pre-flight figures."""
+    """A valid document: its canonical JSON, name and hash; a large body's pre-flight figures (`checked`), or
+    the spec of a small one to check with `check_runnable` (after the idempotency look-up)."""
 
     canonical: str
     name: str | None
     digest: str
-    spec: SceneSpec | None  # a small body: checked in this process when `check` is called
+    spec: SceneSpec | None  # a small body: checked in this process by the caller
     checked: Preflight | None  # a large body: already checked in a pre-flight process
-
-    def check(self, settings: Settings, preflighter: Preflighter) -> Preflight:
-        if self.checked is not None:
-            return self.checked
-        assert self.spec is not None
-        return check_runnable(self.spec, self.canonical, settings, preflighter)
 
 
 def admit(body: bytes, settings: Settings, preflighter: Preflighter) -> Admitted:
     """Parse and validate a body. A body of at most `inprocess_body_bytes` is parsed here (its limits and
-    pre-flight wait for `Admitted.check`); a larger one is parsed, pre-scanned, validated, limited and
+    pre-flight are the caller's: `check_runnable`); a larger one is parsed, pre-scanned, validated, limited and
     pre-flighted in a pre-flight process, so that the server's memory and interpreter stay free.
     Blocking (call it from a worker thread); raises ProblemError."""
     if len(body) <= settings.inprocess_body_bytes:

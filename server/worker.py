@@ -73,8 +73,8 @@ def cap_address_space(budget_bytes: int, headroom_bytes: int) -> int:
 def out_of_memory_reason(budget_bytes: int) -> str:
     return (
         f"the job ran out of its memory budget of {budget_bytes / 2**30:.3g} GB (estimated from its settings: "
-        "links x reflection and scattering orders x time bins, receivers, batch_size, triangles): ask for "
-        "fewer receivers, orders or time bins, or a smaller batch_size"
+        "links x reflection and scattering orders x time bins, receivers, batch_size, triangles, photometric "
+        "tables): ask for fewer receivers, orders or time bins, a smaller batch_size, or smaller photometric files"
     )
 
 

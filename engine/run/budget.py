@@ -25,6 +25,9 @@ The terms follow the arrays the engine allocates:
   by `simulate.PATH_TARGET_BUDGET` (dense per-path tallies: 3 arrays and temporaries, ~10 numbers
   per pair), one step's next-event estimates capped by `simulate.ESTIMATE_BUDGET` (~60 B each) and,
   with quasi-random blocks, the order split's (sample, cell) table (at most `tally.SAMPLE_TABLE_MAX`);
+- `photometry`: the transmitters' photometric files: while parsed, per value of the table its text token,
+  (token, line) pair and list slot, then the float64 table, intensities and CDF (BYTES_PER_PHOTOMETRY_VALUE),
+  plus the file's base64 text, its bytes and its decoded text (3 bytes per base64 character);
 - `result`: the result document: ~40 numbers per link (~70 B each as Python floats and JSON text),
   plus the CIR links' bins x (K+S+4) and the maps (~12 quantities per grid point and channel).
 
@@ -61,6 +64,9 @@ BYTES_PER_DEVICE = 3_000
 BYTES_PER_CONTRIBUTION = 60
 #: Bytes per number of the result document (Python float in a list + JSON text) [B].
 BYTES_PER_RESULT_NUMBER = 70
+#: Bytes per value of a photometric table while it is parsed and kept (benchmarks/hostile_bodies.py: ~200
+#: measured for IES files of 10^5 to 10^6 values) [B].
+BYTES_PER_PHOTOMETRY_VALUE = 256
 #: Extent assumed for the automatic time window when the scene's is unknown [m] (as engine/run/auto.py).
 DEFAULT_EXTENT_M = 10.0
 
@@ -75,6 +81,7 @@ class MemoryEstimate:
     accumulators: int
     batch: int
     result: int
+    photometry: int = 0
 
     @property
     def total(self) -> int:
@@ -87,6 +94,15 @@ def _triangles(spec: SceneSpec) -> int:
     return (12 if spec.room is not None else 0) + 12 * len(spec.furniture) + inline
 
 
+def _photometry(spec: SceneSpec, values: int | None) -> int:
+    """Memory of the transmitters' photometric files [B]; `values`: their tables' values if known (else at
+    most one per 2 bytes of file)."""
+    b64 = sum(len(t.photometry.data_base64 or "") for t in spec.transmitters if t.photometry is not None)
+    if values is None:
+        values = b64 * 3 // 8
+    return values * BYTES_PER_PHOTOMETRY_VALUE + 3 * b64
+
+
 def _extent(spec: SceneSpec) -> float:
     if spec.room is not None:
         return float(max(spec.room.size))
@@ -94,12 +110,18 @@ def _extent(spec: SceneSpec) -> float:
 
 
 def memory_estimate(
-    spec: SceneSpec, *, triangles: int | None = None, extent_m: float | None = None, workers: int = 1
+    spec: SceneSpec,
+    *,
+    triangles: int | None = None,
+    extent_m: float | None = None,
+    workers: int = 1,
+    photometry_values: int | None = None,
 ) -> MemoryEstimate:
     """Peak memory of `spec` run with `workers` engine processes [B], term by term.
 
     `triangles`: the scene's triangle count if known (meshes given as files); `extent_m`: the
-    scene's largest side [m] if known (bounds the automatic window).
+    scene's largest side [m] if known (bounds the automatic window); `photometry_values`: the values of
+    the transmitters' photometric tables if known (parsed), else bounded by the files' lengths.
     """
     sim = spec.simulation
     n_tx = len(spec.transmitters)
@@ -166,11 +188,19 @@ def memory_estimate(
         accumulators=accumulators,
         batch=in_flight * per_batch + pool,
         result=(n_links * (40 + 6 * n_bands) + n_cir * n_bins * (k + s + 4) + map_numbers) * BYTES_PER_RESULT_NUMBER,
+        photometry=_photometry(spec, photometry_values),
     )
 
 
 def job_memory_bytes(
-    spec: SceneSpec, *, triangles: int | None = None, extent_m: float | None = None, workers: int = 1
+    spec: SceneSpec,
+    *,
+    triangles: int | None = None,
+    extent_m: float | None = None,
+    workers: int = 1,
+    photometry_values: int | None = None,
 ) -> int:
     """Estimated peak memory of the job [B] (see `memory_estimate` for the terms)."""
-    return memory_estimate(spec, triangles=triangles, extent_m=extent_m, workers=workers).total
+    return memory_estimate(
+        spec, triangles=triangles, extent_m=extent_m, workers=workers, photometry_values=photometry_values
+    ).total

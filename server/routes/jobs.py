@@ -17,7 +17,7 @@ from ..dispatcher import Dispatcher
 from ..problems import ProblemError
 from ..settings import Settings
 from ..store import IdempotencyConflict, JobRow, JobStore, QueueFull
-from ..submission import admit, read_body
+from ..submission import admit, check_runnable, read_body
 from ..views import API_PREFIX, job_public, job_url
 from .docs import JOB_LINKS, SCENE_BODY, problems
 
@@ -91,7 +91,7 @@ def _submit(body: bytes, owner, key, store: JobStore, settings: Settings, prefli
     try:
         if key is not None and (first := store.find_idempotent(owner, key, digest)) is not None:
             return first, False  # a retry (e.g. after a client timeout): no second pre-flight
-        checked = doc.check(settings, preflighter)
+        checked = doc.checked or check_runnable(doc.spec, canonical, settings, preflighter)  # (small: here)
         return store.submit(
             owner=owner,
             scene_json=canonical,
