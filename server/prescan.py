@@ -5,6 +5,7 @@ body of a million unknown keys, or of 100,000 receivers with a wrong position, b
 million error objects. The pre-scan walks the parsed JSON once (no model, no copy) and
 refuses, each with located messages (at most `MAX_LISTED_ERRORS` and a count):
 
+- strings and keys longer than `max_text_chars` (file content excepted);
 - keys that no model of the scene document has (the names come from the document's JSON
   schema; the keys of free-key maps such as `group_reflectance` are the user's);
 - objects with more than `MAX_OBJECT_KEYS` keys;
@@ -22,7 +23,7 @@ import binascii
 import functools
 import math
 import re
-from collections.abc import Iterator
+from dataclasses import dataclass, field
 
 from pydantic import ValidationError
 
@@ -69,23 +70,59 @@ class Found:
             self.listed.append(ProblemField(loc=loc, msg=msg, type=type_))
 
 
-def scan_keys(doc: dict, found: Found) -> None:
-    """Unknown keys and objects with too many keys, anywhere in the document."""
+@dataclass
+class Scan:
+    """What one walk of the document found: texts too long, unknown keys and oversized objects, mixtures."""
+
+    text: Found = field(default_factory=Found)
+    keys: Found = field(default_factory=Found)
+    mixtures: list[tuple[str, int]] = field(default_factory=list)  # (location of `components`, their number)
+
+
+#: Fields whose text may be long: file content.
+LONG_TEXT = frozenset({"data_base64"})
+
+
+def scan(doc: dict, max_chars: int) -> Scan:
+    """One walk of the parsed document (locations are built for containers and errors only): every string
+    and key at most `max_chars` long (file content excepted), keys no model has, objects of more than
+    MAX_OBJECT_KEYS keys (their unknown keys counted, their values not walked), mixtures' components."""
     names, free = vocabulary()
+    out = Scan()
     stack: list[tuple[object, str, bool]] = [(doc, "body", False)]
     while stack:
         node, loc, is_map = stack.pop()
-        if isinstance(node, dict):
-            too_many = len(node) > MAX_OBJECT_KEYS  # its unknown keys are counted, its values not scanned
-            if too_many:
-                found.add(loc, f"an object of {len(node):,d} keys; at most {MAX_OBJECT_KEYS} are accepted", "too_long")
-            for k, v in node.items():
-                if not is_map and k not in names:
-                    found.add(f"{loc}.{k}", "Extra inputs are not permitted", "extra_forbidden")
-                elif not too_many and isinstance(v, dict | list):
-                    stack.append((v, f"{loc}.{k}", not is_map and k in free))
-        elif isinstance(node, list):
-            stack.extend((v, f"{loc}.{i}", False) for i, v in enumerate(node) if isinstance(v, dict | list))
+        if type(node) is list:
+            for i, v in enumerate(node):
+                t = type(v)
+                if t is dict or t is list:
+                    stack.append((v, f"{loc}.{i}", False))
+                elif t is str and len(v) > max_chars:
+                    out.text.add(f"{loc}.{i}", _too_long_text(len(v), max_chars), "string_too_long")
+            continue
+        assert type(node) is dict
+        too_many = len(node) > MAX_OBJECT_KEYS
+        if too_many:
+            out.keys.add(loc, f"an object of {len(node):,d} keys; at most {MAX_OBJECT_KEYS} are accepted", "too_long")
+        if node.get("type") == "mixture" and type(node.get("components")) is list:
+            out.mixtures.append((f"{loc}.components", len(node["components"])))
+        for k, v in node.items():
+            if len(k) > max_chars:
+                msg = f"a key of {len(k):,d} characters; at most {max_chars:,d} (setting max_text_chars)"
+                out.text.add(loc, msg, "string_too_long")
+            elif not is_map and k not in names:
+                out.keys.add(f"{loc}.{k}", "Extra inputs are not permitted", "extra_forbidden")
+            elif too_many or k in LONG_TEXT:
+                continue
+            elif type(v) is dict or type(v) is list:
+                stack.append((v, f"{loc}.{k}", not is_map and k in free))
+            elif type(v) is str and len(v) > max_chars:
+                out.text.add(f"{loc}.{k}", _too_long_text(len(v), max_chars), "string_too_long")
+    return out
+
+
+def _too_long_text(n: int, max_chars: int) -> str:
+    return f"text of {n:,d} characters; this server accepts at most {max_chars:,d} (setting max_text_chars)"
 
 
 def count_receivers(doc: dict, stop_above: int) -> int:
@@ -124,20 +161,6 @@ def _is_int(x: object) -> bool:
 
 def _is_num(x: object) -> bool:
     return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
-
-
-def mixtures(doc: object, loc: str = "body") -> Iterator[tuple[str, int]]:
-    """(location, components) of every phase-function mixture of the document."""
-    stack: list[tuple[object, str]] = [(doc, loc)]
-    while stack:
-        node, at = stack.pop()
-        if isinstance(node, dict):
-            comps = node.get("components")
-            if node.get("type") == "mixture" and isinstance(comps, list):
-                yield f"{at}.components", len(comps)
-            stack.extend((v, f"{at}.{k}") for k, v in node.items() if isinstance(v, dict | list) and k != "data_base64")
-        elif isinstance(node, list):
-            stack.extend((v, f"{at}.{i}") for i, v in enumerate(node) if isinstance(v, dict | list))
 
 
 _TOKEN = re.compile(rb"[^\s,]+")

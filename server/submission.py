@@ -20,7 +20,7 @@ from owcsim.schemas.errors import ProblemField
 from owcsim.schemas.medium import MAX_MIXTURE_COMPONENTS
 
 from .preflight import Preflight, Preflighter, as_tuple
-from .prescan import Found, check_photometry, count_receivers, mixtures, scan_keys
+from .prescan import Found, check_photometry, count_receivers, scan
 from .problems import MAX_LISTED_ERRORS, ProblemError, field_errors
 from .settings import Settings
 
@@ -87,7 +87,6 @@ def parse_scene(body: bytes, settings: Settings) -> SceneSpec:
         ) from None
     if not isinstance(doc, dict):
         raise _invalid([ProblemField(loc="body", msg="a scene document is a JSON object", type="dict_type")])
-    _check_text_lengths(doc, settings.max_text_chars)
     _check_counts(doc, settings)
     try:
         return SceneSpec.model_validate(doc)
@@ -106,50 +105,15 @@ def _out_of_range(loc: str, exc: ArithmeticError) -> ProblemField:
     )
 
 
-#: Fields whose text may be long: file content.
-_LONG_TEXT = frozenset({"data_base64"})
-
-
-def _check_text_lengths(doc, max_chars: int) -> None:
-    """Every string (and object key) of the document at most `max_chars` long, file content excepted."""
-    errors: list[ProblemField] = []
-    stack: list[tuple[object, str]] = [(doc, "body")]
-    while stack and len(errors) < 10:
-        node, loc = stack.pop()
-        if isinstance(node, dict):
-            for k, v in node.items():
-                if len(k) > max_chars:
-                    errors.append(
-                        ProblemField(
-                            loc=loc,
-                            type="string_too_long",
-                            msg=f"a key of {len(k):,d} characters; at most {max_chars:,d} (setting max_text_chars)",
-                        )
-                    )
-                    continue
-                if k not in _LONG_TEXT:
-                    stack.append((v, f"{loc}.{k}"))
-        elif isinstance(node, list):
-            stack.extend((v, f"{loc}.{i}") for i, v in enumerate(node))
-        elif isinstance(node, str) and len(node) > max_chars:
-            errors.append(
-                ProblemField(
-                    loc=loc,
-                    type="string_too_long",
-                    msg=f"text of {len(node):,d} characters; this server accepts at most "
-                    f"{max_chars:,d} (setting max_text_chars)",
-                )
-            )
-    if errors:
-        raise _invalid(errors, "limit-exceeded")
-
-
 def _check_counts(doc: dict, settings: Settings) -> None:
-    """The pre-scan (prescan.py): unknown keys, then the counts a model would build, before any model builds."""
-    found = Found()
-    scan_keys(doc, found)
-    if found.count > MAX_LISTED_ERRORS or any(e.type != "extra_forbidden" for e in found.listed):
-        raise _invalid(found.listed, count=found.count)  # (a few unknown keys: reported with the other errors)
+    """The pre-scan (prescan.py): text lengths, unknown keys, then the counts a model would build, before any
+    model builds."""
+    walked = scan(doc, settings.max_text_chars)
+    if walked.text.count:
+        raise _invalid(walked.text.listed, "limit-exceeded", count=walked.text.count)
+    keys = walked.keys
+    if keys.count > MAX_LISTED_ERRORS or any(e.type != "extra_forbidden" for e in keys.listed):
+        raise _invalid(keys.listed, count=keys.count)  # (a few unknown keys: reported with the other errors)
     found = Found()
     transmitters = doc.get("transmitters")
     if isinstance(transmitters, list) and len(transmitters) > settings.max_transmitters:
@@ -180,7 +144,7 @@ def _check_counts(doc: dict, settings: Settings) -> None:
             f"the scene has {faces:,d} triangles; this server accepts at most "
             f"{settings.max_triangles:,d} (setting max_triangles)",
         )
-    for loc, n in mixtures(doc):
+    for loc, n in walked.mixtures:
         if n > MAX_MIXTURE_COMPONENTS:
             found.add(loc, f"a mixture of {n:,d} components; at most {MAX_MIXTURE_COMPONENTS} are accepted", "too_long")
     check_photometry(doc, found)
@@ -285,6 +249,11 @@ class Admitted:
     digest: str
     spec: SceneSpec | None  # a small body: checked in this process by the caller
     checked: Preflight | None  # a large body: already checked in a pre-flight process
+
+    def small_spec(self) -> SceneSpec:
+        """The spec of a small body (`checked` is None exactly then)."""
+        assert self.spec is not None, "a large body is checked in its pre-flight process"
+        return self.spec
 
 
 def admit(body: bytes, settings: Settings, preflighter: Preflighter) -> Admitted:

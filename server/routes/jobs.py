@@ -91,7 +91,7 @@ def _submit(body: bytes, owner, key, store: JobStore, settings: Settings, prefli
     try:
         if key is not None and (first := store.find_idempotent(owner, key, digest)) is not None:
             return first, False  # a retry (e.g. after a client timeout): no second pre-flight
-        checked = doc.checked or check_runnable(doc.spec, canonical, settings, preflighter)  # (small: here)
+        checked = doc.checked or check_runnable(doc.small_spec(), canonical, settings, preflighter)  # small: here
         return store.submit(
             owner=owner,
             scene_json=canonical,
