@@ -208,3 +208,23 @@ def test_14_a_mixture_of_too_many_components_is_refused_before_validation(api):
     p = api.post("/v1/jobs", json=doc).json()
     assert p["status"] == 422 and p["type"].endswith("limit-exceeded"), p
     assert p["errors"][0]["loc"] == "body.medium.phase.components" and "65 components" in p["detail"]
+
+
+# -- the hostile suite against a real server: its memory and health stay flat --------------------------------
+
+
+@pytest.mark.slow
+def test_2_a_real_server_stays_flat_under_large_and_hostile_bodies(tmp_path):
+    from benchmarks.hostile_bodies import cases, measure
+
+    from .helpers import ServerProcess
+
+    picked = {name.split(" ", 1)[1]: (body, copies) for name, body, copies in cases(1.0)}
+    with ServerProcess(tmp_path / "jobs.sqlite") as srv:
+        for name in ("unknown keys", "receivers (valid, over max_receivers)", "of 200,000 vertical angles"):
+            body, copies = picked[name]
+            m = measure(srv, body, copies)
+            assert m["status"] == 422 and m["bytes"] < 10_000, (name, m)
+            # the old server: +1,084 MB and health p99 2.6 s for the unknown keys, +232 MB for the receivers
+            assert m["peak"] - m["rss0"] < 120, (name, m)
+            assert m["p99"] < 1.0, (name, m)
