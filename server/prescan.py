@@ -125,16 +125,16 @@ def _too_long_text(n: int, max_chars: int) -> str:
     return f"text of {n:,d} characters; this server accepts at most {max_chars:,d} (setting max_text_chars)"
 
 
-def count_receivers(doc: dict, stop_above: int) -> int:
+def count_receivers(doc: dict, stop_above: int, grids: bool = True) -> int:
     """Receivers of the document, a lower bound counted without building the scene: explicit receivers and
     their orientation samples, each grid's points (from its shape) times 1 + its orientation samples, and each
-    angle-diversity receiver's photodiodes; stops counting past `stop_above`. ArithmeticError: a grid's shape
-    overflows."""
-    receivers, grids, adrs = (doc.get(k) for k in ("receivers", "receiver_grids", "angle_diversity_receivers"))
+    angle-diversity receiver's photodiodes; stops counting past `stop_above`; `grids`: False counts lists only
+    (no grid is validated). ArithmeticError: a grid's shape overflows."""
+    receivers, shapes, adrs = (doc.get(k) for k in ("receivers", "receiver_grids", "angle_diversity_receivers"))
     count = 0
     for r in receivers if isinstance(receivers, list) else []:
         count += 1 + _samples(r)
-    for g in grids if isinstance(grids, list) else []:
+    for g in shapes if grids and isinstance(shapes, list) else []:
         if count > stop_above:
             break
         try:

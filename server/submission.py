@@ -106,31 +106,15 @@ def _out_of_range(loc: str, exc: ArithmeticError) -> ProblemField:
 
 
 def _check_counts(doc: dict, settings: Settings) -> None:
-    """The pre-scan (prescan.py): text lengths, unknown keys, then the counts a model would build, before any
-    model builds."""
-    walked = scan(doc, settings.max_text_chars)
-    if walked.text.count:
-        raise _invalid(walked.text.listed, "limit-exceeded", count=walked.text.count)
-    keys = walked.keys
-    if keys.count > MAX_LISTED_ERRORS or any(e.type != "extra_forbidden" for e in keys.listed):
-        raise _invalid(keys.listed, count=keys.count)  # (a few unknown keys: reported with the other errors)
-    found = Found()
+    """The pre-scan (prescan.py), before any model builds: the lengths of the large lists first (no walk),
+    then text lengths and unknown keys (one walk), then grids, mixtures and photometric tables."""
+    _check_receivers(doc, settings, grids=False)
     transmitters = doc.get("transmitters")
     if isinstance(transmitters, list) and len(transmitters) > settings.max_transmitters:
         raise _limit(
             "body.transmitters",
             f"the scene has {len(transmitters):,d} transmitters; this server accepts at most "
             f"{settings.max_transmitters:,d} (setting max_transmitters)",
-        )
-    try:
-        count = count_receivers(doc, settings.max_receivers)
-    except ArithmeticError as exc:  # e.g. size / spacing overflows
-        raise _invalid([_out_of_range("body.receiver_grids", exc)]) from None
-    if count > settings.max_receivers:
-        raise _limit(
-            "body.receiver_grids",
-            f"the scene has at least {count:,d} receivers, counting each orientation sample and angle-diversity "
-            f"photodiode; this server accepts at most {settings.max_receivers:,d} (setting max_receivers)",
         )
     meshes = doc.get("meshes")
     faces = sum(
@@ -144,12 +128,33 @@ def _check_counts(doc: dict, settings: Settings) -> None:
             f"the scene has {faces:,d} triangles; this server accepts at most "
             f"{settings.max_triangles:,d} (setting max_triangles)",
         )
+    walked = scan(doc, settings.max_text_chars)
+    if walked.text.count:
+        raise _invalid(walked.text.listed, "limit-exceeded", count=walked.text.count)
+    keys = walked.keys
+    if keys.count > MAX_LISTED_ERRORS or any(e.type != "extra_forbidden" for e in keys.listed):
+        raise _invalid(keys.listed, count=keys.count)  # (a few unknown keys: reported with the other errors)
+    _check_receivers(doc, settings, grids=True)
+    found = Found()
     for loc, n in walked.mixtures:
         if n > MAX_MIXTURE_COMPONENTS:
             found.add(loc, f"a mixture of {n:,d} components; at most {MAX_MIXTURE_COMPONENTS} are accepted", "too_long")
     check_photometry(doc, found)
     if found.count:
         raise _invalid(found.listed, "limit-exceeded", count=found.count)
+
+
+def _check_receivers(doc: dict, settings: Settings, grids: bool) -> None:
+    try:
+        count = count_receivers(doc, settings.max_receivers, grids=grids)
+    except ArithmeticError as exc:  # e.g. size / spacing overflows
+        raise _invalid([_out_of_range("body.receiver_grids", exc)]) from None
+    if count > settings.max_receivers:
+        raise _limit(
+            "body.receiver_grids",
+            f"the scene has at least {count:,d} receivers, counting each orientation sample and angle-diversity "
+            f"photodiode; this server accepts at most {settings.max_receivers:,d} (setting max_receivers)",
+        )
 
 
 def _limit(loc: str, msg: str) -> ProblemError:
