@@ -152,8 +152,13 @@ def test_9_the_memory_estimate_covers_parsing_a_photometric_file():
         assert peak <= extra <= 6 * peak, (peak, extra)  # (the old estimate: no term, extra = 0)
 
 
-def test_9_the_out_of_memory_message_names_photometric_files():
-    assert "photometric" in out_of_memory_reason(2**30)
+def test_9_the_out_of_memory_message_names_photometric_files_when_they_are_the_cause():
+    with_ies = SceneSpec.model_validate(ies_doc(ies_file(3601, 40)))  # ~36 MB of the estimate
+    msg = out_of_memory_reason(2**27, with_ies)
+    assert "photometric files take about" in msg and "fewer receivers" not in msg, msg
+    plain = out_of_memory_reason(2**27, SceneSpec.model_validate(quick_doc()))
+    assert "fewer receivers" in plain and "photometric files take" not in plain
+    assert "fewer receivers" in out_of_memory_reason(2**27)  # the document could not be read
 
 
 # -- 14. counted before building: GLB nodes, transmitters, mixture components --------------------------------
