@@ -83,7 +83,7 @@ class Settings(BaseSettings):
         10_000, ge=1, le=10_000, description="most transmitters in a scene (at most the schema's MAX_TRANSMITTERS)"
     )
     inprocess_body_bytes: int = Field(
-        1 << 20,
+        256 << 10,
         ge=0,
         description="largest body validated and pre-flighted in the server's process [bytes]; a larger one is "
         "parsed, validated and pre-flighted in a pre-flight process (preflight_memory_bytes, preflight_timeout_s)",
