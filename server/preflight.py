@@ -112,8 +112,8 @@ def _run(spec: SceneSpec, max_triangles: int, workers: int) -> tuple:
     triangles = len(scene.geometry.faces)
     points = [scene.geometry.vertices, scene.transmitters.positions, scene.receivers.positions]
     extent = float(np.ptp(np.concatenate(points), axis=0).max())
-    values = sum(p.intensity.size + p.c.size + p.gamma.size for p in scene.transmitters.patterns if p is not None)
-    memory = job_memory_bytes(spec, triangles=triangles, extent_m=extent, workers=workers, photometry_values=values)
+    cells = sum(p.intensity.size for p in scene.transmitters.patterns if p is not None)
+    memory = job_memory_bytes(spec, triangles=triangles, extent_m=extent, workers=workers, photometry_cells=cells)
     return ("ok", triangles, memory)
 
 
