@@ -125,20 +125,30 @@ def _too_long_text(n: int, max_chars: int) -> str:
     return f"text of {n:,d} characters; this server accepts at most {max_chars:,d} (setting max_text_chars)"
 
 
+class GridOverflow(ArithmeticError):
+    """A receiver grid whose shape a number overflows: `index` in `receiver_grids`."""
+
+    def __init__(self, index: int, exc: ArithmeticError):
+        super().__init__(str(exc))
+        self.index = index
+
+
 def count_receivers(doc: dict, stop_above: int, grids: bool = True) -> int:
     """Receivers of the document, a lower bound counted without building the scene: explicit receivers and
     their orientation samples, each grid's points (from its shape) times 1 + its orientation samples, and each
     angle-diversity receiver's photodiodes; stops counting past `stop_above`; `grids`: False counts lists only
-    (no grid is validated). ArithmeticError: a grid's shape overflows."""
+    (no grid is validated). GridOverflow: a grid's shape overflows."""
     receivers, shapes, adrs = (doc.get(k) for k in ("receivers", "receiver_grids", "angle_diversity_receivers"))
     count = 0
     for r in receivers if isinstance(receivers, list) else []:
         count += 1 + _samples(r)
-    for g in shapes if grids and isinstance(shapes, list) else []:
+    for i, g in enumerate(shapes if grids and isinstance(shapes, list) else []):
         if count > stop_above:
             break
         try:
             count += ReceiverGridSpec.model_validate(g).count * (1 + _samples(g))
+        except ArithmeticError as exc:  # e.g. size / spacing overflows
+            raise GridOverflow(i, exc) from None
         except (ValidationError, ValueError, TypeError):
             pass  # reported by the full validation
     for a in adrs if isinstance(adrs, list) else []:

@@ -20,7 +20,7 @@ from owcsim.schemas.errors import ProblemField
 from owcsim.schemas.medium import MAX_MIXTURE_COMPONENTS
 
 from .preflight import Preflight, Preflighter, as_tuple
-from .prescan import Found, check_photometry, count_receivers, scan
+from .prescan import Found, GridOverflow, check_photometry, count_receivers, scan
 from .problems import MAX_LISTED_ERRORS, ProblemError, field_errors
 from .settings import Settings
 
@@ -147,8 +147,8 @@ def _check_counts(doc: dict, settings: Settings) -> None:
 def _check_receivers(doc: dict, settings: Settings, grids: bool) -> None:
     try:
         count = count_receivers(doc, settings.max_receivers, grids=grids)
-    except ArithmeticError as exc:  # e.g. size / spacing overflows
-        raise _invalid([_out_of_range("body.receiver_grids", exc)]) from None
+    except GridOverflow as exc:  # e.g. size / spacing overflows
+        raise _invalid([_out_of_range(f"body.receiver_grids.{exc.index}", exc)]) from None
     if count > settings.max_receivers:
         raise _limit(
             "body.receiver_grids",
