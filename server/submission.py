@@ -116,12 +116,16 @@ def _check_counts(doc: dict, settings: Settings) -> None:
             f"the scene has {len(transmitters):,d} transmitters; this server accepts at most "
             f"{settings.max_transmitters:,d} (setting max_transmitters)",
         )
-    meshes = doc.get("meshes")
-    faces = sum(
-        len(m["faces"])
-        for m in (meshes if isinstance(meshes, list) else [])
-        if isinstance(m, dict) and isinstance(m.get("faces"), list)
-    )
+    meshes, furniture = doc.get("meshes"), doc.get("furniture")
+    faces = (
+        sum(
+            len(m["faces"])
+            for m in (meshes if isinstance(meshes, list) else [])
+            if isinstance(m, dict) and isinstance(m.get("faces"), list)
+        )
+        + 12 * (len(furniture) if isinstance(furniture, list) else 0)
+        + (12 if doc.get("room") else 0)
+    )  # boxes: 12
     if faces > settings.max_triangles:
         raise _limit(
             "body.meshes",

@@ -204,6 +204,19 @@ def test_14_transmitters_are_counted_before_validation(tmp_path):
     assert "501 transmitters" in p["detail"] and "max_transmitters" in p["detail"] and seconds < 2
 
 
+def test_14_furniture_is_counted_in_triangles_before_validation(tmp_path, monkeypatch):
+    doc = quick_doc()
+    doc["furniture"] = [{"min": [1, 1, 0], "max": [2, 2, 1], "reflectance": 0.5}] * 10
+    with app_client(tmp_path, max_triangles=100) as c:
+
+        def refuse(*a, **k):
+            raise AssertionError("validated before counting")
+
+        monkeypatch.setattr(SceneSpec, "model_validate", refuse)
+        p = _post(c, doc)[0].json()
+    assert p["status"] == 422 and p["errors"][0]["loc"] == "body.meshes" and "132 triangles" in p["detail"], p
+
+
 def test_14_a_mixture_of_too_many_components_is_refused_before_validation(api):
     comps = [{"weight": 1.0, "phase": {"type": "hg", "g": 0.5}}] * (MAX_MIXTURE_COMPONENTS + 1)
     doc = quick_doc()
