@@ -39,6 +39,9 @@ class Problem(BaseModel):
     detail: str | None = Field(None, description="what went wrong in this case, in words")
     instance: str | None = Field(None, description="the request path")
     errors: list[ProblemField] = Field(default_factory=list, description="each wrong field, located")
+    error_count: int | None = Field(
+        None, description="how many errors the document has; `errors` lists the first 20 (422 answers)"
+    )
 
 
 def located(errors: Sequence[Mapping[str, Any]], prefix: tuple = ()) -> list[tuple[str, str]]:

@@ -20,6 +20,8 @@ Reflectance = Annotated[float, Field(ge=0.0, le=1.0, description="Lambertian ref
 
 #: Names of the six faces of the box room, in the order the engine builds them.
 ROOM_FACES = ("floor", "ceiling", "wall_x_min", "wall_x_max", "wall_y_min", "wall_y_max")
+#: Most nodes of a glTF / GLB mesh file (each node a transform the scene graph holds).
+MAX_MESH_NODES = 100_000
 
 
 class RoomReflectance(SpecModel):

@@ -54,6 +54,10 @@ class RayleighPhaseSpec(SpecModel):
     type: Literal["rayleigh"] = "rayleigh"
 
 
+#: Most components of a phase-function mixture (each costs a branch per scattering event).
+MAX_MIXTURE_COMPONENTS = 64
+
+
 class MixtureComponent(SpecModel):
     weight: float = Field(gt=0.0)
     phase: Annotated[
@@ -66,7 +70,7 @@ class MixturePhaseSpec(SpecModel):
     """Weighted mixture (report eq. 3.3), e.g. two-term HG; weights are normalised."""
 
     type: Literal["mixture"] = "mixture"
-    components: list[MixtureComponent] = Field(min_length=1)
+    components: list[MixtureComponent] = Field(min_length=1, max_length=MAX_MIXTURE_COMPONENTS)
 
 
 #: Most points a tabulated phase function may have.

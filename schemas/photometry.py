@@ -20,6 +20,10 @@ from pydantic import Field, model_validator
 from .base import Direction, SpecModel
 
 PHOTOMETRY_FORMATS = ("ies", "ldt")
+#: Most angles on one axis of a photometric table (0.05 deg steps over 180 deg, 0.1 deg over 360 deg).
+MAX_PHOTOMETRY_ANGLES = 3601
+#: Most candela values of a photometric table: EULUMDAT's largest (721 C planes x 361 gamma angles).
+MAX_PHOTOMETRY_CELLS = 721 * 361
 
 
 class PhotometrySpec(SpecModel):

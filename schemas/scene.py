@@ -21,6 +21,8 @@ from .timeline import TimelineSpec, check_timeline
 
 #: Most tally cells (links x reflection orders x time bins) a job may hold.
 MAX_TALLY_CELLS = 50_000_000
+#: Most transmitters of a scene.
+MAX_TRANSMITTERS = 10_000
 
 
 class TransmitterGroupSpec(SpecModel):
@@ -45,7 +47,7 @@ class SceneSpec(SpecModel):
     room: RoomSpec | None = None
     furniture: list[BoxSpec] = Field(default_factory=list)
     meshes: list[MeshSpec] = Field(default_factory=list)
-    transmitters: list[TransmitterSpec] = Field(min_length=1)
+    transmitters: list[TransmitterSpec] = Field(min_length=1, max_length=MAX_TRANSMITTERS)
     receivers: list[ReceiverSpec] = Field(default_factory=list)
     receiver_grids: list[ReceiverGridSpec] = Field(default_factory=list)
     angle_diversity_receivers: list[AngleDiversityReceiverSpec] = Field(

@@ -31,7 +31,10 @@ from owcsim.schemas import SceneSpec, SimulationSpec
 from owcsim.schemas.algorithms import algorithm
 from owcsim.schemas.errors import ProblemField
 
+from .prescan import vocabulary
 from .problems import ProblemError
+
+vocabulary()  # the pre-scan's field names, made once: the forkserver imports this module, its children inherit them
 
 #: A scene with at most this many receivers (grids expanded), no file-content meshes and at most
 #: SMALL_TRIANGLES inline triangles is pre-flighted in the server's thread, not in a process.
@@ -111,11 +114,13 @@ def _run(spec: SceneSpec, max_triangles: int, workers: int) -> tuple:
     triangles = len(scene.geometry.faces)
     points = [scene.geometry.vertices, scene.transmitters.positions, scene.receivers.positions]
     extent = float(np.ptp(np.concatenate(points), axis=0).max())
-    return ("ok", triangles, job_memory_bytes(spec, triangles=triangles, extent_m=extent, workers=workers))
+    cells = sum(p.intensity.size for p in scene.transmitters.patterns if p is not None)
+    memory = job_memory_bytes(spec, triangles=triangles, extent_m=extent, workers=workers, photometry_cells=cells)
+    return ("ok", triangles, memory)
 
 
-def _child(conn, scene_json: str, max_triangles: int, workers: int, memory_bytes: int) -> None:
-    """Entry point of the pre-flight process: cap the address space, run, send the outcome."""
+def _child(conn, memory_bytes: int, what: str, fn, *args) -> None:
+    """Entry point of the pre-flight process: cap the address space, run `fn(*args)` (a tuple), send it."""
     import warnings
 
     from .worker import cap_address_space
@@ -124,18 +129,21 @@ def _child(conn, scene_json: str, max_triangles: int, workers: int, memory_bytes
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the job's run records them
-            out = _run(SceneSpec.model_validate_json(scene_json), max_triangles, workers)
+            out = fn(*args)
     except MemoryError:
         out = _problem(
             "limit-exceeded",
             "body",
-            f"the pre-flight of this scene needs more than this server's "
-            f"{memory_bytes / 2**30:.3g} GB (setting preflight_memory_bytes): a smaller mesh or fewer "
-            "receivers",
+            f"{what} needs more than this server's {memory_bytes / 2**30:.3g} GB (setting "
+            "preflight_memory_bytes): a smaller mesh, photometric table or medium grid, or fewer receivers",
             "limit_exceeded",
         )
     conn.send(out)
     conn.close()
+
+
+def _preflight_json(scene_json: str, max_triangles: int, workers: int) -> tuple:
+    return _run(SceneSpec.model_validate_json(scene_json), max_triangles, workers)
 
 
 class Preflighter:
@@ -149,19 +157,32 @@ class Preflighter:
 
     def __call__(self, spec: SceneSpec, scene_json: str) -> Preflight:
         """Blocking (call it from a worker thread); raises ProblemError with the refusal."""
-        out: tuple | None
         if is_small(spec):
-            out = _run(spec, self.max_triangles, self.workers)
-            if out[0] != "ok":
-                raise _error(out)
-            return Preflight(triangles=out[1], memory_bytes=out[2])
+            return self.inline(spec, scene_json)
+        out = self.in_process(
+            "the pre-flight of this scene", _preflight_json, scene_json, self.max_triangles, self.workers
+        )
+        return Preflight(triangles=out[1], memory_bytes=out[2])
+
+    def inline(self, spec: SceneSpec, scene_json: str = "") -> Preflight:
+        """The pre-flight in the calling process (small scenes; and inside the pre-flight process itself)."""
+        out = _run(spec, self.max_triangles, self.workers)
+        if out[0] != "ok":
+            raise _error(out)
+        return Preflight(triangles=out[1], memory_bytes=out[2])
+
+    def in_process(self, what: str, fn, *args) -> tuple:
+        """`fn(*args)` (a module-level function returning ("ok", ...) or a problem tuple) in a pre-flight
+        process: capped memory, killed past the timeout, at most `concurrency` at once. Blocking; returns
+        the "ok" tuple, raises ProblemError with the refusal."""
+        out: tuple | None
         with self._slots:
             receive, send = self._ctx.Pipe(duplex=False)
             proc = self._ctx.Process(
                 target=_child,
                 name="owcsim-preflight",
                 daemon=True,
-                args=(send, scene_json, self.max_triangles, self.workers, self.memory_bytes),
+                args=(send, self.memory_bytes, what, fn, *args),
             )
             proc.start()
             send.close()
@@ -180,8 +201,7 @@ class Preflighter:
                 _problem(
                     "limit-exceeded",
                     "body",
-                    f"the pre-flight of this scene took longer than this "
-                    f"server's {self.timeout_s:g} s (setting preflight_timeout_s)",
+                    f"{what} took longer than this server's {self.timeout_s:g} s (setting preflight_timeout_s)",
                     "limit_exceeded",
                 )
             )
@@ -190,19 +210,26 @@ class Preflighter:
                 _problem(
                     "limit-exceeded",
                     "body",
-                    "the pre-flight of this scene ended without an answer "
+                    f"{what} ended without an answer "
                     f"(more memory than this server's {self.memory_bytes / 2**30:.3g} GB for it?)",
                     "limit_exceeded",
                 )
             )
         if out[0] != "ok":
             raise _error(out)
-        return Preflight(triangles=out[1], memory_bytes=out[2])
+        return out
 
 
 def _error(out: tuple) -> ProblemError:
-    _, status, kind, detail, errors = out
-    return ProblemError(status, kind, detail, errors=[ProblemField(loc=loc, msg=msg, type=t) for loc, msg, t in errors])
+    """A problem tuple ("problem", status, kind, detail, [(loc, msg, type)], {extensions}?) as a ProblemError."""
+    _, status, kind, detail, errors, *extensions = out
+    fields = [ProblemField(loc=loc, msg=msg, type=t) for loc, msg, t in errors]
+    return ProblemError(status, kind, detail, errors=fields, **(extensions[0] if extensions else {}))
+
+
+def as_tuple(exc: ProblemError) -> tuple:
+    """A ProblemError as the picklable tuple a pre-flight process sends back (`_error` undoes it)."""
+    return ("problem", exc.status, exc.kind, exc.detail, [(e.loc, e.msg, e.type) for e in exc.errors], exc.extensions)
 
 
 def preflight(spec: SceneSpec) -> int:

@@ -29,6 +29,8 @@ _HTTP_METHODS = {"GET", "PUT", "POST", "DELETE", "OPTIONS", "HEAD", "PATCH", "TR
 log = logging.getLogger("owcsim.server")
 
 URN = "urn:owcsim:problem:"
+#: Most located errors a problem document lists; `error_count` counts them all.
+MAX_LISTED_ERRORS = 20
 
 
 class ProblemError(Exception):
@@ -119,9 +121,10 @@ def install(app: FastAPI) -> None:
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError):
-        errors = field_errors(list(exc.errors()))
+        every = list(exc.errors())
+        errors = field_errors(every[:MAX_LISTED_ERRORS])  # the first few, and how many there are
         detail = "; ".join(f"{e.loc}: {e.msg}" for e in errors[:5])
-        return problem_response(request, 422, "invalid-parameter", detail, errors=errors)
+        return problem_response(request, 422, "invalid-parameter", detail, errors=errors, error_count=len(every))
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException):

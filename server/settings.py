@@ -79,6 +79,15 @@ class Settings(BaseSettings):
     body_timeout_s: float = Field(30.0, gt=0, description="time a client has to send a request's body [s]")
     keep_alive_s: float = Field(5.0, gt=0, description="idle keep-alive connections are closed after this [s]")
     max_connections: int = Field(200, ge=1, description="open connections; a request beyond gets 503")
+    max_transmitters: int = Field(
+        10_000, ge=1, le=10_000, description="most transmitters in a scene (at most the schema's MAX_TRANSMITTERS)"
+    )
+    inprocess_body_bytes: int = Field(
+        256 << 10,
+        ge=0,
+        description="largest body validated and pre-flighted in the server's process [bytes]; a larger one is "
+        "parsed, validated and pre-flighted in a pre-flight process (preflight_memory_bytes, preflight_timeout_s)",
+    )
     scheduler: str | None = Field(
         None,
         description="Dask scheduler address (tcp://host:8786): jobs run their "

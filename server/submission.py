@@ -9,15 +9,19 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Callable
+from dataclasses import dataclass
 
 from fastapi import Request
 from pydantic import ValidationError
 
-from owcsim.schemas import ReceiverGridSpec, SceneSpec
+from owcsim.schemas import SceneSpec
 from owcsim.schemas.errors import ProblemField
+from owcsim.schemas.medium import MAX_MIXTURE_COMPONENTS
 
-from .preflight import Preflight, Preflighter
-from .problems import ProblemError, field_errors
+from .preflight import Preflight, Preflighter, as_tuple
+from .prescan import Found, GridOverflow, check_photometry, count_receivers, scan
+from .problems import MAX_LISTED_ERRORS, ProblemError, field_errors
 from .settings import Settings
 
 JSON_TYPES = ("application/json",)
@@ -48,11 +52,19 @@ async def read_body(request: Request, max_bytes: int) -> bytes:
     return b"".join(chunks)
 
 
-def _invalid(errors: list[ProblemField], kind: str = "invalid-scene", status: int = 422) -> ProblemError:
-    detail = "; ".join(f"{e.loc}: {e.msg}" for e in errors[:5])
-    if len(errors) > 5:
-        detail += f"; and {len(errors) - 5} more"
-    return ProblemError(status, kind, detail, errors=errors)
+def _invalid(
+    errors: list[ProblemField], kind: str = "invalid-scene", status: int = 422, count: int | None = None
+) -> ProblemError:
+    """A refusal that lists the first MAX_LISTED_ERRORS errors and counts all (`error_count`; `count` when the
+    errors given are only the first of more)."""
+    count = max(count or 0, len(errors))
+    listed = errors[:MAX_LISTED_ERRORS]
+    detail = "; ".join(f"{e.loc}: {e.msg}" for e in listed[:5])
+    if count > 5:
+        detail += f"; and {count - 5:,d} more"
+    if count > len(listed):
+        detail += f" (the first {len(listed)} listed)"
+    return ProblemError(status, kind, detail, errors=listed, error_count=count)
 
 
 def parse_scene(body: bytes, settings: Settings) -> SceneSpec:
@@ -75,12 +87,12 @@ def parse_scene(body: bytes, settings: Settings) -> SceneSpec:
         ) from None
     if not isinstance(doc, dict):
         raise _invalid([ProblemField(loc="body", msg="a scene document is a JSON object", type="dict_type")])
-    _check_text_lengths(doc, settings.max_text_chars)
-    _check_receiver_count(doc, settings)
+    _check_counts(doc, settings)
     try:
         return SceneSpec.model_validate(doc)
     except ValidationError as err:
-        raise _invalid(field_errors(err.errors(include_url=False), ("body",))) from None
+        first = err.errors(include_url=False)[:MAX_LISTED_ERRORS]
+        raise _invalid(field_errors(first, ("body",)), count=err.error_count()) from None
     except RecursionError:
         raise _invalid([ProblemField(loc="body", msg="document nested too deeply", type="value_error")]) from None
     except ArithmeticError as exc:  # a rule of the schema met a number it cannot compute with
@@ -93,61 +105,59 @@ def _out_of_range(loc: str, exc: ArithmeticError) -> ProblemField:
     )
 
 
-#: Fields whose text may be long: file content.
-_LONG_TEXT = frozenset({"data_base64"})
+def _check_counts(doc: dict, settings: Settings) -> None:
+    """The pre-scan (prescan.py), before any model builds: the lengths of the large lists first (no walk),
+    then text lengths and unknown keys (one walk), then grids, mixtures and photometric tables."""
+    _check_receivers(doc, settings, grids=False)
+    transmitters = doc.get("transmitters")
+    if isinstance(transmitters, list) and len(transmitters) > settings.max_transmitters:
+        raise _limit(
+            "body.transmitters",
+            f"the scene has {len(transmitters):,d} transmitters; this server accepts at most "
+            f"{settings.max_transmitters:,d} (setting max_transmitters)",
+        )
+    meshes, furniture = doc.get("meshes"), doc.get("furniture")
+    faces = (
+        sum(
+            len(m["faces"])
+            for m in (meshes if isinstance(meshes, list) else [])
+            if isinstance(m, dict) and isinstance(m.get("faces"), list)
+        )
+        + 12 * (len(furniture) if isinstance(furniture, list) else 0)
+        + (12 if doc.get("room") else 0)
+    )  # boxes: 12
+    if faces > settings.max_triangles:
+        raise _limit(
+            "body.meshes",
+            f"the scene has {faces:,d} triangles; this server accepts at most "
+            f"{settings.max_triangles:,d} (setting max_triangles)",
+        )
+    walked = scan(doc, settings.max_text_chars)
+    if walked.text.count:
+        raise _invalid(walked.text.listed, "limit-exceeded", count=walked.text.count)
+    keys = walked.keys
+    if keys.count > MAX_LISTED_ERRORS or any(e.type != "extra_forbidden" for e in keys.listed):
+        raise _invalid(keys.listed, count=keys.count)  # (a few unknown keys: reported with the other errors)
+    _check_receivers(doc, settings, grids=True)
+    found = Found()
+    for loc, n in walked.mixtures:
+        if n > MAX_MIXTURE_COMPONENTS:
+            found.add(loc, f"a mixture of {n:,d} components; at most {MAX_MIXTURE_COMPONENTS} are accepted", "too_long")
+    check_photometry(doc, found)
+    if found.count:
+        raise _invalid(found.listed, "limit-exceeded", count=found.count)
 
 
-def _check_text_lengths(doc, max_chars: int) -> None:
-    """Every string (and object key) of the document at most `max_chars` long, file content excepted."""
-    errors: list[ProblemField] = []
-    stack: list[tuple[object, str]] = [(doc, "body")]
-    while stack and len(errors) < 10:
-        node, loc = stack.pop()
-        if isinstance(node, dict):
-            for k, v in node.items():
-                if len(k) > max_chars:
-                    errors.append(
-                        ProblemField(
-                            loc=loc,
-                            type="string_too_long",
-                            msg=f"a key of {len(k):,d} characters; at most {max_chars:,d} (setting max_text_chars)",
-                        )
-                    )
-                    continue
-                if k not in _LONG_TEXT:
-                    stack.append((v, f"{loc}.{k}"))
-        elif isinstance(node, list):
-            stack.extend((v, f"{loc}.{i}") for i, v in enumerate(node))
-        elif isinstance(node, str) and len(node) > max_chars:
-            errors.append(
-                ProblemField(
-                    loc=loc,
-                    type="string_too_long",
-                    msg=f"text of {len(node):,d} characters; this server accepts at most "
-                    f"{max_chars:,d} (setting max_text_chars)",
-                )
-            )
-    if errors:
-        raise _invalid(errors, "limit-exceeded")
-
-
-def _check_receiver_count(doc: dict, settings: Settings) -> None:
-    """Grids expand into receivers during validation: bound their number first."""
-    grids = doc.get("receiver_grids")
-    receivers = doc.get("receivers")
-    count = len(receivers) if isinstance(receivers, list) else 0
-    for i, g in enumerate(grids if isinstance(grids, list) else []):
-        try:
-            count += ReceiverGridSpec.model_validate(g).count
-        except ArithmeticError as exc:  # e.g. size / spacing overflows
-            raise _invalid([_out_of_range(f"body.receiver_grids.{i}", exc)]) from None
-        except (ValidationError, ValueError, TypeError):
-            pass  # reported by the full validation
+def _check_receivers(doc: dict, settings: Settings, grids: bool) -> None:
+    try:
+        count = count_receivers(doc, settings.max_receivers, grids=grids)
+    except GridOverflow as exc:  # e.g. size / spacing overflows
+        raise _invalid([_out_of_range(f"body.receiver_grids.{exc.index}", exc)]) from None
     if count > settings.max_receivers:
         raise _limit(
             "body.receiver_grids",
-            f"the scene has {count:,d} receivers; this server accepts at most "
-            f"{settings.max_receivers:,d} (setting max_receivers)",
+            f"the scene has at least {count:,d} receivers, counting each orientation sample and angle-diversity "
+            f"photodiode; this server accepts at most {settings.max_receivers:,d} (setting max_receivers)",
         )
 
 
@@ -222,7 +232,9 @@ def check_limits(spec: SceneSpec, settings: Settings) -> None:
         )
 
 
-def check_runnable(spec: SceneSpec, scene_json: str, settings: Settings, preflighter: Preflighter) -> Preflight:
+def check_runnable(
+    spec: SceneSpec, scene_json: str, settings: Settings, preflighter: Callable[[SceneSpec, str], Preflight]
+) -> Preflight:
     """The server's limits, the engine's pre-flight and the memory estimate of a validated scene;
     returns the pre-flight's figures, raises ProblemError."""
     check_limits(spec, settings)
@@ -244,6 +256,57 @@ def check_runnable(spec: SceneSpec, scene_json: str, settings: Settings, preflig
             "most the engine may choose), or a smaller batch_size",
         )
     return out
+
+
+@dataclass(frozen=True)
+class Admitted:
+    """A valid document: its canonical JSON, name and hash; a large body's pre-flight figures (`checked`), or
+    the spec of a small one to check with `check_runnable` (after the idempotency look-up)."""
+
+    canonical: str
+    name: str | None
+    digest: str
+    spec: SceneSpec | None  # a small body: checked in this process by the caller
+    checked: Preflight | None  # a large body: already checked in a pre-flight process
+
+    def small_spec(self) -> SceneSpec:
+        """The spec of a small body (`checked` is None exactly then)."""
+        assert self.spec is not None, "a large body is checked in its pre-flight process"
+        return self.spec
+
+
+def admit(body: bytes, settings: Settings, preflighter: Preflighter) -> Admitted:
+    """Parse and validate a body. A body of at most `inprocess_body_bytes` is parsed here (its limits and
+    pre-flight are the caller's: `check_runnable`); a larger one is parsed, pre-scanned, validated, limited and
+    pre-flighted in a pre-flight process, so that the server's memory and interpreter stay free.
+    Blocking (call it from a worker thread); raises ProblemError."""
+    if len(body) <= settings.inprocess_body_bytes:
+        spec = parse_scene(body, settings)
+        canonical = spec.model_dump_json()
+        return Admitted(canonical, spec.name, request_hash(canonical), spec, None)
+    what = "the validation and pre-flight of this document"
+    _, canonical, name, triangles, memory = preflighter.in_process(what, check_document, body, settings)
+    checked = Preflight(triangles=triangles, memory_bytes=memory)
+    return Admitted(canonical, name, request_hash(canonical), None, checked)
+
+
+def check_document(body: bytes, settings: Settings) -> tuple:
+    """In a pre-flight process: the whole admission of a body, as ("ok", canonical, name, triangles, memory)
+    or a problem tuple."""
+    inline = Preflighter(
+        concurrency=1,
+        timeout_s=settings.preflight_timeout_s,
+        memory_bytes=settings.preflight_memory_bytes,
+        max_triangles=settings.max_triangles,
+        workers=settings.workers_per_job,
+    ).inline
+    try:
+        spec = parse_scene(body, settings)
+        canonical = spec.model_dump_json()
+        checked = check_runnable(spec, canonical, settings, inline)
+    except ProblemError as exc:
+        return as_tuple(exc)
+    return ("ok", canonical, spec.name, checked.triangles, checked.memory_bytes)
 
 
 def request_hash(canonical: str) -> str:

@@ -72,11 +72,21 @@ def cap_address_space(budget_bytes: int, headroom_bytes: int) -> int:
     return limit
 
 
-def out_of_memory_reason(budget_bytes: int) -> str:
+def out_of_memory_reason(budget_bytes: int, spec=None) -> str:
+    """What a job that ran out of memory is told; `spec` (its SceneSpec, if read) names photometric files
+    that take a quarter of the budget or more as the cause."""
+    from owcsim.engine.run.budget import memory_estimate
+
+    photometry = memory_estimate(spec).photometry if spec is not None else 0
+    if photometry >= budget_bytes / 4:
+        return (
+            f"the job ran out of its memory budget of {budget_bytes / 2**30:.3g} GB: its photometric files take "
+            f"about {photometry / 2**20:,.0f} MB of it while they are read: send photometric files with fewer angles"
+        )
     return (
         f"the job ran out of its memory budget of {budget_bytes / 2**30:.3g} GB (estimated from its settings: "
-        "links x reflection and scattering orders x time bins, receivers, batch_size, triangles): ask for "
-        "fewer receivers, orders or time bins, or a smaller batch_size"
+        "links x reflection and scattering orders x time bins, receivers, batch_size, triangles, photometric "
+        "tables): ask for fewer receivers, orders or time bins, a smaller batch_size, or smaller photometric files"
     )
 
 
@@ -204,7 +214,9 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
         return
     except MemoryError:
         result = None  # free what can be freed before writing
-        store_outcome(store, job_id, token, "failed", lifeline, error=out_of_memory_reason(memory_bytes))
+        store_outcome(
+            store, job_id, token, "failed", lifeline, error=out_of_memory_reason(memory_bytes, locals().get("spec"))
+        )
         return
     except Exception as exc:  # a bug, not the user's input: keep the trace in the server log
         log.exception("job %s: the engine failed", job_id)

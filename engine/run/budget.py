@@ -25,6 +25,10 @@ The terms follow the arrays the engine allocates:
   by `simulate.PATH_TARGET_BUDGET` (dense per-path tallies: 3 arrays and temporaries, ~10 numbers
   per pair), one step's next-event estimates capped by `simulate.ESTIMATE_BUDGET` (~60 B each) and,
   with quasi-random blocks, the order split's (sample, cell) table (at most `tally.SAMPLE_TABLE_MAX`);
+- `photometry`: the transmitters' photometric files: while parsed, per number of the file its text token,
+  (token, line) pair, list slot and float (BYTES_PER_PHOTOMETRY_VALUE; the numbers counted in the file),
+  the file's base64 text, its bytes and its decoded text (3 bytes per base64 character), and the
+  expanded table's intensities, CDF and copies (BYTES_PER_PHOTOMETRY_CELL per cell, when known);
 - `result`: the result document: ~40 numbers per link (~70 B each as Python floats and JSON text),
   plus the CIR links' bins x (K+S+4) and the maps (~12 quantities per grid point and channel).
 
@@ -34,8 +38,11 @@ When K, S or the time window are "auto", the estimate takes the most the engine 
 
 from __future__ import annotations
 
+import base64
 import math
 from dataclasses import asdict, dataclass
+
+import numpy as np
 
 from owcsim.engine.core.constants import SPEED_OF_LIGHT
 from owcsim.engine.core.qmc import BLOCK
@@ -61,6 +68,13 @@ BYTES_PER_DEVICE = 3_000
 BYTES_PER_CONTRIBUTION = 60
 #: Bytes per number of the result document (Python float in a list + JSON text) [B].
 BYTES_PER_RESULT_NUMBER = 70
+#: Bytes per number of a photometric file while it is parsed (~170-200 measured for IES files of 10^5 to
+#: 10^6 values, tests/server/test_hostile_bodies.py) [B].
+BYTES_PER_PHOTOMETRY_VALUE = 256
+#: Bytes per cell of an expanded photometric table: intensity, CDF and the arrays they come from [B].
+BYTES_PER_PHOTOMETRY_CELL = 32
+#: Bytes that separate the numbers of a photometric file.
+_SEPARATORS = np.frombuffer(b" \t\r\n,;", np.uint8)
 #: Extent assumed for the automatic time window when the scene's is unknown [m] (as engine/run/auto.py).
 DEFAULT_EXTENT_M = 10.0
 
@@ -75,6 +89,7 @@ class MemoryEstimate:
     accumulators: int
     batch: int
     result: int
+    photometry: int = 0
 
     @property
     def total(self) -> int:
@@ -87,6 +102,21 @@ def _triangles(spec: SceneSpec) -> int:
     return (12 if spec.room is not None else 0) + 12 * len(spec.furniture) + inline
 
 
+def _photometry(spec: SceneSpec, cells: int | None) -> int:
+    """Memory of the transmitters' photometric files [B]: their numbers while parsed, their text and their
+    expanded tables; `cells`: the tables' cells if known (the scene built), else 4 per number of the file
+    (a quadrant-symmetric file stores a quarter of its table)."""
+    total, numbers = 0, 0
+    for t in spec.transmitters:
+        if t.photometry is not None and t.photometry.data_base64 is not None:
+            text = np.frombuffer(base64.b64decode(t.photometry.data_base64), np.uint8)
+            is_token = ~np.isin(text, _SEPARATORS)
+            n = int(np.count_nonzero(is_token[1:] & ~is_token[:-1])) + int(is_token[:1].sum())
+            total += n * BYTES_PER_PHOTOMETRY_VALUE + 3 * len(t.photometry.data_base64)
+            numbers += n
+    return total + BYTES_PER_PHOTOMETRY_CELL * (cells if cells is not None else 4 * numbers)
+
+
 def _extent(spec: SceneSpec) -> float:
     if spec.room is not None:
         return float(max(spec.room.size))
@@ -94,12 +124,18 @@ def _extent(spec: SceneSpec) -> float:
 
 
 def memory_estimate(
-    spec: SceneSpec, *, triangles: int | None = None, extent_m: float | None = None, workers: int = 1
+    spec: SceneSpec,
+    *,
+    triangles: int | None = None,
+    extent_m: float | None = None,
+    workers: int = 1,
+    photometry_cells: int | None = None,
 ) -> MemoryEstimate:
     """Peak memory of `spec` run with `workers` engine processes [B], term by term.
 
     `triangles`: the scene's triangle count if known (meshes given as files); `extent_m`: the
-    scene's largest side [m] if known (bounds the automatic window).
+    scene's largest side [m] if known (bounds the automatic window); `photometry_cells`: the cells of
+    the transmitters' expanded photometric tables if known (the scene built).
     """
     sim = spec.simulation
     n_tx = len(spec.transmitters)
@@ -166,11 +202,19 @@ def memory_estimate(
         accumulators=accumulators,
         batch=in_flight * per_batch + pool,
         result=(n_links * (40 + 6 * n_bands) + n_cir * n_bins * (k + s + 4) + map_numbers) * BYTES_PER_RESULT_NUMBER,
+        photometry=_photometry(spec, photometry_cells),
     )
 
 
 def job_memory_bytes(
-    spec: SceneSpec, *, triangles: int | None = None, extent_m: float | None = None, workers: int = 1
+    spec: SceneSpec,
+    *,
+    triangles: int | None = None,
+    extent_m: float | None = None,
+    workers: int = 1,
+    photometry_cells: int | None = None,
 ) -> int:
     """Estimated peak memory of the job [B] (see `memory_estimate` for the terms)."""
-    return memory_estimate(spec, triangles=triangles, extent_m=extent_m, workers=workers).total
+    return memory_estimate(
+        spec, triangles=triangles, extent_m=extent_m, workers=workers, photometry_cells=photometry_cells
+    ).total

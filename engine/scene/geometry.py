@@ -11,6 +11,8 @@ every call passes a fresh array.
 from __future__ import annotations
 
 import io
+import json
+import struct
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +27,7 @@ from owcsim.engine.core.lazy import trimesh  # imported on first use: it pulls i
 from owcsim.engine.spectral.spectra import grey_surfaces
 from owcsim.engine.surfaces.bsdf import Materials
 from owcsim.schemas import ROOM_FACES, SceneSpec
-from owcsim.schemas.geometry import BoxSpec, MeshSpec, RoomSpec
+from owcsim.schemas.geometry import MAX_MESH_NODES, BoxSpec, MeshSpec, RoomSpec
 
 # Unit-cube corners and the two triangles of each face, wound so normals point outward.
 _CUBE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
@@ -125,6 +127,8 @@ def _load_mesh(i: int, spec: MeshSpec, base_dir: Path | None, count_only: bool =
         data, path = read_input(spec.file, spec.data_base64, base_dir, f"{label}: mesh file")
         if path is not None:
             fmt = fmt or path.suffix[1:].lower()
+        if count_only and fmt in ("glb", "gltf"):
+            return _gltf_triangles(data, fmt, label)
         # OBJ objects and groups become separate geometries (trimesh merges them otherwise).
         kw = {"split_objects": True, "split_groups": True} if fmt == "obj" else {}
         loaded = trimesh.load_scene(io.BytesIO(data), file_type=fmt, process=False, **kw)
@@ -157,6 +161,52 @@ def _load_mesh(i: int, spec: MeshSpec, base_dir: Path | None, count_only: bool =
     if not fs:
         raise SceneError(f"{label}: the mesh has no faces")
     return np.concatenate(vs), np.concatenate(fs), np.concatenate(rhos), names
+
+
+#: Triangles of a glTF primitive of `count` indices (or vertices) by its mode: triangles, strip, fan.
+_GLTF_MODES = {4: lambda n: n // 3, 5: lambda n: max(n - 2, 0), 6: lambda n: max(n - 2, 0)}
+
+
+def _gltf_triangles(data: bytes, fmt: str, label: str) -> int:
+    """Triangles a glTF / GLB file flattens to, from its JSON only (no buffer decoded, no graph built):
+    the triangles each node's mesh declares (accessor counts), over the nodes of the default scene and
+    their children. SceneError past MAX_MESH_NODES nodes or for a JSON that is not glTF."""
+    try:
+        if fmt == "glb":
+            magic, _, _ = struct.unpack_from("<4sII", data, 0)
+            length, kind = struct.unpack_from("<I4s", data, 12)
+            if magic != b"glTF" or kind != b"JSON":
+                raise ValueError("not a GLB file (no glTF header and JSON chunk)")
+            data = data[20 : 20 + length]
+        doc = json.loads(data)
+        nodes, meshes, accessors = (doc.get(k, []) for k in ("nodes", "meshes", "accessors"))
+        if len(nodes) > MAX_MESH_NODES:
+            raise SceneError(
+                f"{label}: the mesh file has {len(nodes):,d} nodes; at most {MAX_MESH_NODES:,d} are accepted"
+            )
+        per_mesh = [
+            sum(
+                _GLTF_MODES.get(p.get("mode", 4), lambda n: 0)(
+                    accessors[p["indices"] if "indices" in p else p["attributes"]["POSITION"]]["count"]
+                )
+                for p in m.get("primitives", [])
+            )
+            for m in meshes
+        ]
+        scenes = doc.get("scenes") or [{"nodes": list(range(len(nodes)))}]
+        stack, seen, total = list(scenes[doc.get("scene", 0)].get("nodes", [])), set(), 0
+        while stack:
+            n = stack.pop()
+            if n in seen:  # glTF nodes form a forest; a cycle would never end
+                continue
+            seen.add(n)
+            total += per_mesh[nodes[n]["mesh"]] if "mesh" in nodes[n] else 0
+            stack.extend(nodes[n].get("children", []))
+        return total
+    except SceneError:
+        raise
+    except Exception as exc:  # a malformed file: the user needs the file and the reason
+        raise SceneError(f"{label}: cannot read mesh ({type(exc).__name__}: {exc})") from None
 
 
 def check_extent(points: np.ndarray, what: str) -> float:

@@ -17,7 +17,7 @@ from ..dispatcher import Dispatcher
 from ..problems import ProblemError
 from ..settings import Settings
 from ..store import IdempotencyConflict, JobRow, JobStore, QueueFull
-from ..submission import check_runnable, parse_scene, read_body, request_hash
+from ..submission import admit, check_runnable, read_body
 from ..views import API_PREFIX, job_public, job_url
 from .docs import JOB_LINKS, SCENE_BODY, problems
 
@@ -126,17 +126,16 @@ async def submit_job(
 
 def _submit(body: bytes, owner, key, store: JobStore, settings: Settings, preflighter) -> tuple[JobRow, bool]:
     owner = owner if owner is not None else NO_AUTH_OWNER
-    spec = parse_scene(body, settings)
-    canonical = spec.model_dump_json()
-    digest = request_hash(canonical)
+    doc = admit(body, settings, preflighter)  # a large body: validated and pre-flighted in its own process
+    canonical, digest = doc.canonical, doc.digest
     try:
         if key is not None and (first := store.find_idempotent(owner, key, digest)) is not None:
             return first, False  # a retry (e.g. after a client timeout): no second pre-flight
-        checked = check_runnable(spec, canonical, settings, preflighter)
+        checked = doc.checked or check_runnable(doc.small_spec(), canonical, settings, preflighter)  # small: here
         return store.submit(
             owner=owner,
             scene_json=canonical,
-            name=spec.name,
+            name=doc.name,
             request_hash=digest,
             idempotency_key=key,
             max_queued=settings.max_queued_jobs,
