@@ -111,8 +111,43 @@ def test_bad_timelines_are_located_422s(api, change, message):
 
 def test_frames_from_a_server_path_are_refused_at_their_field(api):
     doc = _doc()
-    doc["timeline"]["frames"] = {"type": "netcdf", "path": "/etc/passwd", "variable": "K", "albedo": 0.0, "origin": [0, 0, 0]}
+    doc["timeline"]["frames"] = {
+        "type": "netcdf",
+        "path": "/etc/passwd",
+        "variable": "K",
+        "albedo": 0.0,
+        "origin": [0, 0, 0],
+    }
     r = api.post("/v1/jobs", json=doc)
     assert r.status_code == 422, r.text
     fields = r.json()["errors"]
     assert [f["loc"] for f in fields] == ["body.timeline.frames.path"] and fields[0]["type"] == "path_not_allowed"
+
+
+def test_an_fds_case_sent_by_the_client_runs_over_http(live_fast, tmp_path):
+    """The real FDS office fire, zipped by the client into the body (a few MB: checked in the pre-flight process),
+    runs as a timeline job whose result says where its frames came from."""
+    pytest.importorskip("fdsreader")
+    from owcsim.clients.scene import scene_document
+    from tests.fds_data import office_fire
+
+    doc = quick_doc(paths=500)
+    doc["room"]["size"] = [6.0, 4.0, 3.0]
+    doc["timeline"] = {
+        "frames": {
+            "type": "fds",
+            "path": str(office_fire()),
+            "slice_id": "EXT_3D_CELL",
+            "albedo": 0.3,
+            "origin": [0, 0, 0],
+            "times_s": [0.0, 90.0],
+        },
+    }
+    body = scene_document(doc, base_dir=tmp_path)
+    job = live_fast.post("/v1/jobs", json=body)
+    assert job.status_code == 202, job.text
+    wait_for(live_fast, job.json()["id"], "succeeded", timeout=120)
+    tl = live_fast.get(f"{job.json()['url']}/result").json()["timeline"]
+    assert tl["frames_report"]["kind"] == "fds" and tl["frames_report"]["grid_shape"] == [30, 20, 15]
+    h0 = tl["links"][0]["los_gain"]
+    assert h0[1] < h0[0]  # the smoke of 90 s attenuates the line of sight
