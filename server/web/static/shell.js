@@ -2,7 +2,7 @@
 // from a page's module; it fills <header id="shell">. The key box asks for a key when the server answers 401
 // (event "owcsim:unauthorized" from api.js) and keeps it for the tab (sessionStorage).
 
-import { getKey, setKey } from "./api.js";
+import { apiFetch, getKey, setKey } from "./api.js";
 
 const LINKS = [
   ["jobs", "/ui", "Jobs"],
@@ -33,6 +33,8 @@ export function initShell(active) {
     nav.append(el("a", { href, text: label, ...(name === active ? { "aria-current": "page" } : {}) }));
   }
   header.append(nav, keyBox());
+  // no key yet: ask the API whether it needs one (a 401 opens the prompt)
+  if (!getKey()) apiFetch("/v1/jobs?limit=1").catch(() => {});
 }
 
 function keyBox() {
@@ -61,8 +63,8 @@ function keyBox() {
     ev.preventDefault();
     const key = input.value;
     input.value = "";
-    show(false);
     setKey(key); // the page reloads its data on "owcsim:key"
+    show(false);
   });
   forget.addEventListener("click", () => {
     setKey("");

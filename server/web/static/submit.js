@@ -95,6 +95,10 @@ function showProblem(problem) {
     $("problem").hidden = false;
   }
   drawGutter(bad);
+  if (bad.size) {
+    doc.scrollTop = Math.max(0, (Math.min(...bad.keys()) - 5) * lineHeight()); // the first one in view
+    syncScroll();
+  }
 }
 
 function goToLine(n) {
