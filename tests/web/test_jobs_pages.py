@@ -89,7 +89,7 @@ def test_submit_an_example_and_watch_it_finish(page: Page, web_server):
     expect(page.locator('#est-modeled dd[data-key="max_reflections"]')).to_have_text(
         expected["modeled"]["max_reflections"]
     )
-    page.screenshot(path=str(FIGURES / "web-submit.png"))
+    page.screenshot(path=str(FIGURES / "web-submit.png"), full_page=True)
     # more paths (typed over the example), so that the list shows the job while it runs
     doc = {**example, "name": "watched", "simulation": {**example["simulation"], "paths": 3_000_000}}
     page.fill("#doc", json.dumps(doc, indent=2))
@@ -142,7 +142,9 @@ def test_a_validation_error_is_shown_next_to_the_field_it_names(page: Page, web_
     line = fov_line(text)
     assert note.get_attribute("data-line") == str(line)
     expect(note).to_contain_text(error["msg"])  # the API's (and the CLI's) message
-    expect(page.locator(f"#gutter span:nth-child({line})")).to_have_class("bad")
+    gutter_mark = page.locator(f"#gutter span:nth-child({line})")
+    expect(gutter_mark).to_have_class("bad")
+    expect(gutter_mark).to_have_text(str(line))
     # beside its line, in view: the note's top is the line's top in the (scrolled) editor
     box, editor = note.bounding_box(), page.locator("#doc").bounding_box()
     scrolled = page.eval_on_selector("#doc", "e => e.scrollTop")
@@ -150,6 +152,8 @@ def test_a_validation_error_is_shown_next_to_the_field_it_names(page: Page, web_
     assert abs(box["y"] - line_top) < 2, (box, line_top)
     assert editor["y"] <= box["y"] and box["y"] + box["height"] <= editor["y"] + editor["height"]
     assert box["x"] >= editor["x"] + editor["width"] - 1  # right of the text
+    mark = gutter_mark.bounding_box()
+    assert abs(mark["y"] - box["y"]) < 2, (mark, box)  # the line's number is marked on the same row
     expect(page.locator("#errors li")).to_have_text(f"line {line}: {error['loc']}: {error['msg']}")
     expect(page.locator("#submit")).to_be_disabled()
     expect(page.locator("#estimate")).to_be_hidden()

@@ -27,7 +27,7 @@ function drawGutter(bad = new Map()) {
   gutter.replaceChildren();
   for (let n = 1; n <= lineCount(); n += 1) {
     const span = document.createElement("span");
-    span.textContent = `${n}\n`;
+    span.textContent = String(n);
     if (bad.has(n)) {
       span.className = "bad";
       span.title = bad.get(n).join("\n");
