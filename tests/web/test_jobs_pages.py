@@ -164,9 +164,7 @@ def test_a_validation_error_is_shown_next_to_the_field_it_names(page: Page, web_
     page.fill("#doc", broken)
     page.click("#check")
     bad_line = next(i for i, s in enumerate(broken.splitlines(), 1) if ",," in s)
-    expect(page.locator('.note-error[data-loc="body"]')).to_have_attribute(
-        "data-line", str(bad_line), timeout=WAIT_MS
-    )
+    expect(page.locator('.note-error[data-loc="body"]')).to_have_attribute("data-line", str(bad_line), timeout=WAIT_MS)
 
     # fixed: the errors go, the estimate comes, the job can be submitted
     page.fill("#doc", json.dumps(quick_doc(), indent=2))
