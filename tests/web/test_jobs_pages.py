@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import httpx
@@ -230,3 +232,18 @@ def test_the_pages_load_no_file_from_elsewhere(page: Page, web_server, path: str
     page.goto(web_server.url + path)
     page.wait_for_load_state("networkidle")
     assert urls and all(u.startswith(web_server.url) for u in urls), urls
+
+
+def test_playwright_leaves_the_other_tests_alone():
+    """pytest-playwright parametrizes by browser any test with a `page` parameter; outside tests/web it must not
+    (tests/test_docs.py's `page` is a documentation page): the ids stay as they were (conftest.py)."""
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run(
+        [sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider", "tests/test_docs.py"],
+        cwd=root,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    ).stdout
+    assert "test_examples_run_and_print_what_the_page_says[README.md]" in out, out[-2000:]
+    assert "chromium" not in out
