@@ -80,13 +80,13 @@ function showProblem(problem) {
       note.dataset.loc = e.loc;
       note.dataset.line = String(line);
       note.style.top = `${top + (line - 1) * lineHeight()}px`;
-      note.textContent = `${e.loc.replace(/^body\.?/, "") || "document"}: ${e.msg}`;
+      note.textContent = cliText(e);
       note.title = note.textContent;
       note.addEventListener("click", () => goToLine(line));
       $("notes-inner").append(note);
     }
     const where = line !== undefined ? `line ${line}: ` : "";
-    li.textContent = `${where}${e.loc}: ${e.msg}`;
+    li.textContent = `${where}${cliText(e)}`;
     li.addEventListener("click", () => line !== undefined && goToLine(line));
     $("errors").append(li);
   }
@@ -99,6 +99,12 @@ function showProblem(problem) {
     doc.scrollTop = Math.max(0, (Math.min(...bad.keys()) - 5) * lineHeight()); // the first one in view
     syncScroll();
   }
+}
+
+/** An error as `owcsim validate` prints it: "receivers.0.fov_deg: Input should be ..." (the document's own
+ * level, `body`, as "document"). */
+function cliText(e) {
+  return `${e.loc.replace(/^body\.?/, "") || "document"}: ${e.msg}`;
 }
 
 function goToLine(n) {
