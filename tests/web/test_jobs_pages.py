@@ -10,6 +10,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import httpx
 import pytest
@@ -244,16 +245,20 @@ def test_the_pages_load_no_file_from_elsewhere(page: Page, web_server, path: str
     assert urls and all(u.startswith(web_server.url) for u in urls), urls
 
 
-def test_playwright_leaves_the_other_tests_alone():
+def test_playwright_leaves_the_other_tests_alone(pytestconfig):
     """pytest-playwright parametrizes by browser any test with a `page` parameter; outside tests/web it must not
-    (tests/test_docs.py's `page` is a documentation page): the ids stay as they were (conftest.py)."""
+    (tests/test_docs.py's `page` is a documentation page, its ids must stay "[README.md]"): conftest.py keeps the
+    plugin's test generation to tests/web."""
+    plugin = pytestconfig.pluginmanager.get_plugin("playwright")
+    (generate,) = [i.function for i in pytestconfig.hook.pytest_generate_tests.get_hookimpls() if i.plugin is plugin]
     root = Path(__file__).resolve().parents[2]
-    out = subprocess.run(
-        [sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider", "tests/test_docs.py"],
-        cwd=root,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    ).stdout
-    assert "test_examples_run_and_print_what_the_page_says[README.md]" in out, out[-2000:]
-    assert "chromium" not in out
+    for test_file, expected in ((root / "tests" / "test_docs.py", []), (Path(__file__), ["browser_name"])):
+        calls: list[str] = []
+        metafunc = SimpleNamespace(
+            fixturenames=["page"],
+            definition=SimpleNamespace(path=test_file),
+            config=pytestconfig,
+            parametrize=lambda name, *args, calls=calls, **kwargs: calls.append(name),
+        )
+        generate(metafunc)
+        assert calls == expected, test_file
