@@ -2,7 +2,8 @@
 
 `Client`, `AsyncClient` and their exceptions need httpx (`pip install owcsim[client]`);
 they are imported on first use, so `clients.result` works without it. Result files and plots
-are owcsim.formats'. Depends on formats and schemas only, never on engine or server.
+are owcsim.formats'. Depends on formats and schemas only (and owcsim.docs' MAX_SCENE_BYTES), never on
+engine or server.
 """
 
 from __future__ import annotations
@@ -24,6 +25,9 @@ _LAZY = {
     "QueueFull": "errors",
     "ServerError": "errors",
     "JobFailed": "errors",
+    "InputFileError": "scene",
+    "MeshFileError": "scene",
+    "PhotometryFileError": "scene",
 }
 
 __all__ = sorted(_LAZY)

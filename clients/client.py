@@ -129,6 +129,12 @@ class Job:
         params = {"link": link} if link is not None else None
         return self.client._request("GET", job_path(self.info.id, "/plot.png"), params=params).content
 
+    def timeline_file(self, name: str) -> bytes:
+        """A timeline job's file as served: "timeline.csv", "timeline.nc" or "timeline.svg" (docs/fire-timeline.md)."""
+        if name not in ("timeline.csv", "timeline.nc", "timeline.svg"):
+            raise ValueError(f"no timeline file {name!r}: timeline.csv, timeline.nc or timeline.svg")
+        return self.client._request("GET", job_path(self.info.id, f"/{name}")).content
+
 
 class Client:
     """Client(base_url, api_key=None). `http` may be any httpx.Client (tests pass a TestClient)."""

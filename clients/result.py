@@ -17,7 +17,10 @@ from owcsim.formats.maps import GridMap, maps_of_result
 from owcsim.formats.plots import plot_cir
 from owcsim.formats.result_files import LINK_COLUMNS, write_outputs
 from owcsim.formats.result_tables import cir_arrays
+from owcsim.formats.timeline import to_xarray as timeline_xarray
+from owcsim.formats.timeline_plot import timeline_figure
 from owcsim.schemas.results import LinkPublic, SimulationResultPublic
+from owcsim.schemas.timeline import TimelineResultPublic
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas
@@ -118,6 +121,34 @@ class Result(SimulationResultPublic):
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         return write_outputs(self, folder, self._raw)
+
+    def _timeline(self) -> TimelineResultPublic:
+        if self.timeline is None:
+            raise ValueError("this result has no timeline: its scene has no `timeline` section")
+        return self.timeline
+
+    def timeline_to_xarray(self) -> xarray.Dataset:
+        """The timeline as an xarray Dataset with dims (link, time): dc_gain, its errors, SNR, BER, in_outage, ...
+        (formats.timeline.to_xarray)."""
+        return timeline_xarray(self._timeline())
+
+    def timeline_dataframe(self) -> pandas.DataFrame:
+        """The timeline as a pandas DataFrame, one row per link and time (the columns of timeline.csv)."""
+        import io
+
+        import pandas as pd
+
+        from owcsim.formats.timeline import timeline_rows
+
+        return pd.read_csv(io.StringIO(timeline_rows(self._timeline())))
+
+    def plot_timeline(self, path: str | Path | None = None) -> Figure:
+        """H0 and BER against time with the outage bands (formats.timeline_plot.timeline_figure); saved to `path`
+        if given."""
+        fig = timeline_figure(self._timeline())
+        if path is not None:
+            fig.savefig(path, dpi=100)
+        return fig
 
     def to_json(self) -> str:
         return json.dumps(self._raw) if self._raw is not None else self.model_dump_json()

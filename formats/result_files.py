@@ -16,6 +16,7 @@ from owcsim.formats.maps import maps_of_result
 from owcsim.formats.plots import panels_of, plot_cir
 from owcsim.formats.result_tables import cir_csv_chunks, csv_cell
 from owcsim.formats.svg import PlotFormat, cir_svg, heatmap_svg
+from owcsim.formats.timeline import write_timeline_files
 from owcsim.schemas.results import SimulationResultPublic
 
 #: Scalar columns of links.csv (and of the client's links table).
@@ -100,6 +101,8 @@ def write_outputs(
                 plot_cir(result, paths[-1])
     if result.maps:
         paths += write_map_outputs(result, out, fmt if plot else None)
+    if result.timeline is not None:  # timeline.nc, timeline.csv and its plot (formats/timeline.py)
+        paths += write_timeline_files(result.timeline, out, fmt.value if plot else None)
     return paths
 
 

@@ -55,5 +55,10 @@ def simulate(
     from owcsim.engine.run.simulate import simulate as run
 
     spec, folder = load(scene)
-    result = run(spec, base_dir=base_dir if base_dir is not None else folder, workers=workers, progress=progress)
+    where = base_dir if base_dir is not None else folder
+    if spec.timeline is not None:  # the channel over time (engine/run/timeline.py): `result.timeline`
+        from owcsim.engine.run.timeline import run_timeline
+
+        return Result.of(run_timeline(spec, base_dir=where, workers=workers, progress=progress))
+    result = run(spec, base_dir=where, workers=workers, progress=progress)
     return Result.of(result)

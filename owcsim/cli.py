@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -102,6 +103,18 @@ def _print_links(result: SimulationResultPublic) -> None:
         )
 
 
+def _print_timeline(result: SimulationResultPublic, took_s: float | None = None) -> None:
+    """A timeline's times and every link's outages (timeline.csv holds every figure); nothing without one."""
+    tl = result.timeline
+    if tl is None:
+        return
+    took = f", {took_s:.2f} s" if took_s is not None else ""
+    print(f"timeline: {len(tl.times_s)} times from {tl.times_s[0]:g} to {tl.times_s[-1]:g} s ({tl.method}{took})")
+    for k in tl.links:
+        if k.time_to_first_outage_s is not None:
+            print(f"  {k.tx} -> {k.rx}: {len(k.outages)} outage(s), the first at {k.outages[0].start_s:.4g} s")
+
+
 def _scene_overrides(args) -> list[tuple[str, object]]:
     """The simulation flags of `run` and `submit` as (dotted path, value) overrides."""
     flags = {
@@ -164,9 +177,21 @@ def _cmd_run(args) -> int:
         executor = executor_from_scheduler(args.scheduler)
     update, close = _progress_bar()
     try:
-        result = simulate(
-            spec, base_dir=Path(args.scene).resolve().parent, workers=args.workers, progress=update, executor=executor
-        )
+        started = time.perf_counter()
+        if spec.timeline is not None:  # the channel over time: one run per time (engine/run/timeline.py)
+            from owcsim.engine.run.timeline import run_timeline
+
+            result = run_timeline(
+                spec, base_dir=Path(args.scene).resolve().parent, workers=args.workers, progress=update
+            )
+        else:
+            result = simulate(
+                spec,
+                base_dir=Path(args.scene).resolve().parent,
+                workers=args.workers,
+                progress=update,
+                executor=executor,
+            )
     finally:
         close()
         if executor is not None:
@@ -177,6 +202,7 @@ def _cmd_run(args) -> int:
 
         paths.append(write_channel_matrix(channel_matrix(result), out / "channel_matrix.npz"))
     _print_links(result)
+    _print_timeline(result, time.perf_counter() - started)
     run = result.run
     wrote = (
         ", ".join(str(p) for p in paths)
@@ -226,7 +252,7 @@ def _cmd_submit(args) -> int:
     try:
         from owcsim.clients.client import Client
         from owcsim.clients.errors import ApiError, ConnectionFailed, InvalidRequest, JobFailed
-        from owcsim.clients.scene import MeshFileError
+        from owcsim.clients.scene import InputFileError
     except ImportError as exc:
         raise InputError(
             f"`owcsim submit` needs the client extra ({exc.name} is missing): pip install 'owcsim[client]'"
@@ -249,7 +275,7 @@ def _cmd_submit(args) -> int:
                 print(f"owcsim: interrupted; job {job.id} cancelled", file=sys.stderr)
                 return 130
             result = job.result(wait=False)
-    except (FileNotFoundError, MeshFileError) as exc:
+    except (FileNotFoundError, InputFileError) as exc:  # a mesh or photometric file the client will not read
         raise InputError(str(exc)) from None
     except InvalidRequest as exc:
         raise InputError(f"the server refused the scene: {exc}") from None
@@ -257,6 +283,7 @@ def _cmd_submit(args) -> int:
         print(f"owcsim: error: {exc}", file=sys.stderr)
         return 1
     _print_links(result)
+    _print_timeline(result)
     run = result.run
     wrote = f"; wrote {', '.join(str(p) for p in result.save(args.out))}" if args.out else ""
     print(f"{run.paths_total:,d} paths in {run.wall_time_s:.2f} s ({run.stop_reason}); job {job.id}{wrote}")

@@ -11,6 +11,10 @@ from pydantic import ValidationError
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.errors import located
 
+#: Largest scene document read [bytes]: a larger file (or a device such as /dev/zero) is refused before it is
+#: parsed (parsed JSON takes about ten times its size in memory).
+MAX_SCENE_BYTES = 256 * 2**20
+
 
 class InputError(Exception):
     """A problem with the user's input, already worded for them."""
@@ -74,7 +78,11 @@ def load_scene(
     """
     path = Path(path)
     try:
-        doc = json.loads(path.read_text())
+        with open(path, "rb") as f:  # a pipe (`<(...)`) is read as it comes; at most MAX_SCENE_BYTES + 1 bytes
+            raw = f.read(MAX_SCENE_BYTES + 1)
+        if len(raw) > MAX_SCENE_BYTES:
+            raise InputError(f"{path}: more than {MAX_SCENE_BYTES:,d} bytes: too large for a scene document")
+        doc = json.loads(raw.decode("utf-8"))
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
     except UnicodeDecodeError:

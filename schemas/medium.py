@@ -83,8 +83,10 @@ class TabulatedPhaseSpec(SpecModel):
     Give `cos_theta` strictly increasing from exactly -1 to exactly 1, or `angle_deg` (the
     scattering angle theta) strictly increasing from exactly 0 to exactly 180. Between two
     points p is linear in cos(theta) (also with `angle_deg`). `values` >= 0 [1/sr] may carry
-    any common factor: the engine divides them by their integral 2 pi int p dcos(theta) and
-    reports that normalisation and the mean cosine. Sampling inverts the CDF of this
+    any common factor, values up to the float max (about 1.8e308) included: the engine divides them
+    by their integral 2 pi int p dcos(theta) (computed after scaling the largest value to [0.5, 1),
+    so it does not overflow) and reports that normalisation (None when it exceeds the float max)
+    and the mean cosine. Sampling inverts the CDF of this
     piecewise-linear function exactly.
     """
 

@@ -19,6 +19,7 @@ from .lighting import LightingResultPublic
 from .orientation import CombinedSnrPublic, OrientationPointPublic
 from .scene import SceneSpec
 from .spectra import SpectralResultPublic
+from .timeline import TimelineResultPublic
 
 
 class StopReason(StrEnum):
@@ -330,5 +331,8 @@ class SimulationResultPublic(PublicModel):
     )
     lighting: LightingResultPublic | None = Field(
         None, description="luminous fluxes and EN 12464-1 figures (when a transmitter gives light; docs/lighting.md)"
+    )
+    timeline: TimelineResultPublic | None = Field(
+        None, description="the channel at every time of the scene's `timeline` (schemas/timeline.py)"
     )
     scene: SceneSpec

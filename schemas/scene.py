@@ -17,6 +17,7 @@ from .orientation import AngleDiversityReceiverSpec, check_hidden, hidden_count,
 from .outputs import OutputsSpec
 from .simulation import SimulationSpec
 from .spectra import SpectralSpec, check_scene
+from .timeline import TimelineSpec, check_timeline
 
 #: Most tally cells (links x reflection orders x time bins) a job may hold.
 MAX_TALLY_CELLS = 50_000_000
@@ -76,6 +77,9 @@ class SceneSpec(SpecModel):
         "(docs/spectra.md); without it the scene is grey",
     )
     simulation: SimulationSpec = Field(default_factory=SimulationSpec)
+    timeline: TimelineSpec | None = Field(
+        None, description="the channel over time: smoke frames and moving receivers (docs/fire-timeline.md)"
+    )
 
     @model_validator(mode="after")
     def _check(self) -> "SceneSpec":
@@ -101,6 +105,7 @@ class SceneSpec(SpecModel):
             if problem:
                 raise ValueError(f"{kind}[{i}]" + (f" ({d.id})" if d.id else "") + f": {problem}")
         _check_oriented_points(self)
+        check_timeline(self)
         tx_ids = self.transmitter_ids()
         known = set(tx_ids)
         names = [g.name for g in self.transmitter_groups]

@@ -21,7 +21,7 @@ from . import problems
 from .dispatcher import Dispatcher, start_forkserver
 from .limits import RequestLimits
 from .preflight import Preflighter
-from .routes import docs, jobs, results, scenes, service
+from .routes import docs, jobs, results, scenes, service, timeline
 from .routes.service import owcsim_version
 from .settings import Settings
 from .store import JobStore
@@ -90,7 +90,7 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
     app.state.heavy = app.state.submissions = None  # set at startup (they belong to the running event loop)
     problems.install(app)
     app.add_middleware(RequestLimits, body_timeout_s=settings.body_timeout_s)
-    for module in (jobs, results, service, docs):
+    for module in (jobs, results, service, docs, timeline):
         app.include_router(module.router, prefix=API_PREFIX)
     app.include_router(scenes.router, prefix=API_PREFIX)  # examples, pre-flight, delete (the web pages use them)
     pages.install(app)  # the web pages: /, /ui, /ui/submit, /ui/jobs/{id}, /ui/static/* (server/web)

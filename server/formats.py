@@ -46,6 +46,9 @@ RENDERS = {
     "result.csv.gz": ("text/csv; charset=utf-8", True),
     "result.npz": ("application/octet-stream", False),
     "plot.png": ("image/png", False),
+    "timeline.csv.gz": ("text/csv; charset=utf-8", True),  # a result with a `timeline` (formats/timeline.py)
+    "timeline.nc": ("application/x-netcdf", False),
+    "timeline.svg": ("image/svg+xml", False),
 }
 #: Renders made when the job ends (the plot is drawn at its first request).
 AT_JOB_END = ("result.json.gz", "result.csv.gz", "result.npz")
@@ -81,6 +84,14 @@ def render_all(result: SimulationResultPublic, result_json: str, folder: Path) -
     arrays: dict[str, Any] = cir_arrays(result)  # Any: numpy's stubs type **arrays together with allow_pickle
     with open(out["result.npz"], "wb") as f:
         np.savez_compressed(f, **arrays)
+    if result.timeline is not None:  # the timeline's files: netCDF, CSV (gzipped as stored) and its SVG plot
+        from owcsim.formats.timeline import write_timeline_files
+
+        nc, table, svg = write_timeline_files(result.timeline, folder, "svg")
+        out["timeline.csv.gz"] = folder / "timeline.csv.gz"
+        with open(table, "rb") as src, gzip.open(out["timeline.csv.gz"], "wb", compresslevel=6) as dst:
+            dst.write(src.read())
+        out.update({"timeline.nc": nc, "timeline.svg": svg})
     return out
 
 

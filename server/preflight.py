@@ -101,8 +101,10 @@ def _run(spec: SceneSpec, max_triangles: int, workers: int) -> tuple:
         )  # every setting explicit but the algorithm: no pilot
         scene = build_scene(spec, None)
         simulate(spec.model_copy(update={"simulation": tiny}), scene=scene, should_stop=lambda: True)
-    except EngineError as exc:
-        return _problem("scene-not-runnable", "body", f"the engine cannot run this scene: {exc}", "engine_error")
+    except EngineError as exc:  # located at a field when the engine knows it (a photometric file's `loc`)
+        field = getattr(exc, "loc", None)
+        loc = f"body.{field}" if field else "body"
+        return _problem("scene-not-runnable", loc, f"the engine cannot run this scene: {exc}", "engine_error")
     except ArithmeticError as exc:  # e.g. a half-power angle so small that cos() rounds to 1
         msg = f"a number is out of the range the simulator can compute with ({type(exc).__name__}: {exc})"
         return _problem("scene-not-runnable", "body", f"the engine cannot run this scene: {msg}", "value_error")

@@ -137,14 +137,21 @@ def run_job(db_path: str, job_id: str, token: int, limits: WorkerLimits, lifelin
                 from owcsim.engine.run.execution_dask import executor_from_scheduler
 
                 executor = executor_from_scheduler(limits.scheduler)
-            result = simulate(
-                spec,
-                base_dir=None,
-                workers=limits.workers,
-                progress=watch.progress,
-                should_stop=watch.should_stop,
-                executor=executor,
-            )
+            if spec.timeline is not None:  # one run per time, progress per time (engine/run/timeline.py)
+                from owcsim.engine.run.timeline import run_timeline
+
+                result = run_timeline(
+                    spec, workers=limits.workers, progress=watch.progress, should_stop=watch.should_stop
+                )
+            else:
+                result = simulate(
+                    spec,
+                    base_dir=None,
+                    workers=limits.workers,
+                    progress=watch.progress,
+                    should_stop=watch.should_stop,
+                    executor=executor,
+                )
         notes = list(dict.fromkeys(str(w.message) for w in caught))
     except EngineError as exc:
         store.finish(job_id, token, "failed", error=str(exc))

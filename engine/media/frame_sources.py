@@ -1,4 +1,7 @@
-"""Build `MediumFrames` (frames.py) from their document (schemas/frames.py); one function per kind of source."""
+"""Build `MediumFrames` (frames.py) from their document (schemas/frames.py); one function per kind of source.
+
+Inline frames here, FDS output in fds.py, netCDF files in frames_netcdf.py.
+"""
 
 from __future__ import annotations
 
@@ -6,8 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
+from owcsim.engine.media.fds import fds_frames
 from owcsim.engine.media.frames import MediumFrames
-from owcsim.schemas.frames import FramesSpec, InlineFramesSpec
+from owcsim.engine.media.frames_netcdf import netcdf_frames
+from owcsim.schemas.frames import FdsFramesSpec, FramesSpec, InlineFramesSpec, NetcdfFramesSpec
 
 
 def _inline(spec: InlineFramesSpec) -> MediumFrames:
@@ -33,4 +38,8 @@ def frames_from_spec(spec: FramesSpec, base_dir: str | Path | None = None) -> Me
     """The frames a document describes; `base_dir` resolves relative file names of file-based kinds."""
     if isinstance(spec, InlineFramesSpec):
         return _inline(spec)
+    if isinstance(spec, FdsFramesSpec):
+        return fds_frames(spec, base_dir)
+    if isinstance(spec, NetcdfFramesSpec):
+        return netcdf_frames(spec, base_dir)
     raise TypeError(f"unknown frames source {type(spec).__name__}")

@@ -4,6 +4,10 @@ Frame f holds cells of constant sigma_a[f], sigma_s[f] [1/m] filling the box lo.
 shape = (nx, ny, nz) equal cells, laid out as in grid.py (C order, x slowest, z fastest), and one
 phase function shared by every frame and cell. `frame(f)` is that frame as a static `GridMedium`:
 a frame run alone must equal the same grid given as a static medium, bit for bit.
+
+File sources (FDS, netCDF: engine/media/fds.py, frames_netcdf.py) share two steps kept here: which frames
+(`select_frame_indices`) and how an extinction field becomes sigma_a, sigma_s (`scattering_optics`):
+sigma_s = albedo sigma_t, sigma_a = sigma_t - sigma_s, with the albedo and phase given or from Mie theory.
 """
 
 from __future__ import annotations
@@ -13,8 +17,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from owcsim.engine.core.arrays import FloatArray
+from owcsim.engine.core.errors import SceneError
 from owcsim.engine.media.grid import GridMedium
-from owcsim.schemas.medium import IsotropicPhaseSpec, PhaseSpec
+from owcsim.engine.media.mie import particle_optics
+from owcsim.schemas.frames import FramesReportPublic
+from owcsim.schemas.medium import IsotropicPhaseSpec, MiePhaseSpec, ParticlesSpec, PhaseSpec
 
 
 @dataclass(frozen=True)
@@ -32,6 +39,7 @@ class MediumFrames:
     sigma_s: FloatArray
     phase: PhaseSpec = field(default_factory=IsotropicPhaseSpec)
     source: str = ""
+    report: FramesReportPublic | None = None
 
     def __post_init__(self) -> None:
         t = np.asarray(self.times, np.float64)
@@ -76,6 +84,67 @@ class MediumFrames:
     def select(self, indices: np.ndarray | list[int]) -> MediumFrames:
         """The frames at `indices` (increasing), e.g. a sub-sampled or chosen set of times."""
         idx = np.asarray(indices, np.int64)
+        report = self.report
+        if report is not None:
+            report = report.model_copy(update={"times_s": [float(t) for t in self.times[idx]]})
         return MediumFrames(
-            self.times[idx], self.lo, self.hi, self.sigma_a[idx], self.sigma_s[idx], self.phase, self.source
+            self.times[idx], self.lo, self.hi, self.sigma_a[idx], self.sigma_s[idx], self.phase, self.source, report
         )
+
+    def frames_report(self) -> FramesReportPublic:
+        """The structured mapping of the source to sigma_a, sigma_s (a plain description for inline frames)."""
+        if self.report is not None:
+            return self.report
+        st = self.sigma_t
+        return FramesReportPublic(
+            kind="inline",
+            quantity="sigma_a, sigma_s [1/m]",
+            cell_values="as given",
+            albedo_from="given per cell",
+            phase=str(getattr(self.phase, "type", "")),
+            grid_min=tuple(float(v) for v in self.lo),
+            grid_max=tuple(float(v) for v in self.hi),
+            grid_shape=self.shape,
+            times_s=[float(t) for t in self.times],
+            max_sigma_t=float(st.max()),
+        )
+
+
+def select_frame_indices(
+    times: np.ndarray, times_s: list[float] | None, t_min: float | None, t_max: float | None, every: int
+) -> np.ndarray:
+    """Indices of the frames kept: nearest to each of `times_s` (sorted, without repeats), or those in
+    [t_min, t_max] [s], then every `every`-th. A SceneError when none is left."""
+    t = np.asarray(times, np.float64)
+    if times_s is not None:
+        idx = np.unique(np.argmin(np.abs(t[None, :] - np.asarray(times_s, np.float64)[:, None]), axis=1))
+    else:
+        keep = np.ones(len(t), bool)
+        if t_min is not None:
+            keep &= t >= t_min
+        if t_max is not None:
+            keep &= t <= t_max
+        idx = np.flatnonzero(keep)[::every]
+    if len(idx) == 0:
+        raise SceneError(
+            f"frames: no frame in the chosen times; the file has {len(t)} frames at {t.min():g}..{t.max():g} s"
+        )
+    return idx
+
+
+def scattering_optics(
+    albedo: float | None, phase: PhaseSpec | None, particles: ParticlesSpec | None
+) -> tuple[float, PhaseSpec, str]:
+    """(albedo, phase, where from) of an extinction field: given (isotropic phase if omitted), or from the
+    Mie model of `particles` (albedo = <C_sca> / <C_ext>, the size-averaged Mie phase function)."""
+    if particles is not None:
+        optics = particle_optics(particles)
+        return float(optics.c_sca / optics.c_ext), MiePhaseSpec(particles=particles), "mie"
+    assert albedo is not None  # the schema asks for `albedo` or `particles`
+    return float(albedo), phase if phase is not None else IsotropicPhaseSpec(), "given"
+
+
+def split_extinction(sigma_t: np.ndarray, albedo: float) -> tuple[np.ndarray, np.ndarray]:
+    """(sigma_a, sigma_s) [1/m] = (sigma_t - albedo sigma_t, albedo sigma_t): exact for albedo 0 and 1."""
+    sigma_s = sigma_t * albedo
+    return sigma_t - sigma_s, sigma_s

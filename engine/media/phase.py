@@ -11,6 +11,7 @@ Directions are component arrays of shape (3, n) (rows x, y, z); all float64, vec
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 
 import numpy as np
@@ -379,13 +380,23 @@ class Mixture(PhaseFunction):
         return f"Mixture({[(float(w), p) for w, p in self._pairs()]!r})"
 
 
+def _ldexp_or_inf(x: float, exponent: int) -> float:
+    """x 2^exponent, inf when it exceeds the float max (math.ldexp raises instead)."""
+    try:
+        return math.ldexp(x, exponent)
+    except OverflowError:
+        return math.inf
+
+
 class Tabulated(PhaseFunction):
     """A phase function given at points of cos(theta), linear in cos(theta) between them.
 
     ``cos_theta`` (n,) strictly increasing from -1 to 1; ``values`` (n,) >= 0 [1/sr up to a
     common factor]. The phase function is p(c) = v(c) / normalisation with v the linear
     interpolant and normalisation = 2 pi int_{-1}^{1} v dc (trapezoid rule, exact for it);
-    ``normalisation`` is reported (1 for a table that was normalised already).
+    ``normalisation`` is reported (1 for a table that was normalised already). The values are first
+    divided by the power of two of their largest (exact), so any common factor works, up to values
+    at the float max (whose normalisation, past it, is inf and reported as None).
     Mean cosine, exact for the interpolant: on [a, b] of width h,
     int c v dc = h (v_a (2a + b) + v_b (a + 2b)) / 6.
     Sampling inverts the CDF exactly: segment i by its cumulative mass, then within it
@@ -419,13 +430,18 @@ class Tabulated(PhaseFunction):
             i = int(np.argmax(v < 0))
             raise ValueError(f"tabulated phase function: values must be >= 0 (entry {i} is {float(v[i])!r})")
         h = np.diff(c)
-        mass = 0.5 * (v[:-1] + v[1:]) * h  # int v dc per segment
+        # the common factor first: v = w 2^e with max w in [0.5, 1) (exact), so that sums of values up to
+        # the float max do not overflow and a table already normalised gives the same bits as without
+        exponent = int(np.frexp(v.max())[1])
+        w = np.ldexp(v, -exponent)
+        mass = 0.5 * (w[:-1] + w[1:]) * h  # int w dc per segment
         total = float(mass.sum())
         if not total > 0:
             raise ValueError("tabulated phase function: values are all zero (no positive integral)")
-        self.normalisation = 2.0 * np.pi * total  #: 2 pi int v dc of the values as given [-]
         self.cos_theta = c
-        self.values = v / self.normalisation  #: p at the points [1/sr], normalised over the sphere
+        self.values = w / (2.0 * np.pi * total)  #: p at the points [1/sr], normalised over the sphere
+        #: 2 pi int v dc of the values as given [-] (inf past the float max: values near 1e308)
+        self.normalisation = _ldexp_or_inf(2.0 * np.pi * total, exponent)
         self._h = h
         self._slope = np.diff(self.values) / h
         cdf = np.concatenate(([0.0], np.cumsum(mass))) / total
@@ -473,11 +489,12 @@ class Tabulated(PhaseFunction):
         return cls(c, _f64(spec.values)[::-1])
 
     def describe(self) -> dict:
+        """Type, points, mean cosine and `normalisation` (None when it exceeds the float max)."""
         return {
             "type": "tabulated",
             "points": len(self.cos_theta),
             "mean_cosine": self.mean_cosine,
-            "normalisation": self.normalisation,
+            "normalisation": self.normalisation if math.isfinite(self.normalisation) else None,
         }
 
     def __repr__(self):

@@ -183,6 +183,7 @@ def simulate(
     should_stop: Callable[[], bool] | None = None,
     scene: Scene | None = None,
     executor: Executor | None = None,
+    on_finished: Callable[[FinishedJob], None] | None = None,
 ) -> SimulationResultPublic:
     """Simulate the scene document; return its typed result (schemas.results.SimulationResultPublic).
 
@@ -191,13 +192,14 @@ def simulate(
     scene) and the run. `workers` > 1 starts a process pool for this call; pass a long-lived
     `executor` instead to reuse warm workers across jobs (it is not closed here). `progress` gets a
     `Progress` after batches; `should_stop` is asked after every batch of the run (True stops it:
-    stop reason "cancelled").
+    stop reason "cancelled"). `on_finished` sees the finished main run (its tallies: e.g. the path groups'
+    estimates engine/run/frames.py compares across frames) before its result is built.
     """
     watch = Watch(progress, should_stop, time.perf_counter())
     scene = scene if scene is not None else build_scene(spec, base_dir)
     with _executor(executor, workers) as ex:
         resolved, scene, modeled = _resolve(spec, scene, ex, base_dir)
-        return _run_job(resolved, scene, ex, base_dir, watch, original=spec, modeled=modeled)
+        return _run_job(resolved, scene, ex, base_dir, watch, original=spec, modeled=modeled, on_finished=on_finished)
 
 
 def simulate_two_sided(
@@ -276,14 +278,19 @@ def _run_job(
     watch: Watch,
     original: SceneSpec | None = None,
     modeled: ModeledPublic | None = None,
+    on_finished: Callable[[FinishedJob], None] | None = None,
 ) -> SimulationResultPublic:
     """Run a resolved job on its built scene: its settings, its directions, its batches, its result."""
     job = _start(spec, scene, kernel_settings(spec, scene), executor, base_dir, watch)
-    return _finish(job, _choose_directions(job), original, modeled)
+    return _finish(job, _choose_directions(job), original, modeled, on_finished)
 
 
 def _finish(
-    job: Job, directions: IntArray, original: SceneSpec | None = None, modeled: ModeledPublic | None = None
+    job: Job,
+    directions: IntArray,
+    original: SceneSpec | None = None,
+    modeled: ModeledPublic | None = None,
+    on_finished: Callable[[FinishedJob], None] | None = None,
 ) -> SimulationResultPublic:
     """Run the job in its chosen directions (links not simulated skipped) and build its result."""
     scene = job.scene
@@ -312,6 +319,8 @@ def _finish(
         modeled=modeled,
         unreachable=blocked,
     )
+    if on_finished is not None:
+        on_finished(finished)
     return build_result(finished)
 
 

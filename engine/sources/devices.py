@@ -164,7 +164,11 @@ def transmitters_from_specs(specs: list[TransmitterSpec], ids: list[str], base_d
             patterns.append(None)
             continue
         where = f"transmitters[{i}].photometry"
-        patterns.append(load_photometry(s, where, base_dir))
+        try:
+            patterns.append(load_photometry(s, where, base_dir))
+        except PhotometryError as exc:  # located at the document's field: the service's problem names it
+            exc.loc = f"transmitters.{i}.photometry.{'file' if s.photometry.file is not None else 'data_base64'}"
+            raise
         try:
             frames[i] = luminaire_frame(s.normal, s.photometry.c0_direction, s.photometry.rotation_deg)
         except SceneError as exc:

@@ -18,7 +18,11 @@ Normalisation: the engine works per watt emitted, so the pattern is divided by i
 flux Phi = int I dOmega computed exactly for the interpolated table (`flux`): the
 response R(gamma, C) = I(gamma, C) / Phi [1/sr] integrates to 1 and a sampled ray carries
 weight 1, as for the Lambertian model. The flux the file declares (lamp lumens x
-multiplier, or EULUMDAT lamp flux x LOR) is kept as `declared_flux` for comparison.
+multiplier, or EULUMDAT lamp flux x LOR) is kept as `declared_flux` for comparison. The flux is
+computed on the table divided by the power of two of its largest value (exact, so intensities up
+to the float max do not overflow it); an intensity that is not a finite number is refused naming
+its angles, and so is a luminous flux above MAX_PHOTOMETRIC (1e8 lm, the bound of
+`luminous_output.luminous_flux`).
 
 Sampling (exact, 2-D inverse CDF of the interpolated table): the density in (gamma, C) is
 R sin(gamma). On a cell [g_i, g_i+1] x [C_j, C_j+1] with the bilinear I, integrating
@@ -42,12 +46,16 @@ import numpy as np
 
 from owcsim.engine.core.errors import SceneError
 from owcsim.engine.core.sampling import GuideTable
+from owcsim.schemas.link_budget import MAX_PHOTOMETRIC
 
 __all__ = ["Photometry", "PhotometryError", "luminaire_frame"]
 
 
 class PhotometryError(SceneError):
-    """A photometric file that cannot be used; the message names the line and the field."""
+    """A photometric file that cannot be used; the message names the line and the field. `loc`: the document's
+    field it came from ("transmitters.0.photometry.data_base64"), set by the scene's loader (None otherwise)."""
+
+    loc: str | None = None
 
 
 @dataclass
@@ -87,16 +95,30 @@ class Photometry:
         g = np.radians(np.asarray(gamma_deg, float))
         c = np.radians(np.asarray(c_deg, float))
         table = np.asarray(candela, float)
-        masses = _cell_masses(g, c, table)
-        flux = float(masses.sum())
-        if not flux > 0:
+        _check_finite(table, c_deg, gamma_deg, where)
+        # the common factor first: table = t 2^e with max t in [0.5, 1) (exact), so that the flux of values up to
+        # the float max is computed without overflow (an ordinary table gives the same bits as without)
+        exponent = int(np.frexp(table.max())[1]) if table.size else 0
+        scaled = np.ldexp(table, -exponent)
+        masses = _cell_masses(g, c, scaled)
+        scaled_flux = float(masses.sum())
+        if not scaled_flux > 0:
             raise PhotometryError(f"{where}: every intensity in the table is 0: the luminaire emits nothing")
-        cdf = np.concatenate([[0.0], np.cumsum(masses.ravel())]) / flux
+        flux = _ldexp_or_inf(scaled_flux, exponent)
+        lumens = flux * candela_scale
+        if not lumens <= MAX_PHOTOMETRIC:
+            size = f"{lumens:.4g} lm" if math.isfinite(lumens) else "beyond the largest number a double holds"
+            raise PhotometryError(
+                f"{where}: the table's luminous flux is {size} (intensities up to {table.max():.4g} cd), more "
+                f"than the {MAX_PHOTOMETRIC:.0e} lm a luminaire may have (as luminous_output.luminous_flux): "
+                "check the candela multiplier or the conversion factor"
+            )
+        cdf = np.concatenate([[0.0], np.cumsum(masses.ravel())]) / scaled_flux
         cdf[-1] = 1.0
         return cls(
             gamma=g,
             c=c,
-            intensity=table / flux,
+            intensity=scaled / scaled_flux,
             flux=flux,
             declared_flux=declared_flux,
             source=source,
@@ -214,6 +236,25 @@ class Photometry:
     def sample_local(self, u1, u2) -> np.ndarray:
         """Local directions (n, 3) with pdf R (solid angle)."""
         return self.sample_rows(u1, u2).T
+
+
+def _check_finite(table: np.ndarray, c_deg, gamma_deg, where: str) -> None:
+    """PhotometryError naming the first intensity that is not a finite number, by its C and gamma angles."""
+    bad = np.argwhere(~np.isfinite(table))
+    if len(bad):
+        j, i = (int(x) for x in bad[0])
+        raise PhotometryError(
+            f"{where}: the intensity at C = {float(np.asarray(c_deg)[j]):g} deg, gamma = "
+            f"{float(np.asarray(gamma_deg)[i]):g} deg is {table[j, i]}, not a finite number"
+        )
+
+
+def _ldexp_or_inf(x: float, exponent: int) -> float:
+    """x 2^exponent, inf past the float max (math.ldexp raises instead)."""
+    try:
+        return math.ldexp(x, exponent)
+    except OverflowError:
+        return math.inf
 
 
 @functools.lru_cache(maxsize=64)

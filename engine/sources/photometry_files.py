@@ -6,7 +6,9 @@ file's symmetry (none, rotational, bilateral about C0-C180 or C90-C270, quadrant
 
 from __future__ import annotations
 
+import math
 import re
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,6 +53,19 @@ _IES_TAGS = {
     "IESNA:LM-63-1991": "IES LM-63-1991",
 }
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+_PAST_MAX = f"beyond the largest number a double holds ({sys.float_info.max:.4g})"
+
+
+@dataclass(frozen=True)
+class _TableNames:
+    """How errors name a table's entries: the value, its row and column angles, the factor applied to it."""
+
+    value: str  # "candela value"
+    row: str  # "horizontal angle"
+    rows: np.ndarray  # [deg]
+    col: str  # "vertical angle"
+    cols: np.ndarray  # [deg]
+    factor: str  # "the candela multiplier 10"
 
 
 class _Tokens:
@@ -63,7 +78,9 @@ class _Tokens:
         self.pos, self.where = 0, where
         self.last_line = first_line + len(lines) - 1
 
-    def number(self, what: str, *, integer: bool = False) -> float:
+    def number(self, what: str, *, integer: bool = False, finite: bool = True) -> float:
+        """The next number; `finite`: one past the float max ('1e999') is refused here (a table's values are
+        checked by `check_table`, which names their angles)."""
         if self.pos >= len(self.items):
             raise PhotometryError(f"{self.where}: the file ends (line {self.last_line}) before {what}")
         tok, line = self.items[self.pos]
@@ -71,12 +88,29 @@ class _Tokens:
         if not _NUMBER.match(tok):
             raise PhotometryError(f"{self.where}: line {line}: {what} should be a number, found {tok!r}")
         val = float(tok)
+        if finite and not math.isfinite(val):
+            raise PhotometryError(f"{self.where}: line {line}: {what} is {tok!r}, {_PAST_MAX}")
         if integer and val != int(val):
             raise PhotometryError(f"{self.where}: line {line}: {what} should be a whole number, found {tok!r}")
         return val
 
-    def numbers(self, n: int, what: str) -> np.ndarray:
-        return np.array([self.number(f"{what} ({k + 1} of {n})") for k in range(n)])
+    def numbers(self, n: int, what: str, *, finite: bool = True) -> np.ndarray:
+        return np.array([self.number(f"{what} ({k + 1} of {n})", finite=finite) for k in range(n)])
+
+    def check_table(self, start: int, table: np.ndarray, scaled: np.ndarray, names: _TableNames) -> None:
+        """Refuse a table (read from token `start` on) with a value past the float max, as written or once
+        `scaled` (the file's multiplier applied), naming its line, its angles and the token."""
+        bad = np.argwhere(~np.isfinite(scaled))
+        if not len(bad):
+            return
+        j, i = (int(x) for x in bad[0])
+        tok, line = self.items[start + j * table.shape[1] + i]
+        at = f"{names.row} {names.rows[j]:g} deg, {names.col} {names.cols[i]:g} deg"
+        if not math.isfinite(table[j, i]):
+            raise PhotometryError(f"{self.where}: line {line}: the {names.value} at {at} is {tok!r}, {_PAST_MAX}")
+        raise PhotometryError(
+            f"{self.where}: line {line}: the {names.value} at {at} ({tok}) times {names.factor} is {_PAST_MAX}"
+        )
 
     def line(self) -> int:
         return self.items[min(self.pos, len(self.items) - 1)][1] if self.items else self.last_line
@@ -134,15 +168,21 @@ def parse_ies(data: bytes, where: str = "photometry") -> Photometry:
     line = tok.line()
     h = tok.numbers(n_h, "horizontal angles")
     _check_angles(h, "horizontal angles", 0.0, 360.0, where, line)
-    line = tok.line()
-    cd = tok.numbers(n_h * n_v, "candela values").reshape(n_h, n_v)
+    line, start = tok.line(), tok.pos
+    cd = tok.numbers(n_h * n_v, "candela values", finite=False).reshape(n_h, n_v)
     if tok.pos < len(tok.items):
         extra, at = tok.items[tok.pos]
         raise PhotometryError(f"{where}: line {at}: unexpected value {extra!r} after the {n_h} x {n_v} candela table")
     if np.any(cd < 0):
         raise PhotometryError(f"{where}: near line {line}: negative candela values")
-    symmetry, h, cd = _ies_symmetry(h, cd, where, line)
-    c_full, rows = _expand(h, cd * head.multiplier, symmetry, where)
+    with np.errstate(over="ignore"):
+        scaled = cd * head.multiplier
+    names = _TableNames(
+        "candela value", "horizontal angle", h, "vertical angle", v, f"the candela multiplier {head.multiplier:g}"
+    )
+    tok.check_table(start, cd, scaled, names)
+    symmetry, h, cd = _ies_symmetry(h, scaled, where, line)
+    c_full, rows = _expand(h, cd, symmetry, where)
     declared = None if head.lumens == -1 else float(head.n_lamps * head.lumens * head.multiplier * head.ballast)
     return Photometry.from_table(
         v,
@@ -259,6 +299,8 @@ class _LdtLines:
         if not _NUMBER.match(text):
             raise PhotometryError(f"{where}: line {n}: {what} should be a number, found {lines[n - 1].strip()!r}")
         val = float(text)
+        if not math.isfinite(val):
+            raise PhotometryError(f"{where}: line {n}: {what} is {text!r}, {_PAST_MAX}")
         if integer and val != int(val):
             raise PhotometryError(f"{where}: line {n}: {what} should be a whole number, found {text!r}")
         return val
@@ -291,8 +333,8 @@ def parse_ldt(data: bytes, where: str = "photometry") -> Photometry:
     _check_angles(c, "C angles", 0.0, 360.0, where, first)
     _check_angles(g, "gamma angles", 0.0, 180.0, where, line)
     stored = _ldt_stored(isym, mc, where)
-    line = tok.line()
-    values = tok.numbers(len(stored) * ng, "intensities [cd/klm]").reshape(len(stored), ng)
+    line, start = tok.line(), tok.pos
+    values = tok.numbers(len(stored) * ng, "intensities [cd/klm]", finite=False).reshape(len(stored), ng)
     if tok.pos < len(tok.items):
         extra, at = tok.items[tok.pos]
         raise PhotometryError(f"{where}: line {at}: unexpected value {extra!r} after the intensity table")
@@ -300,6 +342,10 @@ def parse_ldt(data: bytes, where: str = "photometry") -> Photometry:
         raise PhotometryError(f"{where}: near line {line}: negative intensities")
     if not factor > 0 or not lamp_flux > 0:
         raise PhotometryError(f"{where}: lines 24-26: the conversion factor and the lamp flux must be positive")
+    with np.errstate(over="ignore"):
+        scaled = values * factor * lamp_flux / 1000.0
+    factors = f"the conversion factor {factor:g} and the lamp flux {lamp_flux:g} lm / 1000"
+    tok.check_table(start, values, scaled, _TableNames("intensity [cd/klm]", "C", c[stored], "gamma", g, factors))
     expect = {2: (0.0, 180.0), 3: (270.0, 90.0), 4: (0.0, 90.0)}.get(isym)
     c_stored = c[stored]
     if expect is not None and (abs(c_stored[0] - expect[0]) > 1e-6 or abs(c_stored[-1] - expect[1]) > 1e-6):
@@ -308,7 +354,7 @@ def parse_ldt(data: bytes, where: str = "photometry") -> Photometry:
             f"{expect[0]:g} to {expect[1]:g} deg, found {c_stored[0]:g}..{c_stored[-1]:g}"
         )
     symmetry = _LDT_SYMMETRY[isym]
-    c_full, rows = _expand(c_stored, values * factor * lamp_flux / 1000.0, symmetry, where)
+    c_full, rows = _expand(c_stored, scaled, symmetry, where)
     return Photometry.from_table(
         g,
         c_full,

@@ -56,6 +56,10 @@ def test_health_version_and_openapi(api):
         ("GET", "/v1/jobs/{job_id}/result.csv"),
         ("GET", "/v1/jobs/{job_id}/result.npz"),
         ("GET", "/v1/jobs/{job_id}/plot.png"),
+        ("GET", "/v1/jobs/{job_id}/timeline"),
+        ("GET", "/v1/jobs/{job_id}/timeline.csv"),
+        ("GET", "/v1/jobs/{job_id}/timeline.nc"),
+        ("GET", "/v1/jobs/{job_id}/timeline.svg"),
         ("GET", "/v1/health"),
         ("GET", "/v1/version"),
         ("GET", "/v1/examples"),  # the web pages' (routes/scenes.py)
