@@ -21,11 +21,12 @@ from . import faults, problems
 from .dispatcher import Dispatcher, start_forkserver
 from .limits import RequestLimits
 from .preflight import Preflighter
-from .routes import docs, jobs, results, service, timeline
+from .routes import docs, jobs, results, scenes, service, timeline
 from .routes.service import owcsim_version
 from .settings import Settings
 from .store import JobStore
 from .views import API_PREFIX
+from .web import pages
 
 log = logging.getLogger("owcsim.server")
 
@@ -93,6 +94,8 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
     app.add_middleware(RequestLimits, body_timeout_s=settings.body_timeout_s)
     for module in (jobs, results, service, docs, timeline):
         app.include_router(module.router, prefix=API_PREFIX)
+    app.include_router(scenes.router, prefix=API_PREFIX)  # examples, pre-flight, delete (the web pages use them)
+    pages.install(app)  # the web pages: /, /ui, /ui/submit, /ui/jobs/{id}, /ui/static/* (server/web)
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]  # FastAPI's documented way to customise it
     return app
 

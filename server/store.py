@@ -529,6 +529,20 @@ class JobStore:
             con.execute(f"UPDATE jobs SET cancel_requested = 1 WHERE id = ? AND status = 'running'{own}", args)
         return self.get(job_id, owner)
 
+    def delete(self, job_id: str, owner: str | None, statuses: Sequence[str]) -> bool:
+        """Delete the job, its documents and renders if it is in one of `statuses` (and the owner's);
+        False if it is not (or not any more, e.g. it started meanwhile)."""
+        with self._tx() as con:
+            own, args = ("", (job_id,)) if owner is None else (" AND owner = ?", (job_id, owner))
+            marks = ",".join("?" * len(statuses))
+            found = con.execute(f"SELECT 1 FROM jobs WHERE id = ?{own} AND status IN ({marks})", (*args, *statuses))
+            if found.fetchone() is None:
+                return False
+            con.execute("DELETE FROM job_renders WHERE job_id = ?", (job_id,))
+            con.execute("DELETE FROM job_documents WHERE job_id = ?", (job_id,))
+            con.execute("DELETE FROM jobs WHERE id = ?", (job_id,))
+        return True
+
     # -- a job's worker ---------------------------------------------------------------------
 
     def run_state(self, job_id: str, token: int) -> tuple[bool, bool]:

@@ -87,7 +87,7 @@ def checks(case) -> dict:
     the scene is validated as `owcsim run` validates it (pydantic, lax), which takes `false` or "2.5"
     where the JSON Schema says number, as the command line does."""
     left_out = [schemathesis.checks.positive_data_acceptance]
-    if case.method.upper() == "POST" and case.path == "/v1/jobs":
+    if case.method.upper() == "POST" and case.path in ("/v1/jobs", "/v1/preflight"):  # both take the scene body
         left_out.append(schemathesis.checks.negative_data_rejection)
     return {"excluded_checks": left_out}
 

@@ -62,6 +62,9 @@ def test_health_version_and_openapi(api):
         ("GET", "/v1/jobs/{job_id}/timeline.svg"),
         ("GET", "/v1/health"),
         ("GET", "/v1/version"),
+        ("GET", "/v1/examples"),  # the web pages' (routes/scenes.py)
+        ("POST", "/v1/preflight"),
+        ("DELETE", "/v1/jobs/{job_id}"),
     }
     post = doc["paths"]["/v1/jobs"]["post"]["responses"]
     assert post["422"]["content"] == {PROBLEM: {"schema": {"$ref": "#/components/schemas/Problem"}}}
@@ -265,7 +268,7 @@ def test_unknown_job_route_and_method(api):
     assert r.headers["allow"] == "GET, HEAD, POST"  # the methods of the path, from the included router
     r = api.put("/v1/jobs/abc")
     problem(r, 405, "method-not-allowed")
-    assert r.headers["allow"] == "GET, HEAD"
+    assert r.headers["allow"] == "DELETE, GET, HEAD"
 
 
 def test_unusable_json_numbers_are_400(api):
