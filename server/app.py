@@ -24,10 +24,10 @@ from .preflight import Preflighter
 from .routes import docs, jobs, results, service
 from .routes import scene as scene_routes  # GET /v1/jobs/{id}/scene (issue 27: the scene preview)
 from .routes.service import owcsim_version
-from .web import pages as web_pages  # STAND-IN (branch webresult): drop at merge
 from .settings import Settings
 from .store import JobStore
 from .views import API_PREFIX
+from .web import pages as web_pages  # STAND-IN (branch webresult): drop at merge
 
 log = logging.getLogger("owcsim.server")
 

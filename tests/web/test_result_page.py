@@ -75,7 +75,9 @@ def map_doc(n: int = 6, paths: int = 300) -> dict:
                 "fov_deg": 85,
             }
         ],
-        "lighting": {"task_areas": [{"name": "desk area", "grid": "plane", "min": [1.0, 1.0, 0.85], "max": [4.0, 4.0, 0.85]}]},
+        "lighting": {
+            "task_areas": [{"name": "desk area", "grid": "plane", "min": [1.0, 1.0, 0.85], "max": [4.0, 4.0, 0.85]}]
+        },
         "link_budget": {"responsivity": 0.5, "bit_rate": 1e7},
         "simulation": {"max_reflections": 1, "paths": paths, "seed": 2, "time_bin_s": 1e-9, "t_max_s": 4e-8},
     }
@@ -327,7 +329,7 @@ def test_timeline_renders_from_an_injected_result(page, web_server, cir_job):
     open_result(page, web_server.url, job["id"])
     assert page.locator("#timeline").is_hidden()  # this result has no timeline
     page.evaluate(
-        "async t => { const m = await import('/ui/static/result.js'); m.renderTimeline(document.querySelector('#timeline'), t); }",
+        "async t => (await import('/ui/static/result.js')).renderTimeline(document.querySelector('#timeline'), t)",
         TIMELINE,
     )
     assert page.locator("#timeline").is_visible()
