@@ -110,10 +110,8 @@ def main() -> int:
         times = page_times(srv.url, job, args.runs)
     print(f"result page, navigation to plotted [s] over {args.runs} runs (target < {TARGET_S:g} s):")
     for kind, ts in times.items():
-        print(
-            f"  {kind:4s}  median {statistics.median(ts):.3f}  min {min(ts):.3f}  max {max(ts):.3f}  "
-            f"runs {' '.join(f'{t:.3f}' for t in ts)}"
-        )
+        runs = ", ".join(f"{t:.3f} s" for t in ts)
+        print(f"  {kind}: median {statistics.median(ts):.3f} s, slowest {max(ts):.3f} s (runs: {runs})")
     worst = max(max(ts) for ts in times.values())
     print(f"slowest load {worst:.3f} s: {'within' if worst < TARGET_S else 'OVER'} the target")
     return 0

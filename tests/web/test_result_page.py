@@ -248,7 +248,7 @@ def test_downloads_offer_every_format_and_answer(page, web_server, cir_job):
     for k in range(links.count()):
         a = links.nth(k)
         href = a.get_attribute("data-href")
-        assert httpx.get(f"{web_server.url}{href}", headers=_auth()).status_code == 200
+        assert httpx.get(f"{web_server.url}{href}", headers=_auth(), timeout=60).status_code == 200
         with page.expect_download() as info:
             a.click()
         download = info.value
