@@ -372,3 +372,33 @@ def test_scene_route_returns_the_jobs_document(web_server, cir_job):
     other = httpx.get(url, headers=_auth(OTHER_KEY))
     assert other.status_code == 404 and other.headers["content-type"] == "application/problem+json"
     assert httpx.get(url).status_code == 401
+
+
+def test_a_running_job_shows_its_preview_then_its_result(page, web_server):
+    """Before a result exists the page polls the job and draws the scene from GET /v1/jobs/{id}/scene; once the
+    job stops (here cancelled, keeping its partial result) the result is drawn."""
+    doc = {**CIR_DOC, "name": "long job (web test)", "simulation": {**CIR_DOC["simulation"], "paths": 200_000_000}}
+    doc["simulation"]["batch_size"] = 4096
+    r = httpx.post(f"{web_server.url}/v1/jobs", json=doc, headers=_auth(), timeout=60)
+    assert r.status_code == 202, r.text
+    job = r.json()
+    try:
+        page.set_viewport_size({"width": 1200, "height": 900})
+        page.goto(f"{web_server.url}/ui/jobs/{job['id']}")
+        page.wait_for_selector("#key-form:not([hidden])")
+        page.fill("#key-input", KEY)
+        page.click("#key-form button")
+        page.wait_for_selector("#preview:not([hidden])", timeout=30_000)
+        page.wait_for_selector("#job-status[data-status=running]", timeout=30_000)
+        assert page.get_attribute("body", "data-state") == "loading"
+        assert page.locator("#preview svg[data-view=top] .luminaire").count() == 2
+        assert page.locator("#metrics").is_hidden()
+    finally:
+        httpx.post(f"{web_server.url}{job['urls']['cancel']}", headers=_auth(), timeout=30)
+    page.wait_for_selector("body[data-state=plotted]", timeout=60_000)
+    assert page.get_attribute("#job-status", "data-status") == "cancelled"
+    status = httpx.get(f"{web_server.url}{job['urls']['result']}", headers=_auth(), timeout=60).status_code
+    if status == 200:  # stopped with a partial result: drawn
+        assert page.locator("#links-table tbody tr").count() == 4
+    else:
+        assert status == 409 and "no result" in page.inner_text("#message")
