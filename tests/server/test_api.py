@@ -56,6 +56,7 @@ def test_health_version_and_openapi(api):
         ("GET", "/v1/jobs/{job_id}/result.csv"),
         ("GET", "/v1/jobs/{job_id}/result.npz"),
         ("GET", "/v1/jobs/{job_id}/plot.png"),
+        ("GET", "/v1/jobs/{job_id}/scene"),
         ("GET", "/v1/health"),
         ("GET", "/v1/version"),
     }
