@@ -382,8 +382,11 @@ export function renderDownloads(el, job) {
 /** Draw a whole result document (and its job's links) into the page. */
 export function renderResult(result, job) {
   renderMetrics($("#metrics"), result);
+  performance.mark("owcsim:metrics");
   renderCurves($("#curves"), result);
+  performance.mark("owcsim:curves");
   renderMaps($("#maps"), result);
+  performance.mark("owcsim:maps");
   renderTimeline($("#timeline"), result.timeline);
   if (job) renderDownloads($("#downloads"), job);
 }
@@ -454,7 +457,9 @@ async function main() {
   } else {
     try {
       const result = await apiJson(job.urls.result);
+      performance.mark("owcsim:result-parsed");
       renderResult(result, job);
+      performance.mark("owcsim:result-drawn");
     } catch (err) {
       showMessage(err.message || String(err), err.status === 409 ? "info" : "error");
     }
