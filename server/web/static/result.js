@@ -433,6 +433,12 @@ async function main() {
   const m = /^\/ui\/jobs\/([^/]+)\/?$/.exec(location.pathname);
   if (!m) return;
   const id = decodeURIComponent(m[1]);
+  const base = `/v1/jobs/${encodeURIComponent(id)}`;
+  // the scene and the result are asked for at once, beside the job (a job without a result answers 409)
+  const sceneP = apiJson(`${base}/scene`);
+  const resultP = apiJson(`${base}/result`);
+  sceneP.catch(() => null);
+  resultP.catch(() => null);
   let job;
   try {
     job = await loadJob(id);
@@ -442,7 +448,7 @@ async function main() {
     document.body.dataset.state = "error";
     return;
   }
-  const preview = apiJson(`${job.url}/scene`)
+  const preview = sceneP
     .then((scene) => {
       drawPreview($("#preview-body"), scene);
       $("#preview").hidden = false;
@@ -456,7 +462,8 @@ async function main() {
     showMessage(`the job failed: ${job.error || "no reason given"}`);
   } else {
     try {
-      const result = await apiJson(job.urls.result);
+      // asked for before the job ended (409): ask again
+      const result = await resultP.catch((err) => (err.status === 409 ? apiJson(job.urls.result) : Promise.reject(err)));
       performance.mark("owcsim:result-parsed");
       renderResult(result, job);
       performance.mark("owcsim:result-drawn");
