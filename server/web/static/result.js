@@ -3,11 +3,24 @@
 // downloads, and the scene preview. Everything comes from /v1/... with the API key of api.js. When the page is
 // drawn, <body data-state="plotted"> is set and data-plotted-ms holds the time since navigation [ms].
 
-import { apiFetch, apiJson, formatError, setKey } from "./api.js";
+import { apiFetch, formatError, setKey } from "./api.js";
 import { attr, barPlot, esc, fmt, heatmap, heatmapHover, linePlot, lineHover, withError } from "./plots.js";
 import { drawPreview } from "./preview.js";
 
 const $ = (sel, root = document) => root.querySelector(sel);
+
+/** GET a JSON document with the API key (api.js); an answer other than 2xx throws an Error with `status` and the
+ * problem document's text. */
+async function apiJson(path) {
+  const r = await apiFetch(path);
+  const body = await r.json().catch(() => null);
+  if (!r.ok) {
+    const err = new Error((body && formatError(body)) || `HTTP ${r.status}`);
+    err.status = r.status;
+    throw err;
+  }
+  return body;
+}
 
 /** Readable names and display scales of the figures (the API's values stay in SI units in data-value). */
 const QUANTITIES = {
