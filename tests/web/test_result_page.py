@@ -263,8 +263,8 @@ def test_preview_draws_every_device(page, web_server, cir_job):
     job, result = cir_job
     open_result(page, web_server.url, job["id"])
     scene = result["scene"]
-    for view in ("top", "side"):
-        svg = page.locator(f"#preview svg[data-view={view}]")
+    for view in ("top", "side", "3d"):
+        svg = page.locator(f"#preview svg[data-view='{view}']")
         assert svg.locator(".luminaire").count() == len(scene["transmitters"]) == 2
         assert svg.locator(".receiver").count() == len(scene["receivers"]) == 2
         ids = svg.locator(".luminaire, .receiver").evaluate_all("els => els.map(e => e.dataset.id)")
@@ -280,9 +280,20 @@ def test_preview_draws_every_device(page, web_server, cir_job):
     assert page.locator("#preview svg[data-view=top] .luminaire[data-id=lamp] .normal.away").count() == 1
     # the wall lamp faces +x: an arrow to the right in both views
     for view in ("top", "side"):
-        arrow = page.locator(f"#preview svg[data-view={view}] .luminaire[data-id=wall-lamp] line.normal")
+        arrow = page.locator(f"#preview svg[data-view='{view}'] .luminaire[data-id=wall-lamp] line.normal")
         assert float(arrow.get_attribute("x2")) > float(arrow.get_attribute("x1"))
     page.locator("#preview").screenshot(path=str(FIGURES / "web-preview.png"))
+    # the 3D view turns when dragged, and still draws every device
+    lamp = page.locator("#preview svg[data-view='3d'] .luminaire[data-id=lamp] circle")
+    before = (lamp.get_attribute("cx"), lamp.get_attribute("cy"))
+    page.locator("#preview .view3d-box").scroll_into_view_if_needed()
+    box = page.locator("#preview .view3d-box").bounding_box()
+    page.mouse.move(box["x"] + 100, box["y"] + 100)
+    page.mouse.down()
+    page.mouse.move(box["x"] + 160, box["y"] + 120, steps=4)
+    page.mouse.up()
+    assert (lamp.get_attribute("cx"), lamp.get_attribute("cy")) != before
+    assert page.locator("#preview svg[data-view='3d'] .luminaire, #preview svg[data-view='3d'] .receiver").count() == 4
 
 
 def test_preview_of_a_map_draws_its_plane(page, web_server, map_job):

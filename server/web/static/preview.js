@@ -144,7 +144,7 @@ export function viewSvg(parts, view, width = 440) {
       // the normal points at or away from the viewer: a dot (towards) or a cross (away), as in drawings
       const toward = d.n[view.depth] * (view.name === "side" ? -1 : 1) > 0;
       const c = `${X(d.p)},${Y(d.p)}`;
-      g.push(toward ? `<circle class="normal toward" cx="${X(d.p)}" cy="${Y(d.p)}" r="9"/>` : `<path class="normal away" d="M${X(d.p) - 7},${Y(d.p) - 7}l14,14m0,-14l-14,14" data-at="${c}"/>`);
+      g.push(toward ? `<circle class="normal toward" cx="${X(d.p)}" cy="${Y(d.p)}" r="9"/>` : `<path class="normal away" d="M${X(d.p) - 9},${Y(d.p) - 9}l18,18m0,-18l-18,18" data-at="${c}"/>`);
     }
     g.push(shape(X(d.p), Y(d.p)));
     g.push("</g>");
@@ -157,10 +157,94 @@ export function viewSvg(parts, view, width = 440) {
   return out.join("");
 }
 
-/** Draw the preview of `scene` into `container`: the two views, a legend and what could not be drawn. */
+/** The 12 edges of a box [min, max] as pairs of corners. */
+function boxEdges([a, b]) {
+  const c = (i) => [i & 1 ? b[0] : a[0], i & 2 ? b[1] : a[1], i & 4 ? b[2] : a[2]];
+  const out = [];
+  for (let i = 0; i < 8; i++) for (const bit of [1, 2, 4]) if (!(i & bit)) out.push([c(i), c(i | bit)]);
+  return out;
+}
+
+/**
+ * The 3D view: an orthographic projection turned by `azimuth` about z and tilted by `elevation` [rad] (own
+ * projection, no library): wireframes of the room, furniture, meshes' boxes and the smoke, the map planes, and
+ * every device with its normal. Same classes and data-id as the two flat views.
+ */
+export function view3dSvg(parts, azimuth, elevation, width = 440, height = 340) {
+  const [lo, hi] = extentOf(parts);
+  const centre = lo.map((v, k) => (v + hi[k]) / 2);
+  const span = Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 1e-3);
+  const [ca, sa, ce, se] = [Math.cos(azimuth), Math.sin(azimuth), Math.cos(elevation), Math.sin(elevation)];
+  const s = (0.62 * Math.min(width, height)) / span;
+  const P = (p) => {
+    const [x, y, z] = p.map((v, k) => v - centre[k]);
+    const u = ca * x - sa * y;
+    const w = sa * x + ca * y;
+    const r2 = (v) => Math.round(v * 100) / 100;
+    return [r2(width / 2 + s * u), r2(height / 2 - s * (ce * z + se * w))]; // w: away from the viewer (right-handed)
+  };
+  const line = (a, b, cls) => {
+    const [pa, pb] = [P(a), P(b)];
+    return `<line class="${cls}" x1="${pa[0]}" y1="${pa[1]}" x2="${pb[0]}" y2="${pb[1]}"/>`;
+  };
+  const out = [`<svg xmlns="http://www.w3.org/2000/svg" class="preview-view view3d" data-view="3d" viewBox="0 0 ${width} ${height}" width="${width}" height="${height}">`];
+  out.push('<defs><marker id="arrow-3d" viewBox="0 0 10 10" refX="8" refY="5" markerWidth="6" markerHeight="6" orient="auto-start-reverse"><path d="M0,0L10,5L0,10z" class="arrowhead"/></marker></defs>');
+  // the axes at the scene's lowest corner, one metre long
+  const o = lo;
+  for (const [k, name] of [[0, "x"], [1, "y"], [2, "z"]]) {
+    const e = [...o];
+    e[k] += Math.min(1, span / 3);
+    const pe = P(e);
+    out.push(`${line(o, e, `axis axis-${name}`)}<text class="tick" x="${pe[0] + 3}" y="${pe[1] - 3}">${name}</text>`);
+  }
+  if (parts.room) out.push(`<g class="room">${boxEdges(parts.room).map(([a, b]) => line(a, b, "edge")).join("")}</g>`);
+  if (parts.smoke) out.push(`<g class="smoke"><title>${esc(parts.smoke.note)}</title>${boxEdges(parts.smoke.box).map(([a, b]) => line(a, b, "edge")).join("")}</g>`);
+  for (const g of parts.grids) {
+    out.push(`<polygon class="map-plane" points="${g.corners.map((c) => P(c).join(",")).join(" ")}" data-grid="${esc(g.id)}"><title>receiver grid ${esc(g.id)}</title></polygon>`);
+  }
+  for (const b of parts.furniture) out.push(`<g class="furniture" data-name="${esc(b.name)}"><title>${esc(b.name)}</title>${boxEdges(b.box).map(([a, c]) => line(a, c, "edge")).join("")}</g>`);
+  for (const b of parts.meshes) out.push(`<g class="mesh" data-name="${esc(b.name)}"><title>${esc(b.name)}</title>${boxEdges(b.box).map(([a, c]) => line(a, c, "edge")).join("")}</g>`);
+  const L = 0.08 * span;
+  const device = (d, cls, r) => {
+    const [px, py] = P(d.p);
+    return `<g class="${cls}" data-id="${esc(d.id)}"><title>${esc(d.id)}</title><line class="normal" x1="${px}" y1="${py}" x2="${P(add(d.p, d.n, L))[0]}" y2="${P(add(d.p, d.n, L))[1]}" marker-end="url(#arrow-3d)"/><circle class="mark" cx="${px}" cy="${py}" r="${r}"/></g>`;
+  };
+  for (const d of parts.tx) out.push(device(d, "luminaire", 5));
+  for (const d of parts.rx) out.push(device(d, "receiver", 4));
+  for (const d of parts.adr) out.push(device(d, "receiver adr", 4));
+  out.push("</svg>");
+  return out.join("");
+}
+
+/** Draw the 3D view into `box` and let the pointer turn it (drag: azimuth and elevation). */
+function mount3d(box, parts) {
+  let az = -0.6;
+  let el = 0.45;
+  const draw = () => {
+    box.innerHTML = view3dSvg(parts, az, el);
+  };
+  draw();
+  let drag = null;
+  box.addEventListener("pointerdown", (ev) => {
+    drag = [ev.clientX, ev.clientY, az, el];
+    box.setPointerCapture(ev.pointerId);
+  });
+  box.addEventListener("pointermove", (ev) => {
+    if (!drag) return;
+    az = drag[2] + (ev.clientX - drag[0]) * 0.01;
+    el = Math.min(Math.max(drag[3] + (ev.clientY - drag[1]) * 0.01, -1.5), 1.5);
+    draw();
+  });
+  box.addEventListener("pointerup", () => {
+    drag = null;
+  });
+}
+
+/** Draw the preview of `scene` into `container`: the two views, the 3D view, a legend and what is not drawn. */
 export function drawPreview(container, scene) {
   const parts = sceneParts(scene);
   const views = VIEWS.map((v) => `<figure class="preview-fig"><figcaption>${v.title}</figcaption>${viewSvg(parts, v)}</figure>`);
+  views.push('<figure class="preview-fig"><figcaption>3D (drag to turn)</figcaption><div class="view3d-box"></div></figure>');
   const notes = [];
   if (parts.fileMeshes.length) notes.push(`meshes given as files are not drawn: ${parts.fileMeshes.map(esc).join(", ")}`);
   if (parts.smoke) notes.push(`smoke: ${esc(parts.smoke.note)}`);
@@ -171,5 +255,6 @@ export function drawPreview(container, scene) {
 <span class="key furniture-key">▭ furniture</span> <span class="key smoke-key">▭ smoke</span>
 <span class="key">⊗ / ⊙ normal into / out of the view</span></p>
 <p class="preview-counts">${counts}${notes.length ? "; " + notes.join("; ") : ""}</p>`;
+  mount3d(container.querySelector(".view3d-box"), parts);
   return parts;
 }
