@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import sys
 import tempfile
@@ -121,7 +122,10 @@ def main() -> int:
         print(f"map points: {points}; links: {len(result['links'])}; job ran in {t_job:.1f} s")
         print(f"result document: {len(raw.content) / 1e6:.1f} MB of JSON" + f", {wire / 1e6:.2f} MB on the wire (gzip)")
         times = page_times(srv.url, job, args.runs)
-    print(f"result page, navigation to plotted [s] over {args.runs} runs (target < {TARGET_S:g} s):")
+    load = os.getloadavg()[0]
+    print(
+        f"result page, navigation to plotted over {args.runs} runs (target < {TARGET_S:g} s), load average {load:.1f}:"
+    )
     for kind in ("cold", "warm"):
         ts = times[kind]
         runs = ", ".join(f"{t:.3f} s" for t in ts)
