@@ -22,23 +22,23 @@ async function apiJson(path) {
   return body;
 }
 
-/** Readable names and display scales of the figures (the API's values stay in SI units in data-value). */
+/** Readable names of the map quantities (shown with the map's own unit; the values are the API's). */
 const QUANTITIES = {
-  dc_gain: ["DC gain H0", "", 1],
-  path_loss_db: ["path loss", "dB", 1],
-  received_power_w: ["received power", "W", 1],
-  received_power_dbm: ["received power", "dBm", 1],
-  mean_delay_s: ["mean delay", "ns", 1e9],
-  rms_delay_spread_s: ["RMS delay spread", "ns", 1e9],
-  illuminance_lx: ["illuminance E", "lx", 1],
-  illuminance_direct_lx: ["direct illuminance", "lx", 1],
-  cylindrical_illuminance_direct_lx: ["direct cylindrical illuminance", "lx", 1],
-  snr_db: ["SNR", "dB", 1],
-  ber: ["bit-error rate", "", 1],
-  max_bit_rate_bps: ["bit rate 1/(10 tau_rms)", "Mbit/s", 1e-6],
-  bandwidth_3db_hz: ["3 dB bandwidth", "MHz", 1e-6],
-  dc_gain_rel_error: ["relative error of H0", "", 1],
-  paths: ["paths", "", 1],
+  dc_gain: "DC gain H0",
+  path_loss_db: "path loss",
+  received_power_w: "received power",
+  received_power_dbm: "received power",
+  mean_delay_s: "mean delay",
+  rms_delay_spread_s: "RMS delay spread",
+  illuminance_lx: "illuminance E",
+  illuminance_direct_lx: "direct illuminance",
+  cylindrical_illuminance_direct_lx: "direct cylindrical illuminance",
+  snr_db: "SNR",
+  ber: "bit-error rate",
+  max_bit_rate_bps: "bit rate 1/(10 tau_rms)",
+  bandwidth_3db_hz: "3 dB bandwidth",
+  dc_gain_rel_error: "relative error of H0",
+  paths: "paths",
 };
 
 /** Columns of the metrics tables: [field, heading, stderr field, display scale]; optional ones only when present. */
@@ -80,8 +80,15 @@ function gridReceivers(result) {
 
 function renderMetrics(el, result) {
   const grid = gridReceivers(result);
-  const links = result.links.map((l, k) => ({ ...l, _index: k, _name: `${l.transmitter} → ${l.receiver}` })).filter((l) => !grid.has(l.receiver));
-  const channels = (result.channels || []).map((c, k) => ({ ...c, _index: k, _name: `${c.group} → ${c.receiver}` })).filter((c) => !grid.has(c.receiver));
+  // rows of explicit receivers only (a map's thousands of grid links are drawn as maps)
+  const links = [];
+  result.links.forEach((l, k) => {
+    if (!grid.has(l.receiver)) links.push({ ...l, _index: k, _name: `${l.transmitter} → ${l.receiver}` });
+  });
+  const channels = [];
+  (result.channels || []).forEach((c, k) => {
+    if (!grid.has(c.receiver)) channels.push({ ...c, _index: k, _name: `${c.group} → ${c.receiver}` });
+  });
   const parts = [];
   if (links.length) parts.push(metricsTable(links, "link", "links-table"));
   if (channels.length) parts.push(`<h3>Transmitter groups</h3>${metricsTable(channels, "channel", "channels-table")}`);
@@ -96,7 +103,8 @@ function renderMetrics(el, result) {
   el.hidden = false;
 }
 
-/** Rows of the link selector: links and channels with a CIR or an order split. */
+/** Rows of the link selector: links and channels with a CIR or an order split (the first MAX_SOURCES). */
+const MAX_SOURCES = 1000;
 function curveSources(result) {
   const out = [];
   result.links.forEach((l, k) => {
@@ -105,7 +113,7 @@ function curveSources(result) {
   (result.channels || []).forEach((c, k) => {
     if (c.cir) out.push({ key: `channel:${k}`, name: `group ${c.group} → ${c.receiver}`, row: c });
   });
-  return out;
+  return out.slice(0, MAX_SOURCES);
 }
 
 function renderCurves(el, result) {
@@ -128,6 +136,8 @@ function renderCurves(el, result) {
   draw();
 }
 
+const MAX_MARKERS = 5000;
+
 /** The CIR h(t) = power per bin / dt [1/s] against the delay [ns], with its ±1 standard error band. */
 export function drawCir(el, result, row, logY) {
   const cir = row.cir;
@@ -146,7 +156,8 @@ export function drawCir(el, result, row, logY) {
   (cir.by_reflection_order || []).forEach((o, k) => {
     if (o.some((v) => v > 0)) series.push({ y: o.map((v) => v / dt), values: o, cls: `order order-${k % 8}`, label: `k = ${k}` });
   });
-  series.push({ y: h, lo, hi, values: cir.total, stderr: se, cls: "total", label: "total", markers: true });
+  // one marker per bin (its value in data-value) up to MAX_MARKERS bins; the line's data-values always hold them
+  series.push({ y: h, lo, hi, values: cir.total, stderr: se, cls: "total", label: "total", markers: h.length <= MAX_MARKERS });
   const { svg, frame } = linePlot({ x: t, series, xlabel: "delay t [ns]", ylabel: "h(t) [1/s]", logY });
   const legend = series.map((s) => `<span class="key ${esc(s.cls)}">${esc(s.label)}</span>`).join(" ");
   const h0 = withError(row.dc_gain, row.dc_gain_stderr);
@@ -243,7 +254,7 @@ function renderMaps(el, result) {
     const keep = qSel.value;
     const names = Object.keys(m.values);
     const first = names.includes("illuminance_lx") ? "illuminance_lx" : names.includes(keep) ? keep : "dc_gain";
-    qSel.innerHTML = names.map((q) => `<option value="${esc(q)}">${esc((QUANTITIES[q] || [q])[0])}${m.units[q] && m.units[q] !== "1" ? ` [${esc(m.units[q])}]` : ""}</option>`).join("");
+    qSel.innerHTML = names.map((q) => `<option value="${esc(q)}">${esc(QUANTITIES[q] || q)}${m.units[q] && m.units[q] !== "1" ? ` [${esc(m.units[q])}]` : ""}</option>`).join("");
     qSel.value = names.includes(keep) ? keep : first;
   };
   const draw = () => drawMap($("#map-plot", el), result, maps[Number(mapSel.value)], qSel.value, $("#map-log", el).checked);
@@ -283,7 +294,7 @@ export function drawMap(el, result, map, q, logColour) {
     : "";
   el.innerHTML = `${hm.svg}<div class="readout map-readout" aria-live="polite">hover over the map for a point's value</div>${stats}${u0}`;
   const out = $(".map-readout", el);
-  const [name, , ] = QUANTITIES[q] || [q];
+  const name = QUANTITIES[q] || q;
   heatmapHover($("svg", el), hm.frame, au.coords, av.coords, au.cell, av.cell, (i, j) => {
     if (i === null) {
       delete out.dataset.i;
