@@ -177,9 +177,33 @@ def test_cir_points_equal_the_apis_cir(page, web_server, cir_job):
             if any(v > 0 for v in row):
                 drawn = page.locator(f"#cir-plot polyline[data-label='k = {order}']").get_attribute("data-values")
                 assert floats(drawn.split(",")) == row
-    # the band: +-1 standard error drawn around h = total / dt (the polygon's first point is bin 0's upper edge)
+    # the band: +-1 standard error drawn around h = total / dt. On a linear scale, at every bin with an error the
+    # band's upper and lower edges sit the same distance above and below the point, in proportion to the error.
+    page.uncheck("#cir-log")
+    link = result["links"][0]
+    page.select_option("#curve-source", "link:0")
     band = page.locator("#cir-plot polygon.band")
     assert band.count() == 1
+    pts = [tuple(map(float, p.split(","))) for p in band.get_attribute("points").split()]
+    n = len(pts) // 2
+    upper, lower = pts[:n], pts[n:][::-1]
+    cx_cy = page.locator("#cir-plot .total-points .pt").evaluate_all(
+        "els => els.map(e => [+e.getAttribute('cx'), +e.getAttribute('cy')])"
+    )
+    with_err = [k for k, e in enumerate(link["cir"]["total_stderr"]) if e is not None]
+    assert len(with_err) == n
+    span = []
+    for (x_hi, y_hi), (x_lo, y_lo), k in zip(upper, lower, with_err):
+        cx, cy = cx_cy[k]
+        assert x_hi == x_lo == cx
+        assert y_hi - 0.02 <= cy <= y_lo + 0.02 and abs((y_lo - cy) - (cy - y_hi)) <= 0.03
+        span.append((y_lo - y_hi, link["cir"]["total_stderr"][k]))
+    # the y axis's pixels per unit of h from two points, and the band's height 2 stderr / dt on it
+    total, dt = link["cir"]["total"], result["time_bins"]["time_bin_s"]
+    a, b = total.index(max(total)), total.index(min(total))
+    scale = (cx_cy[b][1] - cx_cy[a][1]) / ((total[a] - total[b]) / dt)
+    for px, err in span:
+        assert px == pytest.approx(2 * err / dt * scale, abs=0.05)
 
 
 def test_order_bars_equal_the_apis_order_split(page, web_server, cir_job):
