@@ -437,3 +437,58 @@ def test_a_running_job_shows_its_preview_then_its_result(page, web_server):
         assert page.locator("#links-table tbody tr").count() == 4
     else:
         assert status == 409 and "no result" in page.inner_text("#message")
+
+
+#: A scene document with what the two jobs above lack: a grid medium, inline and file meshes, an angle-diversity
+#: receiver, a wall grid (drawn by preview.js as given; the page draws any document the API returns).
+HAND_MADE_SCENE = {
+    "room": {"size": [6.0, 4.0, 3.0], "origin": [1.0, 0.0, 0.0]},
+    "meshes": [
+        {"name": "shelf", "vertices": [[2, 1, 0], [3, 1, 0], [3, 1.5, 2], [2, 1.5, 2]], "faces": [[0, 1, 2]]},
+        {"name": "chair", "file": "chair.obj"},
+    ],
+    "transmitters": [{"id": "t", "position": [4, 2, 3], "normal": [0, 0, -1]}],
+    "receivers": [],
+    "angle_diversity_receivers": [{"id": "adr", "position": [2.5, 2, 1.0], "normal": [0, 0, 1]}],
+    "receiver_grids": [
+        {"id_prefix": "wall", "origin": [7.0, 0.5, 0.5], "u": [0, 1, 0], "v": [0, 0, 1], "size": [3, 2]}
+    ],
+    "medium": {"type": "grid", "min": [1.0, 0.0, 2.0], "max": [7.0, 4.0, 3.0], "shape": [2, 2, 2]},
+}
+
+
+def test_preview_draws_meshes_grid_media_and_wall_grids(page, web_server, cir_job):
+    job, _ = cir_job
+    open_result(page, web_server.url, job["id"])
+    note = page.evaluate(
+        """async scene => {
+             const m = await import('/ui/static/preview.js');
+             const div = document.createElement('div');
+             div.id = 'hand-made';
+             document.body.appendChild(div);
+             m.drawPreview(div, scene);
+             return div.querySelector('.preview-counts').textContent;
+           }""",
+        HAND_MADE_SCENE,
+    )
+    assert "chair" in note and "grid medium" in note
+    top = page.locator("#hand-made svg[data-view='top']")
+    side = page.locator("#hand-made svg[data-view='side']")
+    assert top.locator(".receiver.adr[data-id=adr]").count() == 1
+    assert top.locator(".mesh").count() == 1  # the file mesh is listed, not drawn
+    # the inline mesh's bounding box x 2..3 m, y 1..1.5 m, z 0..2 m; the smoke box z 2..3 m, the room's x 1..7 m
+    room = top.locator(".room").bounding_box()
+    shelf, smoke = top.locator(".mesh").bounding_box(), side.locator(".smoke").bounding_box()
+    px_per_m = room["width"] / 6.0
+    assert shelf["width"] == pytest.approx(1.0 * px_per_m, abs=1.5)
+    assert shelf["height"] == pytest.approx(0.5 * px_per_m, abs=1.5)
+    assert shelf["x"] - room["x"] == pytest.approx(1.0 * px_per_m, abs=1.5)
+    side_room = side.locator(".room").bounding_box()
+    assert smoke["height"] == pytest.approx(side_room["height"] / 3.0, abs=1.5) and smoke["y"] == pytest.approx(
+        side_room["y"], abs=1.5
+    )
+    # the wall grid (the plane x = 7 m, 3 m along y, 2 m along z) is seen edge-on in both views: a line (its stroke)
+    plane = top.locator(".map-plane[data-grid=wall]").bounding_box()
+    assert plane["width"] <= 5 and plane["height"] == pytest.approx(3.0 * px_per_m, abs=5)
+    plane = side.locator(".map-plane[data-grid=wall]").bounding_box()
+    assert plane["width"] <= 5 and plane["height"] == pytest.approx(2.0 * px_per_m, abs=5)
