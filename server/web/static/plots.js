@@ -126,8 +126,8 @@ export function linePlot({ x, series, xlabel, ylabel, logY = false, bands = [], 
     lo = Math.min(lo, 0) === 0 && lo >= 0 ? 0 : lo - pad;
     hi += pad;
   }
-  const xs = x.filter(Number.isFinite);
-  const f = frame({ width, height, xlim: [Math.min(...xs), Math.max(...xs)], ylim: [lo, hi], logY });
+  const [xmin, xmax] = extent([x], false); // a loop, not Math.min(...x): a CIR may have 10^5 bins
+  const f = frame({ width, height, xlim: [xmin, xmax], ylim: [lo, hi], logY });
   const parts = [`<svg xmlns="http://www.w3.org/2000/svg" class="plot line-plot" viewBox="0 0 ${width} ${height}" width="${width}" height="${height}">`];
   parts.push(axes(f, xlabel, ylabel));
   for (const b of bands) {
