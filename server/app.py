@@ -22,7 +22,7 @@ from .dispatcher import Dispatcher, start_forkserver
 from .limits import RequestLimits
 from .preflight import Preflighter
 from .routes import docs, jobs, results, service
-from .routes import scene as scene_routes  # GET /v1/jobs/{id}/scene (issue 27: the scene preview)
+from .routes.job_scene import router as job_scene_router  # GET /v1/jobs/{id}/scene (issue 27: scene preview)
 from .routes.service import owcsim_version
 from .settings import Settings
 from .store import JobStore
@@ -93,7 +93,7 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
     app.add_middleware(RequestLimits, body_timeout_s=settings.body_timeout_s)
     for module in (jobs, results, service, docs):
         app.include_router(module.router, prefix=API_PREFIX)
-    app.include_router(scene_routes.router, prefix=API_PREFIX)
+    app.include_router(job_scene_router, prefix=API_PREFIX)
     app.include_router(web_pages.router)  # STAND-IN (branch webresult): drop at merge, webjobs wires its pages
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]  # FastAPI's documented way to customise it
     return app

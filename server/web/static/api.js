@@ -11,22 +11,21 @@ export function setKey(k) {
 }
 
 export async function apiFetch(path, options = {}) {
+  // as webjobs' api.js: the Response when 2xx, else an Error with `status` and the problem document
   const headers = new Headers(options.headers || {});
   const key = getKey();
   if (key) headers.set("Authorization", `Bearer ${key}`);
-  return fetch(path, { ...options, headers });
+  const r = await fetch(path, { ...options, headers });
+  if (r.ok) return r;
+  const problem = await r.json().catch(() => null);
+  const err = new Error(formatError(problem) || `HTTP ${r.status}`);
+  err.status = r.status;
+  err.problem = problem;
+  throw err;
 }
 
 export async function apiJson(path) {
-  const r = await apiFetch(path);
-  const body = await r.json().catch(() => null);
-  if (!r.ok) {
-    const err = new Error(formatError(body) || `HTTP ${r.status}`);
-    err.status = r.status;
-    err.problem = body;
-    throw err;
-  }
-  return body;
+  return (await apiFetch(path)).json();
 }
 
 export function formatError(problem) {

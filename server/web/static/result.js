@@ -9,17 +9,15 @@ import { drawPreview } from "./preview.js";
 
 const $ = (sel, root = document) => root.querySelector(sel);
 
-/** GET a JSON document with the API key (api.js); an answer other than 2xx throws an Error with `status` and the
- * problem document's text. */
+/** GET a JSON document with the API key (api.js's apiFetch: the Response when 2xx; otherwise it throws an Error
+ * with `status` and the problem document's text, or, from an older api.js, returns the failed Response). */
 async function apiJson(path) {
   const r = await apiFetch(path);
+  if (r.ok) return r.json();
   const body = await r.json().catch(() => null);
-  if (!r.ok) {
-    const err = new Error((body && formatError(body)) || `HTTP ${r.status}`);
-    err.status = r.status;
-    throw err;
-  }
-  return body;
+  const err = new Error((body && formatError(body)) || `HTTP ${r.status}`);
+  err.status = r.status;
+  throw err;
 }
 
 /** Readable names of the map quantities (shown with the map's own unit; the values are the API's). */
@@ -383,9 +381,12 @@ export function renderDownloads(el, job) {
   for (const a of el.querySelectorAll("a.download")) {
     a.addEventListener("click", async (ev) => {
       ev.preventDefault();
-      const r = await apiFetch(a.dataset.href);
-      if (!r.ok) {
-        showMessage(formatError(await r.json().catch(() => null)) || `download failed: HTTP ${r.status}`);
+      let r;
+      try {
+        r = await apiFetch(a.dataset.href);
+        if (!r.ok) throw new Error(formatError(await r.json().catch(() => null)) || `HTTP ${r.status}`);
+      } catch (err) {
+        showMessage(`download failed: ${err.message || err}`);
         return;
       }
       const blob = await r.blob();
