@@ -82,7 +82,7 @@ def page_times(base: str, job: dict, runs: int) -> dict[str, list[float]]:
         page = context.new_page()
         cdp = context.new_cdp_session(page)
         page.goto(url)  # first visit: no key yet (401), the page asks for it
-        page.wait_for_selector("#key-form:not([hidden])")
+        page.wait_for_selector("#api-key:visible, #result-key-input:visible")
         page.evaluate("async k => (await import('/ui/static/api.js')).setKey(k)", KEY)  # this tab's sessionStorage
         for _ in range(runs):
             for kind in ("cold", "warm"):

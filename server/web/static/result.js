@@ -423,13 +423,17 @@ function showMessage(text, cls = "error") {
   el.hidden = !text;
 }
 
+/** The pages' shared frame (shell.js: navigation and the key box) when the server has it; else null. */
+let shell = null;
+
 function askKey(text) {
-  const el = $("#key-form");
+  if (shell) return; // the shell's key box asks (api.js fires "owcsim:unauthorized")
+  const el = $("#result-key-form");
   el.hidden = false;
-  $("#key-reason", el).textContent = text;
+  $("#result-key-reason", el).textContent = text;
   el.onsubmit = (ev) => {
     ev.preventDefault();
-    setKey($("#key-input", el).value.trim());
+    setKey($("#result-key-input", el).value.trim());
     location.reload();
   };
 }
@@ -457,6 +461,13 @@ async function loadJob(id) {
 async function main() {
   const m = /^\/ui\/jobs\/([^/]+)\/?$/.exec(location.pathname);
   if (!m) return;
+  shell = await import("./shell.js").catch(() => null);
+  if (shell) {
+    shell.initShell("result");
+    document.addEventListener("owcsim:key", (ev) => {
+      if (ev.detail && ev.detail.set) location.reload(); // a key was typed: draw the page with it
+    });
+  }
   const id = decodeURIComponent(m[1]);
   const base = `/v1/jobs/${encodeURIComponent(id)}`;
   // the scene and the result are asked for at once, beside the job (a job without a result answers 409)
