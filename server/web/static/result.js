@@ -349,7 +349,7 @@ export function drawTimeline(el, timeline, link, logY) {
   });
   const first = link.time_to_first_outage_s;
   const note = outages.length
-    ? `${outages.length} outage interval(s) shaded (hatched: uncertain, the error bar straddles the threshold)${first !== null && first !== undefined ? `; first outage at ${fmt(first, 4)} s` : ""}`
+    ? `${outages.length} outage interval(s) shaded in red (orange: uncertain, the error bar straddles the threshold)${first !== null && first !== undefined ? `; first outage at ${fmt(first, 4)} s` : ""}`
     : "no outage";
   el.innerHTML = `${svg}<p class="legend">band: ±1 standard error; ${esc(note)}</p><div class="readout" aria-live="polite"></div>`;
   const out = $(".readout", el);
