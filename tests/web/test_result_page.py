@@ -497,3 +497,31 @@ def test_preview_draws_meshes_grid_media_and_wall_grids(page, web_server, cir_jo
     assert plane["width"] <= 5 and plane["height"] == pytest.approx(3.0 * px_per_m, abs=5)
     plane = side.locator(".map-plane[data-grid=wall]").bounding_box()
     assert plane["width"] <= 5 and plane["height"] == pytest.approx(2.0 * px_per_m, abs=5)
+
+
+def test_a_timeline_results_files_are_offered_for_download(page, web_server, cir_job):
+    """A result with a timeline: the page lists the files GET {job}/timeline names (the timeline branch's route;
+    answered here by the test) beside the job's own, and downloads them with the key."""
+    job, result = cir_job
+    open_result(page, web_server.url, job["id"])
+    base = f"{web_server.url}{job['url']}"
+    files = {name: f"{job['url']}/{name}" for name in ("timeline.csv", "timeline.nc", "timeline.svg")}
+    seen: list[str | None] = []
+
+    def listing(route):
+        seen.append(route.request.headers.get("authorization"))
+        route.fulfill(json={"files": files})
+
+    page.route(f"{base}/timeline", listing)
+    page.route(f"{base}/timeline.nc", lambda route: route.fulfill(body=b"CDF\x01 netcdf bytes", status=200))
+    page.evaluate(
+        "async ([r, j]) => (await import('/ui/static/result.js')).renderResult(r, j)",
+        [{**result, "timeline": TIMELINE}, job],
+    )
+    keys = page.locator("#downloads a.download").evaluate_all("els => els.map(e => e.dataset.key)")
+    assert set(keys) == (set(job["urls"]) - {"self", "cancel"}) | {"scene"} | set(files)
+    assert seen == [f"Bearer {KEY}"]
+    with page.expect_download() as info:
+        page.click("#downloads a.download[data-key='timeline.nc']")
+    assert Path(info.value.path()).read_bytes() == b"CDF\x01 netcdf bytes"
+    assert page.locator("#timeline-plot .pt").count() == len(TIMELINE["times_s"])

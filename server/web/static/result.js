@@ -318,7 +318,8 @@ export function renderTimeline(el, timeline) {
   }
   el.hidden = false;
   const sel = $("#timeline-link", el);
-  const name = (l, k) => `${l.tx || l.transmitter || "tx"} → ${l.rx || l.receiver || "rx"}` + (l.tx || l.transmitter ? "" : ` (${k})`);
+  const name = (l, k) =>
+    `${l.kind === "channel" ? "group " : ""}${l.tx || l.transmitter || "tx"} → ${l.rx || l.receiver || "rx"}` + (l.tx || l.transmitter ? "" : ` (${k})`);
   sel.innerHTML = timeline.links.map((l, k) => `<option value="${k}">${esc(name(l, k))}</option>`).join("");
   const draw = () => drawTimeline($("#timeline-plot", el), timeline, timeline.links[Number(sel.value)], $("#timeline-log", el).checked);
   sel.onchange = draw;
@@ -364,16 +365,20 @@ const DOWNLOADS = {
   result_csv: ["binned CIR of every link", "CSV"],
   result_npz: ["numpy arrays", ".npz"],
   plot: ["h(t) plot", "PNG"],
+  "timeline.csv": ["timeline, one row per link and time", "CSV"],
+  "timeline.nc": ["timeline", "netCDF"],
+  "timeline.svg": ["timeline plot", "SVG"],
 };
 /** Job links that are not downloads. */
 const NOT_DOWNLOADS = new Set(["self", "cancel", "delete", "events", "scene"]);
 
 /** Download links of every format the API offers for the job (its `urls`), and the scene document. */
-export function renderDownloads(el, job) {
+export function renderDownloads(el, job, extra = {}) {
   const items = Object.entries(job.urls || {})
     .filter(([k, u]) => !NOT_DOWNLOADS.has(k) && typeof u === "string")
     .map(([k, u]) => [k, u, ...(DOWNLOADS[k] || [k.replaceAll("_", " "), u.split("/").pop()])]);
   items.push(["scene", `${job.url}/scene`, "scene document", "JSON"]);
+  for (const [name, u] of Object.entries(extra)) items.push([name, u, ...(DOWNLOADS[name] || [name, name.split(".").pop()])]);
   el.innerHTML = `<ul class="downloads">${items
     .map(([k, u, what, fmtName]) => `<li><a class="download" href="${esc(u)}" data-key="${esc(k)}" data-href="${esc(u)}">${esc(what)} (${esc(fmtName)})</a></li>`)
     .join("")}</ul><p class="note">Downloads send your API key; the files are also at the URLs shown.</p>`;
@@ -404,8 +409,18 @@ export function renderDownloads(el, job) {
   }
 }
 
-/** Draw a whole result document (and its job's links) into the page. */
-export function renderResult(result, job) {
+/** The files of a result's timeline (GET {job}/timeline lists them: {files: {name: url}}); none when the server
+ * has no such route or the job no timeline. */
+export async function timelineFiles(job) {
+  try {
+    return (await apiJson(`${job.url}/timeline`)).files || {};
+  } catch {
+    return {};
+  }
+}
+
+/** Draw a whole result document (and its job's links) into the page; resolves once the downloads are listed. */
+export async function renderResult(result, job) {
   renderMetrics($("#metrics"), result);
   performance.mark("owcsim:metrics");
   renderCurves($("#curves"), result);
@@ -413,7 +428,9 @@ export function renderResult(result, job) {
   renderMaps($("#maps"), result);
   performance.mark("owcsim:maps");
   renderTimeline($("#timeline"), result.timeline);
-  if (job) renderDownloads($("#downloads"), job);
+  if (!job) return;
+  renderDownloads($("#downloads"), job);
+  if (result.timeline) renderDownloads($("#downloads"), job, await timelineFiles(job));
 }
 
 function showMessage(text, cls = "error") {
@@ -501,8 +518,9 @@ async function main() {
       // asked for before the job ended (409): ask again
       const result = await resultP.catch((err) => (err.status === 409 ? apiJson(job.urls.result) : Promise.reject(err)));
       performance.mark("owcsim:result-parsed");
-      renderResult(result, job);
+      const listed = renderResult(result, job);
       performance.mark("owcsim:result-drawn");
+      await listed;
     } catch (err) {
       showMessage(err.message || String(err), err.status === 409 ? "info" : "error");
     }
