@@ -22,6 +22,7 @@ from .dispatcher import Dispatcher, start_forkserver
 from .limits import RequestLimits
 from .preflight import Preflighter
 from .routes import docs, jobs, results, scenes, service, timeline
+from .routes.job_scene import router as job_scene_router  # GET /v1/jobs/{id}/scene (issue 27: scene preview)
 from .routes.service import owcsim_version
 from .settings import Settings
 from .store import JobStore
@@ -95,6 +96,7 @@ def create_app(settings: Settings | None = None, *, run_jobs: bool = True) -> Fa
     for module in (jobs, results, service, docs, timeline):
         app.include_router(module.router, prefix=API_PREFIX)
     app.include_router(scenes.router, prefix=API_PREFIX)  # examples, pre-flight, delete (the web pages use them)
+    app.include_router(job_scene_router, prefix=API_PREFIX)  # the stored scene document (the scene preview)
     pages.install(app)  # the web pages: /, /ui, /ui/submit, /ui/jobs/{id}, /ui/static/* (server/web)
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]  # FastAPI's documented way to customise it
     return app

@@ -60,6 +60,7 @@ def test_health_version_and_openapi(api):
         ("GET", "/v1/jobs/{job_id}/timeline.csv"),
         ("GET", "/v1/jobs/{job_id}/timeline.nc"),
         ("GET", "/v1/jobs/{job_id}/timeline.svg"),
+        ("GET", "/v1/jobs/{job_id}/scene"),
         ("GET", "/v1/health"),
         ("GET", "/v1/version"),
         ("GET", "/v1/examples"),  # the web pages' (routes/scenes.py)
