@@ -39,8 +39,15 @@ IS_ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
 
 
 # ----------------------------------------------------------------------------- reads in a bounded child
+def _address_space() -> int:
+    """This process's virtual memory size [bytes] (VmSize): a forked child starts with it."""
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) * 1024 for line in f if line.startswith("VmSize:"))
+
+
 def _child(conn, fn, args):
-    resource.setrlimit(resource.RLIMIT_AS, (2**30, 2**30))
+    cap = _address_space() + 2**30  # 1 GiB beyond what the child inherits (the test process's size varies)
+    resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
     try:
         fn(*args)
         conn.send(("returned", "", ""))
