@@ -58,7 +58,7 @@ from owcsim.engine.run.simulate import (
     kernel_settings,
 )
 from owcsim.engine.run.stopping import SKIP, BatchWatch
-from owcsim.engine.scene.los import line_of_sight
+from owcsim.engine.scene.los import line_of_sight, los_geometry
 from owcsim.engine.scene.scene import Scene, build_scene
 from owcsim.engine.tally.plan import N_GROUPS
 from owcsim.engine.tally.tally import Accumulator
@@ -183,7 +183,7 @@ class _Window:
         self.directions = directions = self._directions(job)
         F = len(self.idx)
         self.frame_scenes = [self._frame_scene(f) for f in range(F)]
-        self.frame_los = [LineOfSight(*line_of_sight(s, job.los.geometry), job.los.geometry) for s in self.frame_scenes]
+        self.frame_los = [_los(s) for s in self.frame_scenes]  # exact, through each frame's grid
         self.accs = _new_accumulators(self.scene, self.settings)
         self.frame_accs = [_new_accumulators(self.scene, self.settings) for _ in range(F)]
         self.infos = [
@@ -330,6 +330,12 @@ class _Window:
         rel_f = np.stack([_rel2(a) for a in self.frame_accs])
         eff = effective_fraction(rel_c[None, :], rel_f)
         return eff.min(axis=1) if eff.shape[1] else np.ones(len(self.idx))
+
+
+def _los(scene: Scene) -> LineOfSight:
+    """The exact line of sight of every link through the scene's medium (a frame's grid)."""
+    geometry = los_geometry(scene)
+    return LineOfSight(*line_of_sight(scene, geometry), geometry)
 
 
 def _group_means(accs: dict[Direction, Accumulator]) -> FloatArray:
