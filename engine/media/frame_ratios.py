@@ -57,7 +57,7 @@ loop runs over cell crossings only, never over frames or paths.
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -89,25 +89,25 @@ class PathRatios(Protocol):
     @property
     def depth_row(self) -> bool: ...  # algorithm 5's uncollided flights and collisions change the ratios
 
-    def initial_ratio(self, n: int) -> FloatArray: ...
+    def initial_ratio(self, n: int) -> np.ndarray: ...
 
-    def reflect(self, ratio: FloatArray, prims: IntArray) -> FloatArray: ...
+    def reflect(self, ratio: np.ndarray, prims: np.ndarray) -> np.ndarray: ...
 
-    def transmit(self, ratio: FloatArray, tau: FloatArray, seg: Segments | None = None) -> FloatArray: ...
+    def transmit(self, ratio: np.ndarray, tau: np.ndarray, seg: Segments | None = None) -> np.ndarray: ...
 
     def transmit_rows(
-        self, ratio: FloatArray, rows: IntArray, tau: FloatArray, seg: Segments | None = None
-    ) -> FloatArray: ...
+        self, ratio: np.ndarray, rows: np.ndarray, tau: np.ndarray, seg: Segments | None = None
+    ) -> np.ndarray: ...
 
-    def scatter(self, ratio: FloatArray, tau: FloatArray, seg: Segments | None = None) -> FloatArray: ...
+    def scatter(self, ratio: np.ndarray, tau: np.ndarray, seg: Segments | None = None) -> np.ndarray: ...
 
-    def turn(self, ratio: FloatArray, cos: FloatArray) -> FloatArray: ...
+    def turn(self, ratio: np.ndarray, cos: np.ndarray) -> np.ndarray: ...
 
-    def phase_ratio(self, cos: FloatArray) -> FloatArray: ...
+    def phase_ratio(self, cos: np.ndarray) -> np.ndarray: ...
 
     def estimate_ratio(
-        self, ratio: FloatArray, tau: FloatArray | None = None, seg: Segments | None = None
-    ) -> FloatArray: ...
+        self, ratio: np.ndarray, tau: np.ndarray | None = None, seg: Segments | None = None
+    ) -> np.ndarray: ...
 
 
 def carrier_grid(frames: MediumFrames) -> GridMedium:
@@ -120,8 +120,8 @@ def carrier_grid(frames: MediumFrames) -> GridMedium:
 class FrameRatios:
     """Per-frame ratio rows (F, n) of paths sampled in the carrier `carrier` (same grid as `frames`)."""
 
-    carry = True
-    phase_bands = None
+    carry: bool = True
+    phase_bands: list | None = None
 
     def __init__(self, frames: MediumFrames, carrier: GridMedium, rx_frames: ArrayLike | None = None):
         if tuple(carrier.shape) != frames.shape or not (
@@ -208,9 +208,8 @@ class FrameRatios:
             tau[ids[fin]] = acc[fin]
             keep = np.flatnonzero(~done)
             if len(keep) < len(ids):
-                ids, oo, dd, tc, te, acc, cell, step, inv = (
-                    x[keep] for x in (ids, oo, dd, tc, te, acc, cell, step, inv)
-                )
+                state: list[Any] = [x[keep] for x in (ids, oo, dd, tc, te, acc, cell, step, inv)]
+                ids, oo, dd, tc, te, acc, cell, step, inv = state
         tau[ids] = acc
         return tau
 

@@ -12,10 +12,15 @@ spreads of w r_f), and the line of sight computed exactly through that frame's g
 mode the run stops at the end of the first round at which every frame meets the target
 (engine/run/stopping.py's rule, asked per frame).
 
-Windows. Where frames differ much from the carrier, ratio rows spread (heavy tails): a pilot of
-PILOT_PATHS paths per window measures each frame's effective sample size as a fraction of the
-carrier's (frame_ratios.effective_fraction); while some frame falls below MIN_EFFECTIVE_FRACTION
-the window is cut in two halves (each its own carrier and paths), down to single frames. Frames of
+Windows. Where frames differ much from the carrier, ratio rows spread (heavy tails): a path's ratio
+is exp(-(tau_f - tau_c)) over its segments. The rule, in two steps: (1) probe rays (PROBES from each
+device with its angular density, to the first surface) give every frame's optical depth along them;
+consecutive frames form a window while every frame's depths stay within MAX_DEPTH_SPREAD of the
+window's mean along every probe (no path tracing: a fraction of a second); (2) a pilot of PILOT_PATHS
+paths per window measures each frame's effective sample size as a fraction of the carrier's
+(frame_ratios.effective_fraction, the per-path relative second moments); while some frame falls below
+MIN_EFFECTIVE_FRACTION the window is cut in two halves (each its own carrier and paths), down to
+single frames. Frames of
 one window share paths (their differences have small errors); frames of different windows are
 independent.
 
@@ -67,8 +72,13 @@ from owcsim.schemas.algorithms import Direction
 from owcsim.schemas.medium import GridMediumSpec
 from owcsim.schemas.results import DirectionChoicePublic, SimulationResultPublic, StopReason
 
-#: Paths of the window pilot (per frame window); its random streams are their own (WorkItem phase WINDOW_PHASE).
-PILOT_PATHS = 4096
+#: Paths of the window pilot (per frame window; 0: no pilot); its random streams are their own (WorkItem phase
+#: WINDOW_PHASE).
+PILOT_PATHS = 2048
+#: Largest difference of optical depth [-] between a frame and its window's mean along any probe ray.
+MAX_DEPTH_SPREAD = 0.5
+#: Probe rays per device.
+PROBES = 256
 WINDOW_PHASE = 2
 
 
@@ -340,7 +350,7 @@ def _los(scene: Scene) -> LineOfSight:
 
 def _group_means(accs: dict[Direction, Accumulator]) -> FloatArray:
     """(n_links, N_GROUPS) mean per-path H0 per path group, summed over the directions."""
-    out = 0.0
+    out: FloatArray = np.zeros((next(iter(accs.values())).n_links, N_GROUPS))
     for acc in accs.values():
         paths = acc.h0_group_paths.T
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -361,15 +371,51 @@ def _rel2(accs: dict[Direction, Accumulator]) -> FloatArray:
     return rel
 
 
+def probe_depths(scene: Scene, frames: MediumFrames, n: int = PROBES) -> FloatArray:
+    """(P, F) optical depth of every frame along probe rays: `n` rays from each device with its own angular
+    density (emission pattern, receiver field of view) to the first surface, fixed random numbers."""
+    rng = np.random.default_rng(26)
+    isect = scene.intersector
+    segs = []
+    for devices in (scene.transmitters, scene.receivers):
+        for i in range(len(devices.positions)):  # a loop over devices (one link: two)
+            u = rng.random((2, n))
+            d = np.asarray(devices.sample_directions(i, u[0], u[1]), np.float64).reshape(n, 3)
+            o = np.repeat((devices.positions[i] + isect.offset * devices.normals[i])[None, :], n, axis=0)
+            _, t = isect.intersect(o, d)
+            segs.append((o, d, np.where(np.isfinite(t), t, 0.0)))
+    o, d, L = (np.concatenate(x) for x in zip(*segs))
+    return FrameRatios(frames, carrier_grid(frames)).depths((o, d, L))[:, :-1]
+
+
+def depth_windows(tau: FloatArray, spread: float) -> list[IntArray]:
+    """Consecutive frame windows, each as long as every frame's probe depths stay within `spread` of the window's
+    mean frame's (tau (P, F); greedy from the first frame)."""
+    F = tau.shape[1]
+    out, start = [], 0
+    while start < F:
+        end = start + 1
+        while end < F:
+            block = tau[:, start : end + 1]
+            if np.abs(block - block.mean(axis=1, keepdims=True)).max() > spread:
+                break
+            end += 1
+        out.append(np.arange(start, end))
+        start = end
+    return out
+
+
 def _windows(
     spec: SceneSpec, frames: MediumFrames, rx_frames: IntArray | None, base_dir: str | Path | None
 ) -> list[IntArray]:
-    """The frame windows (module docstring): halves while a pilot finds a frame below MIN_EFFECTIVE_FRACTION."""
-    todo = [np.arange(frames.n_frames)]
+    """The frame windows (module docstring): by the probe rays' depth spread, then halves while a pilot finds a
+    frame below MIN_EFFECTIVE_FRACTION."""
+    scene = _carrier_scene(spec, base_dir)
+    todo = depth_windows(probe_depths(scene, frames), MAX_DEPTH_SPREAD)
     out: list[IntArray] = []
     while todo:
         idx = todo.pop(0)
-        if len(idx) == 1:
+        if len(idx) == 1 or PILOT_PATHS <= 0:
             out.append(idx)
             continue
         pilot = _Window(spec, frames, idx, rx_frames, base_dir, Watch(t_start=time.perf_counter()))

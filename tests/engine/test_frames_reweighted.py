@@ -111,8 +111,11 @@ def test_one_frame_equals_the_plain_run_bit_for_bit():
     assert groups[0, 0].mean() == pytest.approx(a.dc_gain, rel=1e-9)
 
 
-def test_a_frame_that_is_the_carrier_gives_its_plain_run():
-    """Dyadic coefficients: frame 1 is exactly the mean of the three, so the carrier is frame 1 itself."""
+def test_a_frame_that_is_the_carrier_gives_its_plain_run(monkeypatch):
+    """Dyadic coefficients: frame 1 is exactly the mean of the three, so the carrier is frame 1 itself (one window:
+    the window rules switched off)."""
+    monkeypatch.setattr(fr, "MAX_DEPTH_SPREAD", math.inf)
+    monkeypatch.setattr(fr, "PILOT_PATHS", 0)
     rng = np.random.default_rng(6)
     a0, a1 = rng.integers(0, 8, SHAPE) / 64, rng.integers(0, 8, SHAPE) / 64
     s0, s1 = rng.integers(1, 32, SHAPE) / 64, rng.integers(1, 32, SHAPE) / 64
@@ -215,5 +218,13 @@ def test_frames_far_from_their_carrier_are_split_into_windows(monkeypatch):
     doc = _doc(algorithm=5, paths=2048)
     windows = fr._windows(doc, frames, None, None)
     assert len(windows) > 1 and sorted(np.concatenate(windows).tolist()) == [0, 1, 2, 3]
-    monkeypatch.setattr(fr, "MIN_EFFECTIVE_FRACTION", 0.0)  # never split: one window
+    monkeypatch.setattr(fr, "MAX_DEPTH_SPREAD", math.inf)  # the probe rule off: the pilot alone splits
+    assert len(fr._windows(doc, frames, None, None)) > 1
+    monkeypatch.setattr(fr, "MIN_EFFECTIVE_FRACTION", 0.0)  # neither rule: one window
     assert len(fr._windows(doc, frames, None, None)) == 1
+
+
+def test_depth_windows_rule():
+    tau = np.array([[0.0, 0.2, 0.4, 2.0, 2.1, 5.0]])
+    assert [w.tolist() for w in fr.depth_windows(tau, 0.5)] == [[0, 1, 2], [3, 4], [5]]
+    assert [w.tolist() for w in fr.depth_windows(tau, 0.15)] == [[0, 1], [2], [3, 4], [5]]
