@@ -145,6 +145,7 @@ class FrameRatios:
         with np.errstate(divide="ignore", invalid="ignore"):
             self.scatter_ratio = np.ascontiguousarray(np.where(ss_c > 0, ss_f / np.where(ss_c > 0, ss_c, 1.0), 0.0).T)
         self.segments = 0  # segments walked (a cost figure)
+        self._memo: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None = None  # the last walk
         #: per receiver, the one frame whose tally it enters (a moving receiver: one receiver per frame), -1: all
         self.rx_frames = None if rx_frames is None else np.asarray(rx_frames, np.int64)
 
@@ -169,27 +170,43 @@ class FrameRatios:
 
     # --- optical depths of every frame --------------------------------------------------------------------
     def depths(self, seg: Segments) -> FloatArray:
-        """(n, F + 1) optical depths of the segments in every frame and (last column) the carrier [-]."""
+        """(n, F + 1) optical depths of the segments in every frame and (last column) the carrier [-]; the
+        segments the carrier medium (`FramedGrid`) walked last are not walked again."""
         o, d = as_rows(seg[0]), as_rows(seg[1])
         L = np.asarray(seg[2], np.float64).reshape(-1)
+        memo = self._memo
+        if memo is not None and len(memo[2]) == len(L):
+            if np.array_equal(memo[2], L) and np.array_equal(memo[0], o) and np.array_equal(memo[1], d):
+                return memo[3]
+        return self.walk(o, d, L)[0]
+
+    def walk(self, o: FloatArray, d: FloatArray, L: FloatArray) -> tuple[FloatArray, int]:
+        """(depths (n, F + 1) as `depths`, segments crossing the grid): one 3-D DDA walk (the steps of grid._march,
+        each adding length x sigma_t of every frame and the carrier; finished rays add 0 until a quarter of them
+        is done, then the arrays shrink)."""
         g = self.carrier
         n, width = len(L), self.sigma_t.shape[1]
         tau = np.zeros((n, width))
         t0, t1 = clip_box(o, d, L, g.lo, g.hi)
         ids: IntArray = np.flatnonzero(t1 > t0)
-        self.segments += len(ids)
-        if len(ids) == 0:
-            return tau
+        n_cross = len(ids)
+        self.segments += n_cross
+        self._memo = (o.copy(), d.copy(), L.copy(), tau)  # copies: a caller may reuse its buffers
+        if n_cross == 0:
+            return tau, 0
         oo, dd, tc, te = o[ids], d[ids], t0[ids], t1[ids]
         acc = np.zeros((len(ids), width))
+        live = np.ones(len(ids), bool)
         cell, _ = g.cells(oo + tc[:, None] * dd)
         step: IntArray = np.sign(dd).astype(np.int64)
         with np.errstate(divide="ignore"):
             inv = np.where(step != 0, 1.0 / np.where(step != 0, dd, 1.0), np.inf)
         upper = np.asarray(g.shape)
         strides = np.array([g.shape[1] * g.shape[2], g.shape[2], 1], np.int64)
+        last = self.sigma_t.shape[0] - 1
+        n_live = len(ids)
         for _ in range(sum(g.shape) + 3):  # every step crosses one cell boundary (the same walk as grid._march)
-            if len(ids) == 0:
+            if n_live == 0:
                 break
             boundary = g.lo + (cell + (step > 0)) * g.h
             with np.errstate(invalid="ignore"):
@@ -198,20 +215,24 @@ class FrameRatios:
             rows = np.arange(len(ids))
             t_next = tm[rows, axis]
             t_end = np.maximum(np.minimum(t_next, te), tc)
-            acc += self.sigma_t.take(cell @ strides, axis=0) * (t_end - tc)[:, None]
+            flat = np.clip(cell @ strides, 0, last)  # (finished rays may have left the grid: they add 0)
+            acc += self.sigma_t.take(flat, axis=0) * (t_end - tc)[:, None]
             done = t_next >= te
             tc = t_end
             cell[rows, axis] += step[rows, axis]
             c_ax = cell[rows, axis]
             done |= (c_ax < 0) | (c_ax >= upper[axis])
-            fin = np.flatnonzero(done)
-            tau[ids[fin]] = acc[fin]
-            keep = np.flatnonzero(~done)
-            if len(keep) < len(ids):
-                state: list[Any] = [x[keep] for x in (ids, oo, dd, tc, te, acc, cell, step, inv)]
-                ids, oo, dd, tc, te, acc, cell, step, inv = state
-        tau[ids] = acc
-        return tau
+            fin = np.flatnonzero(done & live)
+            if len(fin):
+                tau[ids[fin]] = acc[fin]
+                live[fin] = False
+                te[fin] = tc[fin]  # from here on t_end = tc: nothing more
+                n_live -= len(fin)
+            if n_live * 4 < len(ids) * 3:  # shrink once a quarter has finished
+                keep = np.flatnonzero(live)
+                state: list[Any] = [x[keep] for x in (ids, oo, dd, tc, te, acc, cell, step, inv, live)]
+                ids, oo, dd, tc, te, acc, cell, step, inv, live = state
+        return tau, n_cross
 
     def transmittance_ratio(self, seg: Segments) -> FloatArray:
         """(F, n) T_f / T_c = exp(-(tau_f - tau_c)) along the segments."""
@@ -273,6 +294,21 @@ class FrameRatios:
     ) -> FloatArray:
         """(F, m) ratios of estimates from path states `ratio`, their connections `seg` (None: none)."""
         return ratio if seg is None else ratio * self.transmittance_ratio(seg)
+
+
+class FramedGrid(GridMedium):
+    """The carrier as the kernel's medium: its optical depths come from the walk that also gives every frame's
+    (`FrameRatios.walk`), so the ratios of the same segments asked next cost no second walk."""
+
+    def __init__(self, carrier: GridMedium, ratios: FrameRatios):
+        super().__init__(carrier.lo, carrier.hi, carrier.shape, 0.0, carrier.sigma_s_grid, carrier.phase_spec)
+        self.sigma_t_grid = carrier.sigma_t_grid  # (the carrier's own sums: the same numbers)
+        self._sigma_t_max, self.sigma_t_min = carrier.sigma_t_max, carrier.sigma_t_min
+        self.ratios = ratios
+
+    def _optical_depth(self, o: FloatArray, d: FloatArray, L: FloatArray) -> tuple[FloatArray, int]:
+        tau, n = self.ratios.walk(o, d, L)
+        return tau[:, -1].copy(), n
 
 
 def effective_fraction(rel2_carrier: FloatArray, rel2_frames: FloatArray) -> FloatArray:

@@ -43,7 +43,13 @@ import numpy as np
 from owcsim.engine.core.arrays import FloatArray, IntArray
 from owcsim.engine.core.errors import SceneError
 from owcsim.engine.integrator.path import KernelSettings, WorkItem
-from owcsim.engine.media.frame_ratios import MIN_EFFECTIVE_FRACTION, FrameRatios, carrier_grid, effective_fraction
+from owcsim.engine.media.frame_ratios import (
+    MIN_EFFECTIVE_FRACTION,
+    FramedGrid,
+    FrameRatios,
+    carrier_grid,
+    effective_fraction,
+)
 from owcsim.engine.media.frames import MediumFrames
 from owcsim.engine.media.grid import GridMedium
 from owcsim.engine.media.model import medium_model
@@ -182,7 +188,8 @@ class _Window:
             pos = {int(f): i for i, f in enumerate(self.idx)}
             local = np.array([-1 if r < 0 else pos.get(int(r), -2) for r in self.rx_frames], np.int64)
         self.ratios = FrameRatios(self.sub, grid, local)
-        self.scene = replace(scene, path_ratios=self.ratios)
+        medium = FramedGrid(grid, self.ratios) if scene.medium is not None else None  # one walk: carrier and frames
+        self.scene = replace(scene, medium=medium, path_ratios=self.ratios)
         self.settings: KernelSettings = replace(kernel_settings(self.spec_c, self.scene), phase_lobe=False)
 
     # --- the run ------------------------------------------------------------------------------------------------
