@@ -41,12 +41,12 @@ def _doc(algorithm=5, paths=8192, seed=2, **kw):
     return spec(room_doc(algorithm=algorithm, paths=paths, seed=seed, **sim))
 
 
-def _plain(doc, frames, f, seed):
-    return simulate(fr._with_medium(doc, frames, f).model_copy(update={"simulation": _seeded(doc, seed)}))
+def _plain(doc, frames, f, seed, paths=None):
+    return simulate(fr._with_medium(doc, frames, f).model_copy(update={"simulation": _seeded(doc, seed, paths)}))
 
 
-def _seeded(doc, seed):
-    return doc.simulation.model_copy(update={"seed": seed})
+def _seeded(doc, seed, paths=None):
+    return doc.simulation.model_copy(update={"seed": seed, "paths": paths or doc.simulation.paths})
 
 
 def _agree(a, sa, b, sb, k=4.0):
@@ -131,11 +131,17 @@ def test_a_frame_that_is_the_carrier_gives_its_plain_run(monkeypatch):
 
 
 # --- frames against independent runs ------------------------------------------------------------------------------
-def _check_against_plain(doc, frames, seed=101):
+def _one_window(monkeypatch):
+    """The window rules off: every frame reweighted from one carrier (the ratio rows do all the work)."""
+    monkeypatch.setattr(fr, "MAX_DEPTH_SPREAD", math.inf)
+    monkeypatch.setattr(fr, "PILOT_PATHS", 0)
+
+
+def _check_against_plain(doc, frames, seed=101, ref_paths=None):
     res, _ = simulate_reweighted(doc, frames)
     for f in range(frames.n_frames):
         a = res[f].links[0]
-        b = _plain(doc, frames, f, seed + f).links[0]
+        b = _plain(doc, frames, f, seed + f, ref_paths).links[0]
         assert a.los_gain == pytest.approx(b.los_gain, rel=1e-12)
         mc_a, mc_b = a.dc_gain - a.los_gain, b.dc_gain - b.los_gain
         assert _agree(mc_a, a.dc_gain_stderr, mc_b, b.dc_gain_stderr), (f, mc_a, mc_b)
@@ -144,15 +150,25 @@ def _check_against_plain(doc, frames, seed=101):
     return res
 
 
-def test_absorption_only_frames_agree_with_independent_runs():
+def test_absorption_only_frames_agree_with_independent_runs(monkeypatch):
+    """Absorption grows everywhere and most in a ceiling layer; the same scattering in every frame."""
+    _one_window(monkeypatch)
     s = _layer(3, 0.05)
-    a = np.stack([_layer(1, 0.2), _layer(2, 0.4), _layer(3, 0.6)])
+    a = np.stack([_layer(1, 0.2) + 0.02, _layer(2, 0.3) + 0.1, _layer(3, 0.4) + 0.2])
     _check_against_plain(_doc(algorithm=5, paths=16384), _frames(a, np.stack([s, s, s])))
 
 
+@pytest.mark.slow
+def test_frames_in_windows_agree_with_independent_runs():
+    """The default window rules on frames from clear to thick smoke."""
+    t = np.stack([_layer(1, 0.05), _layer(2, 0.6), _layer(3, 1.5)])
+    _check_against_plain(_doc(algorithm=5, paths=8192), _frames(t * 0.5, t * 0.5), ref_paths=32768)
+
+
 @pytest.mark.parametrize("algorithm", [1, *(pytest.param(a, marks=pytest.mark.slow) for a in (2, 3, 4)), 5])
-def test_scattering_frames_agree_with_independent_runs(algorithm):
+def test_scattering_frames_agree_with_independent_runs(algorithm, monkeypatch):
     """A small grid whose albedo goes 0.5 -> 0.9 and whose ceiling layer thickens."""
+    _one_window(monkeypatch)
     rng = np.random.default_rng(algorithm)
     t = np.stack([_layer(2, 0.3) + 0.1, _layer(2, 0.5) + 0.15, _layer(3, 0.6) + 0.2]) * rng.uniform(0.8, 1.2, SHAPE)
     albedo = np.array([0.5, 0.7, 0.9])[:, None, None, None]
