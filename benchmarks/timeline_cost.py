@@ -107,6 +107,8 @@ def main() -> None:
         ),
         ("algorithm (reweighted carrier)", str(results[0].algorithm)),
         ("worst frame's relative stderr of H0", f"{max(rel):.4f}"),
+        ("windows (carriers)", str(len({_window(r) for r in results}))),
+        ("smallest effective sample size over the carrier's", f"{min(_ess(r) for r in results):.2f}"),
     ]
     for f in picks:
         r = results[int(f)].links[0]
@@ -131,6 +133,15 @@ def main() -> None:
     else:
         for k, v in rows:
             print(f"{k:62s} {v}")
+
+
+def _window(result) -> str:
+    return next(w for w in result.warnings if w.startswith("frames:")).split("carrier of frames ")[1].split(" ")[0]
+
+
+def _ess(result) -> float:
+    text = next(w for w in result.warnings if w.startswith("frames:"))
+    return float(text.split("effective sample size is ")[1].split(" ")[0])
 
 
 if __name__ == "__main__":

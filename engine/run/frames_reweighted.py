@@ -114,11 +114,18 @@ def simulate_reweighted(
     F = frames.n_frames
     results: list[SimulationResultPublic | None] = [None] * F
     groups: FloatArray | None = None
-    for idx in windows:
+    for w, idx in enumerate(windows):
         run = _Window(resolved, frames, idx, rx_frames, base_dir, watch)
         run.run(None)
+        ess = run.efficiency_per_frame()
         for local, f in enumerate(idx):
-            results[f] = run.result(local, modeled, spec)
+            res = run.result(local, modeled, spec)
+            res.warnings.append(
+                f"frames: frame {f} reweighted from the carrier of frames {idx[0]}..{idx[-1]} (window {w + 1} of "
+                f"{len(windows)}; frames of one window share paths, of different windows are independent); its "
+                f"effective sample size is {ess[local]:.2f} of the carrier's (engine/media/frame_ratios.py)"
+            )
+            results[f] = res
         g = run.group_h0()
         if groups is None:
             groups = np.zeros((F,) + g.shape[1:])
@@ -340,6 +347,10 @@ class _Window:
         for f, accs in enumerate(self.frame_accs):
             out[f] = _group_means(accs) + self.frame_los[f].gain[:, None]
         return out
+
+    def efficiency_per_frame(self) -> FloatArray:
+        """(F,) the worst link's ESS_f / ESS_c, 1 before any path."""
+        return self.efficiency()
 
     def efficiency(self) -> FloatArray:
         """(F,) the worst link's ESS_f / ESS_c (frame_ratios.effective_fraction) of the run so far."""
