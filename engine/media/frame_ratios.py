@@ -156,7 +156,7 @@ class FrameRatios:
         if self.rx_frames is None:
             return np.ones((F, len(tgt)), bool)
         rx = self.rx_frames.take(np.asarray(tgt, np.int64)) if forward else np.full(len(tgt), self.rx_frames[source])
-        return (rx[None, :] < 0) | (rx[None, :] == np.arange(F)[:, None])
+        return (rx[None, :] == -1) | (rx[None, :] == np.arange(F)[:, None])  # (-2: a frame of another window)
 
     @property
     def n_bands(self) -> int:
