@@ -155,6 +155,10 @@ class BatchContext(BatchState):
         self.w0 = 1.0  # the source's weight W_source (trace_batch), the roulette's scale
         self.pending: dict[int, list[tuple[Any, ...]]] = {}  # depth k + s -> estimate groups waiting for their step
         self.builder: BatchBuilder | PackedBuilder | None = None  # the batch's tally (trace_batch)
+        #: frames of a time-varying medium (engine/media/frame_ratios.py): one tally per frame, of the estimates
+        #: x the frame's ratio row, and which of the batch's targets each frame tallies (F, T)
+        self.frame_builders: list[BatchBuilder] = []
+        self.frame_targets: Any = None
         #: (2, n_paths) quasi-random uniforms of the first bounce (KernelSettings.qmc_block), step 0
         self.first_bounce_u: FloatArray | None = None
 
@@ -180,7 +184,7 @@ class BatchContext(BatchState):
         if item.packed:  # several sources' paths (engine/run/allocation.py): per-path sums, reduced per source
             plan = settings.tally
             kept = max(plan.cir_slots(links).max(initial=-1), plan.order_slots(links).max(initial=-1))
-            if several or self.spectra is not None or kept >= 0:
+            if several or self.ratios is not None or kept >= 0:
                 raise RuntimeError("a packed batch needs algorithm 1 without mirrors, spectra, CIR or order split")
             self.builder = PackedBuilder(plan, links, len(self.tgt), np.asarray(item.sources), np.asarray(item.counts))
             return
@@ -192,6 +196,13 @@ class BatchContext(BatchState):
         self.builder = BatchBuilder(
             settings.tally, links, item.n_paths, several, block, first_batch=item.batch == 0, channels=self.channels
         )
+        frames = self.scene.path_ratios
+        if self.spectra is None and frames is not None:  # one tally per frame (engine/run/frames_reweighted.py)
+            self.frame_targets = frames.frame_targets(item.direction is Direction.FORWARD, item.source, self.tgt)
+            self.frame_builders = [
+                BatchBuilder(settings.tally, links, item.n_paths, several, block, first_batch=item.batch == 0)
+                for _ in range(frames.n_bands)
+            ]
 
     def connect(self, v: Vertices, target: int | None = None) -> None:
         """Next-event estimation from the vertices `v` to the targets: the measurement equation.
@@ -334,10 +345,11 @@ class BatchContext(BatchState):
             length += rows(v.extra_length, vertex)
         s_order = rows(paths.s if v.scatter_order is None else v.scatter_order, vertex)
         ratio = None
-        if "ratio" in self.out:  # spectral: the path's band ratios, with T_b / T_c of the connection
-            spectra = self.spectra
-            assert spectra is not None  # (only spectral scenes carry ratios)
-            ratio = spectra.estimate_ratio(rows(paths.ratio, vertex), tau)
+        if "ratio" in self.out:  # bands or frames: the path's ratios, with T_b / T_c of the connection
+            spectra = self.ratios
+            assert spectra is not None  # (only parts with ratios carry them)
+            seg = (rows(v.points, vertex).T, out_dir.T, d) if medium is not None else None
+            ratio = spectra.estimate_ratio(rows(paths.ratio, vertex), tau, seg)
             if v.normals is None and spectra.phase_bands is not None:  # medium vertex: p_b / p_c
                 ratio = ratio * spectra.phase_ratio(dot(rows(v.in_dirs, vertex), out_dir))
         length *= 1.0 / SPEED_OF_LIGHT
@@ -364,6 +376,27 @@ class BatchContext(BatchState):
                 ratio = cat[6] if len(cat) > 6 else np.ones((0, len(power)))
                 cat[4] = self.channels.add(target, delay, power, ratio, path)
             self.builder.add_step(*cat[:6])
+            if self.frame_builders:  # frame f's estimates: the carrier's x its ratio row
+                self._add_frames(cat)
+
+    def _add_frames(self, cat: list[Any]) -> None:
+        """Each frame's tally gets the step's estimates of its targets times the frame's ratio row."""
+        target, k, s, delay, power, path, ratio = cat[:7]
+        several = len(self.tgt) > 1
+        for f, builder in enumerate(self.frame_builders):  # a loop over frames: each its own tally
+            keep = self.frame_targets[f]
+            if keep.all():
+                builder.add_step(target, k, s, delay, power * ratio[f], path)
+            elif keep.any() and several:
+                sel = keep.take(target).nonzero()[0]
+                builder.add_step(
+                    target.take(sel),
+                    k.take(sel),
+                    s.take(sel),
+                    delay.take(sel),
+                    power.take(sel) * ratio[f].take(sel),
+                    path.take(sel),
+                )
 
     def reduce(self, n_paths: int) -> BatchTally:
         self.flush()
@@ -371,4 +404,7 @@ class BatchContext(BatchState):
         if self.item.direction is Direction.BACKWARD and self.settings.tally.group_weights.size:
             weights = self.settings.tally.group_weights[:, self.tgt]  # (G, T): targets are transmitters
         assert self.builder is not None
-        return self.builder.finish(weights)  # (with the channel sums of spectral scenes)
+        tally = self.builder.finish(weights)  # (with the channel sums of spectral scenes)
+        if self.frame_builders:
+            tally.frames = [b.finish(weights) for b in self.frame_builders]
+        return tally

@@ -60,7 +60,7 @@ def surface_vertex(ctx: BatchContext, sp: Paths, prims: IntArray, ts: FloatArray
         first=sp.first,
         first_rho=sp.first_rho,
         # spectral scenes: rho_b / rho_c of the face, for the NEE from here and the reflected path
-        ratio=ctx.spectra.reflect(sp.ratio, prims) if ctx.spectra is not None else sp.ratio,
+        ratio=ctx.ratios.reflect(sp.ratio, prims) if ctx.ratios is not None else sp.ratio,
     )
     # after reflection K a path still matters if it can scatter (5) or host segment points (2-4)
     K, S = settings.max_reflections, settings.max_scattering
@@ -201,8 +201,8 @@ def _connect_points(
         n_e = n_e.take(inside)
     tau = medium.optical_depth(pp.origins.T, pp.directions.T, s)
     transmittance = np.exp(-tau)  # = medium.transmittance
-    if ctx.spectra is not None:  # smoke per band: sigma_s,b T_b over the carrier's at the point (spectra.py)
-        pp.ratio = ctx.spectra.scatter(pp.ratio, tau)
+    if ctx.ratios is not None:  # bands or frames: sigma_s,b T_b over the carrier's at the point (spectra.py)
+        pp.ratio = ctx.ratios.scatter(pp.ratio, tau, (pp.origins.T, pp.directions.T, s))
     throughput = scattering_point_throughput(pp.weights, transmittance, sigma_t, sigma_s, n_e)
     mid_g, lobe = _first_vertices(ctx, j, pp, points, s, transmittance, throughput)
     pp.s = pp.s + 1
@@ -260,10 +260,11 @@ def medium_collision(
     K, S = settings.max_reflections, settings.max_scattering
     mp = paths.gather(rows)
     points = mp.origins + t_col * mp.directions
-    if ctx.spectra is not None and ctx.spectra.depth_row:  # smoke per band: ratio tracking (spectra.py)
+    if ctx.ratios is not None and ctx.ratios.depth_row:  # bands or frames: ratio tracking (spectra.py)
         # the carrier sampled t_col with density sigma_t,c T_c and keeps albedo_c: band b's true sigma_s,b T_b
         # over that is (sigma_s,b / sigma_s,c) exp(-tau_c (sigma_t,b / sigma_t,c - 1)) x albedo_c
-        mp.ratio = ctx.spectra.scatter(mp.ratio, medium.optical_depth(mp.origins.T, mp.directions.T, t_col))
+        flight = (mp.origins.T, mp.directions.T, t_col)
+        mp.ratio = ctx.ratios.scatter(mp.ratio, medium.optical_depth(*flight), flight)
     mp.lengths = mp.lengths + t_col
     uniform = medium.uniform_coefficients
     if uniform is not None and uniform[0] > 0:  # the same albedo everywhere: a number
@@ -279,8 +280,8 @@ def medium_collision(
     u = ctx.bounce_uniforms(mp, rng)
     arriving = mp.directions
     mp.directions = phase.sample(arriving, u[0], u[1])
-    if ctx.spectra is not None:  # Mie per band: p_b / p_c of the sampled direction (spectra.py)
-        mp.ratio = ctx.spectra.turn(mp.ratio, dot(arriving, mp.directions))
+    if ctx.ratios is not None:  # Mie per band: p_b / p_c of the sampled direction (spectra.py)
+        mp.ratio = ctx.ratios.turn(mp.ratio, dot(arriving, mp.directions))
     if settings.both_sides:  # leaving the path's first vertex: its phase density (weights.py)
         at_first = mp.k + mp.s == 1
         if at_first.any():
@@ -390,14 +391,15 @@ def _join_from_target(
         return
     ratio = None
     if "ratio" in ctx.out:  # spectral: the ratios at x_1 (k = 0: only smoke per band changes them)
-        spectra = ctx.spectra
-        assert spectra is not None  # (only spectral scenes carry ratios)
+        spectra = ctx.ratios
+        assert spectra is not None  # (only parts with ratios carry them)
         ratio = mp.ratio.take(first.take(sel.take(ok)), axis=1)
         if spectra.depth_row:  # sigma_s,b T_b at x_2 over the carrier's, T_b / T_c of x_1 -> x_2
             o_k, d_k = origins.take(sel.take(ok), axis=1), dj.take(ok, axis=1)
-            tau = medium.optical_depth(o_k.T, d_k.T, t_y.take(sel.take(ok)))
-            tau = tau + medium.optical_depth(a.take(ok, axis=1).T, w12.take(ok, axis=1).T, r12.take(ok))
-            ratio = spectra.estimate_ratio(spectra.scatter(ratio, tau))
+            to_y = (o_k.T, d_k.T, t_y.take(sel.take(ok)))
+            joint = (a.take(ok, axis=1).T, w12.take(ok, axis=1).T, r12.take(ok))
+            scattered = spectra.scatter(ratio, medium.optical_depth(*to_y), to_y)
+            ratio = spectra.estimate_ratio(scattered, medium.optical_depth(*joint), joint)
         if spectra.phase_bands is not None:  # p_b / p_c at x_1 and at x_2
             ratio = ratio[: spectra.n_bands] * spectra.phase_ratio(p_cos1.take(ok))
             ratio = ratio * spectra.phase_ratio(p_cos2.take(ok))

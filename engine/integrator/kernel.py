@@ -160,7 +160,7 @@ def _emit(ctx: BatchContext, item: WorkItem, rng: np.random.Generator) -> tuple[
         s=np.zeros(n, np.int64),
         first=np.zeros(n) if two_sided else None,
         first_rho=np.full(n, 1.0 / np.pi) if two_sided else None,
-        ratio=ctx.spectra.initial_ratio(n) if ctx.spectra is not None else np.ones((0, n)),
+        ratio=ctx.ratios.initial_ratio(n) if ctx.ratios is not None else np.ones((0, n)),
     )
     # source -> mirror -> target (order k = 1, none when K = 0): the same for every path; half each from both devices
     if ctx.mirrors and settings.max_reflections >= 1:
@@ -221,18 +221,16 @@ def _step(
         frames = EquiangularFrames(ctx, paths, t_seg) if settings.equiangular_points else None
         medium_rows = (collided & (paths.s < S)).nonzero()[0]
         medium_next_events(ctx, paths, frames, medium_rows, t_col.take(medium_rows), rng)
-        if ctx.spectra is not None and ctx.spectra.depth_row:  # smoke per band: T_b / T_c of the flight
+        if ctx.ratios is not None and ctx.ratios.depth_row:  # bands or frames: T_b / T_c of the flight
             flown = (hit & ~collided & (paths.k < K)).nonzero()[0]  # (its collisions: `medium_collision`)
             if len(flown):
-                tau = medium.optical_depth(
-                    paths.origins.take(flown, axis=1).T, paths.directions.take(flown, axis=1).T, t.take(flown)
-                )
-                paths.ratio = ctx.spectra.transmit_rows(paths.ratio, flown, tau)
+                flight = (paths.origins.take(flown, axis=1).T, paths.directions.take(flown, axis=1).T, t.take(flown))
+                paths.ratio = ctx.ratios.transmit_rows(paths.ratio, flown, medium.optical_depth(*flight), flight)
     elif medium is not None:  # algorithm 1 (and 2-4): the segment's extinction
         tau = medium.optical_depth(paths.origins.T, paths.directions.T, t_seg)
         paths.weights = paths.weights * np.exp(-tau)  # = medium.transmittance
-        if ctx.spectra is not None:  # spectral smoke: the carrier depth travelled (spectra.py)
-            paths.ratio = ctx.spectra.transmit(paths.ratio, tau)
+        if ctx.ratios is not None:  # bands: the carrier depth travelled; frames: T_f / T_c (spectra.py)
+            paths.ratio = ctx.ratios.transmit(paths.ratio, tau, (paths.origins.T, paths.directions.T, t_seg))
     at_surface = hit if collided is None else hit & ~collided
     if forward:  # the power balance of the result's diagnostics (forward runs)
         power.escaped += paths.weights[~hit if collided is None else ~hit & ~collided].sum()

@@ -16,6 +16,7 @@ import numpy as np
 
 from owcsim.engine.core import qmc
 from owcsim.engine.core.arrays import FloatArray, IntArray
+from owcsim.engine.media.frame_ratios import PathRatios
 from owcsim.engine.media.medium import Medium
 from owcsim.engine.media.phase import PhaseFunction
 from owcsim.engine.scene.scene import Scene
@@ -256,7 +257,10 @@ class BatchState:
         self.t_directional = targets.directional
         #: spectral scenes: per-band tables; estimates carry their band ratios ("ratio") when paths do
         self.spectra = scene.spectra
-        self.keys = self.KEYS + (("ratio",) if self.spectra is not None and self.spectra.carry else ())
+        #: the per-path ratio rows' part: the bands of a spectral scene, or the frames of a time-varying medium
+        #: (engine/media/frame_ratios.py, `Scene.path_ratios`); the events call it through `PathRatios`
+        self.ratios: PathRatios | None = scene.spectra if scene.spectra is not None else scene.path_ratios
+        self.keys = self.KEYS + (("ratio",) if self.ratios is not None and self.ratios.carry else ())
         self.out: dict[str, list[Any]] = {k: [] for k in self.keys}
         self.mirrors = scene.mirror_planes
 

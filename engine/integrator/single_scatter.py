@@ -146,8 +146,8 @@ def segment_points(
         # strata and the equiangular points in Veach's multi-sample form (segments.py)
         tau = medium.optical_depth(pp.origins.T, pp.directions.T, s)
         throughput = pp.weights * np.exp(-tau) * sigma_s / density  # exp(-tau) = medium.transmittance
-        if ctx.spectra is not None:  # spectral smoke: sigma_s,b T_b over the carrier's (spectra.py)
-            pp.ratio = ctx.spectra.scatter(pp.ratio, tau)
+        if ctx.ratios is not None:  # bands or frames: sigma_s,b T_b over the carrier's (spectra.py)
+            pp.ratio = ctx.ratios.scatter(pp.ratio, tau, (pp.origins.T, pp.directions.T, s))
         if direction_mis and ctx.mirrors:  # source -> p -> mirror -> target, through the image (mirrors.py)
             connect_segment_mirrors(ctx, j, points, throughput, pp, s, order, density)
         mis = _direction_mis(ctx, int(ctx.tgt[j]), pp, points, s, density) if direction_mis else None
@@ -220,13 +220,14 @@ def _scatter_on_first_segment(
     p_in = br.origins + t_in * br.directions
     br.weights = br.weights * medium.albedo_at(p_in.T)
     br.first = source_factor(ctx, p_in)
-    if ctx.spectra is not None:  # spectral smoke: sigma_s,b T_b over the carrier's (engine/spectral/spectra.py)
-        br.ratio = ctx.spectra.scatter(br.ratio, medium.optical_depth(br.origins.T, br.directions.T, t_in))
+    if ctx.ratios is not None:  # bands or frames: sigma_s,b T_b over the carrier's (engine/spectral/spectra.py)
+        flight = (br.origins.T, br.directions.T, t_in)
+        br.ratio = ctx.ratios.scatter(br.ratio, medium.optical_depth(*flight), flight)
     u = rng.random((2, len(br)))
     arriving = br.directions
     br.directions = ctx.phase.sample(br.directions, u[0], u[1])
-    if ctx.spectra is not None and ctx.spectra.phase_bands is not None:  # p_b / p_c of the sampled direction
-        br.ratio = ctx.spectra.turn(br.ratio, dot3(arriving, br.directions))
+    if ctx.ratios is not None and ctx.ratios.phase_bands is not None:  # p_b / p_c of the sampled direction
+        br.ratio = ctx.ratios.turn(br.ratio, dot3(arriving, br.directions))
     br.origins, br.lengths, br.s = p_in, br.lengths + t_in, br.s + 1
     return br.keep_where(br.weights > 0)
 
@@ -275,8 +276,8 @@ def first_segment_branch(
         ts = t.take(nxt)
         tau = medium.optical_depth(br.origins.T, br.directions.T, ts)
         br.weights = br.weights * np.exp(-tau)  # = medium.transmittance
-        if ctx.spectra is not None:
-            br.ratio = ctx.spectra.transmit(br.ratio, tau)
+        if ctx.ratios is not None:
+            br.ratio = ctx.ratios.transmit(br.ratio, tau, (br.origins.T, br.directions.T, ts))
         points = br.origins + ts * br.directions
         prims = prim.take(nxt)
         normals = isect.normals_soa.take(prims, axis=1)
@@ -284,8 +285,8 @@ def first_segment_branch(
         spawn = points + isect.offset * normals
         br.lengths = br.lengths + ts
         br.k = br.k + 1
-        if ctx.spectra is not None:  # spectral scenes: rho_b / rho_c of the face (engine/spectral/spectra.py)
-            br.ratio = ctx.spectra.reflect(br.ratio, prims)
+        if ctx.ratios is not None:  # spectral scenes: rho_b / rho_c of the face (engine/spectral/spectra.py)
+            br.ratio = ctx.ratios.reflect(br.ratio, prims)
         # NEE (chain; materials and mirror images included), then reflection from the materials (mirrors.py)
         br.directions, br.weights = branch_surface(ctx, br, points, spawn, normals, prims, rng, chain)
         br.origins = spawn

@@ -140,7 +140,7 @@ def connect_on_segments(
     """
     scene = ctx.scene
     medium = ctx.medium
-    if medium.uniform_coefficients is None or ctx.spectra is not None or not scene.all_visible or ctx.t_directional:
+    if medium.uniform_coefficients is None or ctx.ratios is not None or not scene.all_visible or ctx.t_directional:
         return False
     mode = _mode(ctx, paths, eq)
     if mode is None:

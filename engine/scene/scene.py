@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from owcsim.engine.core.errors import SceneError
+from owcsim.engine.media.frame_ratios import FrameRatios
 from owcsim.engine.media.media import HomogeneousMedium, region_from_spec
 from owcsim.engine.media.medium import Medium
 from owcsim.engine.media.model import MediumKind, MediumModel, medium_model
@@ -49,6 +50,8 @@ class Scene:
     spectra: SceneSpectra | None = None
     #: the document's medium as decided once when built: scatters, max_albedo, report (engine/media/model.py)
     medium_model: MediumModel | None = None
+    #: per-frame ratio rows of a time-varying medium reweighted from one carrier (engine/media/frame_ratios.py)
+    path_ratios: FrameRatios | None = None
 
     @property
     def n_links(self) -> int:

@@ -205,7 +205,7 @@ class SceneSpectra:
             return ratio * self._face_ratio_depth.take(prims, axis=1)
         return ratio * self.face_ratio.take(prims, axis=1)
 
-    def transmit(self, ratio: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    def transmit(self, ratio: np.ndarray, tau: np.ndarray, seg=None) -> np.ndarray:
         """The state after segments of carrier optical depth `tau` (n,): the depth row grows (the band factors
         T_b / T_c = exp(-tau_c (sigma_t,b / sigma_t,c - 1)) are applied once, at the estimates)."""
         if not self.carry or self.tau_scale is None:
@@ -219,7 +219,7 @@ class SceneSpectra:
         """True when the ratio state has the carrier-depth row (ratios carried, smoke varying per band)."""
         return self.carry and self.tau_scale is not None
 
-    def transmit_rows(self, ratio: np.ndarray, rows: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    def transmit_rows(self, ratio: np.ndarray, rows: np.ndarray, tau: np.ndarray, seg=None) -> np.ndarray:
         """`transmit` for the paths `rows` only (algorithm 5: the flights that reached a surface uncollided; the
         carrier's weight is unchanged, T_c / P(no collision) = 1, band b's is T_b / T_c)."""
         if not self.depth_row:
@@ -228,7 +228,7 @@ class SceneSpectra:
         out[-1, rows] += tau
         return out
 
-    def scatter(self, ratio: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    def scatter(self, ratio: np.ndarray, tau: np.ndarray, seg=None) -> np.ndarray:
         """The state of paths scattered at points a carrier depth `tau` (n,) along their segment (algorithms 2-4):
         bands times sigma_s,b / sigma_s,c, depth + tau (the density sigma_s T of the point, over the carrier's)."""
         if not self.carry or self.tau_scale is None:
@@ -260,8 +260,11 @@ class SceneSpectra:
             ]
         )
 
-    def estimate_ratio(self, ratio: np.ndarray, tau: np.ndarray | None = None) -> np.ndarray:
-        """(B, m) band ratios of estimates from path states `ratio`, their connections adding carrier depth `tau`."""
+    def estimate_ratio(self, ratio: np.ndarray, tau: np.ndarray | None = None, seg=None) -> np.ndarray:
+        """(B, m) band ratios of estimates from path states `ratio`, their connections adding carrier depth `tau`.
+
+        `seg` (here and in transmit, transmit_rows, scatter): the segments of the event, read by the parts whose
+        ratios need more than the carrier depth (engine/media/frame_ratios.py `PathRatios`); bands ignore it."""
         if not self.carry or self.tau_scale is None:
             return ratio
         depth = ratio[-1] if tau is None else ratio[-1] + tau

@@ -112,6 +112,9 @@ class BatchTally:
     #: h0_group_paths (T, N_GROUPS) per link, channel_s1 (G, M, 3) and channel_s2 (G, M, 3, 3) per source
     link_paths: np.ndarray | None = None
     sources: np.ndarray | None = None
+    #: frames of a time-varying medium reweighted from one carrier (engine/media/frame_ratios.py): frame f's tally
+    #: of the same paths (the estimates x the frame's ratio row), None otherwise
+    frames: list[BatchTally] | None = None
 
 
 def _accumulate(out: np.ndarray, idx: np.ndarray, weights: np.ndarray) -> None:

@@ -447,10 +447,10 @@ def test_algorithm_5_in_smoke_per_band_against_one_band_runs(monkeypatch):
     assert abs(h - two["dc_gain_by_band"][1]) > 8 * math.hypot(se, two["dc_gain_by_band_stderr"][1])
     scatter = SceneSpectra.scatter
 
-    def without_sigma_s(self, ratio, tau):
+    def without_sigma_s(self, ratio, tau, seg=None):
         keep, self.scatter_scale = self.scatter_scale, None
         try:
-            return scatter(self, ratio, tau)
+            return scatter(self, ratio, tau, seg)
         finally:
             self.scatter_scale = keep
 
@@ -505,7 +505,7 @@ def test_algorithm_5_in_smoke_per_band_through_reflections(monkeypatch):
     h, se = two["dc_gain_by_band"][0], two["dc_gain_by_band_stderr"][0]
     tol = 4 * math.hypot(se, one["dc_gain_stderr"])
     assert abs(h - one["dc_gain"]) <= tol, (h, one["dc_gain"], se)
-    monkeypatch.setattr(SceneSpectra, "transmit_rows", lambda self, ratio, rows, tau: ratio)
+    monkeypatch.setattr(SceneSpectra, "transmit_rows", lambda self, ratio, rows, tau, seg=None: ratio)
     wrong = run(bands, smoke)["spectral"]["links"][0]
     assert abs(wrong["dc_gain_by_band"][0] - one["dc_gain"]) > tol
 
