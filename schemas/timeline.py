@@ -25,7 +25,8 @@ MAX_TIMES = MAX_FRAMES
 
 class TimelineMethod(StrEnum):
     """How the frames are run: each its own run with the same random numbers (independent), one set of paths
-    reweighted per frame (reweighted), or the engine's choice (auto: independent for now)."""
+    reweighted per frame (reweighted), or the engine's choice (auto: reweighted from 3 times on when no device moves
+    and there is no receiver grid, else independent; engine/run/timeline.py `frames_method`)."""
 
     INDEPENDENT = "independent"
     REWEIGHTED = "reweighted"

@@ -8,7 +8,8 @@ largest total extinction first, and every frame runs with them (the same plan, t
 Each run keeps its path groups' H0 estimates (engine/tally/reliability.py `group_means`, the groups
 lighting's jackknife uses): group g holds the same sample indices in every frame, so the spread of the
 groups' differences gives the error of a difference between frames (engine/results/timeline.py).
-REWEIGHTED (one set of paths reweighted per frame) is another branch's part.
+REWEIGHTED: one set of paths traced in a carrier medium and reweighted per frame (frames_reweighted.py,
+engine/media/frame_ratios.py); the same outcome, at a fraction of the independent runs' cost.
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ from owcsim.engine.core.errors import SceneError
 from owcsim.engine.media.frames import MediumFrames
 from owcsim.engine.results.job import FinishedJob
 from owcsim.engine.run.execution import Executor, ProcessExecutor, SerialExecutor
+from owcsim.engine.run.frames_reweighted import simulate_reweighted
+from owcsim.engine.run.job import Progress
 from owcsim.engine.run.simulate import simulate
 from owcsim.engine.tally import reliability
 from owcsim.schemas import GridMediumSpec, SceneSpec
@@ -130,10 +133,10 @@ def simulate_frames(
     """Run the scene once per frame (see the module docstring); `frame_of_receiver[r]` is the frame whose time
     receiver r (of `spec.receivers`) belongs to, -1 every frame. `progress(done, F)` after every frame;
     `should_stop` is asked after every batch (a stopped frame ends the runs: its result is the last)."""
-    if method is not FrameMethod.INDEPENDENT:
-        raise SceneError(f"the frames method {method.value!r} is not available in this build: use 'independent'")
     for_rx = None if frame_of_receiver is None else np.asarray(frame_of_receiver, np.int64)
     _check(spec, frames, for_rx)
+    if method is FrameMethod.REWEIGHTED:
+        return _reweighted(spec, frames, for_rx, base_dir, workers, progress, should_stop)
     executor: Executor = SerialExecutor() if workers <= 1 else ProcessExecutor(workers)
     results: list[SimulationResultPublic] = []
     groups: list[tuple[FloatArray, FloatArray]] = []
@@ -155,3 +158,33 @@ def simulate_frames(
     h0 = np.stack([np.pad(g, ((0, 0), (0, n_groups - g.shape[1]))) for g, _ in groups])
     paths = np.stack([np.pad(c, ((0, 0), (0, n_groups - c.shape[1]))) for _, c in groups])
     return FramesOutcome(results, h0, FrameMethod.INDEPENDENT, paths)
+
+
+def _reweighted(
+    spec: SceneSpec,
+    frames: MediumFrames,
+    frame_of_receiver: IntArray | None,
+    base_dir: str | Path | None,
+    workers: int,
+    progress: Callable[[int, int], None] | None,
+    should_stop: Callable[[], bool] | None,
+) -> FramesOutcome:
+    """REWEIGHTED: every frame from one set of paths (frames_reweighted.py); progress as the frames' share done."""
+    n = frames.n_frames
+
+    def report(p: Progress) -> None:
+        if progress is not None:
+            progress(min(n, int(p.fraction * n)), n)
+
+    results, h0, paths = simulate_reweighted(
+        spec,
+        frames,
+        frame_of_receiver=frame_of_receiver,
+        base_dir=base_dir,
+        workers=workers,
+        progress=report,
+        should_stop=should_stop,
+    )
+    if progress is not None:
+        progress(len(results), n)
+    return FramesOutcome(results, h0, FrameMethod.REWEIGHTED, paths)

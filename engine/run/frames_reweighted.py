@@ -71,6 +71,7 @@ from owcsim.engine.run.simulate import (
 from owcsim.engine.run.stopping import SKIP, BatchWatch
 from owcsim.engine.scene.los import line_of_sight, los_geometry
 from owcsim.engine.scene.scene import Scene, build_scene
+from owcsim.engine.tally import reliability
 from owcsim.engine.tally.plan import N_GROUPS
 from owcsim.engine.tally.tally import Accumulator
 from owcsim.schemas import SceneSpec
@@ -97,9 +98,10 @@ def simulate_reweighted(
     workers: int = 1,
     progress: ProgressFn | None = None,
     should_stop: Callable[[], bool] | None = None,
-) -> tuple[list[SimulationResultPublic], FloatArray | None]:
-    """One result per frame (as if the scene held frame f's medium; spec.medium is replaced) and per path group
-    the H0 of every frame and link, (F, n_links, N_GROUPS) (see the module docstring).
+) -> tuple[list[SimulationResultPublic], FloatArray | None, FloatArray | None]:
+    """One result per frame (as if the scene held frame f's medium; spec.medium is replaced), per path group
+    the H0 of every frame and link, (F, n_links, G), and each group's weight (its paths; 0 = empty), the same
+    shape (engine/tally/reliability.py `group_means`; see the module docstring).
 
     `frame_of_receiver[r]`: the frame receiver r belongs to (a moving receiver is one receiver per frame: its
     estimate is tallied in that frame only, and the other frames' results report its line of sight alone);
@@ -114,6 +116,7 @@ def simulate_reweighted(
     F = frames.n_frames
     results: list[SimulationResultPublic | None] = [None] * F
     groups: FloatArray | None = None
+    paths: FloatArray | None = None
     for w, idx in enumerate(windows):
         run = _Window(resolved, frames, idx, rx_frames, base_dir, watch)
         run.run(None)
@@ -126,11 +129,11 @@ def simulate_reweighted(
                 f"effective sample size is {ess[local]:.2f} of the carrier's (engine/media/frame_ratios.py)"
             )
             results[f] = res
-        g = run.group_h0()
-        if groups is None:
-            groups = np.zeros((F,) + g.shape[1:])
-        groups[idx] = g
-    return [r for r in results if r is not None], groups
+        g, n = run.group_h0()
+        if groups is None or paths is None:
+            groups, paths = np.zeros((F,) + g.shape[1:]), np.zeros((F,) + g.shape[1:])
+        groups[idx], paths[idx] = g, n
+    return [r for r in results if r is not None], groups, paths
 
 
 def _check(spec: SceneSpec, frames: MediumFrames, frame_of_receiver: IntArray | None) -> IntArray | None:
@@ -340,13 +343,16 @@ class _Window:
         )
         return build_result(finished)
 
-    def group_h0(self) -> FloatArray:
-        """(F, n_links, N_GROUPS) per path group the H0 of each frame: the groups' mean per-path estimates, summed
-        over the directions, plus the exact line of sight."""
+    def group_h0(self) -> tuple[FloatArray, FloatArray]:
+        """(F, n_links, N_GROUPS) per path group the H0 of each frame (the groups' mean per-path estimates, summed
+        over the directions, plus the exact line of sight) and each group's weight (reliability.group_means)."""
         out = np.zeros((len(self.idx), self.scene.n_links, N_GROUPS))
+        paths = np.zeros_like(out)
         for f, accs in enumerate(self.frame_accs):
-            out[f] = _group_means(accs) + self.frame_los[f].gain[:, None]
-        return out
+            means, counts = reliability.group_means(accs.values())
+            out[f] = means.T + self.frame_los[f].gain[:, None]
+            paths[f] = counts.T
+        return out, paths
 
     def efficiency_per_frame(self) -> FloatArray:
         """(F,) the worst link's ESS_f / ESS_c, 1 before any path."""
@@ -364,16 +370,6 @@ def _los(scene: Scene) -> LineOfSight:
     """The exact line of sight of every link through the scene's medium (a frame's grid)."""
     geometry = los_geometry(scene)
     return LineOfSight(*line_of_sight(scene, geometry), geometry)
-
-
-def _group_means(accs: dict[Direction, Accumulator]) -> FloatArray:
-    """(n_links, N_GROUPS) mean per-path H0 per path group, summed over the directions."""
-    out: FloatArray = np.zeros((next(iter(accs.values())).n_links, N_GROUPS))
-    for acc in accs.values():
-        paths = acc.h0_group_paths.T
-        with np.errstate(invalid="ignore", divide="ignore"):
-            out = out + np.where(paths > 0, acc.group_h0.T / np.maximum(paths, 1), 0.0)
-    return np.asarray(out)
 
 
 def _rel2(accs: dict[Direction, Accumulator]) -> FloatArray:

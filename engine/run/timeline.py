@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -137,6 +138,41 @@ def _groups(finished: FinishedJob) -> tuple[FloatArray, FloatArray]:
     return (means + finished.los.gain[None, :]).T, counts.T
 
 
+#: Fewest times for which `auto` reweights one set of paths rather than running every time on its own.
+AUTO_REWEIGHT_MIN_TIMES = 3
+
+
+def frames_method(spec: SceneSpec, n_times: int) -> FrameMethod:
+    """The timeline's `method`; `auto` reweights (frames_reweighted.py: ~1/6 of the independent runs' cost at 60
+    frames, benchmarks/timeline_cost.py) from AUTO_REWEIGHT_MIN_TIMES times on, except with receiver grids
+    (per-frame tallies of every grid point) or moving devices (a receiver at another place at every time shares
+    no paths between times: reweighting costs more than the runs), else runs every time on its own. (Scenes reweighting does not
+    support, spectral or with perfect mirrors, fall back to independent runs in `run_timeline`, with a note.)"""
+    tl = spec.timeline
+    assert tl is not None
+    if tl.method is not TimelineMethod.AUTO:
+        return FrameMethod(tl.method.value)
+    if spec.receiver_grids or tl.trajectories or n_times < AUTO_REWEIGHT_MIN_TIMES:
+        return FrameMethod.INDEPENDENT
+    return FrameMethod.REWEIGHTED
+
+
+def _frames_outcome(
+    run: Callable[..., FramesOutcome], method: FrameMethod, auto: bool, notes: list[str]
+) -> FramesOutcome:
+    """`run(method=...)`; an `auto` choice of reweighting that the scene does not support (a "frames:" refusal of
+    frames_reweighted.py: spectral bands, perfect mirrors) runs every time on its own instead, with a note."""
+    if not (auto and method is FrameMethod.REWEIGHTED):
+        return run(method=method)
+    try:
+        return run(method=method)
+    except SceneError as err:
+        if not str(err).startswith("frames:"):
+            raise
+        notes.append(f"method auto: every time runs on its own, since reweighting cannot ({err})")
+        return run(method=FrameMethod.INDEPENDENT)
+
+
 def run_timeline(
     spec: SceneSpec,
     *,
@@ -162,17 +198,17 @@ def run_timeline(
             if progress is not None:
                 progress(Progress(done / total, 0, done, None, time.perf_counter() - t0))
 
-        method = FrameMethod.REWEIGHTED if tl.method is TimelineMethod.REWEIGHTED else FrameMethod.INDEPENDENT
-        outcome: FramesOutcome = simulate_frames(
+        run = partial(
+            simulate_frames,
             expanded.model_copy(update={"timeline": None}),
             frames,
             frame_of_receiver=frame_of_rx,
-            method=method,
             base_dir=base_dir,
             workers=workers,
             progress=per_frame,
             should_stop=should_stop,
         )
+        outcome = _frames_outcome(run, frames_method(spec, len(times)), tl.method is TimelineMethod.AUTO, notes)
         results = outcome.results
         done = len(results)
         assert outcome.dc_gain_groups is not None and outcome.group_paths is not None

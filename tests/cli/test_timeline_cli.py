@@ -40,7 +40,7 @@ def test_run_writes_the_timeline_files(tmp_path, capsys):
     assert main(["run", str(scene), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert (
-        "timeline: 5 times from 0 to 100 s (independent, " in printed
+        "timeline: 5 times from 0 to 100 s (reweighted, " in printed
         and "tx -> rx: 1 outage(s), the first at 21.05 s" in printed
     )
     for name in ("result.json", "timeline.nc", "timeline.csv", "timeline.svg"):

@@ -102,7 +102,7 @@ def test_one_frame_equals_the_plain_run_bit_for_bit():
     rng = np.random.default_rng(5)
     frames = _frames(rng.uniform(0, 0.1, (1,) + SHAPE), rng.uniform(0, 0.4, (1,) + SHAPE))
     doc = _doc(algorithm=5)
-    (res,), groups = simulate_reweighted(doc, frames)
+    (res,), groups, _ = simulate_reweighted(doc, frames)
     plain = simulate(fr._with_medium(doc, frames, 0))
     a, b = res.links[0], plain.links[0]
     assert a.dc_gain == b.dc_gain and a.dc_gain_stderr == b.dc_gain_stderr and a.los_gain == b.los_gain
@@ -124,7 +124,7 @@ def test_a_frame_that_is_the_carrier_gives_its_plain_run(monkeypatch):
     assert np.array_equal(frames.sigma_a.mean(axis=0), frames.sigma_a[1])
     assert np.array_equal(frames.sigma_s.mean(axis=0), frames.sigma_s[1])
     doc = _doc(algorithm=5)
-    res, _ = simulate_reweighted(doc, frames)
+    res, _, _ = simulate_reweighted(doc, frames)
     plain = simulate(fr._with_medium(doc, frames, 1))
     assert res[1].links[0].dc_gain == pytest.approx(plain.links[0].dc_gain, rel=1e-12)
     assert res[1].links[0].dc_gain_stderr == pytest.approx(plain.links[0].dc_gain_stderr, rel=1e-12)
@@ -138,7 +138,7 @@ def _one_window(monkeypatch):
 
 
 def _check_against_plain(doc, frames, seed=101, ref_paths=None):
-    res, _ = simulate_reweighted(doc, frames)
+    res, _, _ = simulate_reweighted(doc, frames)
     for f in range(frames.n_frames):
         a = res[f].links[0]
         b = _plain(doc, frames, f, seed + f, ref_paths).links[0]
@@ -182,7 +182,7 @@ def _difference_run(seed):
     a = np.stack([_layer(2, 0.3), _layer(2, 0.33)])
     s = np.stack([_layer(2, 0.3), _layer(2, 0.31)]) + 0.02
     frames = _frames(a, s)
-    res, groups = simulate_reweighted(_doc(algorithm=5, paths=2048, seed=seed, max_reflections=2), frames)
+    res, groups, _ = simulate_reweighted(_doc(algorithm=5, paths=2048, seed=seed, max_reflections=2), frames)
     d_g = groups[1, 0] - groups[0, 0]
     return res[1].links[0].dc_gain - res[0].links[0].dc_gain, d_g.std(ddof=1) / math.sqrt(len(d_g)), res
 
@@ -218,8 +218,8 @@ def test_frame_of_receiver_tallies_each_receiver_in_its_frame_only():
     )
     a = np.stack([_layer(1, 0.2), _layer(2, 0.3)])
     frames = _frames(a, a)
-    res, _ = simulate_reweighted(two, frames, frame_of_receiver=np.array([0, 1]))
-    full, _ = simulate_reweighted(two, frames)
+    res, _, _ = simulate_reweighted(two, frames, frame_of_receiver=np.array([0, 1]))
+    full, _, _ = simulate_reweighted(two, frames)
     # receiver 0 in frame 0 and receiver 1 in frame 1: the same estimates as without the restriction
     assert res[0].links[0].dc_gain == pytest.approx(full[0].links[0].dc_gain, rel=1e-12)
     assert res[1].links[1].dc_gain == pytest.approx(full[1].links[1].dc_gain, rel=1e-12)

@@ -101,7 +101,7 @@ def test_difference_error_formula_by_hand():
     assert np.isnan(diff_stderr(x, np.array([[1, 0, 0, 0], [1, 1, 1, 1.0]]))[0])  # one shared group
 
 
-def _los_timeline(sigma, times, threshold, quantity="dc_gain", **extra):
+def _los_timeline(sigma, times, threshold, quantity="dc_gain", method="auto", **extra):
     """Pure absorption on a 3 m line of sight (no surfaces, K = 0): H0 in closed form."""
     doc = open_doc(D=3.0, medium=None, algorithm=1)
     doc["timeline"] = {
@@ -116,6 +116,7 @@ def _los_timeline(sigma, times, threshold, quantity="dc_gain", **extra):
         },
         "times_s": times,
         "outage": {"quantity": quantity, "threshold": threshold},
+        "method": method,
     }
     doc.update(extra)
     return run_timeline(spec(doc))
@@ -124,10 +125,11 @@ def _los_timeline(sigma, times, threshold, quantity="dc_gain", **extra):
 H_LOS = 2.0 / (2.0 * math.pi * 3.0**2) * 1e-4  # (m + 1) / (2 pi d^2) A, m = 1, facing each other
 
 
-def test_outage_intervals_of_pure_absorption_in_closed_form():
+@pytest.mark.parametrize("method", ["independent", "reweighted"])
+def test_outage_intervals_of_pure_absorption_in_closed_form(method):
     times = list(range(0, 101, 10))
     threshold = 1e-6
-    result = _los_timeline([0.0, 1.0, 0.0], times, threshold)
+    result = _los_timeline([0.0, 1.0, 0.0], times, threshold, method=method)
     link = result.timeline.links[0]
     sigma = np.minimum(np.array(times) / 50.0, 2.0 - np.array(times) / 50.0)
     np.testing.assert_allclose(link.dc_gain, H_LOS * np.exp(-3.0 * sigma), rtol=1e-12)
@@ -138,7 +140,7 @@ def test_outage_intervals_of_pure_absorption_in_closed_form():
     assert interval.end_s == pytest.approx(100.0 - 50.0 * s_star, rel=1e-9)
     assert not interval.uncertain  # exact values: no error bar
     assert link.time_to_first_outage_s == pytest.approx(50.0 * s_star, rel=1e-9)
-    assert result.timeline.frames_source and result.timeline.method == "independent"
+    assert result.timeline.frames_source and result.timeline.method == method
 
 
 def test_outage_on_ber_through_the_link_budget():
@@ -274,11 +276,45 @@ def test_bad_timelines_are_refused_with_located_messages(timeline, medium, messa
         spec(_doc_with(timeline, medium))
 
 
-def test_reweighted_is_refused_in_this_build():
-    from owcsim.engine.core.errors import SceneError
+def _walker_doc(method, seed=7):
+    doc = room_doc(**{**SMOKY, "seed": seed, "paths": 4000}, rx=(1.0, 1.0, 0.5))
+    doc["receivers"].append({"id": "desk", "position": [4.0, 4.0, 0.8], "normal": [0, 0, 1], "area": 1e-4})
+    doc["timeline"] = {
+        "frames": {
+            "type": "inline",
+            "times": [0.0, 20.0],
+            "min": [0, 0, 0],
+            "max": [5, 5, 3],
+            "shape": [1, 1, 2],
+            "sigma_a": [0.05, [0.05, 0.2]],
+            "sigma_s": [0.1, [0.1, 0.25]],
+        },
+        "times_s": [0.0, 10.0, 20.0],
+        "trajectories": [{"device": "rx", "waypoints": [[1, 1, 0.5], [4, 1, 0.5]], "speed_m_s": 0.1}],
+        "method": method,
+    }
+    return spec(doc)
 
-    with pytest.raises(SceneError, match="not available"):
-        simulate_frames(spec(room_doc(**SMOKY)), _random_frames(), method=FrameMethod.REWEIGHTED)
+
+def test_a_reweighted_timeline_agrees_with_independent_runs_and_its_differences_are_sharper():
+    """method reweighted (one set of paths, frame ratios; engine/run/frames_reweighted.py) through the whole
+    timeline, a walker and a static receiver in smoke frames: every time's H0 within 4 sigma of the
+    independent runs' (each its own error; a 10 %-off reference fails), the static receiver's frame-to-frame
+    differences with a smaller error than the independent runs' combined errors."""
+    rew = run_timeline(_walker_doc("reweighted")).timeline
+    ind = run_timeline(_walker_doc("independent", seed=11)).timeline
+    assert rew.method == "reweighted" and ind.method == "independent"
+    for rx in ("rx", "desk"):
+        a, b = rew.link("tx", rx), ind.link("tx", rx)
+        np.testing.assert_allclose(a.receiver_position, b.receiver_position)
+        h_a, h_b = np.array(a.dc_gain), np.array(b.dc_gain)
+        s = np.hypot(a.dc_gain_stderr, b.dc_gain_stderr)
+        assert np.all(np.abs(h_a - h_b) < 4 * s), (rx, h_a, h_b, s)
+        assert np.any(np.abs(h_a - 1.1 * h_b) > 4 * s), rx  # the power to see a 10 % error
+        assert np.all(np.array(a.los_gain) == np.array(b.los_gain))  # exact through each frame in both
+    desk_rew, desk_ind = rew.link("tx", "desk"), ind.link("tx", "desk")
+    combined = np.hypot(desk_ind.dc_gain_stderr[1:], desk_ind.dc_gain_stderr[:-1])
+    assert np.all(np.array(desk_rew.dc_gain_diff_stderr) < combined), (desk_rew.dc_gain_diff_stderr, combined)
 
 
 def test_a_walker_in_frames_is_each_time_a_run_of_that_frame_with_the_receiver_there():
@@ -300,6 +336,7 @@ def test_a_walker_in_frames_is_each_time_a_run_of_that_frame_with_the_receiver_t
         "trajectories": [
             {"device": "rx", "waypoints": [[1, 1, 0.5], [4, 1, 0.5]], "speed_m_s": 0.1, "orientation": "heading"}
         ],
+        "method": "independent",
     }
     sp = spec(doc)
     result = run_timeline(sp)
@@ -338,3 +375,18 @@ def test_auto_settings_are_resolved_once_on_the_heaviest_frame():
     assert resolved.is_resolved and not out.results[1].scene.simulation.is_resolved
     again = simulate(sp.model_copy(update={"simulation": resolved, "medium": frame_medium(frames, 1)}))
     assert _links(again) == _links(out.results[1])  # the heavy frame's auto run is the resolved run, bit for bit
+
+
+def test_auto_reweights_from_three_times_and_runs_grids_and_short_timelines_on_their_own():
+    from owcsim.engine.run.frames import FrameMethod
+    from owcsim.engine.run.timeline import frames_method
+
+    walker = _walker_doc("auto")
+    assert frames_method(walker, 3) is FrameMethod.INDEPENDENT  # a moving receiver shares no paths between times
+    doc = walker.model_dump(mode="json", by_alias=True, exclude_none=True)
+    doc["timeline"].pop("trajectories")
+    sp = spec(doc)
+    assert frames_method(sp, 3) is FrameMethod.REWEIGHTED and frames_method(sp, 2) is FrameMethod.INDEPENDENT
+    doc["receiver_grids"] = [{"origin": [1, 1, 0.8], "size": [2, 2], "shape": [2, 2], "area": 1e-4}]
+    assert frames_method(spec(doc), 3) is FrameMethod.INDEPENDENT
+    assert run_timeline(sp).timeline.method == "reweighted"

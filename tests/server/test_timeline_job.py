@@ -57,7 +57,7 @@ def test_a_timeline_job_reports_progress_per_time_and_serves_its_files(live_fast
     assert seen & {k / N_TIMES for k in range(1, N_TIMES)}, seen  # a time done while the job ran
     result = live_fast.get(f"{job['url']}/result").json()
     tl = result["timeline"]
-    assert tl["times_s"] == [0.0, 10.0, 20.0, 30.0] and tl["method"] == "independent"
+    assert tl["times_s"] == [0.0, 10.0, 20.0, 30.0] and tl["method"] == "reweighted"  # auto, 4 times
     link = tl["links"][0]
     assert len(link["dc_gain"]) == N_TIMES and len(link["dc_gain_diff_stderr"]) == N_TIMES - 1
     files = live_fast.get(f"{job['url']}/timeline").json()["files"]
