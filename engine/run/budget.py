@@ -41,6 +41,7 @@ from __future__ import annotations
 import base64
 import math
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
@@ -51,6 +52,7 @@ from owcsim.engine.tally.plan import N_GROUPS
 from owcsim.engine.tally.tally import CIR_GROUPS_MAX, SAMPLE_TABLE_MAX
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.algorithms import ALGORITHMS, Direction
+from owcsim.schemas.frames import InlineFramesSpec
 
 #: The batch caps of engine/run/simulate.py (copied: simulate imports the whole engine, this module stays light).
 PATH_TARGET_BUDGET = 1 << 20
@@ -90,6 +92,7 @@ class MemoryEstimate:
     batch: int
     result: int
     photometry: int = 0
+    frames: int = 0
 
     @property
     def total(self) -> int:
@@ -123,6 +126,47 @@ def _extent(spec: SceneSpec) -> float:
     return DEFAULT_EXTENT_M
 
 
+def _orders(spec: SceneSpec, extent_m: float | None) -> tuple[Any, int, int, int]:
+    """(algorithm or None for auto, K, S, time bins) the run's tallies are sized for: the pilot's caps where
+    the document leaves them to the engine, the pilot's window where it leaves the window (auto.resolve)."""
+    sim = spec.simulation
+    k = sim.max_reflections if sim.max_reflections is not None else PILOT_CAP
+    alg = ALGORITHMS.get(sim.algorithm) if sim.algorithm != "auto" else None  # (schemas/algorithms.py)
+    if alg is None:  # auto: the pilot's S cap in a medium
+        s = PILOT_CAP if spec.medium is not None or spec.timeline is not None else 1
+    elif alg.scattering_orders is None:  # S chosen (algorithm 5)
+        s = sim.max_scattering if sim.max_scattering is not None else PILOT_CAP
+    else:
+        s = alg.S(sim.max_scattering)
+    if sim.t_max_s is not None:
+        return alg, k, s, sim.n_bins
+    extent = extent_m if extent_m is not None else _extent(spec)
+    t_long = (k + s + 3) * 1.8 * extent / SPEED_OF_LIGHT
+    return alg, k, s, max(1, math.ceil(t_long / sim.time_bin_s))
+
+
+def _frames(spec: SceneSpec) -> tuple[int, int]:
+    """(memory of a timeline's frames [B], tallies held at once). Inline frames: the frames, the frames at the
+    evaluation times and the carrier, sigma_a and sigma_s of every cell in float64; file frames (FDS, netCDF,
+    sent as base64): 8 bytes per base64 character (float32 files become two float64 fields, copied at the
+    times). A timeline `reweighted` (asked, or `auto` from 3 times with no device moving and no grid) keeps one
+    tally per time (engine/run/timeline.py `frames_method`)."""
+    tl = spec.timeline
+    if tl is None or tl.frames is None:
+        return 0, 1
+    frames = tl.frames
+    times = tl.times_s
+    if isinstance(frames, InlineFramesSpec):
+        n_times = len(times) if times is not None else len(frames.times)
+        memory = 2 * 8 * math.prod(frames.shape) * (len(frames.times) + n_times + 1)
+    else:
+        data = getattr(frames, "data_base64", None) or ""
+        n_times = len(times) if times is not None else len(getattr(frames, "times_s", None) or ()) or 1
+        memory = 8 * len(data)
+    auto = tl.method.value == "auto" and n_times >= 3 and not tl.trajectories and not spec.receiver_grids
+    return memory, n_times if tl.method.value == "reweighted" or auto else 1
+
+
 def memory_estimate(
     spec: SceneSpec,
     *,
@@ -141,20 +185,7 @@ def memory_estimate(
     n_tx = len(spec.transmitters)
     n_rx = len(spec.receivers) + spec.grid_receiver_count()  # grid points and hidden receivers (orientation)
     n_links = n_tx * n_rx
-    k = sim.max_reflections if sim.max_reflections is not None else PILOT_CAP
-    alg = ALGORITHMS.get(sim.algorithm) if sim.algorithm != "auto" else None  # (schemas/algorithms.py)
-    if alg is None:  # auto: the pilot's S cap in a medium
-        s = PILOT_CAP if spec.medium is not None else 1
-    elif alg.scattering_orders is None:  # S chosen (algorithm 5)
-        s = sim.max_scattering if sim.max_scattering is not None else PILOT_CAP
-    else:
-        s = alg.S(sim.max_scattering)
-    if sim.t_max_s is not None:
-        n_bins = sim.n_bins
-    else:  # the pilot's window (auto.resolve): the automatic window ends inside it
-        extent = extent_m if extent_m is not None else _extent(spec)
-        t_long = (k + s + 3) * 1.8 * extent / SPEED_OF_LIGHT
-        n_bins = max(1, math.ceil(t_long / sim.time_bin_s))
+    alg, k, s, n_bins = _orders(spec, extent_m)
     cells = (k + 1) * (s + 1)
     per_side = {Direction.FORWARD: n_rx, Direction.BACKWARD: n_tx}  # targets of a path from each side
     targets = max(n_rx, n_tx) if sim.direction == "auto" else per_side[Direction(sim.direction)]
@@ -171,6 +202,8 @@ def memory_estimate(
     accumulators = (
         2 * 8 * (n_links * 50 + int(n_cir * per_cir_link) + n_ord * 3 * cells + n_groups * n_rx * 18 + first_groups)
     )
+    frames_bytes, tallies = _frames(spec)
+    accumulators *= tallies  # reweighted timelines keep one tally per frame (engine/run/frames_reweighted.py)
     n_bands = spec.spectral.n_bands if spec.spectral is not None else 0
     if n_bands:  # spectral channel sums per link and direction (engine/tally/spectral.py ChannelAccumulator)
         accumulators += 2 * 8 * n_links * ((n_bands + 10) * N_GROUPS + 2 * n_bands)
@@ -203,6 +236,7 @@ def memory_estimate(
         batch=in_flight * per_batch + pool,
         result=(n_links * (40 + 6 * n_bands) + n_cir * n_bins * (k + s + 4) + map_numbers) * BYTES_PER_RESULT_NUMBER,
         photometry=_photometry(spec, photometry_cells),
+        frames=frames_bytes,
     )
 
 
