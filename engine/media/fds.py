@@ -46,7 +46,7 @@ fdsreader = LazyModule("fdsreader")
 CELL_SIZE_RTOL = 1e-4
 #: Most files and bytes an FDS case sent as a zip archive (`data_base64`) may unpack to.
 MAX_ARCHIVE_MEMBERS = 10_000
-MAX_ARCHIVE_BYTES = 2_000_000_000
+MAX_ARCHIVE_BYTES = 512 * 2**20  # a legitimate case of 60 frames of 72,000 cells and a few quantities: ~100 MB
 #: The FDS quantity names of the two inputs.
 FDS_QUANTITIES = {"extinction": "SOOT EXTINCTION COEFFICIENT", "soot_density": "SOOT DENSITY"}
 
