@@ -390,3 +390,31 @@ def test_auto_reweights_from_three_times_and_runs_grids_and_short_timelines_on_t
     doc["receiver_grids"] = [{"origin": [1, 1, 0.8], "size": [2, 2], "shape": [2, 2], "area": 1e-4}]
     assert frames_method(spec(doc), 3) is FrameMethod.INDEPENDENT
     assert run_timeline(sp).timeline.method == "reweighted"
+
+
+@pytest.mark.parametrize(
+    "waypoints,refused",
+    [
+        ([[1, 2.5, 0.5], [4, 2.5, 0.5]], True),  # straight through the desk (its interior at t = 5 s)
+        ([[1, 2.5, 0.5], [2.5, 2.5, 0.5]], True),  # ends inside it
+        ([[1, 2.5, 0.8], [4, 2.5, 0.8]], False),  # slides over its top face
+        ([[1, 1.5, 0.5], [4, 1.5, 0.5]], False),  # passes beside it
+        ([[1, 1.5, 0.5], [4, 3.5, 0.5]], True),  # diagonal: through its middle
+    ],
+)
+def test_a_trajectory_through_furniture_is_refused_before_the_run(waypoints, refused):
+    """A walker's leg that crosses a furniture box's interior (review of issue 26): before, the document was
+    accepted, every time ran, and the result failed to build (a receiver copy inside the box)."""
+    doc = room_doc(paths=500, rx=(1.0, 2.5, 0.5))
+    doc["furniture"] = [{"min": [2.0, 2.0, 0.0], "max": [3.0, 3.0, 0.8], "reflectance": 0.5, "name": "desk"}]
+    doc["timeline"] = {
+        "times_s": [0.0, 5.0],
+        "trajectories": [{"device": "rx", "waypoints": waypoints, "speed_m_s": 0.3}],
+    }
+    if refused:
+        with pytest.raises(
+            ValidationError, match=r"trajectories\[0\] \(rx\): the leg .* passes through furniture\[0\] \(desk\)"
+        ):
+            spec(doc)
+    else:
+        spec(doc)
