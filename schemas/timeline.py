@@ -80,6 +80,14 @@ class TrajectorySpec(SpecModel):
             raise ValueError("`normals` needs one normal per row of `times_s`")
         if self.normals is not None and self.orientation is not TrajectoryOrientation.FIXED:
             raise ValueError("a table with `normals` gives the orientation: leave `orientation` fixed")
+        if self.normals is not None:
+            unit = [[c / (math.hypot(*n) or 1.0) for c in n] for n in self.normals]
+            for i, (a, b) in enumerate(zip(unit, unit[1:])):
+                if sum(x * y for x, y in zip(a, b)) <= -1.0 + 1e-12:
+                    raise ValueError(
+                        f"`normals` rows {i} and {i + 1} are opposite: the turn between them has no defined "
+                        "plane (the normals are interpolated linearly); add a row in between"
+                    )
         return self
 
     def points(self) -> list[tuple[float, float, float]]:

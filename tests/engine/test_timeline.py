@@ -418,3 +418,16 @@ def test_a_trajectory_through_furniture_is_refused_before_the_run(waypoints, ref
             spec(doc)
     else:
         spec(doc)
+
+
+def test_opposite_consecutive_normals_are_refused():
+    """Normals interpolated linearly then normalized: between opposite rows the mean is the zero vector
+    (review of issue 26: before, the receiver's normal at the midpoint was NaN)."""
+    row = {"device": "rx", "times_s": [0, 2], "positions": [[1, 1, 1], [1, 1, 1]]}
+    with pytest.raises(ValidationError, match=r"`normals` rows 0 and 1 are opposite"):
+        TrajectorySpec(**row, normals=[[1, 0, 0], [-2, 0, 0]])
+    turn = TrajectorySpec(
+        device="rx", times_s=[0, 1, 2], positions=[[1, 1, 1]] * 3, normals=[[1, 0, 0], [0, 1, 0], [-1, 0, 0]]
+    )
+    n = normals_at(turn, (0, 0, 1), np.linspace(0, 2, 9))
+    assert np.all(np.isfinite(n)) and np.allclose(np.linalg.norm(n, axis=1), 1.0)
