@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
+from owcsim.engine.core.errors import SceneError
 from owcsim.engine.media.frames import MediumFrames
 from owcsim.engine.results.timeline import diff_stderr, outage_intervals
 from owcsim.engine.run.frames import FrameMethod, frame_medium, simulate_frames
@@ -431,3 +432,20 @@ def test_opposite_consecutive_normals_are_refused():
     )
     n = normals_at(turn, (0, 0, 1), np.linspace(0, 2, 9))
     assert np.all(np.isfinite(n)) and np.allclose(np.linalg.norm(n, axis=1), 1.0)
+
+
+def test_a_walker_turned_into_a_wall_is_refused_before_any_run(monkeypatch):
+    """Heading orientation along the west wall (x = 0) turns the normal (0, 1, 0) of the walker's frame to
+    (-1, 0, 0): into the wall (review of issue 26). Before, every time ran and the result then failed to build
+    (a pydantic error naming the copy rx@t0); now a SceneError names the trajectory and the time, before any run."""
+    import owcsim.engine.run.timeline as tl_mod
+
+    def no_run(*args, **kwargs):
+        raise AssertionError("the timeline ran")
+
+    monkeypatch.setattr(tl_mod, "simulate", no_run)
+    doc = room_doc(paths=500, rx=(0.0, 1.0, 1.0), rx_normal=(0, 1, 0))
+    walk = {"device": "rx", "waypoints": [[0, 1, 1], [0, 4, 1]], "speed_m_s": 1.0, "orientation": "heading"}
+    doc["timeline"] = {"times_s": [0.0, 2.0], "trajectories": [walk]}
+    with pytest.raises(SceneError, match=r"trajectories \(rx\): at t = 0 s the receiver sits on a room face at x = 0"):
+        run_timeline(spec(doc))
