@@ -15,6 +15,7 @@ reweighted from one carrier (window rules off) so that the ratio rows do all the
 import math
 
 import numpy as np
+import pytest
 
 from owcsim.engine.media.frames import MediumFrames
 from owcsim.engine.run import frames_reweighted as fr
@@ -109,8 +110,8 @@ def test_the_quadrature_itself():
     assert np.allclose(_depth(p, q, st), fine, rtol=0, atol=1e-3)
 
 
-def _run(seed: int, paths: int):
-    doc = open_doc(D=D, medium=None, algorithm=5, max_scattering=1, paths=paths, seed=seed)
+def _run(seed: int, paths: int, algorithm: int = 5):
+    doc = open_doc(D=D, medium=None, algorithm=algorithm, max_scattering=1, paths=paths, seed=seed)
     doc.pop("medium")
     res, _, _ = simulate_reweighted(spec(doc), _frames())
     return [(r.links[0].dc_gain - r.links[0].los_gain, r.links[0].dc_gain_stderr) for r in res]
@@ -121,12 +122,14 @@ def _one_window(monkeypatch):
     monkeypatch.setattr(fr, "PILOT_PATHS", 0)
 
 
-def test_reweighted_frames_match_the_single_scattering_quadrature(monkeypatch):
-    """Every frame within 4 sigma of the quadrature; a quadrature 5 % off is told apart (power)."""
+@pytest.mark.parametrize("algorithm", [2, 3, 4, 5])
+def test_reweighted_frames_match_the_single_scattering_quadrature(algorithm, monkeypatch):
+    """Every frame within 4 sigma of the quadrature; a quadrature 5 % off is told apart (power). Algorithms 2-4
+    reweight their points on segments (sigma_s,f T_f / sigma_s,c T_c), algorithm 5 its free-flight collisions."""
     _one_window(monkeypatch)
     frames = _frames()
     ref = [single_scattering(frames.sigma_a[f], frames.sigma_s[f], 12) for f in range(3)]
-    for f, (h, se) in enumerate(_run(seed=3, paths=40_000)):
+    for f, (h, se) in enumerate(_run(seed=3, paths=40_000, algorithm=algorithm)):
         assert abs(h - ref[f]) < 4 * se, (f, h, ref[f], se)
         assert abs(h - 1.05 * ref[f]) > 4 * se, (f, h, ref[f], se)
 
