@@ -80,6 +80,14 @@ class TrajectorySpec(SpecModel):
             raise ValueError("`normals` needs one normal per row of `times_s`")
         if self.normals is not None and self.orientation is not TrajectoryOrientation.FIXED:
             raise ValueError("a table with `normals` gives the orientation: leave `orientation` fixed")
+        if self.normals is not None:
+            unit = [[c / (math.hypot(*n) or 1.0) for c in n] for n in self.normals]
+            for i, (a, b) in enumerate(zip(unit, unit[1:])):
+                if sum(x * y for x, y in zip(a, b)) <= -1.0 + 1e-12:
+                    raise ValueError(
+                        f"`normals` rows {i} and {i + 1} are opposite: the turn between them has no defined "
+                        "plane (the normals are interpolated linearly); add a row in between"
+                    )
         return self
 
     def points(self) -> list[tuple[float, float, float]]:
@@ -175,6 +183,31 @@ def check_timeline(scene: Any) -> None:
             for p in traj.points():
                 if any(c < a or c > b for a, b, c in zip(lo, hi, p)):
                     raise ValueError(f"{where}: the point {tuple(p)} is outside the room {lo}..{hi}")
+        points = traj.points()
+        legs = list(zip(points[:-1], points[1:])) if len(points) > 1 else [(q, q) for q in points]
+        for j, box in enumerate(scene.furniture):
+            for a, b in legs:
+                if _through_box(a, b, box.min, box.max):
+                    name = f" ({box.name})" if box.name else ""
+                    raise ValueError(
+                        f"{where}: the leg {tuple(a)} -> {tuple(b)} passes through furniture[{j}]{name}: a receiver "
+                        "cannot move inside a solid box (go around it, or over it: its faces are allowed)"
+                    )
+
+
+def _through_box(a: Point, b: Point, lo: Point, hi: Point) -> bool:
+    """Whether the segment a -> b (a point when a == b) meets the open interior of the box lo..hi (touching
+    or sliding along a face does not count): the slab test with strict inequalities."""
+    enter, leave = 0.0, 1.0
+    for p, q, l, h in zip(a, b, lo, hi):
+        d = q - p
+        if d == 0.0:
+            if not l < p < h:
+                return False
+            continue
+        s0, s1 = (l - p) / d, (h - p) / d
+        enter, leave = max(enter, min(s0, s1)), min(leave, max(s0, s1))
+    return enter < leave
 
 
 # ----------------------------------------------------------------------------------------------- the result

@@ -40,7 +40,8 @@ support condition holds by construction. Variance: the ratio row multiplies ever
 exp(-(tau_f - tau_c)); a frame far from the carrier (|tau_f - tau_c| >> 1 along typical paths)
 gets weights with a large spread and a heavy tail (frames thinner than the carrier:
 exp(+delta tau) > 1 on rare paths; thicker: most paths near 0). The mean keeps |tau_f - tau_c|
-at most half the window's range of depths; a carrier at the frame-wise maximum would make every
+at most (1 - 1/F) of the window's range of depths along a path (half of it for F = 2; a lone thick frame
+among F - 1 clear ones is the worst case, hence the windows below); a carrier at the frame-wise maximum would make every
 thinner frame's ratios exceed 1 (exp(+Delta tau)), one at the minimum violates the support
 condition when early frames hold no smoke. `effective_fraction` measures it per frame: the
 effective sample size of the per-path estimates x_f = w r_f (summed over the path's estimates) as a

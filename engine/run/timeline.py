@@ -31,6 +31,7 @@ from owcsim.engine.scene.trajectory import normals_at, positions_at
 from owcsim.engine.tally import reliability
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.results import ChannelPublic, LinkPublic, SimulationResultPublic
+from owcsim.schemas.scene import placement_problem
 from owcsim.schemas.timeline import TimelineMethod
 
 MEDIUM_IN_TIME = (
@@ -84,7 +85,11 @@ def expand_receivers(spec: SceneSpec, times: FloatArray) -> tuple[SceneSpec, Int
         p, n = positions_at(moving[rid], times), normals_at(moving[rid], r.normal, times)
         for i in range(len(times)):
             cid = f"{rid}@t{i}"
-            receivers.append(r.model_copy(update={"id": cid, "position": tuple(p[i]), "normal": tuple(n[i])}))
+            at, facing = tuple(float(v) for v in p[i]), tuple(float(v) for v in n[i])
+            problem = placement_problem(spec, at, facing)
+            if problem is not None:  # (the copies skip the schema's check of explicit receivers)
+                raise SceneError(f"timeline.trajectories ({rid}): at t = {times[i]:g} s the receiver {problem}")
+            receivers.append(r.model_copy(update={"id": cid, "position": at, "normal": facing}))
             frame.append(i)
             base.append((rid, cid))
     return spec.model_copy(update={"receivers": receivers}), np.asarray(frame, np.int64), base
@@ -146,8 +151,9 @@ def frames_method(spec: SceneSpec, n_times: int) -> FrameMethod:
     """The timeline's `method`; `auto` reweights (frames_reweighted.py: ~1/6 of the independent runs' cost at 60
     frames, benchmarks/timeline_cost.py) from AUTO_REWEIGHT_MIN_TIMES times on, except with receiver grids
     (per-frame tallies of every grid point) or moving devices (a receiver at another place at every time shares
-    no paths between times: reweighting costs more than the runs), else runs every time on its own. (Scenes reweighting does not
-    support, spectral or with perfect mirrors, fall back to independent runs in `run_timeline`, with a note.)"""
+    no paths between times: reweighting costs more than the runs), else runs every time on its own. (Scenes
+    reweighting does not support, spectral or with perfect mirrors, fall back to independent runs in
+    `run_timeline`, with a note.)"""
     tl = spec.timeline
     assert tl is not None
     if tl.method is not TimelineMethod.AUTO:

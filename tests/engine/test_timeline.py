@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
+from owcsim.engine.core.errors import SceneError
 from owcsim.engine.media.frames import MediumFrames
 from owcsim.engine.results.timeline import diff_stderr, outage_intervals
 from owcsim.engine.run.frames import FrameMethod, frame_medium, simulate_frames
@@ -390,3 +391,61 @@ def test_auto_reweights_from_three_times_and_runs_grids_and_short_timelines_on_t
     doc["receiver_grids"] = [{"origin": [1, 1, 0.8], "size": [2, 2], "shape": [2, 2], "area": 1e-4}]
     assert frames_method(spec(doc), 3) is FrameMethod.INDEPENDENT
     assert run_timeline(sp).timeline.method == "reweighted"
+
+
+@pytest.mark.parametrize(
+    "waypoints,refused",
+    [
+        ([[1, 2.5, 0.5], [4, 2.5, 0.5]], True),  # straight through the desk (its interior at t = 5 s)
+        ([[1, 2.5, 0.5], [2.5, 2.5, 0.5]], True),  # ends inside it
+        ([[1, 2.5, 0.8], [4, 2.5, 0.8]], False),  # slides over its top face
+        ([[1, 1.5, 0.5], [4, 1.5, 0.5]], False),  # passes beside it
+        ([[1, 1.5, 0.5], [4, 3.5, 0.5]], True),  # diagonal: through its middle
+    ],
+)
+def test_a_trajectory_through_furniture_is_refused_before_the_run(waypoints, refused):
+    """A walker's leg that crosses a furniture box's interior (review of issue 26): before, the document was
+    accepted, every time ran, and the result failed to build (a receiver copy inside the box)."""
+    doc = room_doc(paths=500, rx=(1.0, 2.5, 0.5))
+    doc["furniture"] = [{"min": [2.0, 2.0, 0.0], "max": [3.0, 3.0, 0.8], "reflectance": 0.5, "name": "desk"}]
+    doc["timeline"] = {
+        "times_s": [0.0, 5.0],
+        "trajectories": [{"device": "rx", "waypoints": waypoints, "speed_m_s": 0.3}],
+    }
+    if refused:
+        with pytest.raises(
+            ValidationError, match=r"trajectories\[0\] \(rx\): the leg .* passes through furniture\[0\] \(desk\)"
+        ):
+            spec(doc)
+    else:
+        spec(doc)
+
+
+def test_opposite_consecutive_normals_are_refused():
+    """Normals interpolated linearly then normalized: between opposite rows the mean is the zero vector
+    (review of issue 26: before, the receiver's normal at the midpoint was NaN)."""
+    row = {"device": "rx", "times_s": [0, 2], "positions": [[1, 1, 1], [1, 1, 1]]}
+    with pytest.raises(ValidationError, match=r"`normals` rows 0 and 1 are opposite"):
+        TrajectorySpec(**row, normals=[[1, 0, 0], [-2, 0, 0]])
+    turn = TrajectorySpec(
+        device="rx", times_s=[0, 1, 2], positions=[[1, 1, 1]] * 3, normals=[[1, 0, 0], [0, 1, 0], [-1, 0, 0]]
+    )
+    n = normals_at(turn, (0, 0, 1), np.linspace(0, 2, 9))
+    assert np.all(np.isfinite(n)) and np.allclose(np.linalg.norm(n, axis=1), 1.0)
+
+
+def test_a_walker_turned_into_a_wall_is_refused_before_any_run(monkeypatch):
+    """Heading orientation along the west wall (x = 0) turns the normal (0, 1, 0) of the walker's frame to
+    (-1, 0, 0): into the wall (review of issue 26). Before, every time ran and the result then failed to build
+    (a pydantic error naming the copy rx@t0); now a SceneError names the trajectory and the time, before any run."""
+    import owcsim.engine.run.timeline as tl_mod
+
+    def no_run(*args, **kwargs):
+        raise AssertionError("the timeline ran")
+
+    monkeypatch.setattr(tl_mod, "simulate", no_run)
+    doc = room_doc(paths=500, rx=(0.0, 1.0, 1.0), rx_normal=(0, 1, 0))
+    walk = {"device": "rx", "waypoints": [[0, 1, 1], [0, 4, 1]], "speed_m_s": 1.0, "orientation": "heading"}
+    doc["timeline"] = {"times_s": [0.0, 2.0], "trajectories": [walk]}
+    with pytest.raises(SceneError, match=r"trajectories \(rx\): at t = 0 s the receiver sits on a room face at x = 0"):
+        run_timeline(spec(doc))
