@@ -8,6 +8,7 @@ partial result; a failed job its error.
 from __future__ import annotations
 
 import json
+import re
 import sqlite3
 import time
 
@@ -219,3 +220,54 @@ def test_a_cancelled_jobs_partial_result_is_drawn(page, web_server):
     assert "stopped: cancelled" in page.inner_text("#metrics .run")
     cell = page.locator("#links-table td[data-field=dc_gain]")
     assert float(cell.get_attribute("data-value")) == result["links"][0]["dc_gain"]
+
+
+def test_the_result_page_keeps_following_a_job_through_a_failed_poll(page, web_server):
+    """While the job runs, two polls fail (503: a server restarting); the page says so, polls on, and draws the
+    result once the job stops. A job that is gone while its page is open (404) ends the page with the error."""
+    base = web_server.url
+    job = submit(base, {**quick_doc(paths=200_000_000, batch_size=4096), "name": "followed (web test)"})
+    failures = {"left": 0}
+
+    def flaky(route):
+        if failures["left"] > 0:
+            failures["left"] -= 1
+            problem = {"type": "about:blank", "title": "Service Unavailable", "status": 503, "detail": "restarting"}
+            route.fulfill(status=503, content_type="application/problem+json", body=json.dumps(problem))
+        else:
+            route.continue_()
+
+    page.route(re.compile(rf"/v1/jobs/{job['id']}$"), flaky)
+    with_key(page, base)
+    page.goto(f"{base}/ui/jobs/{job['id']}")
+    page.wait_for_function("document.querySelector('#job-status').dataset.status === 'running'", timeout=WAIT_MS)
+    failures["left"] = 2
+    page.wait_for_function("document.querySelector('#message').textContent.includes('trying again')", timeout=WAIT_MS)
+    deadline = time.monotonic() + 30
+    while failures["left"] > 0:
+        assert time.monotonic() < deadline
+        page.wait_for_timeout(200)
+    assert httpx.post(f"{base}{job['url']}/cancel", headers=_auth(), timeout=10).status_code == 202
+    page.wait_for_selector("body[data-state=plotted], body[data-state=error]", timeout=WAIT_MS)
+    assert page.get_attribute("body", "data-state") == "plotted"
+    assert page.inner_text("#job-status").startswith("cancelled")
+    assert page.locator("#metrics").is_visible() and page.locator("#message").is_hidden()
+
+    # gone while followed: the page stops with the API's message
+    job = submit(base, {**quick_doc(paths=200_000_000, batch_size=4096), "name": "gone (web test)"})
+    gone = {"now": False}
+
+    def deleted(route):
+        if gone["now"]:
+            problem = {"type": "about:blank", "title": "Not Found", "status": 404, "detail": f"no job '{job['id']}'"}
+            route.fulfill(status=404, content_type="application/problem+json", body=json.dumps(problem))
+        else:
+            route.continue_()
+
+    page.route(re.compile(rf"/v1/jobs/{job['id']}$"), deleted)
+    page.goto(f"{base}/ui/jobs/{job['id']}")
+    page.wait_for_function("document.querySelector('#job-status').dataset.status === 'running'", timeout=WAIT_MS)
+    gone["now"] = True
+    page.wait_for_selector("body[data-state=error]", timeout=WAIT_MS)
+    assert "no job" in page.inner_text("#message")
+    httpx.post(f"{base}{job['url']}/cancel", headers=_auth(), timeout=10)
