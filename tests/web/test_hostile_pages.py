@@ -287,3 +287,44 @@ def test_no_page_asks_for_a_file_the_server_does_not_have(page, web_server):
     assert "/favicon.ico" not in log, [line for line in log.splitlines() if "favicon" in line][:3]
     icon = page.evaluate("() => document.querySelector('link[rel=icon]').href")
     assert httpx.get(icon, timeout=10).headers["content-type"].startswith("image/svg+xml")
+
+
+def test_maps_of_several_grids_and_channels_each_draw_the_apis_values(page, web_server):
+    """A floor plane and a wall grid, two transmitter groups: every (grid, channel) map is offered and draws its
+    own shape, values and axes."""
+    doc = map_doc(n=4, paths=200)
+    doc["name"] = "two grids, two groups (web test)"
+    doc["transmitter_groups"] = [
+        {"name": "ceiling", "transmitters": ["led1", "led2"]},
+        {"name": "left", "transmitters": ["led1"]},
+    ]
+    doc["receiver_grids"].append(
+        {"id_prefix": "wall", "origin": [5.0, 0.5, 0.5], "u": [0, 1, 0], "v": [0, 0, 1], "size": [3.0, 2.0],
+         "shape": [4, 3], "area": 1e-4, "fov_deg": 85}
+    )  # fmt: skip
+    job = wait(web_server.url, submit(web_server.url, doc))
+    assert job["status"] == "succeeded", job
+    result = httpx.get(f"{web_server.url}{job['urls']['result']}", headers=_auth(), timeout=30).json()
+    maps = result["maps"]
+    assert {(m["grid"], m["channel"]) for m in maps} == {(g, c) for g in ("plane", "wall") for c in ("ceiling", "left")}
+    with_key(page, web_server.url)
+    open_job(page, web_server.url, job["id"])
+    assert page.locator("#map-select option").count() == len(maps)
+    for k, m in enumerate(maps):
+        page.select_option("#map-select", str(k))
+        page.select_option("#quantity-select", "dc_gain")
+        cells = page.locator("#map-plot rect.cell")
+        nu, nv = m["shape"]
+        assert cells.count() == nu * nv, (m["grid"], m["channel"])
+        drawn = cells.evaluate_all("els => els.map(e => [+e.dataset.i, +e.dataset.j, e.dataset.value])")
+        assert sorted((i, j) for i, j, _ in drawn) == [(i, j) for i in range(nu) for j in range(nv)]
+        for i, j, v in drawn:
+            assert (float(v) if v else None) == m["values"]["dc_gain"][i][j]
+        labels = page.locator("#map-plot svg text").evaluate_all("els => els.map(e => e.textContent)")
+        assert ("y [m]" in labels and "z [m]" in labels) if m["grid"] == "wall" else ("x [m]" in labels)
+        # the first point of the grid sits at the low end of both axes: left of and below the last one
+        first = page.locator("#map-plot rect.cell[data-i='0'][data-j='0']").bounding_box()
+        last = page.locator(f"#map-plot rect.cell[data-i='{nu - 1}'][data-j='{nv - 1}']").bounding_box()
+        assert first["x"] < last["x"] and first["y"] > last["y"]
+        areas = [a for a in result["lighting"]["areas"] if a["grid"] == m["grid"] and a["channel"] == m["channel"]]
+        assert page.locator("#u0-table").count() == (1 if areas else 0)
