@@ -174,7 +174,9 @@ def timeline_doc() -> dict:
             "sigma_s": [0.0, 0.0],
         },
         "times_s": [0.0, 10.0, 20.0, 30.0],
-        "trajectories": [{"device": "rx", "waypoints": [[1.0, 1.0, 0.0], [4.0, 1.0, 0.0], [4.0, 4.0, 0.0]], "speed_m_s": 0.2}],
+        "trajectories": [
+            {"device": "rx", "waypoints": [[1.0, 1.0, 0.0], [4.0, 1.0, 0.0], [4.0, 4.0, 0.0]], "speed_m_s": 0.2}
+        ],
         "outage": {"quantity": "dc_gain", "threshold": 1e-6},
     }
     return doc
