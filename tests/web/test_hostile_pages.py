@@ -102,6 +102,11 @@ def test_markup_in_a_jobs_text_renders_as_text_on_the_jobs_list_and_its_page(pag
     assert page.locator("#preview svg[data-view=top] .luminaire").first.get_attribute("data-id") == "led1" + EVIL
     page.hover("#preview svg[data-view=top] .receiver")
     assert_no_script_ran(page)
+    # long names stay inside the page: its menus do not widen it (a horizontal scroll bar for the whole page)
+    assert page.evaluate("document.documentElement.scrollWidth") <= 1200
+    for menu in ("#curve-source", "#map-select"):
+        box = page.locator(menu).bounding_box()
+        assert box["x"] + box["width"] <= 1200, menu
 
 
 def test_a_failed_jobs_error_renders_as_text(page, web_server):
