@@ -83,7 +83,9 @@ def page_times(base: str, job: dict, runs: int) -> dict[str, list[float]]:
         cdp = context.new_cdp_session(page)
         page.goto(url)  # first visit: no key yet (401), the page asks for it
         page.wait_for_selector("#api-key:visible, #result-key-input:visible")
-        page.evaluate("async k => (await import('/ui/static/api.js')).setKey(k)", KEY)  # this tab's sessionStorage
+        # the key straight into this tab's sessionStorage: api.js's setKey() also fires "owcsim:key", on which the
+        # result page reloads itself, and that reload raced the first page.goto below ("navigation interrupted")
+        page.evaluate("k => sessionStorage.setItem('owcsim.apiKey', k)", KEY)
         for _ in range(runs):
             for kind in ("cold", "warm"):
                 if kind == "cold":

@@ -2,7 +2,8 @@
 // (x, z) as two SVG views in metres with axes. Drawn: the room, furniture boxes, meshes (the bounding box of
 // inline vertices), luminaires (transmitters) with an arrow along their normal, receivers (and angle-diversity
 // receivers) with theirs, receiver grids (map planes), lighting task areas, and the smoke region (a medium's
-// box or mesh region, a grid medium's box, or the whole room). Every device is one element with its class
+// box or mesh region, a grid medium's box, or the whole room; a timeline's inline frames), and the moving receivers'
+// trajectories (a timeline's waypoints or positions). Every device is one element with its class
 // (luminaire, receiver) and data-id, so that tests can count them.
 
 import { esc, fmt, niceTicks } from "./plots.js";
@@ -40,10 +41,19 @@ export function gridCorners(g) {
   return [g.origin, add(g.origin, u, su), add(add(g.origin, u, su), v, sv), add(g.origin, v, sv)];
 }
 
-/** The medium's region as a box [min, max] and a note, or null without a medium. */
+/** Smoke over time (a timeline's `frames`, in place of `medium`): inline frames as their grid's box; frames read
+ * from files are placed when the job runs, so they get a note and no box. Null without frames. */
+function framesBox(scene) {
+  const fr = scene.timeline && scene.timeline.frames;
+  if (!fr) return null;
+  if (fr.min && fr.max) return { box: [fr.min, fr.max], note: `smoke over time: ${(fr.times || []).length} ${fr.type} frames on a grid` };
+  return { box: null, note: `smoke over time from ${fr.type} frames (placed when the job reads them; not drawn)` };
+}
+
+/** The medium's region as a box [min, max] (null: not drawn) and a note, or null without a medium. */
 export function smokeBox(scene, roomBox) {
   const med = scene.medium;
-  if (!med) return null;
+  if (!med) return framesBox(scene);
   if (med.min && med.max) return { box: [med.min, med.max], note: `${med.type} medium` };
   const reg = med.region || { type: "scene" };
   if (reg.type === "box") return { box: [reg.min, reg.max], note: `${med.type} medium, box region` };
@@ -68,7 +78,11 @@ export function sceneParts(scene) {
   const grids = (scene.receiver_grids || []).map((g) => ({ id: g.id_prefix || "grid", corners: gridCorners(g) }));
   const areas = ((scene.lighting && scene.lighting.task_areas) || []).map((a) => ({ box: [a.min, a.max], name: a.name }));
   const smoke = smokeBox(scene, room);
-  return { room, furniture, meshes, fileMeshes, tx, rx, adr, grids, areas, smoke };
+  // moving receivers (a timeline's trajectories): the points they pass through, in order
+  const walks = ((scene.timeline && scene.timeline.trajectories) || [])
+    .map((t) => ({ device: t.device, pts: t.waypoints || t.positions || [] }))
+    .filter((w) => w.pts.length);
+  return { room, furniture, meshes, fileMeshes, tx, rx, adr, grids, areas, smoke, walks };
 }
 
 function extentOf(parts) {
@@ -78,6 +92,7 @@ function extentOf(parts) {
   for (const b of boxes) if (b) pts.push(b[0], b[1]);
   for (const d of [...parts.tx, ...parts.rx, ...parts.adr]) pts.push(d.p);
   for (const g of parts.grids) pts.push(...g.corners);
+  for (const w of parts.walks) pts.push(...w.pts);
   return bbox(pts.length ? pts : [[0, 0, 0], [1, 1, 1]]);
 }
 
@@ -123,7 +138,7 @@ export function viewSvg(parts, view, width = 440) {
   out.push(`<text class="label" x="${(m.l + width - m.r) / 2}" y="${height - 4}" text-anchor="middle">${view.labels[0]}</text>`);
   out.push(`<text class="label" transform="translate(12 ${(m.t + height - m.b) / 2}) rotate(-90)" text-anchor="middle">${view.labels[1]}</text></g>`);
   if (parts.room) out.push(rect(parts.room, "room", "room"));
-  if (parts.smoke) out.push(rect(parts.smoke.box, "smoke", parts.smoke.note));
+  if (parts.smoke && parts.smoke.box) out.push(rect(parts.smoke.box, "smoke", parts.smoke.note));
   for (const g of parts.grids) {
     const pts = g.corners.map((c) => `${X(c)},${Y(c)}`).join(" ");
     out.push(`<polygon class="map-plane" points="${pts}" data-grid="${esc(g.id)}"><title>receiver grid ${esc(g.id)}</title></polygon>`);
@@ -131,6 +146,10 @@ export function viewSvg(parts, view, width = 440) {
   for (const a of parts.areas) out.push(rect(a.box, "task-area", `task area ${a.name}`));
   for (const b of parts.furniture) out.push(rect(b.box, "furniture", b.name));
   for (const b of parts.meshes) out.push(rect(b.box, "mesh", `${b.name} (bounding box)`));
+  for (const w of parts.walks) {
+    const pts = w.pts.map((c) => `${X(c)},${Y(c)}`).join(" ");
+    out.push(`<polyline class="trajectory" points="${pts}" data-device="${esc(w.device)}"><title>${esc(`${w.device} moves through ${w.pts.length} point(s)`)}</title></polyline>`);
+  }
   const L = 0.08 * span; // arrow length [m]
   const device = (d, cls, shape) => {
     const tip = add(d.p, d.n, L);
@@ -198,12 +217,13 @@ export function view3dSvg(parts, azimuth, elevation, width = 440, height = 340) 
     out.push(`${line(o, e, `axis axis-${name}`)}<text class="tick" x="${pe[0] + 3}" y="${pe[1] - 3}">${name}</text>`);
   }
   if (parts.room) out.push(`<g class="room">${boxEdges(parts.room).map(([a, b]) => line(a, b, "edge")).join("")}</g>`);
-  if (parts.smoke) out.push(`<g class="smoke"><title>${esc(parts.smoke.note)}</title>${boxEdges(parts.smoke.box).map(([a, b]) => line(a, b, "edge")).join("")}</g>`);
+  if (parts.smoke && parts.smoke.box) out.push(`<g class="smoke"><title>${esc(parts.smoke.note)}</title>${boxEdges(parts.smoke.box).map(([a, b]) => line(a, b, "edge")).join("")}</g>`);
   for (const g of parts.grids) {
     out.push(`<polygon class="map-plane" points="${g.corners.map((c) => P(c).join(",")).join(" ")}" data-grid="${esc(g.id)}"><title>receiver grid ${esc(g.id)}</title></polygon>`);
   }
   for (const b of parts.furniture) out.push(`<g class="furniture" data-name="${esc(b.name)}"><title>${esc(b.name)}</title>${boxEdges(b.box).map(([a, c]) => line(a, c, "edge")).join("")}</g>`);
   for (const b of parts.meshes) out.push(`<g class="mesh" data-name="${esc(b.name)}"><title>${esc(b.name)}</title>${boxEdges(b.box).map(([a, c]) => line(a, c, "edge")).join("")}</g>`);
+  for (const w of parts.walks) out.push(`<polyline class="trajectory" points="${w.pts.map((c) => P(c).join(",")).join(" ")}" data-device="${esc(w.device)}"><title>${esc(w.device)}</title></polyline>`);
   const L = 0.08 * span;
   const device = (d, cls, r) => {
     const [px, py] = P(d.p);
@@ -252,7 +272,7 @@ export function drawPreview(container, scene) {
   container.innerHTML = `<div class="preview-views">${views.join("")}</div>
 <p class="legend"><span class="key luminaire-key">● luminaire (arrow: its normal)</span>
 <span class="key receiver-key">■ receiver</span> <span class="key grid-key">▭ receiver grid</span>
-<span class="key furniture-key">▭ furniture</span> <span class="key smoke-key">▭ smoke</span>
+<span class="key furniture-key">▭ furniture</span> <span class="key smoke-key">▭ smoke</span>${parts.walks.length ? ' <span class="key trajectory-key">⟶ receiver\'s walk</span>' : ""}
 <span class="key">⊗ / ⊙ normal into / out of the view</span></p>
 <p class="preview-counts">${counts}${notes.length ? "; " + notes.join("; ") : ""}</p>`;
   mount3d(container.querySelector(".view3d-box"), parts);

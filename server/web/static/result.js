@@ -475,6 +475,31 @@ async function loadJob(id) {
   return job;
 }
 
+/** Poll a queued or running job every second until it stops; the stopped job, or null when it is gone (deleted:
+ * 404) or the key no longer reaches it (401). A failed poll (the server restarting, the network) is said on the
+ * page and tried again, so the page does not stop following the job. */
+async function followJob(id, job) {
+  let failed = false;
+  while (job.status === "queued" || job.status === "running") {
+    await new Promise((r) => setTimeout(r, 1000));
+    try {
+      job = await loadJob(id);
+    } catch (err) {
+      if (err.status === 404 || err.status === 401) {
+        if (err.status === 401) askKey(err.message);
+        showMessage(err.message || String(err));
+        return null;
+      }
+      failed = true;
+      showMessage(`cannot reach the job (${err.message || err}); trying again every second`, "info");
+      continue;
+    }
+    if (failed) showMessage("");
+    failed = false;
+  }
+  return job;
+}
+
 async function main() {
   const m = /^\/ui\/jobs\/([^/]+)\/?$/.exec(location.pathname);
   if (!m) return;
@@ -507,9 +532,10 @@ async function main() {
       $("#preview").hidden = false;
     })
     .catch((err) => showMessage(`scene preview: ${err.message}`));
-  while (job.status === "queued" || job.status === "running") {
-    await new Promise((r) => setTimeout(r, 1000));
-    job = await loadJob(id);
+  job = await followJob(id, job);
+  if (!job) {
+    document.body.dataset.state = "error";
+    return;
   }
   if (job.status === "failed") {
     showMessage(`the job failed: ${job.error || "no reason given"}`);
