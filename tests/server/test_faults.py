@@ -290,16 +290,22 @@ def _answer(sock: socket.socket, limit_s: float = 5.0) -> bytes:
     return out
 
 
-def _post_head(length: int) -> bytes:
+def _post_head(length: int, path: str = "/v1/jobs") -> bytes:
     return (
-        b"POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+        b"POST " + path.encode() + b" HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
         b"Content-Length: " + str(length).encode() + b"\r\n\r\n"
     )
 
 
-def test_4_slow_bodies_do_not_hold_up_a_normal_submission(srv):
+#: the routes that take a scene document: submissions and the pre-flight without a job share slots and budget
+SCENE_ROUTES = ("/v1/jobs", "/v1/preflight")
+
+
+@pytest.mark.parametrize("path", SCENE_ROUTES)
+def test_4_slow_bodies_do_not_hold_up_a_normal_submission(srv, path):
     """8 clients send their bodies 1 byte at a time: a normal submission is answered at once (the old
-    service gave each slow body one of its 6 submission slots: it waited until their 30 s deadline)."""
+    service gave each slow body one of its 6 submission slots: it waited until their 30 s deadline; POST
+    /v1/preflight still took its slot before the body: 29.4 s)."""
     slow = [_connect_from(srv, "127.0.0.2") for _ in range(8)]
     stop = threading.Event()
 
@@ -314,7 +320,7 @@ def test_4_slow_bodies_do_not_hold_up_a_normal_submission(srv):
 
     try:
         for s in slow:
-            s.sendall(_post_head(10_000))
+            s.sendall(_post_head(10_000, path))
         feeder = threading.Thread(target=trickle, daemon=True)
         feeder.start()
         time.sleep(1.0)  # every slow body has started
@@ -329,15 +335,16 @@ def test_4_slow_bodies_do_not_hold_up_a_normal_submission(srv):
             s.close()
 
 
-def test_4_bodies_in_memory_are_bounded_and_the_one_past_it_gets_503(srv):
+@pytest.mark.parametrize("path", SCENE_ROUTES)
+def test_4_bodies_in_memory_are_bounded_and_the_one_past_it_gets_503(srv, path):
     """Two bodies of 0.9 MiB arrive (1.5 MiB may be held): the second is refused 503 with Retry-After, and
-    a small submission still gets through beside the first."""
+    a small submission still gets through beside the first (POST /v1/preflight's bodies were not counted)."""
     first, second = _connect_from(srv, "127.0.0.5"), _connect_from(srv, "127.0.0.6")
     part = b" " * 900_000
     try:
-        first.sendall(_post_head(1_000_000) + part)
+        first.sendall(_post_head(1_000_000, path) + part)
         time.sleep(0.5)
-        second.sendall(_post_head(1_000_000))
+        second.sendall(_post_head(1_000_000, path))
         try:
             second.sendall(part)
         except OSError:

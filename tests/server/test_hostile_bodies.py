@@ -117,6 +117,37 @@ def test_2_a_large_body_is_validated_in_a_preflight_process(tmp_path, monkeypatc
         assert p["status"] == 422 and [e["loc"] for e in p["errors"]] == ["body.receivers.5.fov_deg"]
 
 
+def test_2_a_large_body_to_preflight_is_validated_in_a_preflight_process(tmp_path, monkeypatch):
+    """POST /v1/preflight takes the same path as a submission: a body over `inprocess_body_bytes` is never
+    validated in the server (before: parsed and validated there, a 14 MB body of 1e6 unknown keys took the
+    server from 71 to 249 MB, where POST /v1/jobs took it to 97 MB); its figures are those of a small body."""
+    doc = quick_doc()
+    rx = doc["receivers"][0]
+    doc["receivers"] = [dict(rx, id=f"r{i}") for i in range(2000)]  # ~0.3 MB
+    body = json.dumps(doc).encode()
+    with app_client(tmp_path / "here") as c:
+        here = c.post("/v1/preflight", content=body, headers=JSON)
+        assert here.status_code == 200, here.text
+    with app_client(tmp_path / "there", inprocess_body_bytes=1024) as c:
+
+        def refuse(*a, **k):
+            raise AssertionError("a large document was validated in the server's process")
+
+        monkeypatch.setattr(SceneSpec, "model_validate", refuse)  # in this (the server's) process only
+        monkeypatch.setattr(SceneSpec, "model_validate_json", refuse)
+        there = c.post("/v1/preflight", content=body, headers=JSON)
+        assert there.status_code == 200, there.text
+        assert there.json() == here.json()
+        doc["receivers"][5]["fov_deg"] = 120
+        p = c.post("/v1/preflight", content=json.dumps(doc).encode(), headers=JSON).json()
+        assert p["status"] == 422 and [e["loc"] for e in p["errors"]] == ["body.receivers.5.fov_deg"]
+        doc["receivers"][5]["fov_deg"] = 60
+        doc.update({f"k{i}": 0 for i in range(1000)})
+        p = c.post("/v1/preflight", content=json.dumps(doc).encode(), headers=JSON).json()
+        assert p["status"] == 422 and len(p["errors"]) == 20  # as a submission: bounded
+        assert p["error_count"] == 1001  # the unknown keys, and the object of over MAX_OBJECT_KEYS keys
+
+
 def test_2_a_photometric_table_past_the_limit_is_refused_from_its_header(api):
     data = ies_file(1801, 181)  # 326,000 candela values: a valid file of 1.3 MB
     assert 1801 * 181 > MAX_PHOTOMETRY_CELLS
