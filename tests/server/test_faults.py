@@ -223,6 +223,17 @@ def test_11_a_folder_in_the_stores_place_is_a_clear_error(tmp_path, capsys):
     assert "is a folder" in err and "Traceback" not in err
 
 
+def test_11_a_symbolic_link_loop_in_the_stores_place_is_a_clear_error(tmp_path, capsys):
+    """A store path that is a loop of symbolic links: one line and exit status 2 (it was a RuntimeError's
+    traceback from resolving the path)."""
+    from owcsim.cli import main
+
+    os.symlink(tmp_path / "jobs.sqlite", tmp_path / "jobs.sqlite")
+    assert main(["serve", "--db", str(tmp_path / "jobs.sqlite"), "--port", "9"]) == 2
+    err = capsys.readouterr().err
+    assert "jobs.sqlite" in err and "symbolic link" in err and "Traceback" not in err
+
+
 def test_11_an_empty_file_is_not_silently_an_empty_store(tmp_path, caplog):
     (tmp_path / "jobs.sqlite").write_bytes(b"")
     with pytest.raises(StoreError, match=r"empty file \(0 bytes\)"):
@@ -233,7 +244,7 @@ def test_11_an_empty_file_is_not_silently_an_empty_store(tmp_path, caplog):
     assert any("did not exist: started an empty one" in r.getMessage() for r in caplog.records)
 
 
-@pytest.mark.parametrize("how", ["overwritten", "replaced"])
+@pytest.mark.parametrize("how", ["overwritten", "replaced", "symlinked"])
 def test_11_a_store_overwritten_while_running_is_503_and_health_says_so(tmp_path, how):
     with app_client(tmp_path, run_jobs=True) as c:
         job = c.post("/v1/jobs", json=quick_doc()).json()
@@ -243,9 +254,14 @@ def test_11_a_store_overwritten_while_running_is_503_and_health_says_so(tmp_path
         if how == "overwritten":  # e.g. a restore copied over the live file: the same inode, other bytes
             with open(path, "r+b") as f:
                 f.write(b"\0" * path.stat().st_size)
-        else:  # another file moved into its place
+        elif how == "replaced":  # another file moved into its place
             (tmp_path / "other").write_bytes(b"not a store " * 1000)
             os.replace(tmp_path / "other", path)
+        else:  # a symbolic link to a copy of the store: a valid SQLite file with the same jobs, but not the one locked
+            shutil.copyfile(path, tmp_path / "copy.sqlite")
+            os.symlink(tmp_path / "copy.sqlite", tmp_path / "link")
+            os.replace(tmp_path / "link", path)
+            how = "replaced"
         deadline = time.monotonic() + 5
         while (h := c.get("/v1/health")).status_code == 200:
             assert time.monotonic() < deadline, "health still 200"
