@@ -52,6 +52,54 @@ def vocabulary() -> tuple[frozenset[str], frozenset[str]]:
     return frozenset(names), frozenset(free)
 
 
+#: child_keys()'s entry for the document itself (the keys of SceneSpec)
+ROOT = ""
+
+
+@functools.cache
+def child_keys() -> dict[str, frozenset[str] | None]:
+    """{a field name: the keys an object given as its value (or as an item of its list) may have}, the union
+    over every model that has a field of that name (ROOT: the document's own keys). None where any such
+    field can hold an object of free keys (a map, a model that allows extra keys): not checked."""
+    schema = SceneSpec.model_json_schema()
+    defs = schema.get("$defs", {})
+    out: dict[str, frozenset[str] | None] = {}
+    for model in [schema, *defs.values()]:
+        for name, prop in model.get("properties", {}).items():
+            keys: set[str] = set()
+            closed = _object_keys(prop, defs, keys, set())
+            before = out.get(name, frozenset())
+            out[name] = None if before is None or not closed else before | keys
+    out[ROOT] = frozenset(schema["properties"])
+    return out
+
+
+def _object_keys(node: dict, defs: dict, keys: set[str], seen: set[str]) -> bool:
+    """Add the keys of the objects `node` (a JSON schema) may hold, through references, unions and lists;
+    False if one of them may have keys no schema names."""
+    closed = True
+    ref = node.get("$ref")
+    if isinstance(ref, str):
+        name = ref.rsplit("/", 1)[-1]
+        if name not in seen:
+            seen.add(name)
+            closed &= _object_keys(defs[name], defs, keys, seen)
+    for sub in [*node.get("anyOf", ()), *node.get("oneOf", ()), *node.get("allOf", ()), *node.get("prefixItems", ())]:
+        closed &= _object_keys(sub, defs, keys, seen)
+    if isinstance(node.get("items"), dict):
+        closed &= _object_keys(node["items"], defs, keys, seen)
+    if "properties" in node:
+        keys.update(node["properties"])
+        closed &= node.get("additionalProperties") is False
+    elif node.get("type") == "object" or "additionalProperties" in node:
+        closed = False
+    if not any(k in node for k in ("type", "$ref", "anyOf", "oneOf", "allOf", "const", "enum")):
+        closed = False  # any value (a field of type Any)
+    if node.get("type") == "array" and not isinstance(node.get("items"), dict) and "prefixItems" not in node:
+        closed = False  # a list of anything
+    return closed
+
+
 def _is_map(prop: dict) -> bool:
     options = [prop, *prop.get("anyOf", ())]
     return any(o.get("type") == "object" and isinstance(o.get("additionalProperties"), dict) for o in options)
@@ -76,6 +124,7 @@ class Scan:
 
     text: Found = field(default_factory=Found)
     keys: Found = field(default_factory=Found)
+    misplaced: Found = field(default_factory=Found)  # keys of some model, but not of the field they are under
     mixtures: list[tuple[str, int]] = field(default_factory=list)  # (location of `components`, their number)
 
 
@@ -88,15 +137,17 @@ def scan(doc: dict, max_chars: int) -> Scan:
     and key at most `max_chars` long (file content excepted), keys no model has, objects of more than
     MAX_OBJECT_KEYS keys (their unknown keys counted, their values not walked), mixtures' components."""
     names, free = vocabulary()
+    allowed_under = child_keys()
     out = Scan()
-    stack: list[tuple[object, str, bool]] = [(doc, "body", False)]
+    # (node, its location, whether its keys are free (a map's), the field it is the value of: None in a map)
+    stack: list[tuple[object, str, bool, str | None]] = [(doc, "body", False, ROOT)]
     while stack:
-        node, loc, is_map = stack.pop()
+        node, loc, is_map, under = stack.pop()
         if type(node) is list:
             for i, v in enumerate(node):
                 t = type(v)
                 if t is dict or t is list:
-                    stack.append((v, f"{loc}.{i}", False))
+                    stack.append((v, f"{loc}.{i}", False, under))
                 elif t is str and len(v) > max_chars:
                     out.text.add(f"{loc}.{i}", _too_long_text(len(v), max_chars), "string_too_long")
             continue
@@ -106,6 +157,7 @@ def scan(doc: dict, max_chars: int) -> Scan:
             out.keys.add(loc, f"an object of {len(node):,d} keys; at most {MAX_OBJECT_KEYS} are accepted", "too_long")
         if node.get("type") == "mixture" and type(node.get("components")) is list:
             out.mixtures.append((f"{loc}.components", len(node["components"])))
+        allowed = None if is_map or under is None else allowed_under.get(under)
         for k, v in node.items():
             if len(k) > max_chars:
                 msg = f"a key of {len(k):,d} characters; at most {max_chars:,d} (setting max_text_chars)"
@@ -114,10 +166,13 @@ def scan(doc: dict, max_chars: int) -> Scan:
                 out.keys.add(f"{loc}.{k}", "Extra inputs are not permitted", "extra_forbidden")
             elif too_many or k in LONG_TEXT:
                 continue
-            elif type(v) is dict or type(v) is list:
-                stack.append((v, f"{loc}.{k}", not is_map and k in free))
-            elif type(v) is str and len(v) > max_chars:
-                out.text.add(f"{loc}.{k}", _too_long_text(len(v), max_chars), "string_too_long")
+            else:
+                if allowed is not None and k not in allowed:
+                    out.misplaced.add(f"{loc}.{k}", "Extra inputs are not permitted", "extra_forbidden")
+                if type(v) is dict or type(v) is list:
+                    stack.append((v, f"{loc}.{k}", not is_map and k in free, None if is_map else k))
+                elif type(v) is str and len(v) > max_chars:
+                    out.text.add(f"{loc}.{k}", _too_long_text(len(v), max_chars), "string_too_long")
     return out
 
 

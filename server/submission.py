@@ -138,6 +138,9 @@ def _check_counts(doc: dict, settings: Settings) -> None:
     keys = walked.keys
     if keys.count > MAX_LISTED_ERRORS or any(e.type != "extra_forbidden" for e in keys.listed):
         raise _invalid(keys.listed, count=keys.count)  # (a few unknown keys: reported with the other errors)
+    misplaced = walked.misplaced  # keys of another model than the one they are in (e.g. `faces` in a receiver)
+    if misplaced.count > MAX_LISTED_ERRORS:
+        raise _invalid(keys.listed + misplaced.listed, count=keys.count + misplaced.count)
     _check_receivers(doc, settings, grids=True)
     found = Found()
     for loc, n in walked.mixtures:
