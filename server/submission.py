@@ -141,6 +141,10 @@ def _check_counts(doc: dict, settings: Settings) -> None:
     misplaced = walked.misplaced  # keys of another model than the one they are in (e.g. `faces` in a receiver)
     if misplaced.count > MAX_LISTED_ERRORS:
         raise _invalid(keys.listed + misplaced.listed, count=keys.count + misplaced.count)
+    if walked.numbers.count > MAX_LISTED_ERRORS:  # e.g. [[], [], ...] in a phase table: 3 bytes an error
+        raise _invalid(walked.numbers.listed, count=walked.numbers.count)
+    if walked.missing.count > MAX_LISTED_ERRORS:  # e.g. [{}, {}, ...] as receivers: 3 bytes, 3 errors
+        raise _invalid(walked.missing.listed, count=walked.missing.count)
     _check_receivers(doc, settings, grids=True)
     found = Found()
     for loc, n in walked.mixtures:
