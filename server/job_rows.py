@@ -158,3 +158,15 @@ class JobRow:
 def pack(text: str | bytes) -> bytes:
     """A document as stored: zlib level 6."""
     return zlib.compress(text.encode() if isinstance(text, str) else text, 6)
+
+
+def unpack_chunks(packed: bytes, size: int = 1 << 20):
+    """A stored document decompressed piece by piece (at most `size` bytes each): never whole in memory."""
+    inflate = zlib.decompressobj()
+    while packed:
+        out = inflate.decompress(packed, size)
+        packed = inflate.unconsumed_tail
+        if out:
+            yield out
+    if tail := inflate.flush():
+        yield tail

@@ -31,10 +31,11 @@ from owcsim.schemas import SceneSpec, SimulationSpec
 from owcsim.schemas.algorithms import algorithm
 from owcsim.schemas.errors import ProblemField
 
-from .prescan import vocabulary
+from .prescan import child_keys, number_lists, required_keys, vocabulary
 from .problems import ProblemError
 
 vocabulary()  # the pre-scan's field names, made once: the forkserver imports this module, its children inherit them
+child_keys(), number_lists(), required_keys()
 
 #: A scene with at most this many receivers (grids expanded), no file-content meshes and at most
 #: SMALL_TRIANGLES inline triangles is pre-flighted in the server's thread, not in a process.

@@ -52,6 +52,128 @@ def vocabulary() -> tuple[frozenset[str], frozenset[str]]:
     return frozenset(names), frozenset(free)
 
 
+#: child_keys()'s entry for the document itself (the keys of SceneSpec)
+ROOT = ""
+
+
+@functools.cache
+def child_keys() -> dict[str, frozenset[str] | None]:
+    """{a field name: the keys an object given as its value (or as an item of its list) may have}, the union
+    over every model that has a field of that name (ROOT: the document's own keys). None where any such
+    field can hold an object of free keys (a map, a model that allows extra keys): not checked."""
+    schema = SceneSpec.model_json_schema()
+    defs = schema.get("$defs", {})
+    out: dict[str, frozenset[str] | None] = {}
+    for model in [schema, *defs.values()]:
+        for name, prop in model.get("properties", {}).items():
+            keys: set[str] = set()
+            closed = _object_keys(prop, defs, keys, set())
+            before = out.get(name, frozenset())
+            out[name] = None if before is None or not closed else before | keys
+    out[ROOT] = frozenset(schema["properties"])
+    return out
+
+
+@functools.cache
+def required_keys() -> dict[str, frozenset[str]]:
+    """{a field name: the keys every object given as its value (or in its list) must have}: the keys that every
+    model reachable from every field of that name requires (none where any is open or not a model)."""
+    schema = SceneSpec.model_json_schema()
+    defs = schema.get("$defs", {})
+    out: dict[str, frozenset[str]] = {}
+    for model in [schema, *defs.values()]:
+        for name, prop in model.get("properties", {}).items():
+            models: list[dict] = []
+            common = frozenset(_required_of(prop, defs, models, set()) or ())
+            if not models or not _object_keys(prop, defs, set(), set()):
+                common = frozenset()
+            out[name] = common if name not in out else out[name] & common
+    return out
+
+
+def _required_of(node: dict, defs: dict, models: list[dict], seen: set[str]) -> set[str] | None:
+    """The keys every model `node` may hold requires (their intersection; None: no model), collecting them."""
+    found: list[set[str]] = []
+    ref = node.get("$ref")
+    if isinstance(ref, str):
+        name = ref.rsplit("/", 1)[-1]
+        if name not in seen:
+            seen.add(name)
+            sub = _required_of(defs[name], defs, models, seen)
+            if sub is not None:
+                found.append(sub)
+    for sub_node in [*node.get("anyOf", ()), *node.get("oneOf", ())]:
+        sub = _required_of(sub_node, defs, models, seen)
+        if sub is not None:
+            found.append(sub)
+    if isinstance(node.get("items"), dict):
+        sub = _required_of(node["items"], defs, models, seen)
+        if sub is not None:
+            found.append(sub)
+    if "properties" in node:
+        models.append(node)
+        found.append(set(node.get("required", ())))
+    return set.intersection(*found) if found else None
+
+
+@functools.cache
+def number_lists() -> frozenset[str]:
+    """Field names whose list values hold numbers only, in every model that has a field of that name."""
+    schema = SceneSpec.model_json_schema()
+    yes: set[str] = set()
+    no: set[str] = set()
+    for model in [schema, *schema.get("$defs", {}).values()]:
+        for name, prop in model.get("properties", {}).items():
+            arrays = [o for o in (prop, *prop.get("anyOf", ()), *prop.get("oneOf", ())) if o.get("type") == "array"]
+            if arrays:
+                numbers = all(isinstance(o.get("items"), dict) and o["items"].get("type") in NUMBER for o in arrays)
+                (yes if numbers else no).add(name)
+    return frozenset(yes - no)
+
+
+NUMBER = ("number", "integer")
+
+
+def _not_a_number(v: object) -> str | None:
+    """The error type pydantic gives an item of a list of numbers, for what is surely not one; else None."""
+    t = type(v)
+    if t is int or t is float or t is bool:
+        return None
+    if t is str:
+        try:
+            float(v)  # type: ignore[arg-type]
+        except ValueError:
+            return "float_parsing"
+        return None
+    return "float_type"
+
+
+def _object_keys(node: dict, defs: dict, keys: set[str], seen: set[str]) -> bool:
+    """Add the keys of the objects `node` (a JSON schema) may hold, through references, unions and lists;
+    False if one of them may have keys no schema names."""
+    closed = True
+    ref = node.get("$ref")
+    if isinstance(ref, str):
+        name = ref.rsplit("/", 1)[-1]
+        if name not in seen:
+            seen.add(name)
+            closed &= _object_keys(defs[name], defs, keys, seen)
+    for sub in [*node.get("anyOf", ()), *node.get("oneOf", ()), *node.get("allOf", ()), *node.get("prefixItems", ())]:
+        closed &= _object_keys(sub, defs, keys, seen)
+    if isinstance(node.get("items"), dict):
+        closed &= _object_keys(node["items"], defs, keys, seen)
+    if "properties" in node:
+        keys.update(node["properties"])
+        closed &= node.get("additionalProperties") is False
+    elif node.get("type") == "object" or "additionalProperties" in node:
+        closed = False
+    if not any(k in node for k in ("type", "$ref", "anyOf", "oneOf", "allOf", "const", "enum")):
+        closed = False  # any value (a field of type Any)
+    if node.get("type") == "array" and not isinstance(node.get("items"), dict) and "prefixItems" not in node:
+        closed = False  # a list of anything
+    return closed
+
+
 def _is_map(prop: dict) -> bool:
     options = [prop, *prop.get("anyOf", ())]
     return any(o.get("type") == "object" and isinstance(o.get("additionalProperties"), dict) for o in options)
@@ -76,6 +198,9 @@ class Scan:
 
     text: Found = field(default_factory=Found)
     keys: Found = field(default_factory=Found)
+    misplaced: Found = field(default_factory=Found)  # keys of some model, but not of the field they are under
+    numbers: Found = field(default_factory=Found)  # items of a list of numbers that are no number
+    missing: Found = field(default_factory=Found)  # keys that every model of the field they are under requires
     mixtures: list[tuple[str, int]] = field(default_factory=list)  # (location of `components`, their number)
 
 
@@ -88,15 +213,23 @@ def scan(doc: dict, max_chars: int) -> Scan:
     and key at most `max_chars` long (file content excepted), keys no model has, objects of more than
     MAX_OBJECT_KEYS keys (their unknown keys counted, their values not walked), mixtures' components."""
     names, free = vocabulary()
+    allowed_under, number_fields, needed_under = child_keys(), number_lists(), required_keys()
     out = Scan()
-    stack: list[tuple[object, str, bool]] = [(doc, "body", False)]
+    # (node, its location, whether its keys are free (a map's), the field it is the value of: None in a map)
+    stack: list[tuple[object, str, bool, str | None]] = [(doc, "body", False, ROOT)]
     while stack:
-        node, loc, is_map = stack.pop()
+        node, loc, is_map, under = stack.pop()
         if type(node) is list:
+            numbers = under in number_fields
             for i, v in enumerate(node):
                 t = type(v)
-                if t is dict or t is list:
-                    stack.append((v, f"{loc}.{i}", False))
+                if numbers and (wrong := _not_a_number(v)) is not None:
+                    msg = "Input should be a valid number" + (
+                        ", unable to parse string as a number" if t is str else ""
+                    )
+                    out.numbers.add(f"{loc}.{i}", msg, wrong)
+                elif t is dict or t is list:
+                    stack.append((v, f"{loc}.{i}", False, under))
                 elif t is str and len(v) > max_chars:
                     out.text.add(f"{loc}.{i}", _too_long_text(len(v), max_chars), "string_too_long")
             continue
@@ -106,6 +239,11 @@ def scan(doc: dict, max_chars: int) -> Scan:
             out.keys.add(loc, f"an object of {len(node):,d} keys; at most {MAX_OBJECT_KEYS} are accepted", "too_long")
         if node.get("type") == "mixture" and type(node.get("components")) is list:
             out.mixtures.append((f"{loc}.components", len(node["components"])))
+        allowed = None if is_map or under is None else allowed_under.get(under)
+        if allowed is not None and under is not None and not too_many:
+            for k in needed_under.get(under, ()):
+                if k not in node:
+                    out.missing.add(f"{loc}.{k}", "Field required", "missing")
         for k, v in node.items():
             if len(k) > max_chars:
                 msg = f"a key of {len(k):,d} characters; at most {max_chars:,d} (setting max_text_chars)"
@@ -114,10 +252,13 @@ def scan(doc: dict, max_chars: int) -> Scan:
                 out.keys.add(f"{loc}.{k}", "Extra inputs are not permitted", "extra_forbidden")
             elif too_many or k in LONG_TEXT:
                 continue
-            elif type(v) is dict or type(v) is list:
-                stack.append((v, f"{loc}.{k}", not is_map and k in free))
-            elif type(v) is str and len(v) > max_chars:
-                out.text.add(f"{loc}.{k}", _too_long_text(len(v), max_chars), "string_too_long")
+            else:
+                if allowed is not None and k not in allowed:
+                    out.misplaced.add(f"{loc}.{k}", "Extra inputs are not permitted", "extra_forbidden")
+                if type(v) is dict or type(v) is list:
+                    stack.append((v, f"{loc}.{k}", not is_map and k in free, None if is_map else k))
+                elif type(v) is str and len(v) > max_chars:
+                    out.text.add(f"{loc}.{k}", _too_long_text(len(v), max_chars), "string_too_long")
     return out
 
 

@@ -123,7 +123,10 @@ class Settings(BaseSettings):
     @field_validator("db", mode="after")
     @classmethod
     def _absolute(cls, v: Path) -> Path:
-        return v.expanduser().resolve()
+        try:
+            return v.expanduser().resolve()
+        except (RuntimeError, OSError) as exc:  # a loop of symbolic links (RuntimeError before Python 3.13)
+            raise ValueError(f"{str(v)!r} cannot be resolved: {exc} (a loop of symbolic links?)") from None
 
     @property
     def body_memory_cap(self) -> int:

@@ -44,6 +44,7 @@ from .job_rows import (
     StoreError,
     is_disk_full,
     pack,
+    unpack_chunks,
 )
 from .sqlite_io import BlobFile, Transaction
 
@@ -339,6 +340,11 @@ class JobStore:
     def scene_json(self, job_id: str) -> str:
         row = self._con().execute("SELECT scene FROM job_documents WHERE job_id = ?", (job_id,)).fetchone()
         return zlib.decompress(row[0]).decode()
+
+    def scene_chunks(self, job_id: str):
+        """The scene document's bytes in pieces of at most 1 MiB, decompressed as they are sent; None: no job."""
+        row = self._con().execute("SELECT scene FROM job_documents WHERE job_id = ?", (job_id,)).fetchone()
+        return None if row is None else unpack_chunks(row[0])
 
     def result_json(self, job_id: str) -> bytes | None:
         """The whole result document (for tests and small results; routes stream `render_chunks`)."""

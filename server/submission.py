@@ -138,6 +138,13 @@ def _check_counts(doc: dict, settings: Settings) -> None:
     keys = walked.keys
     if keys.count > MAX_LISTED_ERRORS or any(e.type != "extra_forbidden" for e in keys.listed):
         raise _invalid(keys.listed, count=keys.count)  # (a few unknown keys: reported with the other errors)
+    misplaced = walked.misplaced  # keys of another model than the one they are in (e.g. `faces` in a receiver)
+    if misplaced.count > MAX_LISTED_ERRORS:
+        raise _invalid(keys.listed + misplaced.listed, count=keys.count + misplaced.count)
+    if walked.numbers.count > MAX_LISTED_ERRORS:  # e.g. [[], [], ...] in a phase table: 3 bytes an error
+        raise _invalid(walked.numbers.listed, count=walked.numbers.count)
+    if walked.missing.count > MAX_LISTED_ERRORS:  # e.g. [{}, {}, ...] as receivers: 3 bytes, 3 errors
+        raise _invalid(walked.missing.listed, count=walked.missing.count)
     _check_receivers(doc, settings, grids=True)
     found = Found()
     for loc, n in walked.mixtures:
@@ -290,23 +297,95 @@ def admit(body: bytes, settings: Settings, preflighter: Preflighter) -> Admitted
     return Admitted(canonical, name, request_hash(canonical), None, checked)
 
 
-def check_document(body: bytes, settings: Settings) -> tuple:
-    """In a pre-flight process: the whole admission of a body, as ("ok", canonical, name, triangles, memory)
-    or a problem tuple."""
-    inline = Preflighter(
+def _inline(settings: Settings) -> Callable[[SceneSpec, str], Preflight]:
+    """The engine's pre-flight in this process (inside a pre-flight process: no second one)."""
+    return Preflighter(
         concurrency=1,
         timeout_s=settings.preflight_timeout_s,
         memory_bytes=settings.preflight_memory_bytes,
         max_triangles=settings.max_triangles,
         workers=settings.workers_per_job,
     ).inline
+
+
+def check_document(body: bytes, settings: Settings) -> tuple:
+    """In a pre-flight process: the whole admission of a body, as ("ok", canonical, name, triangles, memory)
+    or a problem tuple."""
     try:
         spec = parse_scene(body, settings)
         canonical = spec.model_dump_json()
-        checked = check_runnable(spec, canonical, settings, inline)
+        checked = check_runnable(spec, canonical, settings, _inline(settings))
     except ProblemError as exc:
         return as_tuple(exc)
     return ("ok", canonical, spec.name, checked.triangles, checked.memory_bytes)
+
+
+def estimate(body: bytes, settings: Settings, preflighter: Preflighter) -> dict:
+    """POST /v1/preflight: the checks of a submission (`admit` + `check_runnable`, a large body in a pre-flight
+    process as there) and the figures of the job it would be (`figures`). Blocking; raises ProblemError."""
+    if len(body) <= settings.inprocess_body_bytes:
+        spec = parse_scene(body, settings)
+        return figures(spec, check_runnable(spec, spec.model_dump_json(), settings, preflighter))
+    what = "the validation and pre-flight of this document"
+    return preflighter.in_process(what, estimate_document, body, settings)[1]
+
+
+def estimate_document(body: bytes, settings: Settings) -> tuple:
+    """In a pre-flight process: `estimate` of a large body, as ("ok", figures) or a problem tuple."""
+    try:
+        spec = parse_scene(body, settings)
+        return ("ok", figures(spec, check_runnable(spec, spec.model_dump_json(), settings, _inline(settings))))
+    except ProblemError as exc:
+        return as_tuple(exc)
+
+
+def figures(spec: SceneSpec, checked: Preflight) -> dict:
+    """What a job of a checked scene would run: memory, triangles, receivers, paths (None: until accuracy),
+    its time budget and what it will model (`planned`)."""
+    receivers = len(spec.receivers) + spec.grid_receiver_count()
+    sim = spec.simulation
+    paths = None
+    if sim.n_paths is not None:
+        sources = {"forward": len(spec.transmitters), "backward": receivers}
+        paths = sim.n_paths * sources.get(sim.direction, min(len(spec.transmitters), receivers))
+    return {
+        "memory_bytes": checked.memory_bytes,
+        "triangles": checked.triangles,
+        "receivers": receivers,
+        "paths": paths,
+        "time_budget_s": sim.time_budget_s,
+        "modeled": planned(spec),
+    }
+
+
+def planned(spec: SceneSpec) -> dict[str, str]:
+    """What the job will model, said before it runs: the settings given, and the ones the engine will choose
+    when the job starts (the result's `modeled` section then gives the values and reasons; docs/modeled.md)."""
+    sim = spec.simulation
+    pilot = "chosen when the job starts, by a short pilot run (docs/modeled.md)"
+    if sim.algorithm != "auto":
+        alg = f"algorithm {sim.algorithm} (requested)"
+    elif spec.medium is None:
+        alg = "algorithm 1: no medium, vacuum paths only"
+    else:
+        alg = (
+            "chosen when the job starts: algorithm 1 if the medium does not scatter (sigma_s = 0) or lies outside "
+            "the room, otherwise algorithm 5 (every scattering family)"
+        )
+    out = {
+        "algorithm": alg,
+        "max_reflections": pilot if sim.max_reflections is None else f"K = {sim.max_reflections} (given)",
+        "time_window": pilot if sim.t_max_s is None else f"{sim.t_min_s:g} s to {sim.t_max_s:g} s (given)",
+        "accuracy": (
+            f"{sim.n_paths:,d} paths per source device"
+            if sim.n_paths is not None
+            else f"until the DC gain's relative error is {sim.target_rel_error:g} or {sim.time_budget_s:g} s"
+        ),
+        "rules": "docs/modeled.md: what the automatic settings choose, and what every job leaves out",
+    }
+    if spec.medium is not None:
+        out["max_scattering"] = pilot if sim.max_scattering is None else f"S = {sim.max_scattering} (given)"
+    return out
 
 
 def request_hash(canonical: str) -> str:

@@ -15,15 +15,14 @@ import anyio
 from fastapi import APIRouter, Depends, Request, Response
 from pydantic import BaseModel, Field
 
-from owcsim.schemas import SceneSpec
-
 from ..auth import current_owner
 from ..deps import get_settings, get_store, owned_job
 from ..problems import ProblemError
 from ..settings import Settings
 from ..store import JobRow, JobStore
-from ..submission import check_runnable, parse_scene, read_body
+from ..submission import estimate, read_body
 from .docs import EXAMPLE_SCENE, SCENE_BODY, problems
+from .jobs import BodyBudget
 
 router = APIRouter(tags=["scenes"])
 
@@ -102,32 +101,24 @@ async def preflight(
 ) -> PreflightPublic:
     """The checks of POST /v1/jobs (schema, the server's limits, the engine's pre-flight, the memory cap), with
     the same refusals (422 problem documents naming the field); nothing is stored."""
-    async with request.app.state.submissions or contextlib.nullcontext():
-        body = await read_body(request, settings.max_body_bytes)
-        return await anyio.to_thread.run_sync(
-            _preflight, body, owner, store, settings, request.app.state.preflighter, limiter=request.app.state.heavy
-        )
+    # as a submission: the body first, without a slot, counted against body_memory_bytes; then a slot; a body
+    # over inprocess_body_bytes is parsed and checked in a pre-flight process (submission.estimate)
+    budget: BodyBudget = request.app.state.bodies
+    held = [0]
+    try:
+        body = await read_body(Request(request.scope, budget.counted(request.receive, held)), settings.max_body_bytes)
+        async with request.app.state.submissions or contextlib.nullcontext():
+            return await anyio.to_thread.run_sync(
+                _preflight, body, owner, store, settings, request.app.state.preflighter, limiter=request.app.state.heavy
+            )
+    finally:
+        budget.release(held)
 
 
 def _preflight(body: bytes, owner: str | None, store: JobStore, settings: Settings, preflighter) -> PreflightPublic:
-    spec = parse_scene(body, settings)
-    checked = check_runnable(spec, spec.model_dump_json(), settings, preflighter)
-    receivers = len(spec.receivers) + spec.grid_receiver_count()
-    sim = spec.simulation
-    paths = None
-    if sim.n_paths is not None:
-        sources = {"forward": len(spec.transmitters), "backward": receivers}
-        paths = sim.n_paths * sources.get(sim.direction, min(len(spec.transmitters), receivers))
-    time_s, basis = _time_estimate(paths, sim.time_budget_s, store, owner)
-    return PreflightPublic(
-        memory_bytes=checked.memory_bytes,
-        triangles=checked.triangles,
-        receivers=receivers,
-        paths=paths,
-        time_s=time_s,
-        time_basis=basis,
-        modeled=planned(spec),
-    )
+    out = estimate(body, settings, preflighter)
+    time_s, basis = _time_estimate(out["paths"], out.pop("time_budget_s"), store, owner)
+    return PreflightPublic(**out, time_s=time_s, time_basis=basis)
 
 
 #: Finished jobs whose rate (paths per second) estimates a new job's time.
@@ -149,36 +140,6 @@ def _time_estimate(paths: int | None, budget_s: float, store: JobStore, owner: s
         f"rough: {paths:,d} paths at {rate:,.0f} paths/s, the median rate of your last {len(rates)} finished "
         "job(s) on this server (the rate depends on the reflection order, the medium and the receivers)"
     )
-
-
-def planned(spec: SceneSpec) -> dict[str, str]:
-    """What the job will model, said before it runs: the settings given, and the ones the engine will choose
-    when the job starts (the result's `modeled` section then gives the values and reasons; docs/modeled.md)."""
-    sim = spec.simulation
-    pilot = "chosen when the job starts, by a short pilot run (docs/modeled.md)"
-    if sim.algorithm != "auto":
-        alg = f"algorithm {sim.algorithm} (requested)"
-    elif spec.medium is None:
-        alg = "algorithm 1: no medium, vacuum paths only"
-    else:
-        alg = (
-            "chosen when the job starts: algorithm 1 if the medium does not scatter (sigma_s = 0) or lies outside "
-            "the room, otherwise algorithm 5 (every scattering family)"
-        )
-    out = {
-        "algorithm": alg,
-        "max_reflections": pilot if sim.max_reflections is None else f"K = {sim.max_reflections} (given)",
-        "time_window": pilot if sim.t_max_s is None else f"{sim.t_min_s:g} s to {sim.t_max_s:g} s (given)",
-        "accuracy": (
-            f"{sim.n_paths:,d} paths per source device"
-            if sim.n_paths is not None
-            else f"until the DC gain's relative error is {sim.target_rel_error:g} or {sim.time_budget_s:g} s"
-        ),
-        "rules": "docs/modeled.md: what the automatic settings choose, and what every job leaves out",
-    }
-    if spec.medium is not None:
-        out["max_scattering"] = pilot if sim.max_scattering is None else f"S = {sim.max_scattering} (given)"
-    return out
 
 
 #: States a job can be deleted in (a queued or running one is cancelled first).

@@ -223,6 +223,17 @@ def test_11_a_folder_in_the_stores_place_is_a_clear_error(tmp_path, capsys):
     assert "is a folder" in err and "Traceback" not in err
 
 
+def test_11_a_symbolic_link_loop_in_the_stores_place_is_a_clear_error(tmp_path, capsys):
+    """A store path that is a loop of symbolic links: one line and exit status 2 (it was a RuntimeError's
+    traceback from resolving the path)."""
+    from owcsim.cli import main
+
+    os.symlink(tmp_path / "jobs.sqlite", tmp_path / "jobs.sqlite")
+    assert main(["serve", "--db", str(tmp_path / "jobs.sqlite"), "--port", "9"]) == 2
+    err = capsys.readouterr().err
+    assert "jobs.sqlite" in err and "symbolic link" in err and "Traceback" not in err
+
+
 def test_11_an_empty_file_is_not_silently_an_empty_store(tmp_path, caplog):
     (tmp_path / "jobs.sqlite").write_bytes(b"")
     with pytest.raises(StoreError, match=r"empty file \(0 bytes\)"):
@@ -233,7 +244,7 @@ def test_11_an_empty_file_is_not_silently_an_empty_store(tmp_path, caplog):
     assert any("did not exist: started an empty one" in r.getMessage() for r in caplog.records)
 
 
-@pytest.mark.parametrize("how", ["overwritten", "replaced"])
+@pytest.mark.parametrize("how", ["overwritten", "replaced", "symlinked"])
 def test_11_a_store_overwritten_while_running_is_503_and_health_says_so(tmp_path, how):
     with app_client(tmp_path, run_jobs=True) as c:
         job = c.post("/v1/jobs", json=quick_doc()).json()
@@ -243,9 +254,14 @@ def test_11_a_store_overwritten_while_running_is_503_and_health_says_so(tmp_path
         if how == "overwritten":  # e.g. a restore copied over the live file: the same inode, other bytes
             with open(path, "r+b") as f:
                 f.write(b"\0" * path.stat().st_size)
-        else:  # another file moved into its place
+        elif how == "replaced":  # another file moved into its place
             (tmp_path / "other").write_bytes(b"not a store " * 1000)
             os.replace(tmp_path / "other", path)
+        else:  # a symbolic link to a copy of the store: a valid SQLite file with the same jobs, but not the one locked
+            shutil.copyfile(path, tmp_path / "copy.sqlite")
+            os.symlink(tmp_path / "copy.sqlite", tmp_path / "link")
+            os.replace(tmp_path / "link", path)
+            how = "replaced"
         deadline = time.monotonic() + 5
         while (h := c.get("/v1/health")).status_code == 200:
             assert time.monotonic() < deadline, "health still 200"
@@ -290,16 +306,22 @@ def _answer(sock: socket.socket, limit_s: float = 5.0) -> bytes:
     return out
 
 
-def _post_head(length: int) -> bytes:
+def _post_head(length: int, path: str = "/v1/jobs") -> bytes:
     return (
-        b"POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+        b"POST " + path.encode() + b" HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
         b"Content-Length: " + str(length).encode() + b"\r\n\r\n"
     )
 
 
-def test_4_slow_bodies_do_not_hold_up_a_normal_submission(srv):
+#: the routes that take a scene document: submissions and the pre-flight without a job share slots and budget
+SCENE_ROUTES = ("/v1/jobs", "/v1/preflight")
+
+
+@pytest.mark.parametrize("path", SCENE_ROUTES)
+def test_4_slow_bodies_do_not_hold_up_a_normal_submission(srv, path):
     """8 clients send their bodies 1 byte at a time: a normal submission is answered at once (the old
-    service gave each slow body one of its 6 submission slots: it waited until their 30 s deadline)."""
+    service gave each slow body one of its 6 submission slots: it waited until their 30 s deadline; POST
+    /v1/preflight still took its slot before the body: 29.4 s)."""
     slow = [_connect_from(srv, "127.0.0.2") for _ in range(8)]
     stop = threading.Event()
 
@@ -314,7 +336,7 @@ def test_4_slow_bodies_do_not_hold_up_a_normal_submission(srv):
 
     try:
         for s in slow:
-            s.sendall(_post_head(10_000))
+            s.sendall(_post_head(10_000, path))
         feeder = threading.Thread(target=trickle, daemon=True)
         feeder.start()
         time.sleep(1.0)  # every slow body has started
@@ -329,15 +351,16 @@ def test_4_slow_bodies_do_not_hold_up_a_normal_submission(srv):
             s.close()
 
 
-def test_4_bodies_in_memory_are_bounded_and_the_one_past_it_gets_503(srv):
+@pytest.mark.parametrize("path", SCENE_ROUTES)
+def test_4_bodies_in_memory_are_bounded_and_the_one_past_it_gets_503(srv, path):
     """Two bodies of 0.9 MiB arrive (1.5 MiB may be held): the second is refused 503 with Retry-After, and
-    a small submission still gets through beside the first."""
+    a small submission still gets through beside the first (POST /v1/preflight's bodies were not counted)."""
     first, second = _connect_from(srv, "127.0.0.5"), _connect_from(srv, "127.0.0.6")
     part = b" " * 900_000
     try:
-        first.sendall(_post_head(1_000_000) + part)
+        first.sendall(_post_head(1_000_000, path) + part)
         time.sleep(0.5)
-        second.sendall(_post_head(1_000_000))
+        second.sendall(_post_head(1_000_000, path))
         try:
             second.sendall(part)
         except OSError:
