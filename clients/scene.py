@@ -44,7 +44,7 @@ MAX_MESH_BYTES = 32 * 2**20
 #: angles) is about 2 MB of text.
 MAX_PHOTOMETRY_BYTES = 4 * 2**20
 #: Largest frames input read for a submission [bytes]: a netCDF file, or an FDS case folder (all its files).
-MAX_FRAMES_BYTES = 32 * 2**20
+MAX_FRAMES_BYTES = 24 * 2**20  # base64 makes it 32 MiB: the default max_body_bytes
 
 _OPEN_FLAGS = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
 
