@@ -22,7 +22,7 @@ TIMES = [0.0, 45.0, 90.0]
 
 
 def _line_integral(k_cells: np.ndarray) -> float:
-    """integral of K dx from X0 to X1 at (Y, Z): sum over cells i of K[i, j, k] x overlap([x_i, x_i + 0.2], [X0, X1])."""
+    """integral of K dx from X0 to X1 at (Y, Z): sum over cells i of K[i, j, k] overlap([x_i, x_i + 0.2], [X0, X1])."""
     j, k = int(Y // 0.2), int(Z // 0.2)
     edges = np.arange(31) * 0.2
     overlap = np.clip(np.minimum(edges[1:], X1) - np.maximum(edges[:-1], X0), 0.0, None)
