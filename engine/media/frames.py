@@ -21,7 +21,7 @@ from owcsim.engine.core.errors import SceneError
 from owcsim.engine.media.grid import GridMedium
 from owcsim.engine.media.mie import particle_optics
 from owcsim.schemas.frames import FramesReportPublic
-from owcsim.schemas.medium import IsotropicPhaseSpec, MiePhaseSpec, ParticlesSpec, PhaseSpec
+from owcsim.schemas.medium import GridMediumSpec, IsotropicPhaseSpec, MiePhaseSpec, ParticlesSpec, PhaseSpec
 
 
 @dataclass(frozen=True)
@@ -80,6 +80,19 @@ class MediumFrames:
     def frame(self, f: int) -> GridMedium:
         """Frame f as a static grid medium (the same cells, coefficients and phase function)."""
         return GridMedium(self.lo, self.hi, self.shape, self.sigma_a[f], self.sigma_s[f], self.phase)
+
+    def grid_spec(self, f: int | None) -> GridMediumSpec:
+        """Frame f as a document's static `grid` medium (f None: the frames' cell-wise mean, a carrier)."""
+        a = self.sigma_a.mean(axis=0) if f is None else self.sigma_a[f]
+        s = self.sigma_s.mean(axis=0) if f is None else self.sigma_s[f]
+        return GridMediumSpec(
+            min=tuple(self.lo.tolist()),
+            max=tuple(self.hi.tolist()),
+            shape=self.shape,
+            sigma_a=a.ravel().tolist(),
+            sigma_s=s.ravel().tolist(),
+            phase=self.phase,
+        )
 
     def select(self, indices: np.ndarray | list[int]) -> MediumFrames:
         """The frames at `indices` (increasing), e.g. a sub-sampled or chosen set of times."""

@@ -53,14 +53,7 @@ class FramesOutcome:
 
 def frame_medium(frames: MediumFrames, f: int) -> GridMediumSpec:
     """Frame f as the document's static medium (the same cells, coefficients and phase function)."""
-    return GridMediumSpec(
-        min=tuple(frames.lo.tolist()),
-        max=tuple(frames.hi.tolist()),
-        shape=frames.shape,
-        sigma_a=frames.sigma_a[f].ravel().tolist(),
-        sigma_s=frames.sigma_s[f].ravel().tolist(),
-        phase=frames.phase,
-    )
+    return frames.grid_spec(f)
 
 
 def frame_spec(spec: SceneSpec, frames: MediumFrames, f: int, keep: IntArray | None = None) -> SceneSpec:
@@ -145,8 +138,7 @@ def simulate_frames(
         for f in range(frames.n_frames):  # one run per frame: a loop over frames, each a vectorized run
             keep = _receivers_of(for_rx, f)
             run = done.pop(f, None) or _run(frame_spec(resolved, frames, f, keep), base_dir, executor, should_stop)
-            means, counts = reliability.group_means(run.finished.accs.values())
-            groups.append(((means + run.finished.los.gain[None, :]).T, counts.T))
+            groups.append(reliability.group_dc_gain(run.finished.accs.values(), run.finished.los.gain))
             results.append(run.result)
             if progress is not None:
                 progress(f + 1, frames.n_frames)

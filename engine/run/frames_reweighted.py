@@ -57,7 +57,6 @@ from owcsim.engine.results.job import FinishedJob, LineOfSight, RunInfo
 from owcsim.engine.results.result import build_result
 from owcsim.engine.run.execution import SerialExecutor
 from owcsim.engine.run.job import Job, Progress, ProgressFn, Watch
-from owcsim.engine.run.receivers import unreachable_receivers
 from owcsim.engine.run.simulate import (
     _choose_directions,
     _items,
@@ -65,10 +64,10 @@ from owcsim.engine.run.simulate import (
     _resolve,
     _sources,
     _start,
-    exact_los_only,
     kernel_settings,
+    skip_unsimulated,
 )
-from owcsim.engine.run.stopping import SKIP, BatchWatch
+from owcsim.engine.run.stopping import BatchWatch
 from owcsim.engine.scene.los import line_of_sight, los_geometry
 from owcsim.engine.scene.scene import Scene, build_scene
 from owcsim.engine.tally import reliability
@@ -76,8 +75,7 @@ from owcsim.engine.tally.plan import N_GROUPS
 from owcsim.engine.tally.tally import Accumulator
 from owcsim.schemas import SceneSpec
 from owcsim.schemas.algorithms import Direction
-from owcsim.schemas.medium import GridMediumSpec
-from owcsim.schemas.results import DirectionChoicePublic, SimulationResultPublic, StopReason
+from owcsim.schemas.results import SimulationResultPublic, StopReason
 
 #: Paths of the window pilot (per frame window; 0: no pilot); its random streams are their own (WorkItem phase
 #: WINDOW_PHASE).
@@ -153,17 +151,7 @@ def _check(spec: SceneSpec, frames: MediumFrames, frame_of_receiver: IntArray | 
 
 def _with_medium(spec: SceneSpec, frames: MediumFrames, f: int | None) -> SceneSpec:
     """The document with frame f's grid as its medium (f None: the frames' carrier, their cell-wise mean)."""
-    a = frames.sigma_a.mean(axis=0) if f is None else frames.sigma_a[f]
-    s = frames.sigma_s.mean(axis=0) if f is None else frames.sigma_s[f]
-    medium = GridMediumSpec(
-        min=tuple(frames.lo.tolist()),
-        max=tuple(frames.hi.tolist()),
-        shape=frames.shape,
-        sigma_a=a.ravel().tolist(),
-        sigma_s=s.ravel().tolist(),
-        phase=frames.phase,
-    )
-    return spec.model_copy(update={"medium": medium})
+    return spec.model_copy(update={"medium": frames.grid_spec(f)})
 
 
 def _carrier_scene(spec: SceneSpec, base_dir: str | Path | None) -> Scene:
@@ -195,8 +183,9 @@ class _Window:
         grid = scene.medium if isinstance(scene.medium, GridMedium) else carrier_grid(self.sub)
         local = None
         if self.rx_frames is not None:  # the receivers' frames as indices in this window (-2: none of them)
-            pos = {int(f): i for i, f in enumerate(self.idx)}
-            local = np.array([-1 if r < 0 else pos.get(int(r), -2) for r in self.rx_frames], np.int64)
+            lookup = np.full(self.frames.n_frames, -2, np.int64)
+            lookup[self.idx] = np.arange(len(self.idx))
+            local = np.where(self.rx_frames < 0, -1, lookup[np.maximum(self.rx_frames, 0)])
         self.ratios = FrameRatios(self.sub, grid, local)
         medium = FramedGrid(grid, self.ratios) if scene.medium is not None else None  # one walk: carrier and frames
         self.scene = replace(scene, medium=medium, path_ratios=self.ratios)
@@ -246,21 +235,9 @@ class _Window:
             info.wall_time_s = wall
 
     def _directions(self, job: Job) -> IntArray:
-        """Per link its direction (simulate._finish's masking: unreachable and masked receivers, LOS only)."""
-        scene = self.scene
+        """Per link its direction, the links no path needs skipped (simulate.skip_unsimulated)."""
         directions = _choose_directions(job)
-        n_rx = len(scene.receivers)
-        seen = job.los.gain.reshape(len(scene.transmitters), n_rx).any(axis=0)
-        masked = np.flatnonzero(scene.masked != "")
-        self.blocked = unreachable_receivers(scene, seen | (scene.masked != ""))
-        rx_of_link = np.arange(scene.n_links) % n_rx
-        directions[np.isin(rx_of_link, np.concatenate([self.blocked, masked]).astype(np.int64))] = SKIP
-        if exact_los_only(scene, self.settings):
-            directions[:] = SKIP
-            job.info.stop_reason = StopReason.EXACT
-            job.info.direction_choice = DirectionChoicePublic(
-                rule="max_reflections = 0 without scattering: line of sight only, in closed form"
-            )
+        self.blocked = skip_unsimulated(job, directions)
         return directions
 
     def _merge(self, ex: SerialExecutor, items: Iterator[WorkItem], watches: list[BatchWatch]) -> None:
@@ -349,9 +326,7 @@ class _Window:
         out = np.zeros((len(self.idx), self.scene.n_links, N_GROUPS))
         paths = np.zeros_like(out)
         for f, accs in enumerate(self.frame_accs):
-            means, counts = reliability.group_means(accs.values())
-            out[f] = means.T + self.frame_los[f].gain[:, None]
-            paths[f] = counts.T
+            out[f], paths[f] = reliability.group_dc_gain(accs.values(), self.frame_los[f].gain)
         return out, paths
 
     def efficiency_per_frame(self) -> FloatArray:

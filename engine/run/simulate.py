@@ -294,17 +294,7 @@ def _finish(
 ) -> SimulationResultPublic:
     """Run the job in its chosen directions (links not simulated skipped) and build its result."""
     scene = job.scene
-    seen = job.los.gain.reshape(len(scene.transmitters), len(scene.receivers)).any(axis=0)
-    masked = np.flatnonzero(scene.masked != "")
-    blocked = unreachable_receivers(scene, seen | (scene.masked != ""))  # a direct view proves reachability
-    rx_of_link = np.arange(scene.n_links) % len(scene.receivers)
-    directions[np.isin(rx_of_link, np.concatenate([blocked, masked]).astype(np.int64))] = SKIP
-    if exact_los_only(scene, job.settings):
-        directions[:] = SKIP
-        job.info.stop_reason = StopReason.EXACT
-        job.info.direction_choice = DirectionChoicePublic(
-            rule="max_reflections = 0 without scattering: line of sight only, in closed form"
-        )
+    blocked = skip_unsimulated(job, directions)
     accs = _run(job, directions)
     job.info.wall_time_s = time.perf_counter() - job.watch.t_start
     finished = FinishedJob(
@@ -322,6 +312,25 @@ def _finish(
     if on_finished is not None:
         on_finished(finished)
     return build_result(finished)
+
+
+def skip_unsimulated(job: Job, directions: IntArray) -> list[int]:
+    """Mark SKIP in `directions` (per link) the links no path needs: receivers masked or unreachable (a direct
+    view proves reachability), and every link when the job is line of sight only (then stop reason EXACT).
+    Returns the unreachable receivers."""
+    scene = job.scene
+    seen = job.los.gain.reshape(len(scene.transmitters), len(scene.receivers)).any(axis=0)
+    masked = np.flatnonzero(scene.masked != "")
+    blocked = unreachable_receivers(scene, seen | (scene.masked != ""))
+    rx_of_link = np.arange(scene.n_links) % len(scene.receivers)
+    directions[np.isin(rx_of_link, np.concatenate([blocked, masked]).astype(np.int64))] = SKIP
+    if exact_los_only(scene, job.settings):
+        directions[:] = SKIP
+        job.info.stop_reason = StopReason.EXACT
+        job.info.direction_choice = DirectionChoicePublic(
+            rule="max_reflections = 0 without scattering: line of sight only, in closed form"
+        )
+    return blocked
 
 
 def exact_los_only(scene: Scene, settings: KernelSettings) -> bool:

@@ -138,11 +138,6 @@ def _series(
     return out
 
 
-def _groups(finished: FinishedJob) -> tuple[FloatArray, FloatArray]:
-    means, counts = reliability.group_means(finished.accs.values())
-    return (means + finished.los.gain[None, :]).T, counts.T
-
-
 #: Fewest times for which `auto` reweights one set of paths rather than running every time on its own.
 AUTO_REWEIGHT_MIN_TIMES = 3
 
@@ -232,7 +227,7 @@ def run_timeline(
             on_finished=seen.append,
         )
         done = len(times)
-        results, groups = [one] * done, [_groups(seen[0])] * done
+        results, groups = [one] * done, [reliability.group_dc_gain(seen[0].accs.values(), seen[0].los.gain)] * done
         method_name, source, report = "one_run", None, None
         notes.append("the medium does not change: one run traced every time's receivers together")
     if done < len(times):

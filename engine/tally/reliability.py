@@ -142,6 +142,14 @@ def group_means(accs) -> tuple[np.ndarray, np.ndarray]:
     return means, np.where(filled, counts / len(served), 0.0)
 
 
+def group_dc_gain(accs, los_gain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per link and path group (n_links, G): the group's H0 estimate, `group_means` plus the exact line of sight
+    `los_gain` (n_links,), and the group's weight (0: empty). The groups of runs with one seed hold the same
+    samples: the spread of two runs' differences is the error of their difference (engine/results/timeline.py)."""
+    means, counts = group_means(accs)
+    return (means + los_gain[None, :]).T, counts.T
+
+
 def from_accumulators(accs, los=None) -> Reliability:
     """`group_reliability` of merged tallies (see `group_means`)."""
     means, counts = group_means(accs)
