@@ -9,7 +9,7 @@ from owcsim.engine.media.frame_sources import frames_from_spec
 from owcsim.schemas.frames import FdsFramesSpec
 from tests.fds_data import office_fire
 
-pytest.importorskip("fdsreader")
+pytest.importorskip("fdsreader", reason="pip install 'owcsim[fire]' (scripts/test installs it)")
 
 
 def _doc(frames):

@@ -15,7 +15,7 @@ from owcsim.engine.run.timeline import run_timeline
 from tests.fds_data import office_fire
 from tests.scenes import room_doc, spec
 
-fdsreader = pytest.importorskip("fdsreader")
+fdsreader = pytest.importorskip("fdsreader", reason="pip install 'owcsim[fire]' (scripts/test installs it)")
 
 Y, Z, X0, X1 = 2.1, 1.5, 0.3, 5.7  # the link's line [m]; cells 0.2 m
 TIMES = [0.0, 45.0, 90.0]

@@ -127,7 +127,7 @@ def test_frames_from_a_server_path_are_refused_at_their_field(api):
 def test_an_fds_case_sent_by_the_client_runs_over_http(live_fast, tmp_path):
     """The real FDS office fire, zipped by the client into the body (a few MB: checked in the pre-flight process),
     runs as a timeline job whose result says where its frames came from."""
-    pytest.importorskip("fdsreader")
+    pytest.importorskip("fdsreader", reason="pip install 'owcsim[fire]' (scripts/test installs it)")
     from owcsim.clients.scene import scene_document
     from tests.fds_data import office_fire
 
